@@ -1,0 +1,61 @@
+//! Argument parsers shared by the commands.
+
+use glam::Vec3;
+
+use relief_core::camera::MAX_FRAME_SIZE;
+use relief_core::relief::MAX_TEXTURE_SIZE;
+
+/// `X,Y,Z`, finite.
+pub fn vec3(text: &str) -> Result<Vec3, String> {
+    relief_core::vector::parse_vec3(text)
+}
+
+/// A relief-texture edge in texels: `1 ..= MAX_TEXTURE_SIZE`.
+pub fn texture_size(text: &str) -> Result<u32, String> {
+    let n: u32 = text
+        .parse()
+        .map_err(|_| format!("`{text}` is not a whole number"))?;
+    if n == 0 || n > MAX_TEXTURE_SIZE {
+        return Err(format!("{n} is out of range: must be 1 ..= {MAX_TEXTURE_SIZE}"));
+    }
+    Ok(n)
+}
+
+/// `WxH` frame size, each in `1 ..= MAX_FRAME_SIZE`.
+pub fn frame_size(text: &str) -> Result<(u32, u32), String> {
+    let (w, h) = text
+        .split_once(['x', 'X'])
+        .ok_or_else(|| format!("`{text}` is not WIDTHxHEIGHT"))?;
+    let edge = |s: &str| -> Result<u32, String> {
+        let n: u32 = s.parse().map_err(|_| format!("`{s}` is not a whole number"))?;
+        if n == 0 || n > MAX_FRAME_SIZE {
+            return Err(format!("{n} is out of range: must be 1 ..= {MAX_FRAME_SIZE}"));
+        }
+        Ok(n)
+    };
+    Ok((edge(w)?, edge(h)?))
+}
+
+/// 8 or 16.
+pub fn depth_bits(text: &str) -> Result<u32, String> {
+    match text {
+        "8" => Ok(8),
+        "16" => Ok(16),
+        _ => Err(format!("`{text}` is not 8 or 16")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sizes() {
+        assert_eq!(frame_size("640x480"), Ok((640, 480)));
+        assert!(frame_size("0x480").is_err());
+        assert!(frame_size("640").is_err());
+        assert!(texture_size("0").is_err());
+        assert!(texture_size("4097").is_err());
+        assert_eq!(texture_size("256"), Ok(256));
+    }
+}

@@ -1,0 +1,5 @@
+//! One module per `relief` subcommand.
+
+pub mod bake;
+pub mod bench;
+pub mod reference;

@@ -1,0 +1,264 @@
+//! The perspective camera of a frame, and camera paths through a scene.
+
+use std::f32::consts::TAU;
+
+use glam::Vec3;
+use serde::Deserialize;
+
+/// Largest frame edge in pixels that any command accepts.
+pub const MAX_FRAME_SIZE: u32 = 8192;
+
+/// A pinhole camera: eye, orthonormal basis, vertical field of view and resolution.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    /// Unit view direction.
+    pub forward: Vec3,
+    /// Unit vector to the right of the image.
+    pub right: Vec3,
+    /// Unit vector to the top of the image.
+    pub up: Vec3,
+    /// Vertical field of view in radians.
+    pub fov_y: f32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Camera {
+    /// A camera at `eye` looking at `target`. Errors name the bad argument.
+    pub fn look_at(
+        eye: Vec3,
+        target: Vec3,
+        up: Vec3,
+        fov_y_degrees: f32,
+        width: u32,
+        height: u32,
+    ) -> Result<Camera, String> {
+        for (name, v) in [("eye", eye), ("target", target), ("up", up)] {
+            crate::vector::ensure_finite(name, v)?;
+        }
+        if !(fov_y_degrees.is_finite() && fov_y_degrees > 0.0 && fov_y_degrees < 180.0) {
+            return Err(format!("field of view {fov_y_degrees}° must be in (0, 180)"));
+        }
+        if width == 0 || height == 0 || width > MAX_FRAME_SIZE || height > MAX_FRAME_SIZE {
+            return Err(format!(
+                "frame size {width}x{height} must be between 1x1 and {MAX_FRAME_SIZE}x{MAX_FRAME_SIZE}"
+            ));
+        }
+        let forward = (target - eye).normalize_or_zero();
+        if forward == Vec3::ZERO || !forward.is_finite() {
+            return Err("eye and target coincide: no view direction".into());
+        }
+        let right = forward.cross(up).normalize_or_zero();
+        if right == Vec3::ZERO || !right.is_finite() {
+            return Err("up vector is zero or parallel to the view direction".into());
+        }
+        Ok(Camera {
+            eye,
+            forward,
+            right,
+            up: right.cross(forward),
+            fov_y: fov_y_degrees.to_radians(),
+            width,
+            height,
+        })
+    }
+
+    /// Unit direction of the ray through pixel position `(x, y)` (pixel centres at
+    /// `+0.5`; y grows downwards).
+    #[inline]
+    pub fn ray_direction(&self, x: f32, y: f32) -> Vec3 {
+        let tan_half = (self.fov_y * 0.5).tan();
+        let aspect = self.width as f32 / self.height as f32;
+        let sx = (2.0 * x / self.width as f32 - 1.0) * tan_half * aspect;
+        let sy = (1.0 - 2.0 * y / self.height as f32) * tan_half;
+        (self.forward + self.right * sx + self.up * sy).normalize()
+    }
+
+    /// The angle one pixel subtends (Schaufler's β_screen).
+    pub fn pixel_angle(&self) -> f32 {
+        self.fov_y / self.height as f32
+    }
+}
+
+/// One leg of a camera path.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+pub enum PathSegment {
+    /// Circle `turns` times around `center` at `radius`, `height` above it, looking at it.
+    Orbit {
+        center: [f32; 3],
+        radius: f32,
+        height: f32,
+        #[serde(default = "one")]
+        turns: f32,
+        frames: u32,
+    },
+    /// Fly through `points` in order (piecewise linear), looking ahead along the path,
+    /// or at `look_at` when given.
+    Fly {
+        points: Vec<[f32; 3]>,
+        #[serde(default)]
+        look_at: Option<[f32; 3]>,
+        frames: u32,
+    },
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+/// Eye and target of one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    pub eye: Vec3,
+    pub target: Vec3,
+}
+
+/// A sequence of segments, sampled frame by frame.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct CameraPath {
+    pub segments: Vec<PathSegment>,
+}
+
+impl PathSegment {
+    fn frames(&self) -> u32 {
+        match self {
+            PathSegment::Orbit { frames, .. } | PathSegment::Fly { frames, .. } => *frames,
+        }
+    }
+
+    /// Checks the segment; the error names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+        if self.frames() == 0 {
+            return Err("a path segment needs frames > 0".into());
+        }
+        match self {
+            PathSegment::Orbit {
+                center,
+                radius,
+                height,
+                turns,
+                ..
+            } => {
+                if !finite(center) || !finite(&[*radius, *height, *turns]) || *radius <= 0.0 {
+                    return Err("orbit: center, radius (> 0), height and turns must be finite".into());
+                }
+            }
+            PathSegment::Fly { points, look_at, .. } => {
+                if points.len() < 2 {
+                    return Err("fly: needs at least two points".into());
+                }
+                if !points.iter().all(|p| finite(p)) || !look_at.is_none_or(|p| finite(&p)) {
+                    return Err("fly: points and look_at must be finite".into());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Pose at `t` in `[0, 1]`.
+    fn pose(&self, t: f32) -> Pose {
+        match self {
+            PathSegment::Orbit {
+                center,
+                radius,
+                height,
+                turns,
+                ..
+            } => {
+                let c = Vec3::from_array(*center);
+                let angle = t * turns * TAU;
+                Pose {
+                    eye: c + Vec3::new(angle.cos() * radius, *height, angle.sin() * radius),
+                    target: c,
+                }
+            }
+            PathSegment::Fly { points, look_at, .. } => {
+                let at = |t: f32| {
+                    let s = t.clamp(0.0, 1.0) * (points.len() - 1) as f32;
+                    let i = (s.floor() as usize).min(points.len() - 2);
+                    Vec3::from_array(points[i]).lerp(Vec3::from_array(points[i + 1]), s - i as f32)
+                };
+                let eye = at(t);
+                let target = match look_at {
+                    Some(p) => Vec3::from_array(*p),
+                    None => {
+                        let ahead = at(t + 0.02);
+                        if ahead.distance(eye) > 1e-6 {
+                            ahead
+                        } else {
+                            eye + (eye - at(t - 0.02))
+                        }
+                    }
+                };
+                Pose { eye, target }
+            }
+        }
+    }
+}
+
+impl CameraPath {
+    /// Total frames over all segments.
+    pub fn frame_count(&self) -> u32 {
+        self.segments.iter().map(PathSegment::frames).sum()
+    }
+
+    /// The pose of frame `frame` (clamped to the last frame).
+    pub fn pose(&self, frame: u32) -> Option<Pose> {
+        let mut rest = frame.min(self.frame_count().checked_sub(1)?);
+        for segment in &self.segments {
+            let n = segment.frames();
+            if rest < n {
+                return Some(segment.pose(rest as f32 / n as f32));
+            }
+            rest -= n;
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn look_at_rejects_bad_input() {
+        let ok = Camera::look_at(Vec3::Z * 5.0, Vec3::ZERO, Vec3::Y, 60.0, 64, 48).unwrap();
+        assert!(ok.ray_direction(32.0, 24.0).abs_diff_eq(-Vec3::Z, 1e-6));
+        assert!(Camera::look_at(Vec3::ZERO, Vec3::ZERO, Vec3::Y, 60.0, 4, 4).is_err());
+        assert!(Camera::look_at(Vec3::Y, Vec3::ZERO, Vec3::Y, 60.0, 4, 4).is_err());
+        assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 180.0, 4, 4).is_err());
+        assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 60.0, 0, 4).is_err());
+        assert!(Camera::look_at(Vec3::NAN, Vec3::ZERO, Vec3::Y, 60.0, 4, 4).is_err());
+    }
+
+    #[test]
+    fn path_samples_orbit_then_fly() {
+        let path = CameraPath {
+            segments: vec![
+                PathSegment::Orbit {
+                    center: [0.0; 3],
+                    radius: 2.0,
+                    height: 1.0,
+                    turns: 1.0,
+                    frames: 4,
+                },
+                PathSegment::Fly {
+                    points: vec![[0.0, 0.0, 0.0], [4.0, 0.0, 0.0]],
+                    look_at: None,
+                    frames: 4,
+                },
+            ],
+        };
+        assert_eq!(path.frame_count(), 8);
+        let p0 = path.pose(0).unwrap();
+        assert!(p0.eye.abs_diff_eq(Vec3::new(2.0, 1.0, 0.0), 1e-6));
+        let p5 = path.pose(5).unwrap();
+        assert!(p5.eye.abs_diff_eq(Vec3::new(1.0, 0.0, 0.0), 1e-6));
+        assert!(p5.target.x > p5.eye.x);
+        assert_eq!(path.pose(100), path.pose(7));
+        assert_eq!(CameraPath::default().pose(0), None);
+    }
+}

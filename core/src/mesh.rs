@@ -1,0 +1,322 @@
+//! Triangle meshes with per-vertex attributes and per-triangle materials.
+
+use std::sync::Arc;
+
+use glam::{Affine3A, Mat3, Vec2, Vec3};
+
+use crate::bounds::Aabb;
+
+/// An RGB image used as a material's diffuse texture, stored as linear `[0, 1]` floats.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TextureImage {
+    pub width: u32,
+    pub height: u32,
+    pub texels: Vec<Vec3>,
+}
+
+impl TextureImage {
+    /// Bilinear lookup with wrap-around addressing; `uv = (0, 0)` is the bottom-left
+    /// corner, as in OBJ.
+    pub fn sample(&self, uv: Vec2) -> Vec3 {
+        if self.texels.is_empty() || !uv.is_finite() {
+            return Vec3::ONE;
+        }
+        let (w, h) = (self.width as f32, self.height as f32);
+        let x = uv.x.rem_euclid(1.0) * w - 0.5;
+        let y = (1.0 - uv.y.rem_euclid(1.0)) * h - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let wrap = |v: f32, n: u32| (v as i64).rem_euclid(n as i64) as usize;
+        let (xa, xb) = (wrap(x0, self.width), wrap(x0 + 1.0, self.width));
+        let (ya, yb) = (wrap(y0, self.height), wrap(y0 + 1.0, self.height));
+        let at = |x: usize, y: usize| self.texels[y * self.width as usize + x];
+        let top = at(xa, ya).lerp(at(xb, ya), fx);
+        let bottom = at(xa, yb).lerp(at(xb, yb), fx);
+        top.lerp(bottom, fy)
+    }
+}
+
+/// A surface's diffuse reflectance: a colour, optionally modulated by a texture.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// Linear RGB albedo in `[0, 1]`.
+    pub diffuse: Vec3,
+    pub diffuse_texture: Option<Arc<TextureImage>>,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material {
+            name: "default".into(),
+            diffuse: Vec3::splat(0.8),
+            diffuse_texture: None,
+        }
+    }
+}
+
+/// An indexed triangle mesh.
+///
+/// Attribute arrays are indexed like `positions`. A zero vertex normal means "none":
+/// shading then falls back to the triangle's geometric normal.
+#[derive(Debug, Clone, Default)]
+pub struct Mesh {
+    pub positions: Vec<Vec3>,
+    pub normals: Option<Vec<Vec3>>,
+    pub texcoords: Option<Vec<Vec2>>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Index into `materials` per triangle; `None` means material 0 for all.
+    pub triangle_materials: Option<Vec<u16>>,
+    /// At least one material.
+    pub materials: Vec<Material>,
+}
+
+impl Mesh {
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Checks index ranges, attribute lengths and finiteness; the error says what is wrong.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.triangles.is_empty() {
+            return Err("the mesh has no triangles".into());
+        }
+        if self.materials.is_empty() {
+            return Err("the mesh has no material".into());
+        }
+        let n = self.positions.len();
+        if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
+            return Err(format!("vertex {} has a non-finite position", i + 1));
+        }
+        if let Some(normals) = &self.normals
+            && normals.len() != n
+        {
+            return Err("normal count differs from vertex count".into());
+        }
+        if let Some(uv) = &self.texcoords
+            && uv.len() != n
+        {
+            return Err("texture-coordinate count differs from vertex count".into());
+        }
+        if let Some(t) = self
+            .triangles
+            .iter()
+            .position(|t| t.iter().any(|&i| i as usize >= n))
+        {
+            return Err(format!(
+                "triangle {} refers to a vertex that does not exist",
+                t + 1
+            ));
+        }
+        if let Some(ids) = &self.triangle_materials {
+            if ids.len() != self.triangles.len() {
+                return Err("material-id count differs from triangle count".into());
+            }
+            if ids.iter().any(|&m| m as usize >= self.materials.len()) {
+                return Err("a triangle refers to a material that does not exist".into());
+            }
+        }
+        Ok(())
+    }
+
+    /// Bounds of the vertices that triangles use.
+    pub fn bounds(&self) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for t in &self.triangles {
+            for &i in t {
+                b.grow(self.positions[i as usize]);
+            }
+        }
+        b
+    }
+
+    /// The three corner positions of triangle `tri`.
+    #[inline]
+    pub fn corners(&self, tri: usize) -> [Vec3; 3] {
+        let [a, b, c] = self.triangles[tri];
+        [
+            self.positions[a as usize],
+            self.positions[b as usize],
+            self.positions[c as usize],
+        ]
+    }
+
+    /// Unit geometric normal by the winding `(b - a) × (c - a)`; zero for a degenerate
+    /// triangle.
+    pub fn face_normal(&self, tri: usize) -> Vec3 {
+        let [a, b, c] = self.corners(tri);
+        (b - a).cross(c - a).normalize_or_zero()
+    }
+
+    /// The shading normal at barycentric `(u, v)` (weights `1-u-v, u, v` of the corners):
+    /// interpolated vertex normals when the mesh has them, else the face normal.
+    pub fn shading_normal(&self, tri: usize, u: f32, v: f32) -> Vec3 {
+        if let Some(normals) = &self.normals {
+            let [a, b, c] = self.triangles[tri];
+            let n = normals[a as usize] * (1.0 - u - v) + normals[b as usize] * u + normals[c as usize] * v;
+            let n = n.normalize_or_zero();
+            if n != Vec3::ZERO {
+                return n;
+            }
+        }
+        self.face_normal(tri)
+    }
+
+    /// The material of triangle `tri`.
+    #[inline]
+    pub fn material(&self, tri: usize) -> &Material {
+        let id = self.triangle_materials.as_ref().map_or(0, |m| m[tri] as usize);
+        &self.materials[id]
+    }
+
+    /// Linear albedo at barycentric `(u, v)` of triangle `tri`.
+    pub fn albedo(&self, tri: usize, u: f32, v: f32) -> Vec3 {
+        let material = self.material(tri);
+        match (&material.diffuse_texture, &self.texcoords) {
+            (Some(texture), Some(uvs)) => {
+                let [a, b, c] = self.triangles[tri];
+                let uv = uvs[a as usize] * (1.0 - u - v) + uvs[b as usize] * u + uvs[c as usize] * v;
+                material.diffuse * texture.sample(uv)
+            }
+            _ => material.diffuse,
+        }
+    }
+
+    /// A copy placed in the world by `transform`; normals go through the inverse
+    /// transpose and are renormalised.
+    pub fn transformed(&self, transform: Affine3A) -> Mesh {
+        let normal_matrix: Mat3 = Mat3::from(transform.matrix3).inverse().transpose();
+        Mesh {
+            positions: self
+                .positions
+                .iter()
+                .map(|&p| transform.transform_point3(p))
+                .collect(),
+            normals: self.normals.as_ref().map(|ns| {
+                ns.iter()
+                    .map(|&n| (normal_matrix * n).normalize_or_zero())
+                    .collect()
+            }),
+            ..self.clone()
+        }
+    }
+
+    /// Appends `other`, offsetting its indices and material ids.
+    pub fn append(&mut self, other: Mesh) {
+        let vertex_offset = self.positions.len() as u32;
+        let material_offset = self.materials.len() as u16;
+        let (own_vertices, other_vertices) = (self.positions.len(), other.positions.len());
+        let own_triangles = self.triangles.len();
+        merge_attribute(
+            &mut self.normals,
+            other.normals,
+            own_vertices,
+            other_vertices,
+            Vec3::ZERO,
+        );
+        merge_attribute(
+            &mut self.texcoords,
+            other.texcoords,
+            own_vertices,
+            other_vertices,
+            Vec2::ZERO,
+        );
+        let own_ids = self
+            .triangle_materials
+            .take()
+            .unwrap_or_else(|| vec![0; own_triangles]);
+        let other_ids = other
+            .triangle_materials
+            .unwrap_or_else(|| vec![0; other.triangles.len()]);
+        self.triangle_materials = Some(
+            own_ids
+                .into_iter()
+                .chain(other_ids.into_iter().map(|m| m + material_offset))
+                .collect(),
+        );
+        self.positions.extend(other.positions);
+        self.triangles
+            .extend(other.triangles.into_iter().map(|t| t.map(|i| i + vertex_offset)));
+        self.materials.extend(other.materials);
+    }
+
+    /// Heap bytes held by the mesh (excluding material textures).
+    pub fn heap_bytes(&self) -> usize {
+        self.positions.len() * size_of::<Vec3>()
+            + self.normals.as_ref().map_or(0, |n| n.len() * size_of::<Vec3>())
+            + self.texcoords.as_ref().map_or(0, |t| t.len() * size_of::<Vec2>())
+            + self.triangles.len() * size_of::<[u32; 3]>()
+            + self
+                .triangle_materials
+                .as_ref()
+                .map_or(0, |m| m.len() * size_of::<u16>())
+    }
+}
+
+/// Concatenates an optional per-vertex attribute, filling the side that lacks it.
+fn merge_attribute<T: Copy>(
+    own: &mut Option<Vec<T>>,
+    other: Option<Vec<T>>,
+    own_len: usize,
+    other_len: usize,
+    fill: T,
+) {
+    match (own.as_mut(), other) {
+        (None, None) => {}
+        (Some(values), None) => values.extend(std::iter::repeat_n(fill, other_len)),
+        (None, Some(values)) => {
+            let mut merged = vec![fill; own_len];
+            merged.extend(values);
+            *own = Some(merged);
+        }
+        (Some(values), Some(more)) => values.extend(more),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn triangle(z: f32, normals: bool) -> Mesh {
+        Mesh {
+            positions: vec![
+                Vec3::new(0.0, 0.0, z),
+                Vec3::new(1.0, 0.0, z),
+                Vec3::new(0.0, 1.0, z),
+            ],
+            normals: normals.then(|| vec![Vec3::Z; 3]),
+            triangles: vec![[0, 1, 2]],
+            materials: vec![Material::default()],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn append_offsets_indices_and_fills_missing_normals() {
+        let mut m = triangle(0.0, false);
+        m.append(triangle(1.0, true));
+        assert_eq!(m.triangles[1], [3, 4, 5]);
+        assert_eq!(m.normals.as_ref().unwrap()[0], Vec3::ZERO);
+        assert_eq!(m.triangle_materials.as_deref(), Some(&[0u16, 1][..]));
+        assert!(m.validate().is_ok());
+        // A zero vertex normal falls back to the face normal.
+        assert_eq!(m.shading_normal(0, 0.3, 0.3), Vec3::Z);
+    }
+
+    #[test]
+    fn validate_names_the_problem() {
+        let mut m = triangle(0.0, false);
+        m.positions[1].x = f32::NAN;
+        assert!(m.validate().unwrap_err().contains("vertex 2"));
+        let mut m = triangle(0.0, false);
+        m.triangles[0][2] = 7;
+        assert!(m.validate().unwrap_err().contains("triangle 1"));
+    }
+
+    #[test]
+    fn degenerate_triangle_has_zero_face_normal() {
+        let mut m = triangle(0.0, false);
+        m.positions[2] = m.positions[1];
+        assert_eq!(m.face_normal(0), Vec3::ZERO);
+    }
+}

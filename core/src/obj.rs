@@ -1,0 +1,201 @@
+//! Wavefront OBJ loading (through `tobj`): positions, normals when present, texture
+//! coordinates, and the materials' diffuse colour and diffuse texture.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use glam::{Vec2, Vec3};
+
+use crate::error::{Error, Result};
+use crate::mesh::{Material, Mesh, TextureImage};
+
+/// Loads every group of an OBJ file into one mesh.
+///
+/// A missing or unreadable MTL file or texture is reported with `tracing::warn!` and
+/// replaced by the default material; a malformed OBJ, or one with no triangles or with
+/// non-finite coordinates, is an error naming the file.
+pub fn load_obj(path: &Path) -> Result<Mesh> {
+    let obj_error = |message: String| Error::Obj {
+        path: path.to_path_buf(),
+        message,
+    };
+    if !path.is_file() {
+        return Err(Error::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        ));
+    }
+    let options = tobj::LoadOptions {
+        single_index: true,
+        triangulate: true,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let (models, materials) =
+        tobj::load_obj(path, &options).map_err(|e| obj_error(format!("malformed OBJ: {e}")))?;
+    let base_dir = path.parent().unwrap_or(Path::new("."));
+    let mut materials: Vec<Material> = match materials {
+        Ok(materials) => materials.iter().map(|m| convert_material(m, base_dir)).collect(),
+        Err(e) => {
+            tracing::warn!(
+                "{}: materials not loaded ({e}); using the default material",
+                path.display()
+            );
+            Vec::new()
+        }
+    };
+    // Slot for faces without a material (or with an id past the MTL's list).
+    let default_id = materials.len() as u16;
+    materials.push(Material::default());
+
+    let mut mesh = Mesh {
+        materials,
+        ..Default::default()
+    };
+    let mut any_normals = false;
+    let mut any_texcoords = false;
+    for model in &models {
+        any_normals |= !model.mesh.normals.is_empty();
+        any_texcoords |= !model.mesh.texcoords.is_empty();
+    }
+    let mut normals = Vec::new();
+    let mut texcoords = Vec::new();
+    let mut ids = Vec::new();
+    for model in models {
+        let m = model.mesh;
+        let offset = mesh.positions.len() as u32;
+        let count = m.positions.len() / 3;
+        mesh.positions
+            .extend(m.positions.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])));
+        if any_normals {
+            if m.normals.len() == m.positions.len() {
+                normals.extend(m.normals.chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])));
+            } else {
+                normals.extend(std::iter::repeat_n(Vec3::ZERO, count));
+            }
+        }
+        if any_texcoords {
+            if m.texcoords.len() / 2 == count {
+                texcoords.extend(m.texcoords.chunks_exact(2).map(|c| Vec2::new(c[0], c[1])));
+            } else {
+                texcoords.extend(std::iter::repeat_n(Vec2::ZERO, count));
+            }
+        }
+        let material = m
+            .material_id
+            .filter(|&id| id < default_id as usize)
+            .map_or(default_id, |id| id as u16);
+        for t in m.indices.chunks_exact(3) {
+            mesh.triangles.push([t[0] + offset, t[1] + offset, t[2] + offset]);
+            ids.push(material);
+        }
+    }
+    // Non-finite or zero normals from the file mean "none here": shading falls back to
+    // the face normal.
+    for n in &mut normals {
+        *n = if n.is_finite() {
+            n.normalize_or_zero()
+        } else {
+            Vec3::ZERO
+        };
+    }
+    mesh.normals = any_normals.then_some(normals);
+    mesh.texcoords = any_texcoords.then_some(texcoords);
+    mesh.triangle_materials = Some(ids);
+    mesh.validate().map_err(obj_error)?;
+    Ok(mesh)
+}
+
+fn convert_material(m: &tobj::Material, base_dir: &Path) -> Material {
+    let diffuse = m
+        .diffuse
+        .map(Vec3::from_array)
+        .filter(|d| d.is_finite())
+        .unwrap_or(Vec3::splat(0.8))
+        .clamp(Vec3::ZERO, Vec3::ONE);
+    let diffuse_texture = m.diffuse_texture.as_ref().and_then(|name| {
+        let path = base_dir.join(name.replace('\\', "/"));
+        match load_texture(&path) {
+            Ok(t) => Some(Arc::new(t)),
+            Err(e) => {
+                tracing::warn!("material `{}`: texture not loaded: {e}", m.name);
+                None
+            }
+        }
+    });
+    Material {
+        name: m.name.clone(),
+        diffuse,
+        diffuse_texture,
+    }
+}
+
+/// Loads an image file as a linear RGB texture.
+pub fn load_texture(path: &Path) -> Result<TextureImage> {
+    let image = image::open(path)
+        .map_err(|e| Error::Obj {
+            path: path.to_path_buf(),
+            message: format!("cannot read texture: {e}"),
+        })?
+        .to_rgb8();
+    Ok(TextureImage {
+        width: image.width(),
+        height: image.height(),
+        texels: image
+            .pixels()
+            .map(|p| Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32) / 255.0)
+            .collect(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    }
+
+    fn temp_dir(tag: &str) -> std::path::PathBuf {
+        let dir = std::env::temp_dir().join(format!("relief-obj-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn loads_quads_materials_and_missing_normals() {
+        let dir = temp_dir("quad");
+        write(&dir, "m.mtl", "newmtl red\nKd 1 0 0\n");
+        let path = write(
+            &dir,
+            "q.obj",
+            "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl red\nf 1 2 3 4\n",
+        );
+        let mesh = load_obj(&path).unwrap();
+        assert_eq!(mesh.triangle_count(), 2);
+        assert!(mesh.normals.is_none());
+        assert_eq!(mesh.material(0).diffuse, Vec3::new(1.0, 0.0, 0.0));
+        assert_eq!(mesh.shading_normal(0, 0.2, 0.2), Vec3::Z);
+    }
+
+    #[test]
+    fn errors_name_the_file_and_problem() {
+        let dir = temp_dir("bad");
+        let nan = write(&dir, "nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
+        let err = load_obj(&nan).unwrap_err().to_string();
+        assert!(err.contains("nan.obj") && err.contains("vertex 2"), "{err}");
+        let empty = write(&dir, "empty.obj", "v 0 0 0\n");
+        assert!(load_obj(&empty).unwrap_err().to_string().contains("no triangles"));
+        let bad = write(&dir, "bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
+        assert!(load_obj(&bad).unwrap_err().to_string().contains("bad.obj"));
+        let missing = dir.join("missing.obj");
+        assert!(
+            load_obj(&missing)
+                .unwrap_err()
+                .to_string()
+                .contains("missing.obj")
+        );
+    }
+}

@@ -1,0 +1,502 @@
+//! The relief texture: an orthographic image with per-texel albedo, normal and depth.
+//!
+//! # Source camera and depth mapping (the one place it is defined)
+//!
+//! A texture of `width × height` texels is seen by an orthographic [`SourceCamera`]
+//! `(origin, a, b, f)`: `a` and `b` are the texel steps along the image's x (i) and y (j)
+//! axes, `f = a×b/|a×b|` the unit viewing direction, pointing away from the eye the
+//! texture was made for. Texel `(i, j)` covers the world points
+//!
+//! ```text
+//! origin + (i + 0.5)·a + (j + 0.5)·b + t·f
+//! t = depth_near + q / q_max · (depth_far − depth_near)
+//! ```
+//!
+//! where `q` is the stored depth level: `0 ..= q_max`, `q_max = 254` for 8-bit depth and
+//! `65534` for 16-bit; the next value (255 or 65535) marks an empty texel. Levels are
+//! rounded to nearest, so a decoded depth is within half a quantum of the surface.
+//!
+//! On disk (`relief bake --out DIR`): `albedo.png` (RGB8), `normal.png` (RGB8, world
+//! normal `n·0.5 + 0.5`), `depth.png` (Gray8 or Gray16) and `texture.json`
+//! ([`TextureMeta`]). PNG pixel `(x, y)` is texel `(i = x, j = y)`.
+
+use std::path::Path;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::bounds::Aabb;
+use crate::error::{Error, Result};
+
+/// Largest relief-texture edge, in texels, that any command accepts.
+pub const MAX_TEXTURE_SIZE: u32 = 4096;
+
+/// Precision of stored depth.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum DepthBits {
+    Eight,
+    Sixteen,
+}
+
+impl DepthBits {
+    /// From a bit count (8 or 16).
+    pub fn from_bits(bits: u32) -> Result<Self> {
+        match bits {
+            8 => Ok(DepthBits::Eight),
+            16 => Ok(DepthBits::Sixteen),
+            _ => Err(Error::Invalid(format!("depth bits must be 8 or 16, got {bits}"))),
+        }
+    }
+
+    pub fn bits(self) -> u32 {
+        match self {
+            DepthBits::Eight => 8,
+            DepthBits::Sixteen => 16,
+        }
+    }
+
+    /// The deepest level, `q_max` (254 or 65534).
+    pub fn max_level(self) -> u16 {
+        self.empty() - 1
+    }
+
+    /// The level that marks an empty texel (255 or 65535).
+    pub fn empty(self) -> u16 {
+        match self {
+            DepthBits::Eight => 255,
+            DepthBits::Sixteen => 65535,
+        }
+    }
+}
+
+/// The orthographic camera of a relief texture (see the module docs for the mapping).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SourceCamera {
+    pub width: u32,
+    pub height: u32,
+    pub origin: Vec3,
+    pub a: Vec3,
+    pub b: Vec3,
+    pub f: Vec3,
+    pub depth_near: f32,
+    pub depth_far: f32,
+}
+
+/// Why no source camera can be made for an eye.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FacingError {
+    #[error("the eye is inside the object's bounds: draw the object as geometry")]
+    EyeInsideBounds,
+    #[error("relief texture size {0}x{1} must be between 1 and {MAX_TEXTURE_SIZE}")]
+    BadSize(u32, u32),
+    #[error("the eye {0} is not finite")]
+    NonFiniteEye(Vec3),
+    #[error("the object's bounds are empty or not finite")]
+    BadBounds,
+}
+
+impl SourceCamera {
+    /// The source camera of a relief texture of the object with `bounds`, made for
+    /// `eye`: orthographic, looking from the eye towards the bounds' centre, its image
+    /// plane at the near face of the bounds and its `width × height` texels spanning the
+    /// bounds' projection exactly.
+    pub fn facing(eye: Vec3, bounds: &Aabb, width: u32, height: u32) -> Result<Self, FacingError> {
+        if width == 0 || height == 0 || width > MAX_TEXTURE_SIZE || height > MAX_TEXTURE_SIZE {
+            return Err(FacingError::BadSize(width, height));
+        }
+        if !eye.is_finite() {
+            return Err(FacingError::NonFiniteEye(eye));
+        }
+        if bounds.is_empty() || !bounds.min.is_finite() || !bounds.max.is_finite() {
+            return Err(FacingError::BadBounds);
+        }
+        if bounds.contains(eye) {
+            return Err(FacingError::EyeInsideBounds);
+        }
+        let centre = bounds.center();
+        let f = (centre - eye).normalize();
+        // Image "up" follows world +y unless the view is nearly vertical.
+        let world_up = if f.y.abs() < 0.99 { Vec3::Y } else { Vec3::Z };
+        let right = f.cross(world_up).normalize();
+        let down = f.cross(right); // right × down = f, so a×b points along f.
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for corner in bounds.corners() {
+            let d = corner - centre;
+            let p = Vec3::new(d.dot(right), d.dot(down), d.dot(f));
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+        // A flat object seen edge-on projects to a line: keep every span positive.
+        let min_span = (hi - lo).max_element().max(f32::MIN_POSITIVE) * 1e-4;
+        for axis in 0..3 {
+            if hi[axis] - lo[axis] < min_span {
+                let mid = 0.5 * (hi[axis] + lo[axis]);
+                lo[axis] = mid - 0.5 * min_span;
+                hi[axis] = mid + 0.5 * min_span;
+            }
+        }
+        let span = hi - lo;
+        Ok(SourceCamera {
+            width,
+            height,
+            origin: centre + right * lo.x + down * lo.y + f * lo.z,
+            a: right * (span.x / width as f32),
+            b: down * (span.y / height as f32),
+            f,
+            depth_near: 0.0,
+            depth_far: span.z,
+        })
+    }
+
+    /// The point where texel `(i, j)`'s ray crosses the image plane (`t = 0`).
+    #[inline]
+    pub fn texel_origin(&self, i: u32, j: u32) -> Vec3 {
+        self.origin + self.a * (i as f32 + 0.5) + self.b * (j as f32 + 0.5)
+    }
+
+    /// Depth `t` of a stored level `q` (not the empty level).
+    #[inline]
+    pub fn depth_of_level(&self, q: u16, bits: DepthBits) -> f32 {
+        self.depth_near + q as f32 / bits.max_level() as f32 * (self.depth_far - self.depth_near)
+    }
+
+    /// The level nearest depth `t`, clamped to `0 ..= q_max`.
+    #[inline]
+    pub fn level_of_depth(&self, t: f32, bits: DepthBits) -> u16 {
+        let span = self.depth_far - self.depth_near;
+        let x = ((t - self.depth_near) / span).clamp(0.0, 1.0);
+        (x * bits.max_level() as f32 + 0.5) as u16
+    }
+
+    /// One depth quantum in world units.
+    pub fn depth_quantum(&self, bits: DepthBits) -> f32 {
+        (self.depth_far - self.depth_near) / bits.max_level() as f32
+    }
+}
+
+/// A relief texture: source camera plus the albedo, normal and depth planes (row-major,
+/// `j * width + i`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReliefTexture {
+    pub camera: SourceCamera,
+    pub depth_bits: DepthBits,
+    /// The eye the texture was made for.
+    pub eye: Vec3,
+    /// Linear albedo quantised to 8 bits.
+    pub albedo: Vec<[u8; 3]>,
+    /// World-space unit normals, encoded `n·0.5 + 0.5` to 8 bits.
+    pub normal: Vec<[u8; 3]>,
+    /// Depth levels; `depth_bits.empty()` marks an empty texel.
+    pub depth: Vec<u16>,
+}
+
+/// Encodes a unit normal as RGB8 (`n·0.5 + 0.5`).
+#[inline]
+pub fn encode_normal(n: Vec3) -> [u8; 3] {
+    crate::shading::to_rgb8(n * 0.5 + Vec3::splat(0.5))
+}
+
+/// Decodes an RGB8 normal back to a unit vector.
+#[inline]
+pub fn decode_normal(rgb: [u8; 3]) -> Vec3 {
+    (Vec3::new(rgb[0] as f32, rgb[1] as f32, rgb[2] as f32) / 127.5 - Vec3::ONE).normalize_or_zero()
+}
+
+/// The `texture.json` sidecar of a relief texture on disk.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TextureMeta {
+    pub width: u32,
+    pub height: u32,
+    pub origin: [f64; 3],
+    pub a: [f64; 3],
+    pub b: [f64; 3],
+    pub f: [f64; 3],
+    pub depth_near: f64,
+    pub depth_far: f64,
+    pub depth_bits: u32,
+    /// The depth level that marks an empty texel.
+    pub empty: u32,
+    /// The eye the texture was made for.
+    pub eye: [f64; 3],
+}
+
+fn to_f64(v: Vec3) -> [f64; 3] {
+    v.to_array().map(f64::from)
+}
+
+fn from_f64(v: [f64; 3]) -> Vec3 {
+    Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32)
+}
+
+impl ReliefTexture {
+    /// A texture with every texel empty.
+    pub fn empty(camera: SourceCamera, depth_bits: DepthBits, eye: Vec3) -> Self {
+        let n = camera.width as usize * camera.height as usize;
+        ReliefTexture {
+            camera,
+            depth_bits,
+            eye,
+            albedo: vec![[0; 3]; n],
+            normal: vec![[0; 3]; n],
+            depth: vec![depth_bits.empty(); n],
+        }
+    }
+
+    #[inline]
+    pub fn index(&self, i: u32, j: u32) -> usize {
+        j as usize * self.camera.width as usize + i as usize
+    }
+
+    /// True when texel `(i, j)` holds no surface.
+    #[inline]
+    pub fn is_empty_texel(&self, i: u32, j: u32) -> bool {
+        self.depth[self.index(i, j)] == self.depth_bits.empty()
+    }
+
+    /// Number of texels that hold a surface.
+    pub fn covered_texels(&self) -> usize {
+        let empty = self.depth_bits.empty();
+        self.depth.iter().filter(|&&q| q != empty).count()
+    }
+
+    /// The world point of texel `(i, j)`, or `None` when it is empty.
+    pub fn world_point(&self, i: u32, j: u32) -> Option<Vec3> {
+        let q = self.depth[self.index(i, j)];
+        (q != self.depth_bits.empty()).then(|| {
+            self.camera.texel_origin(i, j) + self.camera.f * self.camera.depth_of_level(q, self.depth_bits)
+        })
+    }
+
+    /// The `texture.json` record.
+    pub fn meta(&self) -> TextureMeta {
+        let c = &self.camera;
+        TextureMeta {
+            width: c.width,
+            height: c.height,
+            origin: to_f64(c.origin),
+            a: to_f64(c.a),
+            b: to_f64(c.b),
+            f: to_f64(c.f),
+            depth_near: c.depth_near as f64,
+            depth_far: c.depth_far as f64,
+            depth_bits: self.depth_bits.bits(),
+            empty: self.depth_bits.empty() as u32,
+            eye: to_f64(self.eye),
+        }
+    }
+
+    /// Writes `albedo.png`, `normal.png`, `depth.png` and `texture.json` into `dir`
+    /// (created if missing).
+    pub fn write_dir(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        let (w, h) = (self.camera.width, self.camera.height);
+        let save = |name: &str, result: image::ImageResult<()>| {
+            result.map_err(|e| Error::io(dir.join(name), std::io::Error::other(e)))
+        };
+        let rgb = |plane: &[[u8; 3]]| plane.iter().flatten().copied().collect::<Vec<u8>>();
+        save(
+            "albedo.png",
+            image::save_buffer(
+                dir.join("albedo.png"),
+                &rgb(&self.albedo),
+                w,
+                h,
+                image::ColorType::Rgb8,
+            ),
+        )?;
+        save(
+            "normal.png",
+            image::save_buffer(
+                dir.join("normal.png"),
+                &rgb(&self.normal),
+                w,
+                h,
+                image::ColorType::Rgb8,
+            ),
+        )?;
+        let depth_png = dir.join("depth.png");
+        match self.depth_bits {
+            DepthBits::Eight => {
+                let bytes: Vec<u8> = self.depth.iter().map(|&q| q as u8).collect();
+                save(
+                    "depth.png",
+                    image::save_buffer(&depth_png, &bytes, w, h, image::ColorType::L8),
+                )?;
+            }
+            DepthBits::Sixteen => {
+                let buffer: image::ImageBuffer<image::Luma<u16>, Vec<u16>> =
+                    image::ImageBuffer::from_raw(w, h, self.depth.clone())
+                        .ok_or_else(|| Error::Invalid("depth plane has the wrong size".into()))?;
+                save("depth.png", buffer.save(&depth_png))?;
+            }
+        }
+        let json = serde_json::to_string_pretty(&self.meta()).map_err(|e| Error::Invalid(e.to_string()))?;
+        let json_path = dir.join("texture.json");
+        std::fs::write(&json_path, json + "\n").map_err(|e| Error::io(json_path, e))
+    }
+
+    /// Reads a texture written by [`ReliefTexture::write_dir`]; errors name the file and
+    /// the problem.
+    pub fn read_dir(dir: &Path) -> Result<Self> {
+        let json_path = dir.join("texture.json");
+        let bad = |message: String| Error::Texture {
+            path: dir.to_path_buf(),
+            message,
+        };
+        let text = std::fs::read_to_string(&json_path).map_err(|e| Error::io(&json_path, e))?;
+        let meta: TextureMeta = serde_json::from_str(&text).map_err(|e| bad(format!("texture.json: {e}")))?;
+        let depth_bits = DepthBits::from_bits(meta.depth_bits).map_err(|e| bad(e.to_string()))?;
+        let camera = SourceCamera {
+            width: meta.width,
+            height: meta.height,
+            origin: from_f64(meta.origin),
+            a: from_f64(meta.a),
+            b: from_f64(meta.b),
+            f: from_f64(meta.f),
+            depth_near: meta.depth_near as f32,
+            depth_far: meta.depth_far as f32,
+        };
+        let finite = [camera.origin, camera.a, camera.b, camera.f]
+            .iter()
+            .all(|v| v.is_finite())
+            && camera.depth_near.is_finite()
+            && camera.depth_far.is_finite();
+        if !finite || camera.depth_far <= camera.depth_near {
+            return Err(bad("texture.json holds non-finite or inverted values".into()));
+        }
+        let (w, h) = (meta.width, meta.height);
+        if w == 0 || h == 0 || w > MAX_TEXTURE_SIZE || h > MAX_TEXTURE_SIZE {
+            return Err(bad(format!("size {w}x{h} out of range")));
+        }
+        let open = |name: &str| {
+            let image = image::open(dir.join(name)).map_err(|e| bad(format!("{name}: {e}")))?;
+            if image.width() != w || image.height() != h {
+                return Err(bad(format!(
+                    "{name} is {}x{}, expected {w}x{h}",
+                    image.width(),
+                    image.height()
+                )));
+            }
+            Ok(image)
+        };
+        let rgb = |name: &str| -> Result<Vec<[u8; 3]>> {
+            Ok(open(name)?.to_rgb8().pixels().map(|p| p.0).collect())
+        };
+        let albedo = rgb("albedo.png")?;
+        let normal = rgb("normal.png")?;
+        let depth = match (depth_bits, open("depth.png")?) {
+            (DepthBits::Eight, image::DynamicImage::ImageLuma8(d)) => {
+                d.into_raw().into_iter().map(u16::from).collect()
+            }
+            (DepthBits::Sixteen, image::DynamicImage::ImageLuma16(d)) => d.into_raw(),
+            (_, other) => {
+                return Err(bad(format!(
+                    "depth.png is {:?}, expected {}-bit grey",
+                    other.color(),
+                    depth_bits.bits()
+                )));
+            }
+        };
+        Ok(ReliefTexture {
+            camera,
+            depth_bits,
+            eye: from_f64(meta.eye),
+            albedo,
+            normal,
+            depth,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit_box() -> Aabb {
+        Aabb {
+            min: Vec3::splat(-1.0),
+            max: Vec3::splat(1.0),
+        }
+    }
+
+    #[test]
+    fn facing_camera_spans_the_bounds_and_faces_away_from_the_eye() {
+        let eye = Vec3::new(3.0, 1.0, 4.0);
+        let c = SourceCamera::facing(eye, &unit_box(), 64, 32).unwrap();
+        assert!(c.f.abs_diff_eq((-eye).normalize(), 1e-6));
+        assert!(c.a.cross(c.b).normalize().abs_diff_eq(c.f, 1e-5));
+        // Every corner projects inside the image and at depth within [near, far].
+        for corner in unit_box().corners() {
+            let d = corner - c.origin;
+            let (u, v, t) = (
+                d.dot(c.a) / c.a.length_squared(),
+                d.dot(c.b) / c.b.length_squared(),
+                d.dot(c.f),
+            );
+            assert!(
+                (-1e-3..=64.001).contains(&u) && (-1e-3..=32.001).contains(&v),
+                "{u} {v}"
+            );
+            assert!(t >= c.depth_near - 1e-5 && t <= c.depth_far + 1e-5);
+        }
+        assert_eq!(
+            SourceCamera::facing(Vec3::ZERO, &unit_box(), 8, 8),
+            Err(FacingError::EyeInsideBounds)
+        );
+        assert!(SourceCamera::facing(eye, &unit_box(), 0, 8).is_err());
+        assert!(SourceCamera::facing(eye, &unit_box(), MAX_TEXTURE_SIZE + 1, 8).is_err());
+        assert!(SourceCamera::facing(Vec3::INFINITY, &unit_box(), 8, 8).is_err());
+        // Straight above: the up vector switches axis, no NaN.
+        let top = SourceCamera::facing(Vec3::Y * 5.0, &unit_box(), 8, 8).unwrap();
+        assert!(top.a.is_finite() && top.b.is_finite());
+        // A flat box seen edge-on keeps positive spans.
+        let flat = Aabb {
+            min: Vec3::new(-1.0, 0.0, -1.0),
+            max: Vec3::new(1.0, 0.0, 1.0),
+        };
+        let edge_on = SourceCamera::facing(Vec3::X * 5.0, &flat, 8, 8).unwrap();
+        assert!(edge_on.b.length() > 0.0 && edge_on.depth_far > 0.0);
+    }
+
+    #[test]
+    fn depth_levels_round_trip_within_half_a_quantum() {
+        let c = SourceCamera::facing(Vec3::Z * 5.0, &unit_box(), 4, 4).unwrap();
+        for bits in [DepthBits::Eight, DepthBits::Sixteen] {
+            for k in 0..=100 {
+                let t = c.depth_far * k as f32 / 100.0;
+                let q = c.level_of_depth(t, bits);
+                assert!(q <= bits.max_level());
+                assert!((c.depth_of_level(q, bits) - t).abs() <= 0.5 * c.depth_quantum(bits) + 1e-6);
+            }
+        }
+    }
+
+    #[test]
+    fn normals_encode_within_a_degree() {
+        for n in [Vec3::X, -Vec3::Y, Vec3::new(0.3, -0.5, 0.8).normalize()] {
+            assert!(decode_normal(encode_normal(n)).angle_between(n) < 1f32.to_radians());
+        }
+    }
+
+    #[test]
+    fn disk_round_trip() {
+        let dir = std::env::temp_dir().join(format!("relief-tex-{}", std::process::id()));
+        for bits in [DepthBits::Eight, DepthBits::Sixteen] {
+            let c = SourceCamera::facing(Vec3::Z * 5.0, &unit_box(), 5, 3).unwrap();
+            let mut t = ReliefTexture::empty(c, bits, Vec3::Z * 5.0);
+            t.depth[4] = 7;
+            t.albedo[4] = [1, 2, 3];
+            t.normal[4] = encode_normal(Vec3::Z);
+            t.write_dir(&dir).unwrap();
+            let back = ReliefTexture::read_dir(&dir).unwrap();
+            assert_eq!(back, t);
+        }
+        std::fs::write(dir.join("texture.json"), "{").unwrap();
+        assert!(
+            ReliefTexture::read_dir(&dir)
+                .unwrap_err()
+                .to_string()
+                .contains("texture.json")
+        );
+    }
+}

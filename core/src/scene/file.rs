@@ -1,0 +1,332 @@
+//! The TOML scene-file format.
+//!
+//! ```toml
+//! name = "example"              # optional; defaults to the file name
+//! background = [0.6, 0.75, 0.9] # linear RGB of empty pixels
+//! ambient = [0.2, 0.2, 0.2]
+//!
+//! [camera]
+//! fov_deg = 60
+//! [[camera.path]]               # optional; default: one orbit around the scene
+//! kind = "orbit"
+//! center = [0, 1, 0]
+//! radius = 6
+//! height = 1.5
+//! frames = 120
+//!
+//! [[lights]]                    # optional; default: a sun and a fill light
+//! kind = "directional"          # or "point" with `position`
+//! direction = [-0.4, -1, -0.3]
+//! color = [1, 1, 1]
+//! intensity = 0.9
+//!
+//! [[objects]]
+//! name = "ball"
+//! generator = { kind = "sphere", subdivisions = 4 }  # or: obj = "meshes/ball.obj"
+//! translate = [0, 1, 0]
+//! rotate_deg = [0, 45, 0]       # about x, then y, then z
+//! scale = 1.0
+//! diffuse = [0.8, 0.2, 0.2]     # optional: replaces the mesh's material colours
+//! specular = 0.3                # Phong k_s
+//! shininess = 40
+//! ```
+//!
+//! Paths are relative to the scene file. Unknown keys are errors, so typos are caught.
+
+use std::path::{Path, PathBuf};
+
+use glam::{Affine3A, EulerRot, Quat, Vec3};
+use rayon::prelude::*;
+use serde::Deserialize;
+
+use super::{Scene, SceneObject, default_lighting};
+use crate::camera::{CameraPath, PathSegment};
+use crate::error::{Error, Result};
+use crate::generators::Generator;
+use crate::mesh::Mesh;
+use crate::shading::{Light, Lighting, Specular};
+
+pub(super) const DEFAULT_BACKGROUND: [f32; 3] = [0.62, 0.74, 0.88];
+pub(super) const DEFAULT_AMBIENT: [f32; 3] = [0.18, 0.18, 0.2];
+pub(super) const DEFAULT_FOV: f32 = 60.0;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    name: Option<String>,
+    background: Option<[f32; 3]>,
+    ambient: Option<[f32; 3]>,
+    #[serde(default)]
+    camera: CameraFile,
+    lights: Option<Vec<LightFile>>,
+    objects: Vec<ObjectFile>,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CameraFile {
+    fov_deg: Option<f32>,
+    #[serde(default)]
+    path: Vec<PathSegment>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase", deny_unknown_fields)]
+enum LightFile {
+    Directional {
+        direction: [f32; 3],
+        #[serde(default = "white")]
+        color: [f32; 3],
+        #[serde(default = "one")]
+        intensity: f32,
+    },
+    Point {
+        position: [f32; 3],
+        #[serde(default = "white")]
+        color: [f32; 3],
+        #[serde(default = "one")]
+        intensity: f32,
+    },
+}
+
+fn white() -> [f32; 3] {
+    [1.0; 3]
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ObjectFile {
+    name: String,
+    obj: Option<PathBuf>,
+    generator: Option<Generator>,
+    #[serde(default)]
+    translate: [f32; 3],
+    #[serde(default)]
+    rotate_deg: [f32; 3],
+    #[serde(default = "one")]
+    scale: f32,
+    diffuse: Option<[f32; 3]>,
+    specular: Option<f32>,
+    shininess: Option<f32>,
+}
+
+/// Loads a scene file from disk.
+pub fn load_file(path: &Path) -> Result<Scene> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut scene = parse(&text, &path.display().to_string(), base)?;
+    if scene.name.is_empty() {
+        scene.name = path
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+    }
+    Ok(scene)
+}
+
+/// Parses scene-file text; `origin` names it in errors, `base` resolves relative paths.
+pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scene> {
+    let error = |message: String| Error::Scene {
+        origin: origin.to_string(),
+        message,
+    };
+    let file: SceneFile =
+        toml::from_str(text).map_err(|e| error(e.message().to_string() + &span_note(text, e.span())))?;
+    let finite3 = |what: &str, v: [f32; 3]| {
+        crate::vector::ensure_finite(what, Vec3::from(v)).map_err(|m| error(m.to_string()))
+    };
+    let background = finite3("background", file.background.unwrap_or(DEFAULT_BACKGROUND))?;
+    let ambient = finite3("ambient", file.ambient.unwrap_or(DEFAULT_AMBIENT))?;
+    let fov = file.camera.fov_deg.unwrap_or(DEFAULT_FOV);
+    if !(fov > 0.0 && fov < 180.0) {
+        return Err(error(format!("camera.fov_deg {fov} must be in (0, 180)")));
+    }
+    for segment in &file.camera.path {
+        segment
+            .validate()
+            .map_err(|m| error(format!("camera.path: {m}")))?;
+    }
+    let lighting = match file.lights {
+        None => Lighting {
+            ambient,
+            ..default_lighting()
+        },
+        Some(lights) => Lighting {
+            ambient,
+            lights: lights
+                .into_iter()
+                .map(|l| convert_light(l).map_err(&error))
+                .collect::<Result<_>>()?,
+        },
+    };
+    if file.objects.is_empty() {
+        return Err(error("the scene has no objects".into()));
+    }
+    for (k, o) in file.objects.iter().enumerate() {
+        if o.name.trim().is_empty() {
+            return Err(error(format!("object {} has an empty name", k + 1)));
+        }
+        if file.objects[..k].iter().any(|p| p.name == o.name) {
+            return Err(error(format!("two objects are named `{}`", o.name)));
+        }
+    }
+    let objects = file
+        .objects
+        .into_par_iter()
+        .map(|o| {
+            let name = o.name.clone();
+            build_object(o, base).map_err(|m| match m {
+                Error::Invalid(m) => error(format!("object `{name}`: {m}")),
+                other => other,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let mut scene = Scene {
+        name: file.name.unwrap_or_default(),
+        objects,
+        lighting,
+        background,
+        fov_y_degrees: fov,
+        path: CameraPath {
+            segments: file.camera.path,
+        },
+    };
+    if scene.path.segments.is_empty() {
+        scene.path = scene.default_path();
+    }
+    Ok(scene)
+}
+
+/// " (line L, column C)" for a TOML error span.
+fn span_note(text: &str, span: Option<std::ops::Range<usize>>) -> String {
+    let Some(span) = span else {
+        return String::new();
+    };
+    let before = &text[..span.start.min(text.len())];
+    let line = before.matches('\n').count() + 1;
+    let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+    format!(" (line {line}, column {column})")
+}
+
+fn convert_light(light: LightFile) -> Result<Light, String> {
+    let check = |what: &str, v: [f32; 3]| crate::vector::ensure_finite(what, Vec3::from(v));
+    Ok(match light {
+        LightFile::Directional {
+            direction,
+            color,
+            intensity,
+        } => {
+            let direction = check("light direction", direction)?.normalize_or_zero();
+            if direction == Vec3::ZERO {
+                return Err("a directional light has a zero direction".into());
+            }
+            Light::Directional {
+                direction,
+                color: check("light color", color)? * finite_scalar("light intensity", intensity)?,
+            }
+        }
+        LightFile::Point {
+            position,
+            color,
+            intensity,
+        } => Light::Point {
+            position: check("light position", position)?,
+            color: check("light color", color)? * finite_scalar("light intensity", intensity)?,
+        },
+    })
+}
+
+fn finite_scalar(what: &str, v: f32) -> Result<f32, String> {
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("{what} {v} is not finite"))
+    }
+}
+
+fn build_object(o: ObjectFile, base: &Path) -> Result<SceneObject> {
+    let invalid = |m: String| Error::Invalid(m);
+    let mut mesh: Mesh = match (&o.obj, &o.generator) {
+        (Some(path), None) => crate::obj::load_obj(&base.join(path))?,
+        (None, Some(generator)) => {
+            generator.validate().map_err(invalid)?;
+            generator.build()
+        }
+        _ => return Err(invalid("give exactly one of `obj` or `generator`".into())),
+    };
+    let translate = crate::vector::ensure_finite("translate", Vec3::from(o.translate)).map_err(invalid)?;
+    let rotate = crate::vector::ensure_finite("rotate_deg", Vec3::from(o.rotate_deg)).map_err(invalid)?;
+    if !(o.scale.is_finite() && o.scale > 0.0) {
+        return Err(invalid(format!("scale {} must be positive and finite", o.scale)));
+    }
+    if let Some(diffuse) = o.diffuse {
+        let diffuse = crate::vector::ensure_finite("diffuse", Vec3::from(diffuse)).map_err(invalid)?;
+        for m in &mut mesh.materials {
+            m.diffuse = diffuse.clamp(Vec3::ZERO, Vec3::ONE);
+        }
+    }
+    let specular = Specular {
+        strength: finite_scalar("specular", o.specular.unwrap_or(Specular::default().strength))
+            .map_err(invalid)?,
+        shininess: finite_scalar("shininess", o.shininess.unwrap_or(Specular::default().shininess))
+            .map_err(invalid)?,
+    };
+    let rotation = Quat::from_euler(
+        EulerRot::XYZ,
+        rotate.x.to_radians(),
+        rotate.y.to_radians(),
+        rotate.z.to_radians(),
+    );
+    let transform = Affine3A::from_scale_rotation_translation(Vec3::splat(o.scale), rotation, translate);
+    let world = mesh.transformed(transform);
+    world.validate().map_err(invalid)?;
+    Ok(SceneObject::new(o.name, world, specular))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_str(text: &str) -> Result<Scene> {
+        parse(text, "test", Path::new("."))
+    }
+
+    #[test]
+    fn parses_a_small_scene() {
+        let scene = parse_str(
+            r#"
+            [[lights]]
+            kind = "point"
+            position = [0, 5, 0]
+            [[objects]]
+            name = "ball"
+            generator = { kind = "sphere", subdivisions = 1 }
+            translate = [0, 2, 0]
+            scale = 2
+            "#,
+        )
+        .unwrap();
+        let ball = scene.object("ball").unwrap();
+        assert!(ball.bounds.min.abs_diff_eq(Vec3::new(-2.0, 0.0, -2.0), 1e-4));
+        assert_eq!(scene.lighting.lights.len(), 1);
+        assert_eq!(scene.path.frame_count(), 120);
+    }
+
+    #[test]
+    fn errors_say_what_is_wrong() {
+        let err = |text: &str| parse_str(text).unwrap_err().to_string();
+        assert!(err("[[objects]]\nname = \"a\"\n").contains("exactly one"));
+        assert!(err("objects = []").contains("no objects"));
+        assert!(err("[[objects]]\nname = \"a\"\ncolour = 1\n").contains("colour"));
+        let two = "[[objects]]\nname = \"a\"\ngenerator = { kind = \"sphere\", subdivisions = 0 }\n";
+        assert!(err(&format!("{two}{two}")).contains("two objects"));
+        let nan_scale =
+            "[[objects]]\nname = \"a\"\nscale = nan\ngenerator = { kind = \"sphere\", subdivisions = 0 }\n";
+        assert!(err(nan_scale).contains("scale"));
+        assert!(err("[[objects]]\nname = \"a\"\nobj = \"missing.obj\"\n").contains("missing.obj"));
+        assert!(err("name = ").contains("line 1"));
+    }
+}

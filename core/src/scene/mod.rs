@@ -1,0 +1,189 @@
+//! Scenes: objects placed in the world, lights, and a camera path.
+//!
+//! `--scene` everywhere goes through [`Scene::load`], which accepts a built-in scene
+//! name (see [`builtin_names`]), a TOML scene file (schema in [`file`]) or a bare
+//! `.obj` file (a one-object scene named after the file).
+
+pub mod file;
+
+use std::path::Path;
+use std::sync::Arc;
+
+use glam::Vec3;
+
+use crate::bounds::Aabb;
+use crate::camera::{CameraPath, PathSegment};
+use crate::error::{Error, Result};
+use crate::hash::{ContentHash, mesh_hash};
+use crate::mesh::Mesh;
+use crate::shading::{Light, Lighting, Specular};
+
+/// Built-in scenes, embedded so that they work from any directory.
+const BUILTINS: &[(&str, &str)] = &[("default", include_str!("../../../assets/scenes/default.toml"))];
+
+/// Names accepted by [`Scene::load`] without a file.
+pub fn builtin_names() -> Vec<&'static str> {
+    BUILTINS.iter().map(|(name, _)| *name).collect()
+}
+
+/// One object of a scene, its mesh already placed in world space.
+#[derive(Debug, Clone)]
+pub struct SceneObject {
+    pub name: String,
+    pub mesh: Arc<Mesh>,
+    /// World-space bounds of the mesh.
+    pub bounds: Aabb,
+    pub specular: Specular,
+    /// Content hash of the world-space mesh.
+    pub hash: ContentHash,
+}
+
+impl SceneObject {
+    /// Places `mesh` (already in world space) in a scene object.
+    pub fn new(name: impl Into<String>, mesh: Mesh, specular: Specular) -> Self {
+        SceneObject {
+            name: name.into(),
+            bounds: mesh.bounds(),
+            hash: mesh_hash(&mesh),
+            mesh: Arc::new(mesh),
+            specular,
+        }
+    }
+}
+
+/// A loaded scene.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    pub name: String,
+    pub objects: Vec<SceneObject>,
+    pub lighting: Lighting,
+    /// Colour of pixels that see no object.
+    pub background: Vec3,
+    /// Vertical field of view of the default camera, degrees.
+    pub fov_y_degrees: f32,
+    pub path: CameraPath,
+}
+
+impl Scene {
+    /// Loads a built-in scene by name, a `.toml` scene file or a bare `.obj` file.
+    pub fn load(spec: &str) -> Result<Scene> {
+        let path = Path::new(spec);
+        let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+        match extension.as_deref() {
+            Some("obj") => Self::from_obj(path),
+            Some("toml") => file::load_file(path),
+            _ => match BUILTINS.iter().find(|(name, _)| *name == spec) {
+                Some((name, text)) => file::parse(text, &format!("built-in `{name}`"), Path::new(".")),
+                None => Err(Error::UnknownScene(spec.to_string())),
+            },
+        }
+    }
+
+    /// A one-object scene from an OBJ file, with default lights and an orbit path.
+    pub fn from_obj(path: &Path) -> Result<Scene> {
+        let mesh = crate::obj::load_obj(path)?;
+        let name = path
+            .file_stem()
+            .map_or_else(|| "object".to_string(), |s| s.to_string_lossy().into_owned());
+        let object = SceneObject::new(name.clone(), mesh, Specular::default());
+        let mut scene = Scene {
+            name,
+            objects: vec![object],
+            lighting: default_lighting(),
+            background: file::DEFAULT_BACKGROUND.into(),
+            fov_y_degrees: file::DEFAULT_FOV,
+            path: CameraPath::default(),
+        };
+        scene.path = scene.default_path();
+        Ok(scene)
+    }
+
+    /// World bounds of all objects.
+    pub fn bounds(&self) -> Aabb {
+        self.objects.iter().fold(Aabb::EMPTY, |b, o| b.union(o.bounds))
+    }
+
+    /// Total triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.objects.iter().map(|o| o.mesh.triangle_count()).sum()
+    }
+
+    /// The object called `name`.
+    pub fn object(&self, name: &str) -> Result<&SceneObject> {
+        self.objects
+            .iter()
+            .find(|o| o.name == name)
+            .ok_or_else(|| Error::UnknownObject {
+                scene: self.name.clone(),
+                name: name.to_string(),
+                available: self.object_names(),
+            })
+    }
+
+    /// The object called `name`, or the only object when `name` is `None`.
+    pub fn object_or_only(&self, name: Option<&str>) -> Result<&SceneObject> {
+        match (name, self.objects.as_slice()) {
+            (Some(name), _) => self.object(name),
+            (None, [only]) => Ok(only),
+            (None, _) => Err(Error::Invalid(format!(
+                "scene `{}` has {} objects: name one with --object ({})",
+                self.name,
+                self.objects.len(),
+                self.object_names()
+            ))),
+        }
+    }
+
+    fn object_names(&self) -> String {
+        self.objects
+            .iter()
+            .map(|o| o.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
+    /// One orbit around the whole scene, for scenes that give no path.
+    pub fn default_path(&self) -> CameraPath {
+        let b = self.bounds();
+        let radius = b.extent().length().max(1e-6);
+        CameraPath {
+            segments: vec![PathSegment::Orbit {
+                center: b.center().to_array(),
+                radius: radius * 1.5,
+                height: radius * 0.4,
+                turns: 1.0,
+                frames: 120,
+            }],
+        }
+    }
+}
+
+/// A sun from above-left-front plus a weak fill, for scenes that give no lights.
+pub fn default_lighting() -> Lighting {
+    Lighting {
+        ambient: Vec3::from(file::DEFAULT_AMBIENT),
+        lights: vec![
+            Light::Directional {
+                direction: Vec3::new(-0.4, -1.0, -0.3).normalize(),
+                color: Vec3::splat(0.85),
+            },
+            Light::Directional {
+                direction: Vec3::new(0.6, -0.2, 0.7).normalize(),
+                color: Vec3::splat(0.25),
+            },
+        ],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unknown_scene_names_the_choices() {
+        let err = Scene::load("nonesuch").unwrap_err().to_string();
+        assert!(err.contains("nonesuch") && err.contains("default"), "{err}");
+        let err = Scene::load("/no/such/file.toml").unwrap_err().to_string();
+        assert!(err.contains("/no/such/file.toml"), "{err}");
+    }
+}

@@ -1,0 +1,363 @@
+//! A bounding-volume hierarchy over the triangles of one mesh.
+//!
+//! Built as a binary tree with binned SAH ([`build`]), then collapsed into a 4-wide tree
+//! whose nodes keep their children's boxes in structure-of-arrays form, so one node
+//! visit tests four boxes with SIMD lanes (`glam::Vec4`). Triangles are copied into leaf
+//! order as `(v0, e1, e2)` for the Möller–Trumbore test, with their original index
+//! beside them.
+
+mod build;
+mod triangle;
+
+use glam::{Vec3, Vec4};
+
+use relief_core::bounds::Aabb;
+use relief_core::mesh::Mesh;
+
+pub use triangle::intersect_triangle;
+
+/// A 4-wide node: up to four children, each either an inner node (`count == 0`,
+/// `child` = node index) or a leaf (`count` triangles from `child`). Lanes at or past
+/// `len` are unused.
+#[derive(Debug, Clone, Copy)]
+#[repr(C, align(64))]
+pub(crate) struct Node4 {
+    min_x: Vec4,
+    min_y: Vec4,
+    min_z: Vec4,
+    max_x: Vec4,
+    max_y: Vec4,
+    max_z: Vec4,
+    child: [u32; 4],
+    count: [u32; 4],
+    /// Bit `k` set when lane `k` holds a child.
+    lanes: u32,
+}
+
+/// A triangle in the form the intersection test wants.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct TriAccel {
+    v0: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+    /// Index of the triangle in the mesh.
+    id: u32,
+}
+
+/// The closest intersection along a ray.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    /// Ray parameter: the hit point is `origin + t · direction`.
+    pub t: f32,
+    /// Barycentric weights of corners 1 and 2 (corner 0 gets `1 - u - v`).
+    pub u: f32,
+    pub v: f32,
+    /// Index of the triangle in the mesh.
+    pub triangle: u32,
+}
+
+/// Deepest binary tree the builder makes; the 4-wide traversal stack holds three
+/// entries per level.
+const MAX_DEPTH: usize = 64;
+const STACK: usize = 3 * MAX_DEPTH;
+
+/// Slab distances are widened by this factor so that rounding never drops a box that a
+/// triangle on its boundary is hit in (2·γ₃ of Pharr et al.).
+const SLAB_WIDEN: f32 = 1.0 + 4.0 * f32::EPSILON;
+
+/// A BVH over one mesh's triangles.
+#[derive(Debug, Clone)]
+pub struct Bvh {
+    nodes: Vec<Node4>,
+    bounds: Aabb,
+    triangles: Vec<TriAccel>,
+}
+
+/// `1 / d` per axis, with zero components replaced by a tiny number of the same sign so
+/// that `0 · ∞` never turns a slab distance into NaN.
+#[inline]
+fn safe_recip(d: Vec3) -> Vec3 {
+    let tiny = |x: f32| if x.abs() < 1e-30 { 1e-30f32.copysign(x) } else { x };
+    Vec3::new(tiny(d.x), tiny(d.y), tiny(d.z)).recip()
+}
+
+impl Bvh {
+    /// Builds the hierarchy with binned SAH, in parallel on the current rayon pool.
+    pub fn build(mesh: &Mesh) -> Bvh {
+        build::build(mesh)
+    }
+
+    /// World bounds of everything in the tree.
+    pub fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// Heap bytes held by the hierarchy (nodes and the reordered triangles).
+    pub fn heap_bytes(&self) -> usize {
+        self.nodes.capacity() * size_of::<Node4>() + self.triangles.capacity() * size_of::<TriAccel>()
+    }
+
+    /// Number of 4-wide nodes.
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// The closest hit with `t` in `[t_min, t_max)`, or `None`.
+    pub fn intersect(&self, origin: Vec3, direction: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
+        let mut hit = [None];
+        let ray = Ray {
+            origin,
+            direction,
+            t_min,
+            t_max,
+        };
+        self.intersect_batch(&[ray], &mut hit);
+        hit[0]
+    }
+
+    /// The closest hit of every ray, written to `hits` (same length as `rays`).
+    ///
+    /// Several rays are traversed in lock-step, one node each in turn, each prefetching
+    /// its next node: their fetches are independent, so the processor overlaps the cache
+    /// misses that a single ray would wait for one after another.
+    pub fn intersect_batch(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        assert_eq!(rays.len(), hits.len(), "one hit slot per ray");
+        LANES.with(|lanes| {
+            let mut lanes = lanes.borrow_mut();
+            if lanes.is_empty() {
+                lanes.resize_with(INTERLEAVE, Traversal::idle);
+            }
+            let mut ray_of_lane = [usize::MAX; INTERLEAVE];
+            let mut next_ray = 0;
+            loop {
+                let mut active = false;
+                for (lane, traversal) in lanes.iter_mut().enumerate() {
+                    if ray_of_lane[lane] == usize::MAX {
+                        if next_ray == rays.len() {
+                            continue;
+                        }
+                        traversal.start(self, rays[next_ray]);
+                        ray_of_lane[lane] = next_ray;
+                        next_ray += 1;
+                    }
+                    active = true;
+                    if !traversal.step(self) {
+                        hits[ray_of_lane[lane]] = traversal.hit(self);
+                        ray_of_lane[lane] = usize::MAX;
+                    }
+                }
+                if !active {
+                    return;
+                }
+            }
+        });
+    }
+}
+
+/// Asks the cache for both lines of a node without waiting for them.
+#[inline(always)]
+fn prefetch(node: &Node4) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        let p = (node as *const Node4).cast::<i8>();
+        // SAFETY: prefetching is a hint that never faults; both addresses lie inside
+        // the node (it is 128 bytes, 64-aligned).
+        unsafe {
+            _mm_prefetch::<_MM_HINT_T0>(p);
+            _mm_prefetch::<_MM_HINT_T0>(p.add(64));
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = node;
+}
+
+/// Rays traversed together by [`Bvh::intersect_batch`].
+const INTERLEAVE: usize = 32;
+
+thread_local! {
+    /// Per-thread traversal states, kept so their stacks are not re-initialised per ray.
+    static LANES: std::cell::RefCell<Vec<Traversal>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// A ray and the parameter interval searched for hits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub direction: Vec3,
+    pub t_min: f32,
+    pub t_max: f32,
+}
+
+/// The state of one ray's closest-hit traversal, advanced one node at a time.
+struct Traversal {
+    origin: Vec3,
+    direction: Vec3,
+    o: [Vec4; 3],
+    inv: [Vec4; 3],
+    t_min: f32,
+    best_t: f32,
+    best: Option<(u32, f32, f32)>,
+    /// The node to visit next, if any.
+    node: Option<u32>,
+    stack: [(u32, f32); STACK],
+    depth: usize,
+}
+
+impl Traversal {
+    fn idle() -> Self {
+        Traversal {
+            origin: Vec3::ZERO,
+            direction: Vec3::ZERO,
+            o: [Vec4::ZERO; 3],
+            inv: [Vec4::ZERO; 3],
+            t_min: 0.0,
+            best_t: 0.0,
+            best: None,
+            node: None,
+            stack: [(0, 0.0); STACK],
+            depth: 0,
+        }
+    }
+
+    /// Resets for a new ray (the stack's contents stay: only entries below `depth` are
+    /// ever read).
+    #[inline]
+    fn start(&mut self, bvh: &Bvh, ray: Ray) {
+        let inv = safe_recip(ray.direction);
+        self.origin = ray.origin;
+        self.direction = ray.direction;
+        self.o = [
+            Vec4::splat(ray.origin.x),
+            Vec4::splat(ray.origin.y),
+            Vec4::splat(ray.origin.z),
+        ];
+        self.inv = [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)];
+        self.t_min = ray.t_min;
+        self.best_t = ray.t_max;
+        self.best = None;
+        self.node = (!bvh.triangles.is_empty()).then_some(0);
+        self.depth = 0;
+    }
+
+    /// Visits one node (testing its leaf children's triangles); false when done.
+    #[inline]
+    fn step(&mut self, bvh: &Bvh) -> bool {
+        let Some(index) = self.node else {
+            return false;
+        };
+        let node = &bvh.nodes[index as usize];
+        let [ox, oy, oz] = self.o;
+        let [ix, iy, iz] = self.inv;
+        let (ax, bx) = ((node.min_x - ox) * ix, (node.max_x - ox) * ix);
+        let (ay, by) = ((node.min_y - oy) * iy, (node.max_y - oy) * iy);
+        let (az, bz) = ((node.min_z - oz) * iz, (node.max_z - oz) * iz);
+        let near = ax
+            .min(bx)
+            .max(ay.min(by))
+            .max(az.min(bz))
+            .max(Vec4::splat(self.t_min));
+        let far = (ax.max(bx).min(ay.max(by)).min(az.max(bz)) * SLAB_WIDEN).min(Vec4::splat(self.best_t));
+        let mut mask = near.cmple(far).bitmask() & node.lanes;
+        // Leaves first: their hits shrink `best_t` and prune the inner children.
+        let mut inner = [(0u32, 0f32); 4];
+        let mut inner_count = 0;
+        let near = near.to_array();
+        while mask != 0 {
+            let lane = mask.trailing_zeros() as usize;
+            mask &= mask - 1;
+            let count = node.count[lane];
+            if count == 0 {
+                inner[inner_count] = (node.child[lane], near[lane]);
+                inner_count += 1;
+                continue;
+            }
+            let first = node.child[lane] as usize;
+            for (k, tri) in bvh.triangles[first..first + count as usize].iter().enumerate() {
+                if let Some((t, u, v)) = intersect_triangle(
+                    self.origin,
+                    self.direction,
+                    tri.v0,
+                    tri.e1,
+                    tri.e2,
+                    self.t_min,
+                    self.best_t,
+                ) {
+                    self.best_t = t;
+                    self.best = Some(((first + k) as u32, u, v));
+                }
+            }
+        }
+        // Nearest inner child next; the others onto the stack, farthest first.
+        let inner = &mut inner[..inner_count];
+        if inner.len() > 1 {
+            inner.sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
+        }
+        let mut next = None;
+        for &(child, t) in inner.iter() {
+            if t > self.best_t {
+                continue;
+            }
+            if let Some(pending) = next.replace((child, t)) {
+                self.stack[self.depth] = pending;
+                self.depth += 1;
+            }
+        }
+        self.node = next.map(|(child, _)| child);
+        if self.node.is_none() {
+            // Pop the next subtree that can still hold a closer hit.
+            while self.depth > 0 {
+                self.depth -= 1;
+                let (node, t_entry) = self.stack[self.depth];
+                if t_entry <= self.best_t {
+                    self.node = Some(node);
+                    break;
+                }
+            }
+        }
+        match self.node {
+            Some(next) => {
+                // Start fetching now; in a batch, other rays run while it arrives.
+                prefetch(&bvh.nodes[next as usize]);
+                true
+            }
+            None => false,
+        }
+    }
+
+    fn hit(&self, bvh: &Bvh) -> Option<Hit> {
+        self.best.map(|(k, u, v)| Hit {
+            t: self.best_t,
+            u,
+            v,
+            triangle: bvh.triangles[k as usize].id,
+        })
+    }
+}
+
+/// The closest hit over every triangle, one by one: the oracle for the BVH's tests.
+pub fn intersect_brute_force(
+    mesh: &Mesh,
+    origin: Vec3,
+    direction: Vec3,
+    t_min: f32,
+    t_max: f32,
+) -> Option<Hit> {
+    let mut best: Option<Hit> = None;
+    for tri in 0..mesh.triangle_count() {
+        let [a, b, c] = mesh.corners(tri);
+        let limit = best.map_or(t_max, |h| h.t);
+        if let Some((t, u, v)) = intersect_triangle(origin, direction, a, b - a, c - a, t_min, limit) {
+            best = Some(Hit {
+                t,
+                u,
+                v,
+                triangle: tri as u32,
+            });
+        }
+    }
+    best
+}
+
+#[cfg(test)]
+mod tests;

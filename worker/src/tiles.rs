@@ -1,0 +1,78 @@
+//! The one way images are split across threads: bands of [`TILE`] rows in parallel
+//! (rayon), each band cut into `TILE × TILE` blocks, so neighbouring rays are traced
+//! together and share cache lines of the BVH.
+
+use rayon::prelude::*;
+
+/// Edge of a tile, in pixels.
+pub const TILE: usize = 8;
+
+/// A block of an image: pixel `(x0 + dx, y0 + dy)` for `dx < width`, `dy < height`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Block {
+    pub x0: u32,
+    pub y0: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Block {
+    /// The block's pixels, row by row.
+    pub fn pixels(self) -> impl Iterator<Item = (u32, u32)> {
+        (self.y0..self.y0 + self.height)
+            .flat_map(move |y| (self.x0..self.x0 + self.width).map(move |x| (x, y)))
+    }
+}
+
+/// Fills the row-major `width × height` image `out` block by block: `shade(block,
+/// values)` must write the block's pixels into `values` in [`Block::pixels`] order.
+///
+/// # Panics
+/// If `out.len() != width * height` (a caller bug, not an input error).
+pub fn par_fill_blocks<T, F>(width: u32, height: u32, out: &mut [T], shade: F)
+where
+    T: Send + Copy + Default,
+    F: Fn(Block, &mut Vec<T>) + Sync,
+{
+    let w = width as usize;
+    assert_eq!(out.len(), w * height as usize, "image buffer size");
+    if w == 0 {
+        return;
+    }
+    out.par_chunks_mut(w * TILE).enumerate().for_each_init(
+        || Vec::with_capacity(TILE * TILE),
+        |values, (band, rows)| {
+            let band_height = rows.len() / w;
+            for x0 in (0..w).step_by(TILE) {
+                let block = Block {
+                    x0: x0 as u32,
+                    y0: (band * TILE) as u32,
+                    width: TILE.min(w - x0) as u32,
+                    height: band_height as u32,
+                };
+                values.clear();
+                shade(block, values);
+                debug_assert_eq!(values.len(), (block.width * block.height) as usize);
+                for (dy, row) in values.chunks(block.width as usize).enumerate() {
+                    rows[dy * w + x0..dy * w + x0 + row.len()].copy_from_slice(row);
+                }
+            }
+        },
+    );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_pixel_once() {
+        for (w, h) in [(1, 1), (8, 8), (13, 29), (64, 3)] {
+            let mut out = vec![(u32::MAX, u32::MAX); (w * h) as usize];
+            par_fill_blocks(w, h, &mut out, |block, values| values.extend(block.pixels()));
+            for (k, &(x, y)) in out.iter().enumerate() {
+                assert_eq!((y * w + x) as usize, k);
+            }
+        }
+    }
+}
