@@ -1,1 +1,47 @@
-//! wip
+//! Helpers for Relief's end-to-end tests: find the real binaries, make scratch
+//! directories, write small meshes.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The directory holding the workspace's binaries: the one above this test executable's
+/// `deps/` directory (`target/<profile>/`).
+pub fn bin_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let deps = exe.parent().expect("deps directory");
+    deps.parent().expect("profile directory").to_path_buf()
+}
+
+/// A command for one of the workspace's binaries, e.g. `relief`.
+///
+/// # Panics
+/// When the binary has not been built (run the tests with `cargo test --workspace`,
+/// which builds every binary that has integration tests).
+pub fn command(name: &str) -> Command {
+    let path = bin_dir().join(name);
+    assert!(
+        path.is_file(),
+        "{} is missing: build the workspace first",
+        path.display()
+    );
+    Command::new(path)
+}
+
+/// Runs `relief` with `args` and returns its output.
+pub fn relief(args: &[&str]) -> Output {
+    command("relief").args(args).output().expect("running relief")
+}
+
+/// A fresh, empty scratch directory under the system's temp dir.
+pub fn scratch(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("relief-test-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("creating scratch dir");
+    dir
+}
+
+/// The shared real meshes beside the checkout (`../shared/models`), when present.
+pub fn shared_models() -> Option<PathBuf> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models");
+    dir.is_dir().then_some(dir)
+}

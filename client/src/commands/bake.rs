@@ -25,7 +25,7 @@ pub struct BakeArgs {
     #[arg(long, value_parser = args::vec3, allow_hyphen_values = true)]
     eye: Vec3,
     /// Texture edge in texels (square), 1..=4096.
-    #[arg(long, default_value = "256", value_parser = args::texture_size)]
+    #[arg(long, default_value = "256", value_parser = args::texture_size, allow_hyphen_values = true)]
     size: u32,
     /// Depth precision: 8 (levels 0..254, 255 empty) or 16 (0..65534, 65535 empty).
     #[arg(long, default_value = "8", value_parser = args::depth_bits)]

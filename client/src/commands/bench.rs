@@ -30,7 +30,7 @@ pub struct RaytraceArgs {
     #[arg(long)]
     object: Option<String>,
     /// Bake size N: N² primary rays per run.
-    #[arg(long, default_value = "256", value_parser = args::texture_size)]
+    #[arg(long, default_value = "256", value_parser = args::texture_size, allow_hyphen_values = true)]
     size: u32,
     /// Timed runs per measurement (best is reported), after one warm-up.
     #[arg(long, default_value = "5", value_parser = clap::value_parser!(u32).range(1..=1000))]

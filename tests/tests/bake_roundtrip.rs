@@ -1,0 +1,168 @@
+//! `relief bake` checked by an independent ray caster: brute force over every triangle,
+//! reading only `texture.json` and the PNG planes the command wrote.
+
+use std::path::Path;
+
+use glam::Vec3;
+
+use relief_core::relief::{ReliefTexture, decode_normal};
+use relief_core::scene::Scene;
+use relief_tests::{relief, scratch, shared_models};
+use relief_worker::bvh::intersect_brute_force;
+
+/// Agreement between a baked texture and brute-force rays through its texel centres.
+#[derive(Debug, Default)]
+struct Agreement {
+    texels: usize,
+    covered: usize,
+    mask_mismatch: usize,
+    depth_mismatch: usize,
+    normal_mismatch: usize,
+}
+
+fn check(scene_spec: &str, object: &str, eye: &str, size: u32, bits: u32) -> Agreement {
+    let dir = scratch(&format!("bake-{object}-{bits}"));
+    let out = relief(&[
+        "bake",
+        "--scene",
+        scene_spec,
+        "--object",
+        object,
+        "--eye",
+        eye,
+        "--size",
+        &size.to_string(),
+        "--depth-bits",
+        &bits.to_string(),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "bake failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let texture = ReliefTexture::read_dir(&dir).expect("reading the baked texture");
+    let scene = Scene::load(scene_spec).unwrap();
+    let mesh = &scene.object(object).unwrap().mesh;
+    let c = texture.camera;
+    assert_eq!((c.width, c.height), (size, size));
+    assert!(c.f.dot(c.a.cross(c.b).normalize()) > 0.9999, "f = a×b/|a×b|");
+    let eye_v = relief_core::vector::parse_vec3(eye).unwrap();
+    assert!(c.f.dot((scene.object(object).unwrap().bounds.center() - eye_v).normalize()) > 0.9999);
+    let quantum = c.depth_quantum(texture.depth_bits);
+    let mut agreement = Agreement::default();
+    for j in 0..size {
+        for i in 0..size {
+            agreement.texels += 1;
+            // Cast from far in front of the plane: the caster knows nothing of bounds.
+            let start = c.texel_origin(i, j) - c.f * (c.depth_far * 4.0 + 1.0);
+            let hit = intersect_brute_force(mesh, start, c.f, 0.0, f32::INFINITY);
+            let stored = texture.world_point(i, j);
+            match (hit, stored) {
+                (None, None) => {}
+                (Some(hit), Some(point)) => {
+                    agreement.covered += 1;
+                    let surface = start + c.f * hit.t;
+                    if surface.distance(point) > quantum * 1.01 + 1e-6 {
+                        agreement.depth_mismatch += 1;
+                    }
+                    let want = mesh.shading_normal(hit.triangle as usize, hit.u, hit.v);
+                    let got = decode_normal(texture.normal[texture.index(i, j)]);
+                    if got.angle_between(want) > 2f32.to_radians() {
+                        agreement.normal_mismatch += 1;
+                    }
+                }
+                _ => agreement.mask_mismatch += 1,
+            }
+        }
+    }
+    agreement
+}
+
+fn assert_agrees(a: &Agreement, what: &str) {
+    eprintln!("{what}: {a:?}");
+    assert!(
+        a.covered > a.texels / 20,
+        "{what}: too few covered texels to test: {a:?}"
+    );
+    // Rays grazing an edge may land on either side; allow a handful out of thousands.
+    let allowed = (a.texels / 2000).max(2);
+    assert!(a.mask_mismatch <= allowed, "{what}: mask {a:?}");
+    assert!(a.depth_mismatch <= allowed, "{what}: depth {a:?}");
+    assert!(a.normal_mismatch <= allowed, "{what}: normals {a:?}");
+}
+
+#[test]
+fn default_scene_objects_round_trip() {
+    for (object, eye) in [("sphere", "-1,3,6"), ("knot", "6,2.5,4"), ("tree", "3,4,-1")] {
+        for bits in [8, 16] {
+            let a = check("default", object, eye, 64, bits);
+            assert_agrees(&a, &format!("{object}/{bits}"));
+        }
+    }
+}
+
+/// A small OBJ with no normals, degenerate triangles and a quad.
+fn write_awkward_obj(dir: &Path) -> std::path::PathBuf {
+    let path = dir.join("awkward.obj");
+    let mut text = String::from("# no normals, degenerate faces\n");
+    let n = 12;
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, z) = (i as f32 / n as f32 - 0.5, j as f32 / n as f32 - 0.5);
+            let y = 0.3 * (6.0 * x).sin() * (5.0 * z).cos();
+            text += &format!("v {x} {y} {z}\n");
+        }
+    }
+    let at = |i: usize, j: usize| j * (n + 1) + i + 1;
+    for j in 0..n {
+        for i in 0..n {
+            text += &format!(
+                "f {} {} {} {}\n",
+                at(i, j),
+                at(i, j + 1),
+                at(i + 1, j + 1),
+                at(i + 1, j)
+            );
+        }
+    }
+    text += &format!("f {} {} {}\n", at(0, 0), at(0, 0), at(1, 1)); // repeated corner
+    text += &format!("f {} {} {}\n", at(0, 0), at(1, 0), at(2, 0)); // collinear
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn obj_without_normals_and_with_degenerate_faces_round_trips() {
+    let dir = scratch("awkward");
+    let obj = write_awkward_obj(&dir);
+    let spec = obj.to_str().unwrap();
+    for (eye, bits) in [("0.4,2,1.5", 8), ("-2,0.3,0.2", 16), ("0,3,0.001", 8)] {
+        let a = check(spec, "awkward", eye, 48, bits);
+        assert_agrees(&a, &format!("awkward from {eye}"));
+    }
+}
+
+#[test]
+fn shared_real_meshes_round_trip() {
+    let Some(models) = shared_models() else {
+        eprintln!("../shared/models not present: skipping the real-mesh check");
+        return;
+    };
+    let mut checked = 0;
+    for name in ["suzanne", "spot", "fandisk", "stanford-bunny"] {
+        let path = models.join(format!("{name}.obj"));
+        if !path.is_file() {
+            continue;
+        }
+        let scene = Scene::load(path.to_str().unwrap()).unwrap();
+        let b = scene.objects[0].bounds;
+        let eye = b.center() + Vec3::new(0.7, 0.5, 1.0).normalize() * b.extent().length() * 2.0;
+        let eye = format!("{},{},{}", eye.x, eye.y, eye.z);
+        let a = check(path.to_str().unwrap(), name, &eye, 40, 8);
+        assert_agrees(&a, name);
+        checked += 1;
+    }
+    assert!(checked > 0, "no shared meshes found in {}", models.display());
+}
