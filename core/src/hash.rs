@@ -40,40 +40,47 @@ impl ContentHash {
     }
 }
 
+/// Feeds little-endian values to the hasher through a buffer: one `update` per 64 KiB,
+/// not per value.
+fn update_le<const N: usize>(h: &mut blake3::Hasher, values: impl Iterator<Item = [u8; N]>) {
+    let mut buffer = Vec::with_capacity(1 << 16);
+    for v in values {
+        buffer.extend_from_slice(&v);
+        if buffer.len() + N > buffer.capacity() {
+            h.update(&buffer);
+            buffer.clear();
+        }
+    }
+    h.update(&buffer);
+}
+
+fn floats(h: &mut blake3::Hasher, values: impl Iterator<Item = f32>) {
+    update_le(h, values.map(f32::to_le_bytes));
+}
+
 /// The content hash of a mesh: geometry, attributes, materials and their textures.
 pub fn mesh_hash(mesh: &Mesh) -> ContentHash {
     let mut h = blake3::Hasher::new();
     h.update(b"relief-mesh-v1");
-    let floats = |h: &mut blake3::Hasher, values: &mut dyn Iterator<Item = f32>| {
-        for v in values {
-            h.update(&v.to_le_bytes());
-        }
-    };
     h.update(&(mesh.positions.len() as u64).to_le_bytes());
-    floats(&mut h, &mut mesh.positions.iter().flat_map(|p| p.to_array()));
+    floats(&mut h, mesh.positions.iter().flat_map(|p| p.to_array()));
     h.update(&[mesh.normals.is_some() as u8]);
     if let Some(normals) = &mesh.normals {
-        floats(&mut h, &mut normals.iter().flat_map(|p| p.to_array()));
+        floats(&mut h, normals.iter().flat_map(|p| p.to_array()));
     }
     h.update(&[mesh.texcoords.is_some() as u8]);
     if let Some(uvs) = &mesh.texcoords {
-        floats(&mut h, &mut uvs.iter().flat_map(|p| p.to_array()));
+        floats(&mut h, uvs.iter().flat_map(|p| p.to_array()));
     }
     h.update(&(mesh.triangles.len() as u64).to_le_bytes());
-    for t in &mesh.triangles {
-        for i in t {
-            h.update(&i.to_le_bytes());
-        }
-    }
+    update_le(&mut h, mesh.triangles.iter().flatten().map(|i| i.to_le_bytes()));
     h.update(&[mesh.triangle_materials.is_some() as u8]);
     if let Some(ids) = &mesh.triangle_materials {
-        for i in ids {
-            h.update(&i.to_le_bytes());
-        }
+        update_le(&mut h, ids.iter().map(|i| i.to_le_bytes()));
     }
     h.update(&(mesh.materials.len() as u64).to_le_bytes());
     for m in &mesh.materials {
-        floats(&mut h, &mut m.diffuse.to_array().into_iter());
+        floats(&mut h, m.diffuse.to_array().into_iter());
         match &m.diffuse_texture {
             None => {
                 h.update(&[0]);
@@ -82,7 +89,7 @@ pub fn mesh_hash(mesh: &Mesh) -> ContentHash {
                 h.update(&[1]);
                 h.update(&t.width.to_le_bytes());
                 h.update(&t.height.to_le_bytes());
-                floats(&mut h, &mut t.texels.iter().flat_map(|p| p.to_array()));
+                floats(&mut h, t.texels.iter().flat_map(|p| p.to_array()));
             }
         }
     }
@@ -93,6 +100,7 @@ pub fn mesh_hash(mesh: &Mesh) -> ContentHash {
 mod tests {
     use super::*;
     use crate::generators::Generator;
+    use glam::Vec3;
 
     #[test]
     fn hash_is_stable_and_sensitive() {
@@ -104,5 +112,23 @@ mod tests {
         assert_ne!(mesh_hash(&a), mesh_hash(&c));
         let hex = mesh_hash(&a).to_string();
         assert_eq!(ContentHash::from_hex(&hex), Some(mesh_hash(&a)));
+    }
+
+    /// The serialised layout is part of the protocol: machines compare these hashes.
+    /// This mesh is written out exactly (no transcendental functions), so its hash must
+    /// never change unless the layout's version tag does.
+    #[test]
+    fn golden_hash() {
+        let mesh = Mesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::new(0.0, 0.5, -2.25)],
+            normals: Some(vec![Vec3::Z; 3]),
+            triangles: vec![[0, 1, 2]],
+            materials: vec![crate::mesh::Material::default()],
+            ..Default::default()
+        };
+        assert_eq!(
+            mesh_hash(&mesh).to_string(),
+            "a87f77cda915d9d8a00bd57aa797dee6d7a4af2fbf931aa30ad8ea36b39748d9"
+        );
     }
 }

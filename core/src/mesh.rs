@@ -55,6 +55,9 @@ impl Default for Material {
     }
 }
 
+/// Most triangles a mesh may have (the ray tracer packs triangle indices in 27 bits).
+pub const MAX_TRIANGLES: usize = (1 << 27) - 1;
+
 /// An indexed triangle mesh.
 ///
 /// Attribute arrays are indexed like `positions`. A zero vertex normal means "none":
@@ -80,6 +83,12 @@ impl Mesh {
     pub fn validate(&self) -> Result<(), String> {
         if self.triangles.is_empty() {
             return Err("the mesh has no triangles".into());
+        }
+        if self.triangles.len() > MAX_TRIANGLES {
+            return Err(format!(
+                "the mesh has {} triangles; at most {MAX_TRIANGLES} are supported",
+                self.triangles.len()
+            ));
         }
         if self.materials.is_empty() {
             return Err("the mesh has no material".into());

@@ -7,6 +7,7 @@ use relief_core::relief::{DepthBits, FacingError, ReliefTexture, SourceCamera, e
 use relief_core::shading::to_rgb8;
 
 use crate::bvh::Ray;
+use crate::prefetch::prefetch_lines;
 use crate::tiles::par_fill_blocks;
 use crate::tracer::ObjectTracer;
 
@@ -62,6 +63,18 @@ pub fn bake(
             .collect();
         let mut hits = vec![None; rays.len()];
         target.bvh.intersect_batch(&rays, &mut hits);
+        // Shading reads each hit's vertex indices, then its vertices' attributes: fetch
+        // both for the whole block before using any (see `prefetch`).
+        for hit in hits.iter().flatten() {
+            prefetch_lines(std::slice::from_ref(&mesh.triangles[hit.triangle as usize]));
+        }
+        if let Some(normals) = &mesh.normals {
+            for hit in hits.iter().flatten() {
+                for &v in &mesh.triangles[hit.triangle as usize] {
+                    prefetch_lines(std::slice::from_ref(&normals[v as usize]));
+                }
+            }
+        }
         values.extend(hits.into_iter().map(|hit| match hit {
             None => empty,
             Some(hit) => {

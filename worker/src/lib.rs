@@ -11,6 +11,7 @@
 
 pub mod bake;
 pub mod bvh;
+mod prefetch;
 pub mod reference;
 pub mod tiles;
 pub mod tracer;

@@ -14,6 +14,8 @@ use glam::{Vec3, Vec4};
 use relief_core::bounds::Aabb;
 use relief_core::mesh::Mesh;
 
+use crate::prefetch::prefetch_lines;
+
 pub use triangle::intersect_triangle;
 
 /// A 4-wide node: up to four children, each either an inner node (`count == 0`,
@@ -55,6 +57,14 @@ pub struct Hit {
     /// Index of the triangle in the mesh.
     pub triangle: u32,
 }
+
+/// Traversal items are `u32`: a node index, or, with this bit set, a leaf packed as
+/// `count << COUNT_SHIFT | first triangle`. Hence meshes of at most
+/// [`relief_core::mesh::MAX_TRIANGLES`] triangles and leaves of at most 15.
+const LEAF: u32 = 1 << 31;
+const COUNT_SHIFT: u32 = 27;
+const COUNT_MASK: u32 = 0xF;
+const FIRST_MASK: u32 = (1 << COUNT_SHIFT) - 1;
 
 /// Deepest binary tree the builder makes; the 4-wide traversal stack holds three
 /// entries per level.
@@ -154,24 +164,6 @@ impl Bvh {
     }
 }
 
-/// Asks the cache for both lines of a node without waiting for them.
-#[inline(always)]
-fn prefetch(node: &Node4) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        let p = (node as *const Node4).cast::<i8>();
-        // SAFETY: prefetching is a hint that never faults; both addresses lie inside
-        // the node (it is 128 bytes, 64-aligned).
-        unsafe {
-            _mm_prefetch::<_MM_HINT_T0>(p);
-            _mm_prefetch::<_MM_HINT_T0>(p.add(64));
-        }
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    let _ = node;
-}
-
 /// Rays traversed together by [`Bvh::intersect_batch`].
 const INTERLEAVE: usize = 32;
 
@@ -198,8 +190,8 @@ struct Traversal {
     t_min: f32,
     best_t: f32,
     best: Option<(u32, f32, f32)>,
-    /// The node to visit next, if any.
-    node: Option<u32>,
+    /// What to visit next, if anything: a node index, or a leaf packed by [`LEAF`].
+    item: Option<u32>,
     stack: [(u32, f32); STACK],
     depth: usize,
 }
@@ -214,7 +206,7 @@ impl Traversal {
             t_min: 0.0,
             best_t: 0.0,
             best: None,
-            node: None,
+            item: None,
             stack: [(0, 0.0); STACK],
             depth: 0,
         }
@@ -236,44 +228,22 @@ impl Traversal {
         self.t_min = ray.t_min;
         self.best_t = ray.t_max;
         self.best = None;
-        self.node = (!bvh.triangles.is_empty()).then_some(0);
+        self.item = (!bvh.triangles.is_empty()).then_some(0);
         self.depth = 0;
     }
 
-    /// Visits one node (testing its leaf children's triangles); false when done.
+    /// Visits one item — a node, or a leaf's triangles — and picks the next; false
+    /// when the ray is done.
     #[inline]
     fn step(&mut self, bvh: &Bvh) -> bool {
-        let Some(index) = self.node else {
+        let Some(item) = self.item else {
             return false;
         };
-        let node = &bvh.nodes[index as usize];
-        let [ox, oy, oz] = self.o;
-        let [ix, iy, iz] = self.inv;
-        let (ax, bx) = ((node.min_x - ox) * ix, (node.max_x - ox) * ix);
-        let (ay, by) = ((node.min_y - oy) * iy, (node.max_y - oy) * iy);
-        let (az, bz) = ((node.min_z - oz) * iz, (node.max_z - oz) * iz);
-        let near = ax
-            .min(bx)
-            .max(ay.min(by))
-            .max(az.min(bz))
-            .max(Vec4::splat(self.t_min));
-        let far = (ax.max(bx).min(ay.max(by)).min(az.max(bz)) * SLAB_WIDEN).min(Vec4::splat(self.best_t));
-        let mut mask = near.cmple(far).bitmask() & node.lanes;
-        // Leaves first: their hits shrink `best_t` and prune the inner children.
-        let mut inner = [(0u32, 0f32); 4];
-        let mut inner_count = 0;
-        let near = near.to_array();
-        while mask != 0 {
-            let lane = mask.trailing_zeros() as usize;
-            mask &= mask - 1;
-            let count = node.count[lane];
-            if count == 0 {
-                inner[inner_count] = (node.child[lane], near[lane]);
-                inner_count += 1;
-                continue;
-            }
-            let first = node.child[lane] as usize;
-            for (k, tri) in bvh.triangles[first..first + count as usize].iter().enumerate() {
+        let mut next = None;
+        if item & LEAF != 0 {
+            let first = (item & FIRST_MASK) as usize;
+            let count = (item >> COUNT_SHIFT & COUNT_MASK) as usize;
+            for (k, tri) in bvh.triangles[first..first + count].iter().enumerate() {
                 if let Some((t, u, v)) = intersect_triangle(
                     self.origin,
                     self.direction,
@@ -287,38 +257,70 @@ impl Traversal {
                     self.best = Some(((first + k) as u32, u, v));
                 }
             }
-        }
-        // Nearest inner child next; the others onto the stack, farthest first.
-        let inner = &mut inner[..inner_count];
-        if inner.len() > 1 {
-            inner.sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
-        }
-        let mut next = None;
-        for &(child, t) in inner.iter() {
-            if t > self.best_t {
-                continue;
+        } else {
+            let node = &bvh.nodes[item as usize];
+            let [ox, oy, oz] = self.o;
+            let [ix, iy, iz] = self.inv;
+            let (ax, bx) = ((node.min_x - ox) * ix, (node.max_x - ox) * ix);
+            let (ay, by) = ((node.min_y - oy) * iy, (node.max_y - oy) * iy);
+            let (az, bz) = ((node.min_z - oz) * iz, (node.max_z - oz) * iz);
+            let near = ax
+                .min(bx)
+                .max(ay.min(by))
+                .max(az.min(bz))
+                .max(Vec4::splat(self.t_min));
+            let far = (ax.max(bx).min(ay.max(by)).min(az.max(bz)) * SLAB_WIDEN).min(Vec4::splat(self.best_t));
+            let mut mask = near.cmple(far).bitmask() & node.lanes;
+            let near = near.to_array();
+            let mut children = [(0u32, 0f32); 4];
+            let mut n = 0;
+            while mask != 0 {
+                let lane = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let count = node.count[lane];
+                let child = if count == 0 {
+                    node.child[lane]
+                } else {
+                    LEAF | count << COUNT_SHIFT | node.child[lane]
+                };
+                children[n] = (child, near[lane]);
+                n += 1;
             }
-            if let Some(pending) = next.replace((child, t)) {
-                self.stack[self.depth] = pending;
-                self.depth += 1;
+            // Nearest child next; the others onto the stack, farthest first.
+            let children = &mut children[..n];
+            if n > 1 {
+                children.sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
+            }
+            for &child in children.iter() {
+                if let Some(pending) = next.replace(child) {
+                    self.stack[self.depth] = pending;
+                    self.depth += 1;
+                }
             }
         }
-        self.node = next.map(|(child, _)| child);
-        if self.node.is_none() {
-            // Pop the next subtree that can still hold a closer hit.
+        self.item = next.map(|(child, _)| child);
+        if self.item.is_none() {
+            // Pop the next item that can still hold a closer hit.
             while self.depth > 0 {
                 self.depth -= 1;
-                let (node, t_entry) = self.stack[self.depth];
+                let (item, t_entry) = self.stack[self.depth];
                 if t_entry <= self.best_t {
-                    self.node = Some(node);
+                    self.item = Some(item);
                     break;
                 }
             }
         }
-        match self.node {
-            Some(next) => {
-                // Start fetching now; in a batch, other rays run while it arrives.
-                prefetch(&bvh.nodes[next as usize]);
+        // Start fetching what the next step reads; in a batch, other rays run while it
+        // arrives.
+        match self.item {
+            Some(item) if item & LEAF != 0 => {
+                let first = (item & FIRST_MASK) as usize;
+                let count = (item >> COUNT_SHIFT & COUNT_MASK) as usize;
+                prefetch_lines(&bvh.triangles[first..first + count]);
+                true
+            }
+            Some(item) => {
+                prefetch_lines(std::slice::from_ref(&bvh.nodes[item as usize]));
                 true
             }
             None => false,
