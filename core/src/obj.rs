@@ -181,6 +181,37 @@ mod tests {
     }
 
     #[test]
+    fn diffuse_texture_modulates_albedo() {
+        let dir = temp_dir("texture");
+        // 2×1 texture: red on the left, blue on the right.
+        image::save_buffer(
+            dir.join("t.png"),
+            &[255, 0, 0, 0, 0, 255],
+            2,
+            1,
+            image::ColorType::Rgb8,
+        )
+        .unwrap();
+        write(&dir, "m.mtl", "newmtl tex\nKd 1 1 0.5\nmap_Kd t.png\n");
+        let path = write(
+            &dir,
+            "t.obj",
+            "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.25 0.5\nvt 0.75 0.5\nvt 0.25 0.5\nusemtl tex\nf 1/1 2/2 3/3\n",
+        );
+        let mesh = load_obj(&path).unwrap();
+        assert!(mesh.texcoords.is_some());
+        // Texel centres: corner 0 samples pure red, corner 1 pure blue (times Kd).
+        assert!(
+            mesh.albedo(0, 0.0, 0.0)
+                .abs_diff_eq(Vec3::new(1.0, 0.0, 0.0), 1e-3)
+        );
+        assert!(
+            mesh.albedo(0, 1.0, 0.0)
+                .abs_diff_eq(Vec3::new(0.0, 0.0, 0.5), 1e-3)
+        );
+    }
+
+    #[test]
     fn errors_name_the_file_and_problem() {
         let dir = temp_dir("bad");
         let nan = write(&dir, "nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
