@@ -75,6 +75,41 @@ impl Camera {
         (self.forward + self.right * sx + self.up * sy).normalize()
     }
 
+    /// `tan(fov_y / 2)`.
+    #[inline]
+    pub fn tan_half_fov(&self) -> f32 {
+        (self.fov_y * 0.5).tan()
+    }
+
+    /// View-space coordinates `(right, up, forward)` of a world point; `forward` is the
+    /// depth the z-buffer stores.
+    #[inline]
+    pub fn to_view(&self, p: Vec3) -> Vec3 {
+        let d = p - self.eye;
+        Vec3::new(d.dot(self.right), d.dot(self.up), d.dot(self.forward))
+    }
+
+    /// Pixel position `(x, y)` (pixel centres at `+0.5`, y down) of a view-space point
+    /// with positive depth. Inverse of [`Camera::ray_direction`].
+    #[inline]
+    pub fn view_to_pixel(&self, v: Vec3) -> (f32, f32) {
+        let tan_half = self.tan_half_fov();
+        let aspect = self.width as f32 / self.height as f32;
+        let sx = v.x / (v.z * tan_half * aspect);
+        let sy = v.y / (v.z * tan_half);
+        (
+            (sx + 1.0) * 0.5 * self.width as f32,
+            (1.0 - sy) * 0.5 * self.height as f32,
+        )
+    }
+
+    /// The world point at view depth `depth` on the ray through pixel position `(x, y)`.
+    #[inline]
+    pub fn unproject(&self, x: f32, y: f32, depth: f32) -> Vec3 {
+        let d = self.ray_direction(x, y);
+        self.eye + d * (depth / d.dot(self.forward))
+    }
+
     /// The angle one pixel subtends (Schaufler's β_screen).
     pub fn pixel_angle(&self) -> f32 {
         self.fov_y / self.height as f32
@@ -228,6 +263,11 @@ mod tests {
         let ok = Camera::look_at(Vec3::Z * 5.0, Vec3::ZERO, Vec3::Y, 60.0, 64, 48).unwrap();
         assert!(ok.ray_direction(32.0, 24.0).abs_diff_eq(-Vec3::Z, 1e-6));
         assert!(Camera::look_at(Vec3::ZERO, Vec3::ZERO, Vec3::Y, 60.0, 4, 4).is_err());
+        // Projection inverts ray directions, and unprojection inverts both.
+        let p = Vec3::new(0.7, -0.4, -2.0);
+        let (x, y) = ok.view_to_pixel(ok.to_view(p));
+        assert!(ok.ray_direction(x, y).abs_diff_eq((p - ok.eye).normalize(), 1e-5));
+        assert!(ok.unproject(x, y, ok.to_view(p).z).abs_diff_eq(p, 1e-4));
         assert!(Camera::look_at(Vec3::Y, Vec3::ZERO, Vec3::Y, 60.0, 4, 4).is_err());
         assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 180.0, 4, 4).is_err());
         assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 60.0, 0, 4).is_err());

@@ -1,0 +1,120 @@
+//! The G-buffer: what each pixel shows, before lighting.
+//!
+//! Geometry (the rasterizer) and impostors (the warps) write surfaces here with a depth
+//! test, so they occlude each other correctly; [`GBuffer::shade`] then lights every
+//! covered pixel once with [`relief_core::shading::Lighting::shade`] — the same model as
+//! the ray-traced reference.
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use relief_core::camera::Camera;
+use relief_core::frame::{Frame, NO_OBJECT};
+use relief_core::scene::Scene;
+use relief_core::shading::to_rgb8;
+
+/// One pixel's nearest surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GPixel {
+    /// View-space depth (distance along the camera's forward axis); `INFINITY` if empty.
+    pub depth: f32,
+    /// Scene object index, or [`NO_OBJECT`].
+    pub object: u32,
+    /// Linear albedo, 8 bits per channel.
+    pub albedo: [u8; 3],
+    /// World-space unit normal.
+    pub normal: Vec3,
+}
+
+impl GPixel {
+    pub const EMPTY: GPixel = GPixel {
+        depth: f32::INFINITY,
+        object: NO_OBJECT,
+        albedo: [0; 3],
+        normal: Vec3::ZERO,
+    };
+
+    /// True when a surface has been written.
+    #[inline]
+    pub fn is_covered(&self) -> bool {
+        self.object != NO_OBJECT
+    }
+}
+
+/// A `width × height` G-buffer, row-major, y down.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GBuffer {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<GPixel>,
+}
+
+impl GBuffer {
+    /// An empty buffer for `camera`'s resolution.
+    pub fn new(width: u32, height: u32) -> Self {
+        GBuffer {
+            width,
+            height,
+            pixels: vec![GPixel::EMPTY; width as usize * height as usize],
+        }
+    }
+
+    /// Empties every pixel, keeping the allocation.
+    pub fn clear(&mut self) {
+        self.pixels.fill(GPixel::EMPTY);
+    }
+
+    /// Writes `pixel` at `(x, y)` if it is nearer than what is there. Returns whether it
+    /// was written. Out-of-range coordinates and non-finite or non-positive depths are
+    /// ignored, so a caller can never write outside the buffer or poison it with NaN.
+    #[inline]
+    pub fn write(&mut self, x: i64, y: i64, pixel: GPixel) -> bool {
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
+            return false;
+        }
+        if !(pixel.depth > 0.0 && pixel.depth.is_finite() && pixel.normal.is_finite()) {
+            return false;
+        }
+        let slot = &mut self.pixels[y as usize * self.width as usize + x as usize];
+        if pixel.depth < slot.depth {
+            *slot = pixel;
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Lights every covered pixel with the scene's lighting and objects' specular
+    /// terms; empty pixels get the background.
+    pub fn shade(&self, scene: &Scene, camera: &Camera) -> Frame {
+        let background = to_rgb8(scene.background);
+        let w = self.width as usize;
+        let mut frame = Frame::new(self.width, self.height, background);
+        frame
+            .color
+            .par_chunks_mut(w)
+            .zip(frame.object.par_chunks_mut(w))
+            .zip(self.pixels.par_chunks(w))
+            .enumerate()
+            .for_each(|(y, ((color, object), pixels))| {
+                for (x, p) in pixels.iter().enumerate() {
+                    if !p.is_covered() {
+                        continue;
+                    }
+                    let Some(o) = scene.objects.get(p.object as usize) else {
+                        continue;
+                    };
+                    let position = camera.unproject(x as f32 + 0.5, y as f32 + 0.5, p.depth);
+                    let albedo =
+                        Vec3::new(p.albedo[0] as f32, p.albedo[1] as f32, p.albedo[2] as f32) / 255.0;
+                    color[x] = to_rgb8(
+                        scene
+                            .lighting
+                            .shade(albedo, p.normal, position, camera.eye, o.specular),
+                    );
+                    object[x] = p.object;
+                }
+            });
+        frame
+    }
+}

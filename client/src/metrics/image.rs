@@ -1,0 +1,134 @@
+//! Image error of a rendered frame against a reference frame, over a region.
+
+use relief_core::frame::{Frame, NO_OBJECT};
+
+/// Error figures over the compared pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImageError {
+    /// Peak signal-to-noise ratio over RGB, dB (`INFINITY` when identical).
+    pub psnr_db: f64,
+    /// Mean SSIM of the luma over 8×8 windows that touch the region.
+    pub ssim: f64,
+    /// Fraction of region pixels where one frame shows the object and the other does
+    /// not (holes, or wrongly filled pixels).
+    pub hole_frac: f64,
+    /// Pixels compared.
+    pub pixels: usize,
+}
+
+/// Compares `frame` with `reference` on the pixels where either shows `object` (or,
+/// with `None`, any object). Both frames must be the same size.
+pub fn compare(frame: &Frame, reference: &Frame, object: Option<u32>) -> ImageError {
+    assert_eq!(
+        (frame.width, frame.height),
+        (reference.width, reference.height),
+        "frames to compare differ in size"
+    );
+    let shows = |id: u32| match object {
+        Some(k) => id == k,
+        None => id != NO_OBJECT,
+    };
+    let mut squared = 0f64;
+    let mut pixels = 0usize;
+    let mut mismatched = 0usize;
+    let region: Vec<bool> = frame
+        .object
+        .iter()
+        .zip(&reference.object)
+        .map(|(&a, &b)| shows(a) || shows(b))
+        .collect();
+    for (k, _) in region.iter().enumerate().filter(|(_, inside)| **inside) {
+        pixels += 1;
+        if shows(frame.object[k]) != shows(reference.object[k]) {
+            mismatched += 1;
+        }
+        for c in 0..3 {
+            let d = frame.color[k][c] as f64 - reference.color[k][c] as f64;
+            squared += d * d;
+        }
+    }
+    let mse = squared / (3 * pixels.max(1)) as f64;
+    ImageError {
+        psnr_db: if mse == 0.0 {
+            f64::INFINITY
+        } else {
+            10.0 * (255.0f64 * 255.0 / mse).log10()
+        },
+        ssim: ssim(frame, reference, &region),
+        hole_frac: mismatched as f64 / pixels.max(1) as f64,
+        pixels,
+    }
+}
+
+/// Mean SSIM (Wang et al. 2004, constants K1 = 0.01, K2 = 0.03) of Rec. 601 luma over
+/// non-overlapping 8×8 windows that contain at least one region pixel.
+fn ssim(a: &Frame, b: &Frame, region: &[bool]) -> f64 {
+    const WINDOW: usize = 8;
+    let (c1, c2) = ((0.01f64 * 255.0).powi(2), (0.03f64 * 255.0).powi(2));
+    let luma = |f: &Frame, k: usize| {
+        let [r, g, b] = f.color[k];
+        0.299 * r as f64 + 0.587 * g as f64 + 0.114 * b as f64
+    };
+    let (w, h) = (a.width as usize, a.height as usize);
+    let (mut total, mut windows) = (0f64, 0usize);
+    for wy in (0..h).step_by(WINDOW) {
+        for wx in (0..w).step_by(WINDOW) {
+            let cells: Vec<usize> = (wy..(wy + WINDOW).min(h))
+                .flat_map(|y| (wx..(wx + WINDOW).min(w)).map(move |x| y * w + x))
+                .collect();
+            if !cells.iter().any(|&k| region[k]) {
+                continue;
+            }
+            let n = cells.len() as f64;
+            let (mut sa, mut sb, mut saa, mut sbb, mut sab) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for &k in &cells {
+                let (x, y) = (luma(a, k), luma(b, k));
+                sa += x;
+                sb += y;
+                saa += x * x;
+                sbb += y * y;
+                sab += x * y;
+            }
+            let (ma, mb) = (sa / n, sb / n);
+            let (va, vb, cov) = (saa / n - ma * ma, sbb / n - mb * mb, sab / n - ma * mb);
+            total += ((2.0 * ma * mb + c1) * (2.0 * cov + c2)) / ((ma * ma + mb * mb + c1) * (va + vb + c2));
+            windows += 1;
+        }
+    }
+    if windows == 0 { 1.0 } else { total / windows as f64 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(color: [u8; 3], object: u32) -> Frame {
+        let mut f = Frame::new(16, 16, [0, 0, 0]);
+        for k in 0..64 {
+            f.color[k] = color;
+            f.object[k] = object;
+        }
+        f
+    }
+
+    #[test]
+    fn identical_frames_are_perfect() {
+        let a = frame([100, 150, 200], 0);
+        let e = compare(&a, &a, Some(0));
+        assert_eq!(e.psnr_db, f64::INFINITY);
+        assert!((e.ssim - 1.0).abs() < 1e-12);
+        assert_eq!(e.hole_frac, 0.0);
+        assert_eq!(e.pixels, 64);
+    }
+
+    #[test]
+    fn known_error_gives_known_psnr() {
+        let a = frame([100, 150, 200], 0);
+        let b = frame([110, 160, 210], 0);
+        // MSE 100 → PSNR = 10·log10(255²/100) = 28.13 dB.
+        let e = compare(&a, &b, Some(0));
+        assert!((e.psnr_db - 28.1308).abs() < 1e-3, "{}", e.psnr_db);
+        let missing = frame([0, 0, 0], NO_OBJECT);
+        assert_eq!(compare(&missing, &a, Some(0)).hole_frac, 1.0);
+    }
+}

@@ -1,0 +1,179 @@
+//! The software rasterizer: triangles of scene objects into a [`GBuffer`].
+//!
+//! Perspective-correct and z-buffered, sampling pixel centres. Triangles crossing the
+//! near plane are clipped in view space ([`clip`]); the frame is split into bands of
+//! [`BAND`] rows rasterized in parallel, each band seeing only the triangles that reach
+//! it. Attributes are not interpolated here: each written pixel records the original
+//! triangle's barycentric coordinates and asks the mesh for its albedo and shading
+//! normal — the same functions the ray tracer uses.
+
+mod clip;
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use relief_core::camera::Camera;
+use relief_core::scene::SceneObject;
+use relief_core::shading::to_rgb8;
+
+use crate::gbuffer::{GBuffer, GPixel};
+
+/// Rows per parallel band.
+pub const BAND: usize = 16;
+
+/// A triangle in screen space: pixel positions, view depth, and for each corner its
+/// barycentric position in the original mesh triangle (which differs after clipping).
+#[derive(Debug, Clone, Copy)]
+struct ScreenTriangle {
+    /// Position in the `objects` slice given to [`rasterize`].
+    slot: u32,
+    triangle: u32,
+    xy: [Vec2; 3],
+    depth: [f32; 3],
+    bary: [Vec2; 3],
+}
+
+/// Draws `objects` (pairs of scene index and object) into `gbuffer` as seen by
+/// `camera`, clipping at view depth `near`.
+pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gbuffer: &mut GBuffer) {
+    let (w, h) = (gbuffer.width as usize, gbuffer.height as usize);
+    if w == 0 || h == 0 {
+        return;
+    }
+    let bands = h.div_ceil(BAND);
+    // Set up and bin every triangle by the bands its bounding box touches.
+    let mut triangles: Vec<ScreenTriangle> = Vec::new();
+    for (slot, &(_, object)) in objects.iter().enumerate() {
+        let view: Vec<Vec3> = object
+            .mesh
+            .positions
+            .par_iter()
+            .map(|&p| camera.to_view(p))
+            .collect();
+        let set_up: Vec<ScreenTriangle> = object
+            .mesh
+            .triangles
+            .par_iter()
+            .enumerate()
+            .flat_map_iter(|(t, corners)| {
+                let v = corners.map(|i| view[i as usize]);
+                clip::clip_and_project(camera, near, v)
+                    .into_iter()
+                    .map(move |(xy, depth, bary)| ScreenTriangle {
+                        slot: slot as u32,
+                        triangle: t as u32,
+                        xy,
+                        depth,
+                        bary,
+                    })
+            })
+            .filter(|s| on_screen(s, w as f32, h as f32))
+            .collect();
+        triangles.extend(set_up);
+    }
+    let bins: Vec<Vec<u32>> = triangles
+        .par_iter()
+        .enumerate()
+        .fold(
+            || vec![Vec::new(); bands],
+            |mut bins: Vec<Vec<u32>>, (k, s)| {
+                let y0 = s.xy.iter().map(|p| p.y).fold(f32::INFINITY, f32::min);
+                let y1 = s.xy.iter().map(|p| p.y).fold(f32::NEG_INFINITY, f32::max);
+                let first = ((y0 - 0.5).max(0.0) as usize / BAND).min(bands - 1);
+                let last = ((y1 + 0.5).max(0.0) as usize / BAND).min(bands - 1);
+                for bin in &mut bins[first..=last] {
+                    bin.push(k as u32);
+                }
+                bins
+            },
+        )
+        .reduce(
+            || vec![Vec::new(); bands],
+            |mut a, b| {
+                for (x, y) in a.iter_mut().zip(b) {
+                    x.extend(y);
+                }
+                a
+            },
+        );
+    gbuffer
+        .pixels
+        .par_chunks_mut(w * BAND)
+        .zip(bins.par_iter())
+        .enumerate()
+        .for_each(|(band, (rows, bin))| {
+            let y0 = band * BAND;
+            let rows_here = rows.len() / w;
+            for &k in bin {
+                let s = &triangles[k as usize];
+                let (index, object) = objects[s.slot as usize];
+                draw(s, index, object, rows, w, y0, rows_here);
+            }
+        });
+}
+
+/// Rejects triangles whose bounding box misses the screen.
+fn on_screen(s: &ScreenTriangle, w: f32, h: f32) -> bool {
+    let min = s.xy[0].min(s.xy[1]).min(s.xy[2]);
+    let max = s.xy[0].max(s.xy[1]).max(s.xy[2]);
+    max.x >= 0.0 && max.y >= 0.0 && min.x <= w && min.y <= h && min.is_finite() && max.is_finite()
+}
+
+/// Scan-converts one triangle into the band `rows` (which start at row `y0`).
+fn draw(
+    s: &ScreenTriangle,
+    index: u32,
+    object: &SceneObject,
+    rows: &mut [GPixel],
+    w: usize,
+    y0: usize,
+    rows_here: usize,
+) {
+    let [a, b, c] = s.xy;
+    let area = (b - a).perp_dot(c - a);
+    if area.abs() < 1e-12 || !area.is_finite() {
+        return;
+    }
+    let inv_area = 1.0 / area;
+    let min = a.min(b).min(c);
+    let max = a.max(b).max(c);
+    let x_start = (min.x - 0.5).ceil().max(0.0) as usize;
+    let x_end = ((max.x - 0.5).floor() as i64).min(w as i64 - 1);
+    let y_start = ((min.y - 0.5).ceil().max(y0 as f32) as usize).max(y0);
+    let y_end = ((max.y - 0.5).floor() as i64).min((y0 + rows_here) as i64 - 1);
+    if x_end < x_start as i64 || y_end < y_start as i64 {
+        return;
+    }
+    let inv_depth = s.depth.map(|d| 1.0 / d);
+    let mesh = &object.mesh;
+    for y in y_start..=y_end as usize {
+        let py = y as f32 + 0.5;
+        for x in x_start..=x_end as usize {
+            let p = Vec2::new(x as f32 + 0.5, py);
+            // Screen-space barycentric weights of corners a, b, c.
+            let wa = (b - p).perp_dot(c - p) * inv_area;
+            let wb = (c - p).perp_dot(a - p) * inv_area;
+            let wc = 1.0 - wa - wb;
+            if wa < 0.0 || wb < 0.0 || wc < 0.0 {
+                continue;
+            }
+            // Perspective correction: interpolate 1/depth, weight attributes by it.
+            let (pa, pb, pc) = (wa * inv_depth[0], wb * inv_depth[1], wc * inv_depth[2]);
+            let sum = pa + pb + pc;
+            let depth = 1.0 / sum;
+            let slot = &mut rows[(y - y0) * w + x];
+            // (`depth` is finite and positive: clipping keeps depths at or beyond `near`.)
+            if depth >= slot.depth {
+                continue;
+            }
+            let bary = (s.bary[0] * pa + s.bary[1] * pb + s.bary[2] * pc) / sum;
+            let tri = s.triangle as usize;
+            *slot = GPixel {
+                depth,
+                object: index,
+                albedo: to_rgb8(mesh.albedo(tri, bary.x, bary.y)),
+                normal: mesh.shading_normal(tri, bary.x, bary.y),
+            };
+        }
+    }
+}
