@@ -4,9 +4,15 @@
 //! - [`gbuffer`] — the frame's per-pixel surface record (depth, object, albedo, normal)
 //!   that geometry and impostors both write with a depth test, and the one shading pass
 //!   that turns it into colour with the shared Phong model.
+//! - [`impostor`] — a relief texture prepared for display (texel connectivity).
 //! - [`raster`] — the software rasterizer for geometry.
+//! - [`warp`] — relief impostors shown from new eyes: every method of the sources.
+//! - [`evaluate`] — the orbit set-up of the error reports: bake, reference, show, compare.
 //! - [`metrics`] — image error against the reference; warp-error predictions.
 
+pub mod evaluate;
 pub mod gbuffer;
+pub mod impostor;
 pub mod metrics;
 pub mod raster;
+pub mod warp;

@@ -2,22 +2,26 @@
 
 use relief_core::frame::{Frame, NO_OBJECT};
 
-/// Error figures over the compared pixels.
+/// Error figures of a frame against a reference.
+///
+/// Shading error and coverage error are kept apart: PSNR and SSIM are measured on the
+/// pixels where both frames show the object, and `hole_frac` counts the pixels where
+/// only one of them does (holes, or wrongly filled pixels) among those where either
+/// does.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ImageError {
     /// Peak signal-to-noise ratio over RGB, dB (`INFINITY` when identical).
     pub psnr_db: f64,
-    /// Mean SSIM of the luma over 8×8 windows that touch the region.
+    /// Mean SSIM of the luma over 8×8 windows holding pixels both frames cover.
     pub ssim: f64,
-    /// Fraction of region pixels where one frame shows the object and the other does
-    /// not (holes, or wrongly filled pixels).
+    /// Fraction of covered pixels that only one frame covers.
     pub hole_frac: f64,
-    /// Pixels compared.
+    /// Pixels both frames cover.
     pub pixels: usize,
 }
 
-/// Compares `frame` with `reference` on the pixels where either shows `object` (or,
-/// with `None`, any object). Both frames must be the same size.
+/// Compares `frame` with `reference` for `object` (or, with `None`, any object). Both
+/// frames must be the same size.
 pub fn compare(frame: &Frame, reference: &Frame, object: Option<u32>) -> ImageError {
     assert_eq!(
         (frame.width, frame.height),
@@ -29,19 +33,21 @@ pub fn compare(frame: &Frame, reference: &Frame, object: Option<u32>) -> ImageEr
         None => id != NO_OBJECT,
     };
     let mut squared = 0f64;
-    let mut pixels = 0usize;
+    let mut either = 0usize;
     let mut mismatched = 0usize;
     let region: Vec<bool> = frame
         .object
         .iter()
         .zip(&reference.object)
-        .map(|(&a, &b)| shows(a) || shows(b))
+        .map(|(&a, &b)| shows(a) && shows(b))
         .collect();
+    for (&a, &b) in frame.object.iter().zip(&reference.object) {
+        either += (shows(a) || shows(b)) as usize;
+        mismatched += (shows(a) != shows(b)) as usize;
+    }
+    let mut pixels = 0usize;
     for (k, _) in region.iter().enumerate().filter(|(_, inside)| **inside) {
         pixels += 1;
-        if shows(frame.object[k]) != shows(reference.object[k]) {
-            mismatched += 1;
-        }
         for c in 0..3 {
             let d = frame.color[k][c] as f64 - reference.color[k][c] as f64;
             squared += d * d;
@@ -55,13 +61,14 @@ pub fn compare(frame: &Frame, reference: &Frame, object: Option<u32>) -> ImageEr
             10.0 * (255.0f64 * 255.0 / mse).log10()
         },
         ssim: ssim(frame, reference, &region),
-        hole_frac: mismatched as f64 / pixels.max(1) as f64,
+        hole_frac: mismatched as f64 / either.max(1) as f64,
         pixels,
     }
 }
 
 /// Mean SSIM (Wang et al. 2004, constants K1 = 0.01, K2 = 0.03) of Rec. 601 luma over
-/// non-overlapping 8×8 windows that contain at least one region pixel.
+/// non-overlapping 8×8 windows that contain at least one region pixel; pixels outside
+/// the region take the reference's value in both images, so only the region is judged.
 fn ssim(a: &Frame, b: &Frame, region: &[bool]) -> f64 {
     const WINDOW: usize = 8;
     let (c1, c2) = ((0.01f64 * 255.0).powi(2), (0.03f64 * 255.0).powi(2));
@@ -82,7 +89,8 @@ fn ssim(a: &Frame, b: &Frame, region: &[bool]) -> f64 {
             let n = cells.len() as f64;
             let (mut sa, mut sb, mut saa, mut sbb, mut sab) = (0.0, 0.0, 0.0, 0.0, 0.0);
             for &k in &cells {
-                let (x, y) = (luma(a, k), luma(b, k));
+                let y = luma(b, k);
+                let x = if region[k] { luma(a, k) } else { y };
                 sa += x;
                 sb += y;
                 saa += x * x;

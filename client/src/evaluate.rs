@@ -1,0 +1,97 @@
+//! The measurement set-up shared by the reports and tests: one object alone, a source
+//! eye on an orbit around it, a destination eye turned by an angle on the same orbit,
+//! the ray-traced reference from the destination, and a method's frame to compare.
+
+use std::time::Instant;
+
+use glam::Vec3;
+
+use relief_core::camera::Camera;
+use relief_core::frame::Frame;
+use relief_core::relief::{DepthBits, ReliefTexture};
+use relief_core::scene::Scene;
+use relief_worker::tracer::{ObjectTracer, SceneTracer};
+use relief_worker::{bake, render_reference};
+
+use crate::gbuffer::GBuffer;
+use crate::impostor::Impostor;
+use crate::metrics::image::{ImageError, compare};
+use crate::warp::{Method, WarpError, display};
+
+/// One object of a scene, alone, ready to be baked and ray-traced.
+pub struct Solo {
+    /// A scene holding only the object (index 0), with the original lights.
+    pub scene: Scene,
+    pub tracer: SceneTracer,
+    pub object_tracer: ObjectTracer,
+    /// Orbit radius: the distance of every eye from the object's centre.
+    pub distance: f32,
+}
+
+impl Solo {
+    /// Isolates `name` of `scene`; eyes orbit at `distance_factor` bounding radii.
+    pub fn new(scene: &Scene, name: &str, distance_factor: f32) -> relief_core::Result<Solo> {
+        let object = scene.object(name)?.clone();
+        let solo = Scene {
+            objects: vec![object],
+            ..scene.clone()
+        };
+        let tracer = SceneTracer::new(&solo);
+        let object_tracer = tracer.objects[0].clone();
+        let radius = solo.objects[0].bounds.extent().length() * 0.5;
+        Ok(Solo {
+            distance: radius * distance_factor,
+            scene: solo,
+            tracer,
+            object_tracer,
+        })
+    }
+
+    /// The eye `angle_deg` around the vertical axis through the object's centre,
+    /// slightly above it.
+    pub fn eye(&self, angle_deg: f32) -> Vec3 {
+        let centre = self.scene.objects[0].bounds.center();
+        let a = angle_deg.to_radians();
+        let dir = Vec3::new(a.sin(), 0.25, a.cos()).normalize();
+        centre + dir * self.distance
+    }
+
+    /// A square camera at `eye` looking at the object's centre, the object filling
+    /// about `fill` of the frame height.
+    pub fn camera(&self, eye: Vec3, size: u32) -> Camera {
+        let centre = self.scene.objects[0].bounds.center();
+        let radius = self.scene.objects[0].bounds.extent().length() * 0.5;
+        let fov = 2.0 * (radius * 1.1 / self.distance).asin().to_degrees();
+        Camera::look_at(eye, centre, Vec3::Y, fov, size, size).expect("orbit camera is valid")
+    }
+
+    /// Bakes the object's relief texture for `eye`.
+    pub fn bake(&self, eye: Vec3, size: u32, bits: DepthBits) -> ReliefTexture {
+        bake(&self.object_tracer, eye, size, bits).expect("orbit eyes are outside the bounds")
+    }
+
+    /// The ray-traced reference frame.
+    pub fn reference(&self, camera: &Camera) -> Frame {
+        render_reference(&self.tracer, camera)
+    }
+
+    /// Shows `impostor` with `method` from `camera`; the shaded frame and the time the
+    /// display (warp + reconstruction) took.
+    pub fn show(
+        &self,
+        method: Method,
+        impostor: &Impostor,
+        camera: &Camera,
+    ) -> Result<(Frame, f64), WarpError> {
+        let mut gbuffer = GBuffer::new(camera.width, camera.height);
+        let start = Instant::now();
+        display(method, impostor, 0, camera, &mut gbuffer)?;
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok((gbuffer.shade(&self.scene, camera), ms))
+    }
+
+    /// Error of `frame` against `reference` on the object's pixels.
+    pub fn error(&self, frame: &Frame, reference: &Frame) -> ImageError {
+        compare(frame, reference, Some(0))
+    }
+}

@@ -1,0 +1,119 @@
+//! Showing a relief texture from a new eye: every display method of the sources, each
+//! writing albedo, normal and depth into the frame's [`GBuffer`] with a depth test.
+//!
+//! - [`params`] — the per-eye constants of the pre-warp (epipole, `k3`) and its lookup
+//!   tables (eq. 3-1/3-2, ch. 8.2).
+//! - [`prewarp`] — the pre-warp in its four sampling variants, producing a
+//!   [`prewarp::PrewarpImage`] in the source plane;
+//! - [`texmap`] — perspective texture mapping of that image onto the source quad;
+//! - [`forward`] — texels warped straight to the screen as points, holes filled by
+//!   [`pullpush`] (Marroquim ch. 4);
+//! - [`sprite`] — reuse of a previous result.
+
+pub mod forward;
+pub mod params;
+pub mod prewarp;
+pub mod pullpush;
+pub mod sprite;
+pub mod texmap;
+
+use std::fmt;
+use std::str::FromStr;
+
+use relief_core::camera::Camera;
+
+use crate::gbuffer::GBuffer;
+use crate::impostor::Impostor;
+
+/// Why a texture cannot be shown from an eye.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum WarpError {
+    /// The eye is in, or behind, the texture's plane (`c·f ≤ 0`, `k3` unbounded): the
+    /// texture cannot be warped there; draw geometry or make a new texture.
+    #[error(
+        "the eye is in or behind the relief texture's plane (c·f = {0}): needs geometry or a new texture"
+    )]
+    EyeInPlane(f32),
+    /// An input (eye, texture camera) holds NaN or infinity.
+    #[error("non-finite input to the warp")]
+    NonFinite,
+}
+
+/// A display method, selectable by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// Pre-warp rows then columns, the column pass re-interpolating depth.
+    TwoPass1d,
+    /// Two passes; the row pass stores each texel's final v.
+    TwoPassAsym,
+    /// Two passes with displacement-compensated depth for interpolated texels (eq. 8-1).
+    TwoPassComp,
+    /// One pass: each row sample goes straight into its column (the sources' choice).
+    Interleaved,
+    /// Texels splatted to the screen as points, holes filled by pull–push.
+    ForwardPullPush,
+}
+
+impl Method {
+    /// Every method, in report order.
+    pub const ALL: [Method; 5] = [
+        Method::TwoPass1d,
+        Method::TwoPassAsym,
+        Method::TwoPassComp,
+        Method::Interleaved,
+        Method::ForwardPullPush,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::TwoPass1d => "twopass-1d",
+            Method::TwoPassAsym => "twopass-asym",
+            Method::TwoPassComp => "twopass-comp",
+            Method::Interleaved => "interleaved",
+            Method::ForwardPullPush => "forward-pullpush",
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Method {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+            format!("unknown method `{s}` (choose one of: {})", names.join(", "))
+        })
+    }
+}
+
+/// Shows `impostor` of scene object `object` from `camera` into `gbuffer` with `method`.
+pub fn display(
+    method: Method,
+    impostor: &Impostor,
+    object: u32,
+    camera: &Camera,
+    gbuffer: &mut GBuffer,
+) -> Result<(), WarpError> {
+    let texture = &impostor.texture;
+    match method {
+        Method::ForwardPullPush => forward::display(impostor, object, camera, gbuffer),
+        _ => {
+            let params = params::WarpParams::new(texture, camera.eye)?;
+            let variant = match method {
+                Method::TwoPass1d => prewarp::Variant::OneD,
+                Method::TwoPassAsym => prewarp::Variant::Asymmetric,
+                Method::TwoPassComp => prewarp::Variant::Compensated,
+                _ => prewarp::Variant::Interleaved,
+            };
+            let image = prewarp::prewarp(impostor, &params, variant);
+            texmap::map(&image, texture, &params, object, camera, gbuffer);
+            Ok(())
+        }
+    }
+}

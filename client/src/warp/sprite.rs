@@ -1,0 +1,61 @@
+//! The sprite stage (Schaufler's stage 1): while the eye has moved less than a pixel's
+//! worth, the last displayed impostor is reused as it is.
+
+use crate::gbuffer::{GBuffer, GPixel};
+
+/// A rectangle of displayed impostor pixels, kept to be drawn again.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sprite {
+    pub x0: u32,
+    pub y0: u32,
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<GPixel>,
+}
+
+impl Sprite {
+    /// Keeps the pixels of `object` from `gbuffer` (the bounding rectangle of them).
+    pub fn capture(gbuffer: &GBuffer, object: u32) -> Option<Sprite> {
+        let w = gbuffer.width as usize;
+        let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        for (k, p) in gbuffer.pixels.iter().enumerate() {
+            if p.object == object {
+                let (x, y) = (k % w, k / w);
+                x0 = x0.min(x);
+                y0 = y0.min(y);
+                x1 = x1.max(x + 1);
+                y1 = y1.max(y + 1);
+            }
+        }
+        if x0 == usize::MAX {
+            return None;
+        }
+        let pixels = (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let p = gbuffer.pixels[y * w + x];
+                if p.object == object { p } else { GPixel::EMPTY }
+            })
+            .collect();
+        Some(Sprite {
+            x0: x0 as u32,
+            y0: y0 as u32,
+            width: (x1 - x0) as u32,
+            height: (y1 - y0) as u32,
+            pixels,
+        })
+    }
+
+    /// Draws the sprite into `gbuffer` with the depth test.
+    pub fn draw(&self, gbuffer: &mut GBuffer) {
+        for (k, p) in self.pixels.iter().enumerate() {
+            if p.is_covered() {
+                let (x, y) = (
+                    (k as u32 % self.width + self.x0) as i64,
+                    (k as u32 / self.width + self.y0) as i64,
+                );
+                gbuffer.write(x, y, *p);
+            }
+        }
+    }
+}
