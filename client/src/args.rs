@@ -26,14 +26,18 @@ pub fn frame_size(text: &str) -> Result<(u32, u32), String> {
     let (w, h) = text
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("`{text}` is not WIDTHxHEIGHT"))?;
-    let edge = |s: &str| -> Result<u32, String> {
-        let n: u32 = s.parse().map_err(|_| format!("`{s}` is not a whole number"))?;
-        if n == 0 || n > MAX_FRAME_SIZE {
-            return Err(format!("{n} is out of range: must be 1 ..= {MAX_FRAME_SIZE}"));
-        }
-        Ok(n)
-    };
-    Ok((edge(w)?, edge(h)?))
+    Ok((frame_edge(w)?, frame_edge(h)?))
+}
+
+/// One frame edge: `1 ..= MAX_FRAME_SIZE`.
+pub fn frame_edge(text: &str) -> Result<u32, String> {
+    let n: u32 = text
+        .parse()
+        .map_err(|_| format!("`{text}` is not a whole number"))?;
+    if n == 0 || n > MAX_FRAME_SIZE {
+        return Err(format!("{n} is out of range: must be 1 ..= {MAX_FRAME_SIZE}"));
+    }
+    Ok(n)
 }
 
 /// 8 or 16.

@@ -8,6 +8,7 @@
 //! - [`raster`] — the software rasterizer for geometry.
 //! - [`warp`] — relief impostors shown from new eyes: every method of the sources.
 //! - [`evaluate`] — the orbit set-up of the error reports: bake, reference, show, compare.
+//! - [`report`] — the error-against-run-time measurement.
 //! - [`metrics`] — image error against the reference; warp-error predictions.
 
 pub mod evaluate;
@@ -15,4 +16,5 @@ pub mod gbuffer;
 pub mod impostor;
 pub mod metrics;
 pub mod raster;
+pub mod report;
 pub mod warp;

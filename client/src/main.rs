@@ -29,6 +29,9 @@ enum Command {
     Bake(commands::bake::BakeArgs),
     /// Ray-trace a reference frame of the whole scene (per-pixel Phong).
     Reference(commands::reference::ReferenceArgs),
+    /// Measurements written as CSV, JSON and plots.
+    #[command(subcommand)]
+    Report(commands::report::ReportCommand),
     /// Benchmarks that print numbers.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
@@ -60,6 +63,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Bake(args) => commands::bake::run(args),
         Command::Reference(args) => commands::reference::run(args),
+        Command::Report(command) => commands::report::run(command),
         Command::Bench(command) => commands::bench::run(command),
     };
     match result {

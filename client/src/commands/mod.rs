@@ -3,3 +3,4 @@
 pub mod bake;
 pub mod bench;
 pub mod reference;
+pub mod report;

@@ -8,9 +8,11 @@
 //! - [`texmap`] — perspective texture mapping of that image onto the source quad;
 //! - [`forward`] — texels warped straight to the screen as points, holes filled by
 //!   [`pullpush`] (Marroquim ch. 4);
+//! - [`inverse`] — per-pixel ray marching of the depth field (Policarpo);
 //! - [`sprite`] — reuse of a previous result.
 
 pub mod forward;
+pub mod inverse;
 pub mod params;
 pub mod prewarp;
 pub mod pullpush;
@@ -37,6 +39,9 @@ pub enum WarpError {
     /// An input (eye, texture camera) holds NaN or infinity.
     #[error("non-finite input to the warp")]
     NonFinite,
+    /// The sprite method reuses a previous frame, which [`display`] does not have.
+    #[error("the sprite method needs a previous frame")]
+    NeedsPreviousFrame,
 }
 
 /// A display method, selectable by name.
@@ -52,42 +57,77 @@ pub enum Method {
     Interleaved,
     /// Texels splatted to the screen as points, holes filled by pull–push.
     ForwardPullPush,
+    /// Texels splatted to the screen as points at a pyramid level by their size,
+    /// gathered per pixel with a `k × k` kernel (Marroquim ch. 6); k = 3 or 5.
+    ForwardKernel(u8),
+    /// Per-pixel march of the depth field with this many linear steps.
+    Inverse(u16),
+    /// The previous frame's impostor pixels, unchanged (needs a previous frame).
+    Sprite,
 }
 
 impl Method {
     /// Every method, in report order.
-    pub const ALL: [Method; 5] = [
+    pub const ALL: [Method; 11] = [
+        Method::Sprite,
         Method::TwoPass1d,
         Method::TwoPassAsym,
         Method::TwoPassComp,
         Method::Interleaved,
         Method::ForwardPullPush,
+        Method::ForwardKernel(3),
+        Method::ForwardKernel(5),
+        Method::Inverse(16),
+        Method::Inverse(64),
+        Method::Inverse(128),
     ];
 
-    pub fn name(self) -> &'static str {
+    /// The method's name, as `--method` takes it.
+    pub fn name(self) -> String {
         match self {
-            Method::TwoPass1d => "twopass-1d",
-            Method::TwoPassAsym => "twopass-asym",
-            Method::TwoPassComp => "twopass-comp",
-            Method::Interleaved => "interleaved",
-            Method::ForwardPullPush => "forward-pullpush",
+            Method::Sprite => "sprite".into(),
+            Method::TwoPass1d => "twopass-1d".into(),
+            Method::TwoPassAsym => "twopass-asym".into(),
+            Method::TwoPassComp => "twopass-comp".into(),
+            Method::Interleaved => "interleaved".into(),
+            Method::ForwardPullPush => "forward-pullpush".into(),
+            Method::ForwardKernel(k) => format!("forward-kernel-{k}"),
+            Method::Inverse(n) => format!("inverse-{n}"),
         }
     }
 }
 
 impl fmt::Display for Method {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+        f.write_str(&self.name())
     }
 }
 
 impl FromStr for Method {
     type Err = String;
 
+    /// Parses a method name; `inverse-N` takes any step count 1..=4096 and
+    /// `forward-kernel-K` an odd K in 1..=9.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if let Some(n) = s.strip_prefix("inverse-")
+            && let Ok(n) = n.parse::<u16>()
+            && (1..=4096).contains(&n)
+        {
+            return Ok(Method::Inverse(n));
+        }
+        if let Some(k) = s.strip_prefix("forward-kernel-")
+            && let Ok(k) = k.parse::<u8>()
+            && k % 2 == 1
+            && k <= 9
+        {
+            return Ok(Method::ForwardKernel(k));
+        }
         Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
-            let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
-            format!("unknown method `{s}` (choose one of: {})", names.join(", "))
+            let names: Vec<String> = Method::ALL.iter().map(|m| m.name()).collect();
+            format!(
+                "unknown method `{s}` (choose one of: {}; inverse-N, forward-kernel-K)",
+                names.join(", ")
+            )
         })
     }
 }
@@ -103,6 +143,9 @@ pub fn display(
     let texture = &impostor.texture;
     match method {
         Method::ForwardPullPush => forward::display(impostor, object, camera, gbuffer),
+        Method::ForwardKernel(k) => forward::display_kernel(impostor, k as usize, object, camera, gbuffer),
+        Method::Inverse(steps) => inverse::display(impostor, steps as usize, object, camera, gbuffer),
+        Method::Sprite => Err(WarpError::NeedsPreviousFrame),
         _ => {
             let params = params::WarpParams::new(texture, camera.eye)?;
             let variant = match method {

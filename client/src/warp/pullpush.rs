@@ -52,7 +52,7 @@ impl Layer {
 /// Averages the front-most group of `candidates` (weights, splats): those within
 /// `tolerance(depth)` of the nearest.
 #[inline]
-fn front_average(candidates: &[(f32, Splat)], tolerance: impl Fn(f32) -> f32) -> Splat {
+pub(crate) fn front_average(candidates: &[(f32, Splat)], tolerance: impl Fn(f32) -> f32) -> Splat {
     let nearest = candidates
         .iter()
         .filter(|(w, s)| s.valid && *w > 0.0)

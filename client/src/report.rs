@@ -1,0 +1,159 @@
+//! The error-against-run-time measurement: every object × method × texture size ×
+//! angle between the source eye (where the texture was baked) and the destination eye
+//! (orbiting the object at a fixed distance), timed and compared with the ray-traced
+//! reference.
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use relief_core::frame::Frame;
+use relief_core::relief::DepthBits;
+use relief_core::scene::Scene;
+
+use crate::evaluate::Solo;
+use crate::gbuffer::GBuffer;
+use crate::impostor::Impostor;
+use crate::warp::sprite::Sprite;
+use crate::warp::{Method, display};
+
+/// What to measure.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub sizes: Vec<u32>,
+    pub angles: Vec<f32>,
+    pub methods: Vec<Method>,
+    /// Timed runs per row (the median is reported).
+    pub runs: usize,
+    /// Edge of the square frames, pixels.
+    pub frame_size: u32,
+    /// Orbit radius in bounding radii.
+    pub distance: f32,
+    /// The angle and size whose frames are kept for the side-by-side strip.
+    pub strip: (f32, u32),
+}
+
+/// One measurement: a CSV row.
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    pub object: String,
+    pub method: String,
+    pub size: u32,
+    pub angle_deg: f32,
+    /// Median display time (warp + reconstruction into the frame's G-buffer), ms.
+    pub ms: f64,
+    pub psnr_db: f64,
+    pub ssim: f64,
+    pub hole_frac: f64,
+}
+
+impl Row {
+    pub const CSV_HEADER: &'static str = "object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac";
+
+    pub fn csv(&self) -> String {
+        format!(
+            "{},{},{},{},{:.4},{:.3},{:.5},{:.5}",
+            self.object,
+            self.method,
+            self.size,
+            self.angle_deg,
+            self.ms,
+            self.psnr_db,
+            self.ssim,
+            self.hole_frac
+        )
+    }
+}
+
+/// The frames of one object at the strip's angle and size.
+pub struct Strip {
+    pub object: String,
+    pub reference: Frame,
+    pub frames: Vec<(Method, Frame)>,
+}
+
+fn median(mut values: Vec<f64>) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values.get(values.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// Measures `objects` of `scene`; `on_row` sees each row as it is made (progress).
+pub fn error_vs_time(
+    scene: &Scene,
+    objects: &[String],
+    options: &Options,
+    mut on_row: impl FnMut(&Row),
+) -> relief_core::Result<(Vec<Row>, Vec<Strip>)> {
+    let mut rows = Vec::new();
+    let mut strips = Vec::new();
+    for name in objects {
+        let solo = Solo::new(scene, name, options.distance)?;
+        let source_eye = solo.eye(0.0);
+        let source_camera = solo.camera(source_eye, options.frame_size);
+        let cameras: Vec<_> = options
+            .angles
+            .iter()
+            .map(|&a| solo.camera(solo.eye(a), options.frame_size))
+            .collect();
+        let references: Vec<Frame> = cameras.iter().map(|c| solo.reference(c)).collect();
+        let mut strip = Strip {
+            object: name.clone(),
+            reference: Frame::new(1, 1, [0; 3]),
+            frames: Vec::new(),
+        };
+        for &size in &options.sizes {
+            let impostor = Impostor::new(solo.bake(source_eye, size, DepthBits::Eight));
+            // The sprite is what the sources' best warp showed at the source eye.
+            let mut at_source = GBuffer::new(options.frame_size, options.frame_size);
+            let sprite = display(Method::Interleaved, &impostor, 0, &source_camera, &mut at_source)
+                .ok()
+                .and_then(|()| Sprite::capture(&at_source, 0));
+            for (k, &angle) in options.angles.iter().enumerate() {
+                let camera = &cameras[k];
+                let keep = (angle, size) == options.strip;
+                if keep {
+                    strip.reference = references[k].clone();
+                }
+                for &method in &options.methods {
+                    let mut times = Vec::with_capacity(options.runs);
+                    let mut gbuffer = GBuffer::new(camera.width, camera.height);
+                    let mut failed = false;
+                    for _ in 0..options.runs.max(1) {
+                        gbuffer.clear();
+                        let start = Instant::now();
+                        let shown = match method {
+                            Method::Sprite => {
+                                if let Some(s) = &sprite {
+                                    s.draw(&mut gbuffer);
+                                }
+                                Ok(())
+                            }
+                            _ => display(method, &impostor, 0, camera, &mut gbuffer),
+                        };
+                        times.push(start.elapsed().as_secs_f64() * 1e3);
+                        failed |= shown.is_err();
+                    }
+                    let frame = gbuffer.shade(&solo.scene, camera);
+                    let error = solo.error(&frame, &references[k]);
+                    let row = Row {
+                        object: name.clone(),
+                        method: method.name(),
+                        size,
+                        angle_deg: angle,
+                        ms: if failed { f64::NAN } else { median(times) },
+                        psnr_db: error.psnr_db,
+                        ssim: error.ssim,
+                        hole_frac: error.hole_frac,
+                    };
+                    on_row(&row);
+                    rows.push(row);
+                    if keep {
+                        strip.frames.push((method, frame));
+                    }
+                }
+            }
+        }
+        strips.push(strip);
+    }
+    Ok((rows, strips))
+}
