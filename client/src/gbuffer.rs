@@ -16,7 +16,8 @@ use relief_core::shading::to_rgb8;
 /// One pixel's nearest surface.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GPixel {
-    /// View-space depth (distance along the camera's forward axis); `INFINITY` if empty.
+    /// View-space depth (distance along the camera's forward axis); `f32::MAX` if empty
+    /// (every value in the buffer is finite).
     pub depth: f32,
     /// Scene object index, or [`NO_OBJECT`].
     pub object: u32,
@@ -28,7 +29,7 @@ pub struct GPixel {
 
 impl GPixel {
     pub const EMPTY: GPixel = GPixel {
-        depth: f32::INFINITY,
+        depth: f32::MAX,
         object: NO_OBJECT,
         albedo: [0; 3],
         normal: Vec3::ZERO,

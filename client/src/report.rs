@@ -14,6 +14,8 @@ use relief_core::scene::Scene;
 use crate::evaluate::Solo;
 use crate::gbuffer::GBuffer;
 use crate::impostor::Impostor;
+use crate::metrics::critical::{CriticalPoints, measured_gap};
+use crate::warp::params::WarpParams;
 use crate::warp::sprite::Sprite;
 use crate::warp::{Method, display};
 
@@ -65,6 +67,51 @@ impl Row {
     }
 }
 
+/// Predicted against measured warp error for one object, size and angle.
+#[derive(Debug, Clone, Serialize)]
+pub struct Prediction {
+    pub object: String,
+    pub size: u32,
+    pub angle_deg: f32,
+    /// Gap (texels) predicted from the single critical point (5.5).
+    pub predicted_gap: f32,
+    /// Sum of the 8×8 regions' predicted gaps (5.6).
+    pub predicted_region_gap: f32,
+    /// The widest of the regions' predicted gaps.
+    pub predicted_worst_region_gap: f32,
+    /// The widest gap the pre-warp really opens (texels).
+    pub measured_gap: f32,
+    /// The interleaved warp's image error at this angle.
+    pub psnr_db: f64,
+    pub hole_frac: f64,
+}
+
+impl Prediction {
+    pub const CSV_HEADER: &'static str = "object,size,angle_deg,predicted_gap,predicted_region_gap,predicted_worst_region_gap,measured_gap,psnr_db,hole_frac";
+
+    pub fn csv(&self) -> String {
+        format!(
+            "{},{},{},{:.4},{:.4},{:.4},{:.4},{:.3},{:.5}",
+            self.object,
+            self.size,
+            self.angle_deg,
+            self.predicted_gap,
+            self.predicted_region_gap,
+            self.predicted_worst_region_gap,
+            self.measured_gap,
+            self.psnr_db,
+            self.hole_frac
+        )
+    }
+}
+
+/// Everything one run of the report measured.
+pub struct Measurements {
+    pub rows: Vec<Row>,
+    pub predictions: Vec<Prediction>,
+    pub strips: Vec<Strip>,
+}
+
 /// The frames of one object at the strip's angle and size.
 pub struct Strip {
     pub object: String,
@@ -83,9 +130,10 @@ pub fn error_vs_time(
     objects: &[String],
     options: &Options,
     mut on_row: impl FnMut(&Row),
-) -> relief_core::Result<(Vec<Row>, Vec<Strip>)> {
+) -> relief_core::Result<Measurements> {
     let mut rows = Vec::new();
     let mut strips = Vec::new();
+    let mut predictions = Vec::new();
     for name in objects {
         let solo = Solo::new(scene, name, options.distance)?;
         let source_eye = solo.eye(0.0);
@@ -103,6 +151,7 @@ pub fn error_vs_time(
         };
         for &size in &options.sizes {
             let impostor = Impostor::new(solo.bake(source_eye, size, DepthBits::Eight));
+            let critical = CriticalPoints::find(&impostor.texture, 8, 8);
             // The sprite is what the sources' best warp showed at the source eye.
             let mut at_source = GBuffer::new(options.frame_size, options.frame_size);
             let sprite = display(Method::Interleaved, &impostor, 0, &source_camera, &mut at_source)
@@ -146,6 +195,21 @@ pub fn error_vs_time(
                         hole_frac: error.hole_frac,
                     };
                     on_row(&row);
+                    if method == Method::Interleaved
+                        && let Ok(params) = WarpParams::new(&impostor.texture, camera.eye)
+                    {
+                        predictions.push(Prediction {
+                            object: name.clone(),
+                            size,
+                            angle_deg: angle,
+                            predicted_gap: critical.global_gap(&params),
+                            predicted_region_gap: critical.region_gap(&params),
+                            predicted_worst_region_gap: critical.worst_region_gap(&params),
+                            measured_gap: measured_gap(&impostor.texture, &params),
+                            psnr_db: row.psnr_db,
+                            hole_frac: row.hole_frac,
+                        });
+                    }
                     rows.push(row);
                     if keep {
                         strip.frames.push((method, frame));
@@ -155,5 +219,9 @@ pub fn error_vs_time(
         }
         strips.push(strip);
     }
-    Ok((rows, strips))
+    Ok(Measurements {
+        rows,
+        predictions,
+        strips,
+    })
 }

@@ -8,7 +8,7 @@ use anyhow::{Context, Result, anyhow};
 use clap::{Args, Subcommand};
 use plotters::prelude::*;
 
-use relief_client::report::{self, Options, Row, Strip};
+use relief_client::report::{self, Options, Prediction, Row, Strip};
 use relief_client::warp::Method;
 use relief_core::frame::Frame;
 use relief_core::scene::Scene;
@@ -30,7 +30,8 @@ pub struct ErrorVsTimeArgs {
     /// One object (default: every object with at least 1,000 triangles).
     #[arg(long)]
     object: Option<String>,
-    /// Output directory: error_vs_time.csv, error_vs_time.png, error_vs_angle.png, strip_*.png.
+    /// Output directory: error_vs_time.csv, predicted_error.csv, error_vs_time.png,
+    /// error_vs_angle.png, strip_OBJECT.png.
     #[arg(long)]
     out: PathBuf,
     /// Print the rows as a JSON array on stdout.
@@ -110,7 +111,7 @@ fn error_vs_time(args: ErrorVsTimeArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let total = objects.len() * options.sizes.len() * options.angles.len() * options.methods.len();
     let bar = progress::bar(total as u64, "measuring");
-    let (rows, strips) = report::error_vs_time(&scene, &objects, &options, |row| {
+    let measured = report::error_vs_time(&scene, &objects, &options, |row| {
         bar.set_message(format!(
             "{} {} {}² {}°",
             row.object, row.method, row.size, row.angle_deg
@@ -118,22 +119,31 @@ fn error_vs_time(args: ErrorVsTimeArgs) -> Result<()> {
         bar.inc(1);
     })?;
     bar.finish_and_clear();
+    let (rows, strips) = (&measured.rows, &measured.strips);
+    let prediction_path = args.out.join("predicted_error.csv");
+    let mut predictions = String::from(Prediction::CSV_HEADER) + "\n";
+    for p in &measured.predictions {
+        predictions += &p.csv();
+        predictions.push('\n');
+    }
+    std::fs::write(&prediction_path, predictions)
+        .with_context(|| format!("writing {}", prediction_path.display()))?;
     let csv_path = args.out.join("error_vs_time.csv");
     let mut csv = String::from(Row::CSV_HEADER) + "\n";
-    for row in &rows {
+    for row in rows {
         csv += &row.csv();
         csv.push('\n');
     }
     std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
     register_font()?;
-    plot_error_vs_time(&rows, &options, &args.out.join("error_vs_time.png"))?;
-    plot_error_vs_angle(&rows, &options, &args.out.join("error_vs_angle.png"))?;
-    for strip in &strips {
+    plot_error_vs_time(rows, &options, &args.out.join("error_vs_time.png"))?;
+    plot_error_vs_angle(rows, &options, &args.out.join("error_vs_angle.png"))?;
+    for strip in strips {
         write_strip(strip, &args.out.join(format!("strip_{}.png", strip.object)))?;
     }
     if args.json {
         let mut out = std::io::stdout().lock();
-        serde_json::to_writer(&mut out, &rows)?;
+        serde_json::to_writer(&mut out, rows)?;
         writeln!(out)?;
     }
     tracing::info!("{} rows -> {}", rows.len(), args.out.display());
