@@ -19,6 +19,33 @@ use crate::{args, progress};
 pub enum BenchCommand {
     /// BVH build time and primary-ray throughput of a bake, one thread and all threads.
     Raytrace(RaytraceArgs),
+    /// Display time of every warp method against memcpy and a naive pre-warp.
+    Warp(WarpArgs),
+}
+
+#[derive(Args)]
+pub struct WarpArgs {
+    /// Built-in scene name, .toml scene file, or .obj file.
+    #[arg(long, default_value = "default")]
+    scene: String,
+    /// Object whose relief texture is warped.
+    #[arg(long, default_value = "knot")]
+    object: String,
+    /// Texture edge N (N² texels).
+    #[arg(long, default_value = "256", value_parser = args::texture_size, allow_hyphen_values = true)]
+    size: u32,
+    /// Angle between the texture's eye and the displayed eye, degrees.
+    #[arg(long, default_value = "5")]
+    angle: f32,
+    /// Frame edge in pixels.
+    #[arg(long, default_value = "512", value_parser = args::frame_edge)]
+    frame_size: u32,
+    /// Timed runs per measurement (the median is reported), after one warm-up.
+    #[arg(long, default_value = "21", value_parser = clap::value_parser!(u32).range(1..=10000))]
+    runs: u32,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args)]
@@ -60,7 +87,225 @@ struct RaytraceReport {
 pub fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::Raytrace(args) => raytrace(args),
+        BenchCommand::Warp(args) => warp(args),
     }
+}
+
+/// Median wall time of `runs` calls of `f`, in milliseconds, after one warm-up call.
+fn median_ms(runs: u32, f: impl FnMut()) -> f64 {
+    median_ms_after(runs, || {}, f)
+}
+
+/// As [`median_ms`], running the untimed `setup` before each call.
+fn median_ms_after(runs: u32, mut setup: impl FnMut(), mut f: impl FnMut()) -> f64 {
+    setup();
+    f();
+    let mut times: Vec<f64> = (0..runs)
+        .map(|_| {
+            setup();
+            let start = Instant::now();
+            f();
+            start.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
+
+/// One method's line of `relief bench warp --json`.
+#[derive(Serialize)]
+struct WarpTiming {
+    /// Display into the frame's G-buffer: warp + reconstruction (+ texture mapping).
+    ms: f64,
+    texels_per_s: f64,
+    /// `ms` over a memcpy of the texture's bytes.
+    memcpy_ratio: f64,
+    /// `ms` over the naive per-texel eq. 3-1/3-2 (no lookup table).
+    naive_ratio: f64,
+    /// Pre-warp alone (warp + hole filling in the source plane; table 8.1's quantity).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    prewarp_ms: Option<f64>,
+    /// The pre-warp split into the halves above and below the epipole on two threads.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    prewarp_split_ms: Option<f64>,
+}
+
+#[derive(Serialize)]
+struct WarpReport {
+    object: String,
+    size: u32,
+    texels: usize,
+    angle_deg: f32,
+    frame_size: u32,
+    runs: u32,
+    /// Copy of the texture's albedo, normal and depth bytes.
+    memcpy_ms: f64,
+    /// Eq. 3-1/3-2 per texel with the k's and divisions, no table.
+    naive_ms: f64,
+    /// The same with the lookup table (two additions, two multiplications).
+    lut_ms: f64,
+    methods: std::collections::BTreeMap<String, WarpTiming>,
+}
+
+fn warp(args: WarpArgs) -> Result<()> {
+    use relief_client::evaluate::Solo;
+    use relief_client::gbuffer::GBuffer;
+    use relief_client::impostor::Impostor;
+    use relief_client::warp::params::WarpParams;
+    use relief_client::warp::prewarp::{Variant, prewarp, prewarp_split};
+    use relief_client::warp::sprite::Sprite;
+    use relief_client::warp::{Method, display};
+
+    if !args.angle.is_finite() {
+        anyhow::bail!("--angle must be finite");
+    }
+    let bar = progress::spinner("baking");
+    let scene = Scene::load(&args.scene)?;
+    let solo = Solo::new(&scene, &args.object, 3.0)?;
+    let impostor = Impostor::new(solo.bake(solo.eye(0.0), args.size, DepthBits::Eight));
+    let camera = solo.camera(solo.eye(args.angle), args.frame_size);
+    let params = WarpParams::new(&impostor.texture, camera.eye)?;
+    let texture = &impostor.texture;
+    let texels = texture.depth.len();
+    bar.set_message("baselines");
+    // Baselines, measured in the same run.
+    let (mut albedo, mut normal, mut depth) = (
+        texture.albedo.clone(),
+        texture.normal.clone(),
+        texture.depth.clone(),
+    );
+    let memcpy_ms = median_ms(args.runs, || {
+        albedo.copy_from_slice(&texture.albedo);
+        normal.copy_from_slice(&texture.normal);
+        depth.copy_from_slice(&texture.depth);
+        std::hint::black_box((&albedo, &normal, &depth));
+    });
+    let mut warped = vec![glam::Vec2::ZERO; texels];
+    let c = texture.camera;
+    let (w, empty, bits) = (c.width as usize, texture.depth_bits.empty(), texture.depth_bits);
+    let naive_ms = median_ms(args.runs, || {
+        let cc = c.origin - std::hint::black_box(camera.eye);
+        for (k, out) in warped.iter_mut().enumerate() {
+            let q = texture.depth[k];
+            if q == empty {
+                continue;
+            }
+            let d = c.depth_near + q as f32 / bits.max_level() as f32 * (c.depth_far - c.depth_near);
+            let k1 = c.f.dot(c.b.cross(cc)) / c.a.dot(c.b.cross(cc));
+            let k2 = c.f.dot(cc.cross(c.a)) / c.b.dot(cc.cross(c.a));
+            let k3 = c.f.dot(c.a.cross(c.b)) / cc.dot(c.a.cross(c.b));
+            let (u, v) = ((k % w) as f32 + 0.5, (k / w) as f32 + 0.5);
+            *out = glam::Vec2::new((u - k1 * d) / (1.0 + k3 * d), (v - k2 * d) / (1.0 + k3 * d));
+        }
+        std::hint::black_box(&warped);
+    });
+    let lut_ms = median_ms(args.runs, || {
+        for (k, out) in warped.iter_mut().enumerate() {
+            let q = texture.depth[k];
+            if q != empty {
+                *out = params.warp((k % w) as f32 + 0.5, (k / w) as f32 + 0.5, q as usize);
+            }
+        }
+        std::hint::black_box(&warped);
+    });
+    let mut gbuffer = GBuffer::new(camera.width, camera.height);
+    let source_camera = solo.camera(solo.eye(0.0), args.frame_size);
+    display(Method::Interleaved, &impostor, 0, &source_camera, &mut gbuffer)?;
+    let sprite = Sprite::capture(&gbuffer, 0);
+    let mut methods = std::collections::BTreeMap::new();
+    for method in Method::ALL {
+        bar.set_message(method.name());
+        let cleared = std::cell::RefCell::new(&mut gbuffer);
+        let ms = median_ms_after(
+            args.runs,
+            || cleared.borrow_mut().clear(),
+            || {
+                let gbuffer = &mut **cleared.borrow_mut();
+                match (method, &sprite) {
+                    (Method::Sprite, Some(s)) => s.draw(gbuffer),
+                    (Method::Sprite, None) => {}
+                    _ => drop(display(method, &impostor, 0, &camera, gbuffer)),
+                }
+            },
+        );
+        let variant = match method {
+            Method::TwoPass1d => Some(Variant::OneD),
+            Method::TwoPassAsym => Some(Variant::Asymmetric),
+            Method::TwoPassComp => Some(Variant::Compensated),
+            Method::Interleaved => Some(Variant::Interleaved),
+            _ => None,
+        };
+        let prewarp_ms = variant.map(|v| {
+            median_ms(args.runs, || {
+                drop(std::hint::black_box(prewarp(&impostor, &params, v)))
+            })
+        });
+        let prewarp_split_ms = (method == Method::Interleaved).then(|| {
+            median_ms(args.runs, || {
+                drop(std::hint::black_box(prewarp_split(
+                    &impostor,
+                    &params,
+                    Variant::Interleaved,
+                )))
+            })
+        });
+        methods.insert(
+            method.name(),
+            WarpTiming {
+                ms,
+                texels_per_s: texels as f64 / (ms * 1e-3),
+                memcpy_ratio: ms / memcpy_ms,
+                naive_ratio: ms / naive_ms,
+                prewarp_ms,
+                prewarp_split_ms,
+            },
+        );
+    }
+    bar.finish_and_clear();
+    let report = WarpReport {
+        object: args.object,
+        size: args.size,
+        texels,
+        angle_deg: args.angle,
+        frame_size: args.frame_size,
+        runs: args.runs,
+        memcpy_ms,
+        naive_ms,
+        lut_ms,
+        methods,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+        return Ok(());
+    }
+    println!(
+        "{} {}² ({} texels), {}° turn, {}² frame; memcpy {:.4} ms, naive eq. 3-1/3-2 {:.4} ms, with table {:.4} ms",
+        report.object,
+        report.size,
+        report.texels,
+        report.angle_deg,
+        report.frame_size,
+        memcpy_ms,
+        naive_ms,
+        lut_ms
+    );
+    println!(
+        "{:<18} {:>9} {:>11} {:>9} {:>9} {:>11} {:>11}",
+        "method", "ms", "Mtexels/s", "/memcpy", "/naive", "prewarp ms", "split ms"
+    );
+    for (name, t) in &report.methods {
+        let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
+        println!(
+            "{name:<18} {:>9.3} {:>11.1} {:>9.1} {:>9.1} {:>11} {:>11}",
+            t.ms,
+            t.texels_per_s / 1e6,
+            t.memcpy_ratio,
+            t.naive_ratio,
+            opt(t.prewarp_ms),
+            opt(t.prewarp_split_ms)
+        );
+    }
+    Ok(())
 }
 
 /// Best wall time of `runs` calls of `f`, in milliseconds, after one warm-up call.

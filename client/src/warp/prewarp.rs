@@ -118,7 +118,8 @@ struct Sample {
 /// `a + (b - a)·t` on 8-bit channels, `t` in 1/256 steps.
 #[inline(always)]
 fn lerp8(a: [u8; 3], b: [u8; 3], t: i32) -> [u8; 3] {
-    [0, 1, 2].map(|c| (a[c] as i32 + (((b[c] as i32 - a[c] as i32) * t) >> 8)) as u8)
+    let channel = |x: u8, y: u8| (x as i32 + (((y as i32 - x as i32) * t) >> 8)) as u8;
+    [channel(a[0], b[0]), channel(a[1], b[1]), channel(a[2], b[2])]
 }
 
 impl Sample {
@@ -140,29 +141,44 @@ impl Sample {
 /// Emits the pixels that sample `b` adds after `a` along an axis visited in direction
 /// `dir` (±1): every pixel whose centre lies in `(a, b]`, interpolated — or, when there
 /// is no connected predecessor `a` (or the two fold over), just the pixel `b` lands in.
-/// `interpolate(a, b, centre)` makes the sample at a pixel centre.
+/// `interpolate(a, b, centre, t)` makes the sample at a pixel centre, `t` being the
+/// centre's linear position from `a` to `b`.
 #[inline(always)]
 fn span(
     a: Option<&Sample>,
     b: &Sample,
     dir: f32,
-    interpolate: impl Fn(&Sample, &Sample, f32) -> Sample,
+    interpolate: impl Fn(&Sample, &Sample, f32, f32) -> Sample,
     mut emit: impl FnMut(i64, Sample),
 ) {
     if let Some(a) = a
         && (b.pos - a.pos) * dir >= 0.0
     {
+        let inv = if b.pos == a.pos {
+            0.0
+        } else {
+            1.0 / (b.pos - a.pos)
+        };
+        let at = |x: i64| {
+            let centre = x as f32 + 0.5;
+            let t = if inv == 0.0 {
+                1.0
+            } else {
+                ((centre - a.pos) * inv).clamp(0.0, 1.0)
+            };
+            interpolate(a, b, centre, t)
+        };
         if dir > 0.0 {
             let first = (a.pos - 0.5).floor() as i64 + 1;
             let last = (b.pos - 0.5).floor() as i64;
             for x in first..=last {
-                emit(x, interpolate(a, b, x as f32 + 0.5));
+                emit(x, at(x));
             }
         } else {
             let first = (a.pos - 0.5).ceil() as i64 - 1;
             let last = (b.pos - 0.5).ceil() as i64;
             for x in (last..=first).rev() {
-                emit(x, interpolate(a, b, x as f32 + 0.5));
+                emit(x, at(x));
             }
         }
         return;
@@ -171,13 +187,8 @@ fn span(
 }
 
 /// Linear interpolation at a pixel centre.
-#[inline]
-fn linear(a: &Sample, b: &Sample, centre: f32) -> Sample {
-    let t = if b.pos == a.pos {
-        1.0
-    } else {
-        ((centre - a.pos) / (b.pos - a.pos)).clamp(0.0, 1.0)
-    };
+#[inline(always)]
+fn linear(a: &Sample, b: &Sample, _centre: f32, t: f32) -> Sample {
     a.lerp(b, t)
 }
 
@@ -204,23 +215,29 @@ struct Column {
     last: Option<(Sample, usize)>,
 }
 
-/// Output writer shared by the column passes.
+/// The rows of the pre-warped image one half of the work writes, as plane coordinates
+/// starting at `(u0, v0)`.
 struct Output<'a> {
-    image: &'a mut PrewarpImage,
+    texels: &'a mut [PTexel],
+    u0: i64,
+    v0: i64,
+    width: usize,
 }
 
 impl Output<'_> {
     #[inline]
     fn put(&mut self, x: i64, y: i64, s: &Sample) {
-        let (xx, yy) = (x - self.image.u0 as i64, y - self.image.v0 as i64);
-        if xx < 0 || yy < 0 || xx >= self.image.width as i64 || yy >= self.image.height as i64 {
+        let (xx, yy) = (x - self.u0, y - self.v0);
+        if xx < 0 || yy < 0 || xx as usize >= self.width {
             return;
         }
-        self.image.texels[yy as usize * self.image.width as usize + xx as usize] = PTexel {
-            depth: s.depth,
-            albedo: s.albedo,
-            normal: s.normal,
-        };
+        if let Some(t) = self.texels.get_mut(yy as usize * self.width + xx as usize) {
+            *t = PTexel {
+                depth: s.depth,
+                albedo: s.albedo,
+                normal: s.normal,
+            };
+        }
     }
 }
 
@@ -239,61 +256,46 @@ fn push_column(column: &mut Column, out: &mut Output, x: i64, s: Sample, seq: us
     column.last = Some((s, seq));
 }
 
-/// Pre-warps `impostor` for the eye of `params`.
-pub fn prewarp(impostor: &Impostor, params: &WarpParams, variant: Variant) -> PrewarpImage {
-    let texture = &impostor.texture;
-    let c = &texture.camera;
-    let (w, h) = (c.width as usize, c.height as usize);
-    let s_min = 1.0 / (1.0 + params.k3 * params.max_depth());
-    let (u0, u1) = axis_extent(w as f32, params.epipole.x, s_min);
-    let (v0, v1) = axis_extent(h as f32, params.epipole.y, s_min);
-    let mut image = PrewarpImage {
-        u0,
-        v0,
-        width: (u1 - u0).max(1) as u32,
-        height: (v1 - v0).max(1) as u32,
-        texels: Vec::new(),
-    };
-    image.texels = vec![PTexel::EMPTY; image.width as usize * image.height as usize];
-    let empty = texture.depth_bits.empty();
-    let source_sample = |i: usize, j: usize| -> Option<Sample> {
-        let k = j * w + i;
+/// What both halves of a pre-warp read.
+struct Job<'a> {
+    impostor: &'a Impostor,
+    params: &'a WarpParams,
+    variant: Variant,
+    u0: i64,
+    columns: usize,
+}
+
+impl Job<'_> {
+    /// The texel `(i, j)` as a sample, pre-warped; `None` when empty.
+    #[inline(always)]
+    fn source(&self, i: usize, j: usize) -> Option<Sample> {
+        let texture = &self.impostor.texture;
+        let k = j * texture.camera.width as usize + i;
         let q = texture.depth[k];
-        if q == empty {
+        if q == texture.depth_bits.empty() {
             return None;
         }
-        let p: Vec2 = params.warp(i as f32 + 0.5, j as f32 + 0.5, q as usize);
+        let p: Vec2 = self.params.warp(i as f32 + 0.5, j as f32 + 0.5, q as usize);
         Some(Sample {
             pos: p.x,
             v_target: p.y,
             source: i as f32 + 0.5,
-            depth: params.depth[q as usize],
+            depth: self.params.depth[q as usize],
             albedo: texture.albedo[k],
             normal: texture.normal[k],
-            down: impostor.down[k],
+            down: self.impostor.down[k],
         })
-    };
-    let e = params.epipole;
-    let columns_n = image.width as usize;
-    let column_index = |x: i64| (x - u0 as i64) as usize;
-    let mut out = Output { image: &mut image };
+    }
 
-    // Row pass over one source row: calls `emit(x, sample)` for each pre-warped pixel.
-    #[allow(clippy::too_many_arguments)]
-    fn row_pass(
-        w: usize,
-        j: usize,
-        e1: f32,
-        variant: Variant,
-        right: &[bool],
-        params: &WarpParams,
-        source_sample: &impl Fn(usize, usize) -> Option<Sample>,
-        mut emit: impl FnMut(i64, Sample),
-    ) {
-        for (cols, dir) in halves(w, e1) {
+    /// The row pass over source row `j`: `emit(x, sample)` for each pre-warped pixel.
+    #[inline(always)]
+    fn row(&self, j: usize, mut emit: impl FnMut(i64, Sample)) {
+        let w = self.impostor.texture.camera.width as usize;
+        let right = &self.impostor.right;
+        for (cols, dir) in halves(w, self.params.epipole.x) {
             let mut previous: Option<Sample> = None;
             for i in cols {
-                let Some(s) = source_sample(i, j) else {
+                let Some(s) = self.source(i, j) else {
                     previous = None;
                     continue;
                 };
@@ -304,10 +306,14 @@ pub fn prewarp(impostor: &Impostor, params: &WarpParams, variant: Variant) -> Pr
                     right[j * w + i]
                 };
                 let a = previous.as_ref().filter(|_| linked);
-                match variant {
-                    Variant::Compensated => {
-                        span(a, &s, dir, |a, b, x| compensated(a, b, x, params), &mut emit)
-                    }
+                match self.variant {
+                    Variant::Compensated => span(
+                        a,
+                        &s,
+                        dir,
+                        |a, b, x, _| compensated(a, b, x, self.params),
+                        &mut emit,
+                    ),
                     _ => span(a, &s, dir, linear, &mut emit),
                 }
                 previous = Some(s);
@@ -315,71 +321,122 @@ pub fn prewarp(impostor: &Impostor, params: &WarpParams, variant: Variant) -> Pr
         }
     }
 
-    match variant {
-        Variant::Interleaved => {
-            for (rows, dir) in halves(h, e.y) {
-                let mut columns = vec![Column { last: None }; columns_n];
-                for (seq, j) in rows.into_iter().enumerate() {
-                    row_pass(
-                        w,
-                        j,
-                        e.x,
-                        variant,
-                        &impostor.right,
-                        params,
-                        &source_sample,
-                        |x, s| {
-                            let xi = x - u0 as i64;
-                            if xi < 0 || xi >= columns_n as i64 {
-                                return;
-                            }
-                            let s = Sample { pos: s.v_target, ..s };
-                            push_column(&mut columns[column_index(x)], &mut out, x, s, seq, dir);
-                        },
-                    );
-                }
-            }
-        }
-        _ => {
-            // Row pass into an intermediate image: one row per source row.
-            let mut rows_image: Vec<Option<Sample>> = vec![None; columns_n * h];
-            for j in 0..h {
-                row_pass(
-                    w,
-                    j,
-                    e.x,
-                    variant,
-                    &impostor.right,
-                    params,
-                    &source_sample,
-                    |x, s| {
-                        let xi = x - u0 as i64;
-                        if xi >= 0 && xi < columns_n as i64 {
-                            rows_image[j * columns_n + xi as usize] = Some(s);
-                        }
-                    },
-                );
-            }
-            // Column pass.
-            for (rows, dir) in halves(h, e.y) {
-                let mut columns = vec![Column { last: None }; columns_n];
-                for (seq, j) in rows.into_iter().enumerate() {
-                    for (xi, column) in columns.iter_mut().enumerate() {
-                        let Some(s) = rows_image[j * columns_n + xi] else {
-                            continue;
-                        };
-                        let v_target = match variant {
-                            Variant::Asymmetric => s.v_target,
-                            _ => params.warp_v(j as f32 + 0.5, s.depth),
-                        };
-                        let s = Sample { pos: v_target, ..s };
-                        push_column(column, &mut out, xi as i64 + u0 as i64, s, seq, dir);
+    /// Pre-warps the source rows `rows` (visited in that order, direction `dir`) into
+    /// `out`.
+    fn half(&self, rows: impl Iterator<Item = usize> + Clone, dir: f32, out: &mut Output) {
+        let mut columns = vec![Column { last: None }; self.columns];
+        let column_of = |x: i64| {
+            let xi = x - self.u0;
+            (xi >= 0 && xi < self.columns as i64).then_some(xi as usize)
+        };
+        if self.variant == Variant::Interleaved {
+            for (seq, j) in rows.enumerate() {
+                self.row(j, |x, s| {
+                    if let Some(xi) = column_of(x) {
+                        push_column(
+                            &mut columns[xi],
+                            out,
+                            x,
+                            Sample { pos: s.v_target, ..s },
+                            seq,
+                            dir,
+                        );
                     }
+                });
+            }
+            return;
+        }
+        // Two passes: the rows into an intermediate image, then its columns.
+        let n_rows = rows.clone().count();
+        let mut intermediate: Vec<Option<Sample>> = vec![None; self.columns * n_rows];
+        for (seq, j) in rows.clone().enumerate() {
+            self.row(j, |x, s| {
+                if let Some(xi) = column_of(x) {
+                    intermediate[seq * self.columns + xi] = Some(s);
                 }
+            });
+        }
+        for (seq, j) in rows.enumerate() {
+            for (xi, column) in columns.iter_mut().enumerate() {
+                let Some(s) = intermediate[seq * self.columns + xi] else {
+                    continue;
+                };
+                let v_target = match self.variant {
+                    Variant::Asymmetric => s.v_target,
+                    _ => self.params.warp_v(j as f32 + 0.5, s.depth),
+                };
+                push_column(
+                    column,
+                    out,
+                    xi as i64 + self.u0,
+                    Sample { pos: v_target, ..s },
+                    seq,
+                    dir,
+                );
             }
         }
     }
-    image
+}
+
+/// Pre-warps `impostor` for the eye of `params`, on the calling thread.
+pub fn prewarp(impostor: &Impostor, params: &WarpParams, variant: Variant) -> PrewarpImage {
+    prewarp_with(impostor, params, variant, false)
+}
+
+/// As [`prewarp`], with the halves above and below the epipole on two threads: they
+/// write disjoint rows (texels move towards the epipole, never past it), so each
+/// writes straight into the final image.
+pub fn prewarp_split(impostor: &Impostor, params: &WarpParams, variant: Variant) -> PrewarpImage {
+    prewarp_with(impostor, params, variant, true)
+}
+
+fn prewarp_with(impostor: &Impostor, params: &WarpParams, variant: Variant, parallel: bool) -> PrewarpImage {
+    let c = &impostor.texture.camera;
+    let (w, h) = (c.width as usize, c.height as usize);
+    let s_min = 1.0 / (1.0 + params.k3 * params.max_depth());
+    let (u0, u1) = axis_extent(w as f32, params.epipole.x, s_min);
+    let (v0, v1) = axis_extent(h as f32, params.epipole.y, s_min);
+    let (width, height) = ((u1 - u0).max(1) as usize, (v1 - v0).max(1) as usize);
+    let mut texels = vec![PTexel::EMPTY; width * height];
+    let job = Job {
+        impostor,
+        params,
+        variant,
+        u0: u0 as i64,
+        columns: width,
+    };
+    // Output rows whose centres lie above the epipole belong to the upper half.
+    let split = ((params.epipole.y - 0.5).ceil() as i64 - v0 as i64).clamp(0, height as i64) as usize;
+    let (upper, lower) = texels.split_at_mut(split * width);
+    let [(up_rows, up_dir), (down_rows, down_dir)] = halves(h, params.epipole.y);
+    let mut upper = Output {
+        texels: upper,
+        u0: u0 as i64,
+        v0: v0 as i64,
+        width,
+    };
+    let mut lower = Output {
+        texels: lower,
+        u0: u0 as i64,
+        v0: v0 as i64 + split as i64,
+        width,
+    };
+    if parallel {
+        rayon::join(
+            || job.half(up_rows, up_dir, &mut upper),
+            || job.half(down_rows, down_dir, &mut lower),
+        );
+    } else {
+        job.half(up_rows, up_dir, &mut upper);
+        job.half(down_rows, down_dir, &mut lower);
+    }
+    PrewarpImage {
+        u0,
+        v0,
+        width: width as u32,
+        height: height as u32,
+        texels,
+    }
 }
 
 /// The sample at pixel centre `centre` between row neighbours `a` and `b`, taken at the

@@ -60,18 +60,25 @@ pub fn map(
     let tan_half = camera.tan_half_fov();
     let aspect = camera.width as f32 / camera.height as f32;
     let (a_scale, b_scale) = (c.a / c.a.length_squared(), c.b / c.b.length_squared());
+    // The ray direction D = forward + right·sx + up·sy is linear in the pixel, so are
+    // D·f, D·a/|a|², D·b/|b|²: step them along the row.
+    let dots = |d: Vec3| Vec3::new(d.dot(c.f), d.dot(a_scale), d.dot(b_scale));
+    let sx_step = 2.0 / camera.width as f32 * tan_half * aspect;
+    let x_step = dots(camera.right * sx_step);
     for y in y0..y1 {
         let sy = (1.0 - 2.0 * (y as f32 + 0.5) / camera.height as f32) * tan_half;
+        let sx0 = (2.0 * (x0 as f32 + 0.5) / camera.width as f32 - 1.0) * tan_half * aspect;
+        let mut row = dots(camera.forward + camera.right * sx0 + camera.up * sy);
         for x in x0..x1 {
-            let sx = (2.0 * (x as f32 + 0.5) / camera.width as f32 - 1.0) * tan_half * aspect;
-            let d = camera.forward + camera.right * sx + camera.up * sy;
-            let towards_plane = d.dot(c.f);
+            let along = row;
+            row += x_step;
+            let towards_plane = along.x;
             if towards_plane.is_nan() || towards_plane <= 0.0 {
                 continue;
             }
             let s = params.h / towards_plane;
-            let u = params.epipole.x + s * d.dot(a_scale);
-            let v = params.epipole.y + s * d.dot(b_scale);
+            let u = params.epipole.x + s * along.y;
+            let v = params.epipole.y + s * along.z;
             let Some((depth, albedo, normal)) = sample(image, u, v) else {
                 continue;
             };
@@ -111,15 +118,17 @@ fn sample(image: &PrewarpImage, u: f32, v: f32) -> Option<(f32, [u8; 3], Vec3)> 
         if quad.iter().all(|t| !t.is_empty()) {
             let weights = [(1.0 - tx) * (1.0 - ty), tx * (1.0 - ty), (1.0 - tx) * ty, tx * ty];
             let (mut depth, mut albedo, mut normal) = (0.0, Vec3::ZERO, Vec3::ZERO);
+            let rgb = |c: [u8; 3]| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
             for (t, wgt) in quad.iter().zip(weights) {
                 depth += wgt * t.depth;
-                albedo += wgt * Vec3::new(t.albedo[0] as f32, t.albedo[1] as f32, t.albedo[2] as f32);
-                normal += wgt * decode_normal(t.normal);
+                albedo += wgt * rgb(t.albedo);
+                // Encoded normals blend linearly; one decode (normalisation) after.
+                normal += wgt * rgb(t.normal);
             }
             let a = (albedo + Vec3::splat(0.5))
                 .to_array()
                 .map(|c| c.clamp(0.0, 255.0) as u8);
-            return Some((depth, a, normal.normalize_or_zero()));
+            return Some((depth, a, (normal / 127.5 - Vec3::ONE).normalize_or_zero()));
         }
     }
     let texel = image.at(u, v)?;
