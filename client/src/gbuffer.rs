@@ -91,6 +91,11 @@ impl GBuffer {
         let background = to_rgb8(scene.background);
         let w = self.width as usize;
         let mut frame = Frame::new(self.width, self.height, background);
+        // Ray directions with a unit forward component: a pixel's position is
+        // `eye + direction · depth`. They are linear in x, so step them along rows.
+        let tan_half = camera.tan_half_fov();
+        let aspect = self.width as f32 / self.height as f32;
+        let x_step = camera.right * (2.0 / self.width as f32 * tan_half * aspect);
         frame
             .color
             .par_chunks_mut(w)
@@ -98,6 +103,9 @@ impl GBuffer {
             .zip(self.pixels.par_chunks(w))
             .enumerate()
             .for_each(|(y, ((color, object), pixels))| {
+                let sy = (1.0 - 2.0 * (y as f32 + 0.5) / self.height as f32) * tan_half;
+                let sx0 = (1.0 / self.width as f32 - 1.0) * tan_half * aspect;
+                let row = camera.forward + camera.right * sx0 + camera.up * sy;
                 for (x, p) in pixels.iter().enumerate() {
                     if !p.is_covered() {
                         continue;
@@ -105,7 +113,7 @@ impl GBuffer {
                     let Some(o) = scene.objects.get(p.object as usize) else {
                         continue;
                     };
-                    let position = camera.unproject(x as f32 + 0.5, y as f32 + 0.5, p.depth);
+                    let position = camera.eye + (row + x_step * x as f32) * p.depth;
                     let albedo =
                         Vec3::new(p.albedo[0] as f32, p.albedo[1] as f32, p.albedo[2] as f32) / 255.0;
                     color[x] = to_rgb8(

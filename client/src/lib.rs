@@ -5,16 +5,20 @@
 //!   that geometry and impostors both write with a depth test, and the one shading pass
 //!   that turns it into colour with the shared Phong model.
 //! - [`impostor`] — a relief texture prepared for display (texel connectivity).
+//! - [`pyramid`] — multi-resolution relief textures: no texels the screen cannot show.
 //! - [`raster`] — the software rasterizer for geometry.
 //! - [`warp`] — relief impostors shown from new eyes: every method of the sources.
+//! - [`composite`] — whole frames: geometry where cheap or near, impostors elsewhere.
 //! - [`evaluate`] — the orbit set-up of the error reports: bake, reference, show, compare.
 //! - [`report`] — the error-against-run-time measurement.
 //! - [`metrics`] — image error against the reference; warp-error predictions.
 
+pub mod composite;
 pub mod evaluate;
 pub mod gbuffer;
 pub mod impostor;
 pub mod metrics;
+pub mod pyramid;
 pub mod raster;
 pub mod report;
 pub mod warp;

@@ -29,6 +29,8 @@ enum Command {
     Bake(commands::bake::BakeArgs),
     /// Ray-trace a reference frame of the whole scene (per-pixel Phong).
     Reference(commands::reference::ReferenceArgs),
+    /// One composited frame (geometry + impostors) and its speed against all geometry.
+    Frame(commands::frame::FrameArgs),
     /// Measurements written as CSV, JSON and plots.
     #[command(subcommand)]
     Report(commands::report::ReportCommand),
@@ -63,6 +65,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Bake(args) => commands::bake::run(args),
         Command::Reference(args) => commands::reference::run(args),
+        Command::Frame(args) => commands::frame::run(args),
         Command::Report(command) => commands::report::run(command),
         Command::Bench(command) => commands::bench::run(command),
     };

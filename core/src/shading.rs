@@ -61,9 +61,15 @@ impl Lighting {
             if diffuse <= 0.0 {
                 continue;
             }
-            let reflected = 2.0 * diffuse * n - to_light;
-            let spec = reflected.dot(view).max(0.0).powf(specular.shininess) * specular.strength;
-            color += light_color * (albedo * diffuse + Vec3::splat(spec));
+            let mut lit = albedo * diffuse;
+            // No specular term for surfaces without one (and no `powf` for them).
+            if specular.strength > 0.0 {
+                let along = (2.0 * diffuse * n - to_light).dot(view);
+                if along > 0.0 {
+                    lit += Vec3::splat(along.powf(specular.shininess) * specular.strength);
+                }
+            }
+            color += light_color * lit;
         }
         color
     }

@@ -2,5 +2,6 @@
 
 pub mod bake;
 pub mod bench;
+pub mod frame;
 pub mod reference;
 pub mod report;

@@ -1,0 +1,150 @@
+//! `relief frame`: one composited frame — geometry plus impostors baked some degrees
+//! away from the eye — and how long it took against the same frame as geometry.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Result, anyhow};
+use clap::Args;
+use glam::Vec3;
+use serde::Serialize;
+
+use relief_client::composite::{FramePlan, FrameStats, render_geometry};
+use relief_client::gbuffer::GBuffer;
+use relief_client::metrics::image::compare;
+use relief_client::warp::Method;
+use relief_core::camera::Camera;
+use relief_core::relief::DepthBits;
+use relief_core::scene::Scene;
+use relief_worker::{SceneTracer, render_reference};
+
+use crate::{args, progress};
+
+#[derive(Args)]
+pub struct FrameArgs {
+    /// Built-in scene name, .toml scene file, or .obj file.
+    #[arg(long, default_value = "default")]
+    scene: String,
+    /// Camera position, X,Y,Z.
+    #[arg(long, value_parser = args::vec3, allow_hyphen_values = true)]
+    eye: Vec3,
+    /// Point the camera looks at, X,Y,Z.
+    #[arg(long, value_parser = args::vec3, allow_hyphen_values = true)]
+    target: Vec3,
+    /// Up direction, X,Y,Z.
+    #[arg(long, default_value = "0,1,0", value_parser = args::vec3, allow_hyphen_values = true)]
+    up: Vec3,
+    /// Vertical field of view in degrees (default: the scene's).
+    #[arg(long)]
+    fov: Option<f32>,
+    /// Frame size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = args::frame_size)]
+    size: (u32, u32),
+    /// Display method (sprite is not available without a previous frame).
+    #[arg(long, default_value = "interleaved")]
+    method: Method,
+    /// Bake each impostor this many degrees around its object from the eye.
+    #[arg(long, default_value = "5", allow_hyphen_values = true)]
+    source_angle: f32,
+    /// Timed runs of each frame (the median is reported).
+    #[arg(long, default_value = "5", value_parser = clap::value_parser!(u32).range(1..=1000))]
+    runs: u32,
+    /// Also ray-trace the reference and report the frame's PSNR against it.
+    #[arg(long)]
+    compare: bool,
+    /// Output PNG file.
+    #[arg(long)]
+    out: PathBuf,
+    /// Print the numbers as one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Serialize)]
+struct FrameReport {
+    impostors: Vec<String>,
+    geometry: Vec<String>,
+    frame_ms: f64,
+    geometry_frame_ms: f64,
+    speedup: f64,
+    #[serde(flatten)]
+    stats: FrameStats,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    psnr_db: Option<f64>,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+pub fn run(args: FrameArgs) -> Result<()> {
+    if args.method == Method::Sprite {
+        return Err(anyhow!(
+            "--method sprite needs a previous frame; choose a warp method"
+        ));
+    }
+    if !args.source_angle.is_finite() {
+        return Err(anyhow!("--source-angle must be finite"));
+    }
+    let bar = progress::spinner("loading scene");
+    let scene = Scene::load(&args.scene)?;
+    let fov = args.fov.unwrap_or(scene.fov_y_degrees);
+    let (w, h) = args.size;
+    let camera = Camera::look_at(args.eye, args.target, args.up, fov, w, h).map_err(|e| anyhow!(e))?;
+    bar.set_message("baking impostors");
+    let plan = FramePlan::bake(&scene, &camera, args.source_angle, DepthBits::Eight);
+    bar.set_message("rendering");
+    let mut gbuffer = GBuffer::new(w, h);
+    let mut frame_times = Vec::new();
+    let mut result = None;
+    for _ in 0..args.runs {
+        let start = Instant::now();
+        result = Some(plan.render(&scene, &camera, args.method, &mut gbuffer));
+        frame_times.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    let Some((frame, stats)) = result else {
+        return Err(anyhow!("no frame rendered"));
+    };
+    let mut geometry_times = Vec::new();
+    for _ in 0..args.runs {
+        let start = Instant::now();
+        drop(render_geometry(&scene, &camera, &mut gbuffer));
+        geometry_times.push(start.elapsed().as_secs_f64() * 1e3);
+    }
+    let psnr_db = args.compare.then(|| {
+        bar.set_message("ray-tracing the reference");
+        let reference = render_reference(&SceneTracer::new(&scene), &camera);
+        compare(&frame, &reference, None).psnr_db
+    });
+    bar.finish_and_clear();
+    frame.save_png(&args.out)?;
+    let (frame_ms, geometry_frame_ms) = (median(frame_times), median(geometry_times));
+    let name = |k: u32| scene.objects[k as usize].name.clone();
+    let report = FrameReport {
+        impostors: plan.impostors.iter().map(|i| name(i.index)).collect(),
+        geometry: plan.geometry.iter().map(|&(k, _)| name(k)).collect(),
+        frame_ms,
+        geometry_frame_ms,
+        speedup: geometry_frame_ms / frame_ms,
+        stats,
+        psnr_db,
+    };
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!(
+            "{w}x{h} frame with {} as impostors ({}), {} as geometry: {:.2} ms; all geometry {:.2} ms ({:.1}x){}",
+            report.impostors.join(", "),
+            args.method,
+            report.geometry.join(", "),
+            frame_ms,
+            geometry_frame_ms,
+            report.speedup,
+            psnr_db.map_or(String::new(), |p| format!(
+                "; PSNR {p:.1} dB against the reference"
+            ))
+        );
+    }
+    Ok(())
+}

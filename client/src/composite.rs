@@ -1,0 +1,170 @@
+//! Whole frames: cheap and too-near objects as geometry, complex ones as relief
+//! impostors — composited through one G-buffer, so they occlude each other correctly.
+
+use glam::{Quat, Vec3};
+use rayon::prelude::*;
+
+use relief_core::camera::Camera;
+use relief_core::frame::Frame;
+use relief_core::relief::DepthBits;
+use relief_core::scene::{Scene, SceneObject};
+use relief_worker::bake;
+use relief_worker::tracer::ObjectTracer;
+
+use crate::gbuffer::GBuffer;
+use crate::metrics::schaufler::initial_resolution;
+use crate::pyramid::Pyramid;
+use crate::raster::rasterize;
+use crate::warp::{Method, WarpError, display};
+
+/// Objects with fewer triangles are cheaper to draw than to warp.
+pub const CHEAP_TRIANGLES: usize = 1000;
+/// Texture edges are kept within these bounds.
+pub const MIN_TEXTURE: u32 = 16;
+pub const MAX_TEXTURE: u32 = 1024;
+/// A texel may subtend this many pixels before a finer pyramid level is used.
+pub const TEXEL_TOLERANCE: f32 = 1.0;
+
+/// Why an object is drawn as geometry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GeometryReason {
+    /// Too few triangles to be worth an impostor.
+    Cheap,
+    /// The eye is inside, or within a few percent of, the object's bounds.
+    TooNear,
+}
+
+/// How `object` should be drawn from `eye`.
+pub fn geometry_reason(object: &SceneObject, eye: Vec3) -> Option<GeometryReason> {
+    if object.mesh.triangle_count() < CHEAP_TRIANGLES {
+        return Some(GeometryReason::Cheap);
+    }
+    let margin = object.bounds.extent().length() * 0.05;
+    object
+        .bounds
+        .expanded(margin)
+        .contains(eye)
+        .then_some(GeometryReason::TooNear)
+}
+
+/// The near-plane distance used for a scene: small against its size, never zero.
+pub fn near_plane(scene: &Scene) -> f32 {
+    (scene.bounds().extent().length() * 1e-5).max(1e-6)
+}
+
+/// One impostor of a frame.
+pub struct ImpostorObject {
+    pub index: u32,
+    pub pyramid: Pyramid,
+    /// The eye its texture was baked for.
+    pub source_eye: Vec3,
+}
+
+/// A frame's plan: which objects are impostors (with their textures) and which are
+/// geometry.
+pub struct FramePlan {
+    pub impostors: Vec<ImpostorObject>,
+    pub geometry: Vec<(u32, GeometryReason)>,
+}
+
+/// What drawing one frame did.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct FrameStats {
+    /// Texels warped (the pyramid level each impostor used).
+    pub texels_warped: usize,
+    /// Texels the full-resolution textures have.
+    pub texels_baked: usize,
+    /// Impostors that could not be warped from this eye and were drawn as geometry.
+    pub fell_back: usize,
+}
+
+impl FramePlan {
+    /// Plans a frame for `camera`: every object that is not cheap or too near becomes
+    /// an impostor whose texture is baked `source_angle_deg` around the object (about
+    /// the vertical through its centre) from the eye, at the resolution eq. 5-1 asks.
+    pub fn bake(scene: &Scene, camera: &Camera, source_angle_deg: f32, bits: DepthBits) -> FramePlan {
+        let mut geometry = Vec::new();
+        let mut wanted = Vec::new();
+        for (k, object) in scene.objects.iter().enumerate() {
+            match geometry_reason(object, camera.eye) {
+                Some(reason) => geometry.push((k as u32, reason)),
+                None => wanted.push(k),
+            }
+        }
+        let impostors = wanted
+            .into_par_iter()
+            .filter_map(|k| {
+                let object = &scene.objects[k];
+                let centre = object.bounds.center();
+                let turn = Quat::from_rotation_y(source_angle_deg.to_radians());
+                let source_eye = centre + turn * (camera.eye - centre);
+                let size = initial_resolution(
+                    camera.height,
+                    object.bounds.extent().length(),
+                    centre.distance(camera.eye),
+                    camera.fov_y,
+                )
+                .clamp(MIN_TEXTURE, MAX_TEXTURE);
+                let texture = bake(&ObjectTracer::new(object), source_eye, size, bits).ok()?;
+                Some(ImpostorObject {
+                    index: k as u32,
+                    pyramid: Pyramid::new(texture, MIN_TEXTURE),
+                    source_eye,
+                })
+            })
+            .collect::<Vec<_>>();
+        let baked: Vec<u32> = impostors.iter().map(|i| i.index).collect();
+        // Objects whose bake failed (eye inside after the turn) are drawn as geometry.
+        for k in 0..scene.objects.len() as u32 {
+            if !baked.contains(&k) && !geometry.iter().any(|(g, _)| *g == k) {
+                geometry.push((k, GeometryReason::TooNear));
+            }
+        }
+        FramePlan { impostors, geometry }
+    }
+
+    /// Draws the frame: geometry rasterized, impostors shown with `method`, one
+    /// shading pass.
+    pub fn render(
+        &self,
+        scene: &Scene,
+        camera: &Camera,
+        method: Method,
+        gbuffer: &mut GBuffer,
+    ) -> (Frame, FrameStats) {
+        gbuffer.clear();
+        let mut stats = FrameStats::default();
+        let mut geometry: Vec<(u32, &SceneObject)> = self
+            .geometry
+            .iter()
+            .map(|&(k, _)| (k, &scene.objects[k as usize]))
+            .collect();
+        for imp in &self.impostors {
+            let level = imp.pyramid.level_for(camera, TEXEL_TOLERANCE);
+            let impostor = &imp.pyramid.levels[level];
+            stats.texels_baked += imp.pyramid.levels[0].texture.depth.len();
+            match display(method, impostor, imp.index, camera, gbuffer) {
+                Ok(()) => stats.texels_warped += impostor.texture.depth.len(),
+                Err(WarpError::EyeInPlane(_) | WarpError::NonFinite | WarpError::NeedsPreviousFrame) => {
+                    stats.fell_back += 1;
+                    geometry.push((imp.index, &scene.objects[imp.index as usize]));
+                }
+            }
+        }
+        rasterize(&geometry, camera, near_plane(scene), gbuffer);
+        (gbuffer.shade(scene, camera), stats)
+    }
+}
+
+/// The same frame with every object as geometry: the baseline.
+pub fn render_geometry(scene: &Scene, camera: &Camera, gbuffer: &mut GBuffer) -> Frame {
+    gbuffer.clear();
+    let objects: Vec<(u32, &SceneObject)> = scene
+        .objects
+        .iter()
+        .enumerate()
+        .map(|(k, o)| (k as u32, o))
+        .collect();
+    rasterize(&objects, camera, near_plane(scene), gbuffer);
+    gbuffer.shade(scene, camera)
+}
