@@ -67,3 +67,48 @@ fn near_plane_clipping_keeps_the_visible_part() {
     );
     assert!(e.psnr_db > 48.0 && e.hole_frac < 0.01, "{e:?}");
 }
+
+/// Pixels on edges shared by two triangles belong to at least one of them: a plane of
+/// many triangles seen from above, filling the frame, leaves no pixel empty.
+#[test]
+fn shared_edges_leave_no_cracks() {
+    use relief_core::generators::Generator;
+    use relief_core::scene::{SceneObject, default_lighting};
+    use relief_core::shading::Specular;
+    let plane = Generator::Plane {
+        size: 100.0,
+        divisions: 37,
+    }
+    .build();
+    let scene = Scene {
+        name: "plane".into(),
+        objects: vec![SceneObject::new("plane", plane, Specular::default())],
+        lighting: default_lighting(),
+        background: Vec3::ZERO,
+        fov_y_degrees: 60.0,
+        path: Default::default(),
+    };
+    for (eye, target) in [
+        (Vec3::new(0.3, 5.0, 0.2), Vec3::new(1.0, 0.0, -0.7)),
+        (Vec3::new(-2.0, 1.5, 3.0), Vec3::new(5.0, 0.0, -9.0)),
+    ] {
+        let camera = Camera::look_at(eye, target, Vec3::Y, 50.0, 203, 157).unwrap();
+        let mut gbuffer = GBuffer::new(203, 157);
+        rasterize(&[(0, &scene.objects[0])], &camera, 0.01, &mut gbuffer);
+        // Every pixel whose ray hits the plane (y = 0) within its extent is covered.
+        let mut holes = 0;
+        for y in 0..157 {
+            for x in 0..203 {
+                let d = camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5);
+                if d.y >= -1e-3 {
+                    continue;
+                }
+                let hit = eye + d * (-eye.y / d.y);
+                if hit.x.abs() < 49.0 && hit.z.abs() < 49.0 && !gbuffer.pixels[y * 203 + x].is_covered() {
+                    holes += 1;
+                }
+            }
+        }
+        assert_eq!(holes, 0, "cracks seen from {eye}");
+    }
+}

@@ -112,6 +112,18 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
         });
 }
 
+/// Twice the signed area of `(p, q, r)`, computed with `p` and `q` in lexicographic
+/// order so that the edge `q → p` gives exactly the negated value.
+#[inline(always)]
+fn edge(p: Vec2, q: Vec2, r: Vec2) -> f32 {
+    let orient = |p: Vec2, q: Vec2| (q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x);
+    if (p.x, p.y) < (q.x, q.y) {
+        orient(p, q)
+    } else {
+        -orient(q, p)
+    }
+}
+
 /// Rejects triangles whose bounding box misses the screen.
 fn on_screen(s: &ScreenTriangle, w: f32, h: f32) -> bool {
     let min = s.xy[0].min(s.xy[1]).min(s.xy[2]);
@@ -130,11 +142,15 @@ fn draw(
     rows_here: usize,
 ) {
     let [a, b, c] = s.xy;
-    let area = (b - a).perp_dot(c - a);
-    if area.abs() < 1e-12 || !area.is_finite() {
+    // Edge functions, each evaluated with its edge's endpoints in a fixed order so that
+    // two triangles sharing an edge get exactly opposite values there: no pixel on a
+    // shared edge is missed by both (watertight).
+    let area = edge(b, c, a);
+    if area == 0.0 || !area.is_finite() {
         return;
     }
-    let inv_area = 1.0 / area;
+    let sign = area.signum();
+    let inv_area = 1.0 / area.abs();
     let min = a.min(b).min(c);
     let max = a.max(b).max(c);
     let x_start = (min.x - 0.5).ceil().max(0.0) as usize;
@@ -151,12 +167,13 @@ fn draw(
         for x in x_start..=x_end as usize {
             let p = Vec2::new(x as f32 + 0.5, py);
             // Screen-space barycentric weights of corners a, b, c.
-            let wa = (b - p).perp_dot(c - p) * inv_area;
-            let wb = (c - p).perp_dot(a - p) * inv_area;
-            let wc = 1.0 - wa - wb;
-            if wa < 0.0 || wb < 0.0 || wc < 0.0 {
+            let ea = sign * edge(b, c, p);
+            let eb = sign * edge(c, a, p);
+            let ec = sign * edge(a, b, p);
+            if ea < 0.0 || eb < 0.0 || ec < 0.0 {
                 continue;
             }
+            let (wa, wb, wc) = (ea * inv_area, eb * inv_area, ec * inv_area);
             // Perspective correction: interpolate 1/depth, weight attributes by it.
             let (pa, pb, pc) = (wa * inv_depth[0], wb * inv_depth[1], wc * inv_depth[2]);
             let sum = pa + pb + pc;
