@@ -145,6 +145,23 @@ struct WarpReport {
     /// The same with the lookup table (two additions, two multiplications).
     lut_ms: f64,
     methods: std::collections::BTreeMap<String, WarpTiming>,
+    /// Table 8.1 as ratios: each pre-warp variant's `prewarp_ms` over interleaved's.
+    table_8_1: std::collections::BTreeMap<String, f64>,
+    /// Pull–push reconstruction of a 1280×720 layer with one splat per 2×2 pixels.
+    pullpush_1280x720_ms: f64,
+    /// The same impostor seen from four times as far: the full texture against the
+    /// pyramid level the resolution test picks (no texels the screen cannot show).
+    multires: MultiRes,
+}
+
+#[derive(Serialize)]
+struct MultiRes {
+    full_ms: f64,
+    level: usize,
+    level_size: u32,
+    level_ms: f64,
+    /// `full_ms / level_ms`.
+    saving: f64,
 }
 
 fn warp(args: WarpArgs) -> Result<()> {
@@ -261,7 +278,67 @@ fn warp(args: WarpArgs) -> Result<()> {
             },
         );
     }
+    bar.set_message("pull-push 1280x720");
+    let pullpush_1280x720_ms = {
+        use relief_client::warp::pullpush::{Layer, Splat, fill};
+        let mut sparse = Layer::new(1280, 720);
+        for y in (0..720).step_by(2) {
+            for x in (0..1280).step_by(2) {
+                sparse.pixels[y * 1280 + x] = Splat {
+                    depth: 5.0 + (x as f32 * 0.01).sin(),
+                    albedo: glam::Vec3::splat(0.5),
+                    normal: glam::Vec3::Z,
+                    valid: true,
+                };
+            }
+        }
+        let mut layer = sparse.clone();
+        let cell = std::cell::RefCell::new(&mut layer);
+        median_ms_after(
+            args.runs,
+            || cell.borrow_mut().pixels.copy_from_slice(&sparse.pixels),
+            || fill(&mut cell.borrow_mut(), 2, |d, l| 0.01 * d * (1 << l) as f32),
+        )
+    };
+    bar.set_message("multi-resolution");
+    let multires = {
+        use relief_client::pyramid::Pyramid;
+        let far_eye = solo.scene.objects[0].bounds.center()
+            + (solo.eye(args.angle) - solo.scene.objects[0].bounds.center()) * 4.0;
+        let far = relief_core::camera::Camera {
+            eye: far_eye,
+            ..camera
+        };
+        let pyramid = Pyramid::new(impostor.texture.clone(), 16);
+        let level = pyramid.level_for(&far, 1.0);
+        let mut time = |imp: &Impostor| {
+            let cell = std::cell::RefCell::new(&mut gbuffer);
+            median_ms_after(
+                args.runs,
+                || cell.borrow_mut().clear(),
+                || {
+                    let _ = display(Method::Interleaved, imp, 0, &far, &mut cell.borrow_mut());
+                },
+            )
+        };
+        let (full_ms, level_ms) = (time(&pyramid.levels[0]), time(&pyramid.levels[level]));
+        MultiRes {
+            full_ms,
+            level,
+            level_size: pyramid.levels[level].texture.camera.width,
+            level_ms,
+            saving: full_ms / level_ms,
+        }
+    };
     bar.finish_and_clear();
+    let interleaved = methods
+        .get("interleaved")
+        .and_then(|t: &WarpTiming| t.prewarp_ms)
+        .unwrap_or(f64::NAN);
+    let table_8_1 = methods
+        .iter()
+        .filter_map(|(name, t)| t.prewarp_ms.map(|ms| (name.clone(), ms / interleaved)))
+        .collect();
     let report = WarpReport {
         object: args.object,
         size: args.size,
@@ -273,6 +350,9 @@ fn warp(args: WarpArgs) -> Result<()> {
         naive_ms,
         lut_ms,
         methods,
+        table_8_1,
+        pullpush_1280x720_ms,
+        multires,
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -289,6 +369,21 @@ fn warp(args: WarpArgs) -> Result<()> {
         naive_ms,
         lut_ms
     );
+    println!(
+        "pull-push 1280x720: {:.3} ms; multi-resolution at 4x the distance: full {:.3} ms, level {} ({}²) {:.3} ms ({:.1}x)",
+        report.pullpush_1280x720_ms,
+        report.multires.full_ms,
+        report.multires.level,
+        report.multires.level_size,
+        report.multires.level_ms,
+        report.multires.saving
+    );
+    let table: Vec<String> = report
+        .table_8_1
+        .iter()
+        .map(|(k, v)| format!("{k} {v:.2}"))
+        .collect();
+    println!("table 8.1 (pre-warp time over interleaved): {}", table.join(", "));
     println!(
         "{:<18} {:>9} {:>11} {:>9} {:>9} {:>11} {:>11}",
         "method", "ms", "Mtexels/s", "/memcpy", "/naive", "prewarp ms", "split ms"

@@ -11,6 +11,7 @@
 //! about one sample spacing past its silhouette.
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// One pixel of a layer being reconstructed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -81,7 +82,7 @@ pub(crate) fn front_average(candidates: &[(f32, Splat)], tolerance: impl Fn(f32)
 
 /// Fills the holes of `layer` using at most `levels` coarser levels. `tolerance(depth,
 /// level)` is the depth range, at a level, that still counts as one surface.
-pub fn fill(layer: &mut Layer, levels: usize, tolerance: impl Fn(f32, usize) -> f32) {
+pub fn fill(layer: &mut Layer, levels: usize, tolerance: impl Fn(f32, usize) -> f32 + Sync) {
     // Analysis.
     let mut pyramid: Vec<Layer> = Vec::with_capacity(levels);
     for level in 0..levels {
@@ -91,8 +92,8 @@ pub fn fill(layer: &mut Layer, levels: usize, tolerance: impl Fn(f32, usize) -> 
         }
         let (w, h) = (fine.width.div_ceil(2), fine.height.div_ceil(2));
         let mut coarse = Layer::new(w, h);
-        for y in 0..h {
-            for x in 0..w {
+        coarse.pixels.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+            for (x, out) in row.iter_mut().enumerate() {
                 let mut children = [(0.0f32, Splat::EMPTY); 4];
                 for (k, (dx, dy)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
                     let (fx, fy) = (2 * x + dx, 2 * y + dy);
@@ -100,9 +101,9 @@ pub fn fill(layer: &mut Layer, levels: usize, tolerance: impl Fn(f32, usize) -> 
                         children[k] = (1.0, fine.pixels[fy * fine.width + fx]);
                     }
                 }
-                coarse.pixels[y * w + x] = front_average(&children, |d| tolerance(d, level));
+                *out = front_average(&children, |d| tolerance(d, level));
             }
-        }
+        });
         pyramid.push(coarse);
     }
     // Synthesis, coarsest first.
@@ -113,39 +114,43 @@ pub fn fill(layer: &mut Layer, levels: usize, tolerance: impl Fn(f32, usize) -> 
             Some(l) => l,
             None => &mut *layer,
         };
-        for y in 0..fine.height {
-            for x in 0..fine.width {
-                // The four coarse pixels around this one's centre, bilinear weights.
-                let cx = (x as f32 + 0.5) / 2.0 - 0.5;
-                let cy = (y as f32 + 0.5) / 2.0 - 0.5;
-                let (ix, iy) = (cx.floor(), cy.floor());
-                let (fx, fy) = (cx - ix, cy - iy);
-                let mut candidates = [(0.0f32, Splat::EMPTY); 4];
-                for (k, (dx, dy, w)) in [
-                    (0, 0, (1.0 - fx) * (1.0 - fy)),
-                    (1, 0, fx * (1.0 - fy)),
-                    (0, 1, (1.0 - fx) * fy),
-                    (1, 1, fx * fy),
-                ]
-                .into_iter()
-                .enumerate()
-                {
-                    let (qx, qy) = (ix as i64 + dx, iy as i64 + dy);
-                    if qx >= 0 && qy >= 0 && (qx as usize) < coarse.width && (qy as usize) < coarse.height {
-                        candidates[k] = (w, coarse.pixels[qy as usize * coarse.width + qx as usize]);
+        let fine_width = fine.width;
+        fine.pixels
+            .par_chunks_mut(fine_width)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for (x, pixel) in row.iter_mut().enumerate() {
+                    // The four coarse pixels around this one's centre, bilinear weights.
+                    let cx = (x as f32 + 0.5) / 2.0 - 0.5;
+                    let cy = (y as f32 + 0.5) / 2.0 - 0.5;
+                    let (ix, iy) = (cx.floor(), cy.floor());
+                    let (fx, fy) = (cx - ix, cy - iy);
+                    let mut candidates = [(0.0f32, Splat::EMPTY); 4];
+                    for (k, (dx, dy, w)) in [
+                        (0, 0, (1.0 - fx) * (1.0 - fy)),
+                        (1, 0, fx * (1.0 - fy)),
+                        (0, 1, (1.0 - fx) * fy),
+                        (1, 1, fx * fy),
+                    ]
+                    .into_iter()
+                    .enumerate()
+                    {
+                        let (qx, qy) = (ix as i64 + dx, iy as i64 + dy);
+                        if qx >= 0 && qy >= 0 && (qx as usize) < coarse.width && (qy as usize) < coarse.height
+                        {
+                            candidates[k] = (w, coarse.pixels[qy as usize * coarse.width + qx as usize]);
+                        }
+                    }
+                    let blend = front_average(&candidates, |d| tolerance(d, level + 1));
+                    if !blend.valid {
+                        continue;
+                    }
+                    let occluded = pixel.valid && pixel.depth > blend.depth + tolerance(blend.depth, level);
+                    if !pixel.valid || occluded {
+                        *pixel = blend;
                     }
                 }
-                let blend = front_average(&candidates, |d| tolerance(d, level + 1));
-                if !blend.valid {
-                    continue;
-                }
-                let pixel = &mut fine.pixels[y * fine.width + x];
-                let occluded = pixel.valid && pixel.depth > blend.depth + tolerance(blend.depth, level);
-                if !pixel.valid || occluded {
-                    *pixel = blend;
-                }
-            }
-        }
+            });
     }
 }
 
