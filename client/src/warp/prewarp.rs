@@ -159,31 +159,41 @@ fn span(
         } else {
             1.0 / (b.pos - a.pos)
         };
-        let at = |x: i64| {
-            let centre = x as f32 + 0.5;
-            let t = if inv == 0.0 {
-                1.0
-            } else {
-                ((centre - a.pos) * inv).clamp(0.0, 1.0)
-            };
-            interpolate(a, b, centre, t)
-        };
         if dir > 0.0 {
             let first = (a.pos - 0.5).floor() as i64 + 1;
             let last = (b.pos - 0.5).floor() as i64;
             for x in first..=last {
-                emit(x, at(x));
+                emit(x, at(a, b, inv, x, &interpolate));
             }
         } else {
             let first = (a.pos - 0.5).ceil() as i64 - 1;
             let last = (b.pos - 0.5).ceil() as i64;
             for x in (last..=first).rev() {
-                emit(x, at(x));
+                emit(x, at(a, b, inv, x, &interpolate));
             }
         }
         return;
     }
     emit(b.pos.floor() as i64, *b);
+}
+
+/// The sample at pixel `x`'s centre between `a` and `b` (`inv = 1 / (b − a)`, 0 when
+/// they coincide).
+#[inline(always)]
+fn at(
+    a: &Sample,
+    b: &Sample,
+    inv: f32,
+    x: i64,
+    interpolate: &impl Fn(&Sample, &Sample, f32, f32) -> Sample,
+) -> Sample {
+    let centre = x as f32 + 0.5;
+    let t = if inv == 0.0 {
+        1.0
+    } else {
+        ((centre - a.pos) * inv).clamp(0.0, 1.0)
+    };
+    interpolate(a, b, centre, t)
 }
 
 /// Linear interpolation at a pixel centre.
@@ -225,7 +235,7 @@ struct Output<'a> {
 }
 
 impl Output<'_> {
-    #[inline]
+    #[inline(always)]
     fn put(&mut self, x: i64, y: i64, s: &Sample) {
         let (xx, yy) = (x - self.u0, y - self.v0);
         if xx < 0 || yy < 0 || xx as usize >= self.width {
@@ -244,7 +254,7 @@ impl Output<'_> {
 /// Feeds the sample `s` (already carrying its final v' in `pos`) produced by row number
 /// `seq` (in visiting order) into column `x`, filling rows since that column's last
 /// sample.
-#[inline]
+#[inline(always)]
 fn push_column(column: &mut Column, out: &mut Output, x: i64, s: Sample, seq: usize, dir: f32) {
     // Visiting downwards the previous row's sample carries the link to this row;
     // visiting upwards this row's sample does.
