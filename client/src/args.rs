@@ -1,6 +1,11 @@
 //! Argument parsers shared by the commands.
 
+use anyhow::anyhow;
+use clap::Args;
 use glam::Vec3;
+
+use relief_core::camera::Camera;
+use relief_core::scene::Scene;
 
 use relief_core::camera::MAX_FRAME_SIZE;
 use relief_core::relief::MAX_TEXTURE_SIZE;
@@ -46,6 +51,40 @@ pub fn depth_bits(text: &str) -> Result<u32, String> {
         "8" => Ok(8),
         "16" => Ok(16),
         _ => Err(format!("`{text}` is not 8 or 16")),
+    }
+}
+
+/// The scene and camera of a rendered frame, shared by `reference` and `frame`.
+#[derive(Args)]
+pub struct View {
+    /// Built-in scene name, .toml scene file, or .obj file.
+    #[arg(long, default_value = "default")]
+    pub scene: String,
+    /// Camera position, X,Y,Z.
+    #[arg(long, value_parser = vec3, allow_hyphen_values = true)]
+    pub eye: Vec3,
+    /// Point the camera looks at, X,Y,Z.
+    #[arg(long, value_parser = vec3, allow_hyphen_values = true)]
+    pub target: Vec3,
+    /// Up direction, X,Y,Z.
+    #[arg(long, default_value = "0,1,0", value_parser = vec3, allow_hyphen_values = true)]
+    pub up: Vec3,
+    /// Vertical field of view in degrees (default: the scene's).
+    #[arg(long)]
+    pub fov: Option<f32>,
+    /// Frame size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = frame_size)]
+    pub size: (u32, u32),
+}
+
+impl View {
+    /// Loads the scene and makes the camera; errors name the bad argument.
+    pub fn load(&self) -> anyhow::Result<(Scene, Camera)> {
+        let scene = Scene::load(&self.scene)?;
+        let fov = self.fov.unwrap_or(scene.fov_y_degrees);
+        let (w, h) = self.size;
+        let camera = Camera::look_at(self.eye, self.target, self.up, fov, w, h).map_err(|e| anyhow!(e))?;
+        Ok((scene, camera))
     }
 }
 

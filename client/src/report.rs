@@ -119,7 +119,8 @@ pub struct Strip {
     pub frames: Vec<(Method, Frame)>,
 }
 
-fn median(mut values: Vec<f64>) -> f64 {
+/// The median (the upper one for an even count); NaN for no values.
+pub fn median(mut values: Vec<f64>) -> f64 {
     values.sort_by(f64::total_cmp);
     values.get(values.len() / 2).copied().unwrap_or(f64::NAN)
 }

@@ -100,7 +100,7 @@ fn median_ms(runs: u32, f: impl FnMut()) -> f64 {
 fn median_ms_after(runs: u32, mut setup: impl FnMut(), mut f: impl FnMut()) -> f64 {
     setup();
     f();
-    let mut times: Vec<f64> = (0..runs)
+    let times: Vec<f64> = (0..runs)
         .map(|_| {
             setup();
             let start = Instant::now();
@@ -108,8 +108,7 @@ fn median_ms_after(runs: u32, mut setup: impl FnMut(), mut f: impl FnMut()) -> f
             start.elapsed().as_secs_f64() * 1e3
         })
         .collect();
-    times.sort_by(f64::total_cmp);
-    times[times.len() / 2]
+    relief_client::report::median(times)
 }
 
 /// One method's line of `relief bench warp --json`.

@@ -6,40 +6,22 @@ use std::time::Instant;
 
 use anyhow::{Result, anyhow};
 use clap::Args;
-use glam::Vec3;
 use serde::Serialize;
 
 use relief_client::composite::{FramePlan, FrameStats, render_geometry};
 use relief_client::gbuffer::GBuffer;
 use relief_client::metrics::image::compare;
+use relief_client::report::median;
 use relief_client::warp::Method;
-use relief_core::camera::Camera;
 use relief_core::relief::DepthBits;
-use relief_core::scene::Scene;
 use relief_worker::{SceneTracer, render_reference};
 
 use crate::{args, progress};
 
 #[derive(Args)]
 pub struct FrameArgs {
-    /// Built-in scene name, .toml scene file, or .obj file.
-    #[arg(long, default_value = "default")]
-    scene: String,
-    /// Camera position, X,Y,Z.
-    #[arg(long, value_parser = args::vec3, allow_hyphen_values = true)]
-    eye: Vec3,
-    /// Point the camera looks at, X,Y,Z.
-    #[arg(long, value_parser = args::vec3, allow_hyphen_values = true)]
-    target: Vec3,
-    /// Up direction, X,Y,Z.
-    #[arg(long, default_value = "0,1,0", value_parser = args::vec3, allow_hyphen_values = true)]
-    up: Vec3,
-    /// Vertical field of view in degrees (default: the scene's).
-    #[arg(long)]
-    fov: Option<f32>,
-    /// Frame size WIDTHxHEIGHT.
-    #[arg(long, default_value = "1280x720", value_parser = args::frame_size)]
-    size: (u32, u32),
+    #[command(flatten)]
+    view: args::View,
     /// Display method (sprite is not available without a previous frame).
     #[arg(long, default_value = "interleaved")]
     method: Method,
@@ -73,11 +55,6 @@ struct FrameReport {
     psnr_db: Option<f64>,
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 pub fn run(args: FrameArgs) -> Result<()> {
     if args.method == Method::Sprite {
         return Err(anyhow!(
@@ -88,10 +65,8 @@ pub fn run(args: FrameArgs) -> Result<()> {
         return Err(anyhow!("--source-angle must be finite"));
     }
     let bar = progress::spinner("loading scene");
-    let scene = Scene::load(&args.scene)?;
-    let fov = args.fov.unwrap_or(scene.fov_y_degrees);
-    let (w, h) = args.size;
-    let camera = Camera::look_at(args.eye, args.target, args.up, fov, w, h).map_err(|e| anyhow!(e))?;
+    let (scene, camera) = args.view.load()?;
+    let (w, h) = (camera.width, camera.height);
     bar.set_message("baking impostors");
     let plan = FramePlan::bake(&scene, &camera, args.source_angle, DepthBits::Eight);
     bar.set_message("rendering");

@@ -9,7 +9,7 @@ use relief_core::relief::decode_normal;
 
 use super::WarpError;
 use super::pullpush::{Layer, Splat, fill};
-use super::texmap::screen_rect;
+use super::texmap::volume_rect;
 use crate::gbuffer::{GBuffer, GPixel};
 use crate::impostor::Impostor;
 
@@ -43,14 +43,8 @@ fn project(impostor: &Impostor, camera: &Camera) -> Result<Option<Projection>, W
     if !camera.eye.is_finite() || !c.origin.is_finite() || !c.a.is_finite() || !c.b.is_finite() {
         return Err(WarpError::NonFinite);
     }
-    let (w, h) = (c.width as f32, c.height as f32);
-    let corner = |u: f32, v: f32, d: f32| c.origin + c.a * u + c.b * v + c.f * d;
     let far = c.depth_far;
-    let corners: Vec<Vec3> = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
-        .into_iter()
-        .flat_map(|(u, v)| [corner(u, v, 0.0), corner(u, v, far)])
-        .collect();
-    let (x0, y0, x1, y1) = screen_rect(camera, &corners);
+    let (x0, y0, x1, y1) = volume_rect(camera, c);
     if x1 <= x0 || y1 <= y0 {
         return Ok(None);
     }

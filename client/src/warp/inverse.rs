@@ -9,7 +9,7 @@ use relief_core::camera::Camera;
 use relief_core::relief::decode_normal;
 
 use super::WarpError;
-use super::texmap::screen_rect;
+use super::texmap::volume_rect;
 use crate::gbuffer::{GBuffer, GPixel};
 use crate::impostor::Impostor;
 
@@ -31,12 +31,7 @@ pub fn display(
     }
     let (w, h) = (c.width as f32, c.height as f32);
     let far = c.depth_far;
-    let corner = |u: f32, v: f32, d: f32| c.origin + c.a * u + c.b * v + c.f * d;
-    let corners: Vec<Vec3> = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
-        .into_iter()
-        .flat_map(|(u, v)| [corner(u, v, 0.0), corner(u, v, far)])
-        .collect();
-    let (x0, y0, x1, y1) = screen_rect(camera, &corners);
+    let (x0, y0, x1, y1) = volume_rect(camera, c);
     let steps = steps.max(1);
     let (a_scale, b_scale) = (c.a / c.a.length_squared(), c.b / c.b.length_squared());
     let rel = camera.eye - c.origin;

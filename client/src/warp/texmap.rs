@@ -6,7 +6,7 @@
 use glam::Vec3;
 
 use relief_core::camera::Camera;
-use relief_core::relief::{ReliefTexture, decode_normal};
+use relief_core::relief::{ReliefTexture, SourceCamera, decode_normal};
 
 use super::params::WarpParams;
 use super::prewarp::PrewarpImage;
@@ -38,6 +38,20 @@ pub(crate) fn screen_rect(camera: &Camera, corners: &[Vec3]) -> (u32, u32, u32, 
         clamp_x(hi.x.ceil() + 1.0),
         clamp_y(hi.y.ceil() + 1.0),
     )
+}
+
+/// The screen rectangle the texture's whole volume (its quad, from depth 0 to
+/// `depth_far`) can cover.
+pub(crate) fn volume_rect(camera: &Camera, c: &SourceCamera) -> (u32, u32, u32, u32) {
+    let (w, h) = (c.width as f32, c.height as f32);
+    let corners: Vec<Vec3> = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
+        .into_iter()
+        .flat_map(|(u, v)| {
+            let p = c.origin + c.a * u + c.b * v;
+            [p, p + c.f * c.depth_far]
+        })
+        .collect();
+    screen_rect(camera, &corners)
 }
 
 /// Maps `image` (pre-warped for `camera.eye`) onto the screen into `gbuffer`.
