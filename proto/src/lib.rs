@@ -1,5 +1,14 @@
-//! Relief's gRPC protocol: the `.proto` files, their generated code and the checked
-//! conversions between wire messages and `relief-core` types.
-//!
-//! Nothing lives here yet: the protocol arrives with the distributed-impostors work
-//! (server, workers, client over gRPC). See `ARCHITECTURE.md`.
+//! Relief's gRPC protocol: the code generated from `relief/v1/relief.proto` (in
+//! [`pb`]) and the checked conversions between wire messages and `relief-core` types
+//! (in [`convert`]) — every message is validated here, where it enters a process.
+
+pub mod convert;
+
+/// The generated messages, clients and servers of package `relief.v1`.
+#[allow(clippy::all, missing_docs)]
+pub mod pb {
+    tonic::include_proto!("relief.v1");
+
+    /// The encoded file descriptor set, for gRPC server reflection.
+    pub const FILE_DESCRIPTOR_SET: &[u8] = tonic::include_file_descriptor_set!("relief_descriptor");
+}

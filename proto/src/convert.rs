@@ -1,0 +1,322 @@
+//! Checked conversions between wire messages and core types. Every error is a
+//! `tonic::Status` with code INVALID_ARGUMENT that names the offending field.
+
+use glam::Vec3;
+use tonic::Status;
+
+use relief_core::hash::ContentHash;
+use relief_core::relief::{DepthBits, MAX_TEXTURE_SIZE, ReliefTexture, SourceCamera};
+
+use crate::pb;
+
+fn invalid(field: &str, problem: impl std::fmt::Display) -> Status {
+    Status::invalid_argument(format!("field `{field}`: {problem}"))
+}
+
+/// A core vector as a wire vector.
+pub fn vec3_to_pb(v: Vec3) -> pb::Vec3 {
+    pb::Vec3 {
+        x: v.x,
+        y: v.y,
+        z: v.z,
+    }
+}
+
+/// A wire vector as a core vector: present and finite.
+pub fn vec3_from_pb(field: &str, v: Option<&pb::Vec3>) -> Result<Vec3, Status> {
+    let v = v.ok_or_else(|| invalid(field, "missing"))?;
+    for (axis, value) in [("x", v.x), ("y", v.y), ("z", v.z)] {
+        if !value.is_finite() {
+            return Err(invalid(
+                &format!("{field}.{axis}"),
+                format_args!("{value} is not finite"),
+            ));
+        }
+    }
+    Ok(Vec3::new(v.x, v.y, v.z))
+}
+
+/// A content hash from 64 hex digits.
+pub fn hash_from_pb(field: &str, text: &str) -> Result<ContentHash, Status> {
+    ContentHash::from_hex(text).ok_or_else(|| invalid(field, format_args!("`{text}` is not 64 hex digits")))
+}
+
+/// Depth precision from its bit count.
+pub fn depth_bits_from_pb(field: &str, bits: u32) -> Result<DepthBits, Status> {
+    DepthBits::from_bits(bits).map_err(|_| invalid(field, format_args!("{bits} is not 8 or 16")))
+}
+
+/// A texture edge: `1 ..= MAX_TEXTURE_SIZE`.
+pub fn size_from_pb(field: &str, size: u32) -> Result<u32, Status> {
+    if size == 0 || size > MAX_TEXTURE_SIZE {
+        return Err(invalid(
+            field,
+            format_args!("{size} is not in 1..={MAX_TEXTURE_SIZE}"),
+        ));
+    }
+    Ok(size)
+}
+
+/// A relief texture on the wire.
+pub fn texture_to_pb(t: &ReliefTexture) -> pb::ReliefTexture {
+    let c = &t.camera;
+    let depth = match t.depth_bits {
+        DepthBits::Eight => t.depth.iter().map(|&q| q as u8).collect(),
+        DepthBits::Sixteen => t.depth.iter().flat_map(|q| q.to_le_bytes()).collect(),
+    };
+    pb::ReliefTexture {
+        width: c.width,
+        height: c.height,
+        origin: Some(vec3_to_pb(c.origin)),
+        a: Some(vec3_to_pb(c.a)),
+        b: Some(vec3_to_pb(c.b)),
+        f: Some(vec3_to_pb(c.f)),
+        depth_near: c.depth_near,
+        depth_far: c.depth_far,
+        depth_bits: t.depth_bits.bits(),
+        eye: Some(vec3_to_pb(t.eye)),
+        albedo: t.albedo.iter().flatten().copied().collect(),
+        normal: t.normal.iter().flatten().copied().collect(),
+        depth,
+    }
+}
+
+/// A relief texture from the wire, every field checked. `field` prefixes the names in
+/// errors (e.g. `texture`).
+pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTexture, Status> {
+    let name = |f: &str| format!("{field}.{f}");
+    let width = size_from_pb(&name("width"), t.width)?;
+    let height = size_from_pb(&name("height"), t.height)?;
+    let depth_bits = depth_bits_from_pb(&name("depth_bits"), t.depth_bits)?;
+    let camera = SourceCamera {
+        width,
+        height,
+        origin: vec3_from_pb(&name("origin"), t.origin.as_ref())?,
+        a: vec3_from_pb(&name("a"), t.a.as_ref())?,
+        b: vec3_from_pb(&name("b"), t.b.as_ref())?,
+        f: vec3_from_pb(&name("f"), t.f.as_ref())?,
+        depth_near: t.depth_near,
+        depth_far: t.depth_far,
+    };
+    if !(t.depth_near.is_finite() && t.depth_far.is_finite() && t.depth_far > t.depth_near) {
+        return Err(invalid(
+            &name("depth_far"),
+            "depth range must be finite with far > near",
+        ));
+    }
+    let texels = width as usize * height as usize;
+    let plane = |f: &str, bytes: &[u8], per_texel: usize| {
+        if bytes.len() != texels * per_texel {
+            Err(invalid(
+                &name(f),
+                format_args!("{} bytes, expected {}", bytes.len(), texels * per_texel),
+            ))
+        } else {
+            Ok(())
+        }
+    };
+    plane("albedo", &t.albedo, 3)?;
+    plane("normal", &t.normal, 3)?;
+    let depth: Vec<u16> = match depth_bits {
+        DepthBits::Eight => {
+            plane("depth", &t.depth, 1)?;
+            t.depth.iter().map(|&q| q as u16).collect()
+        }
+        DepthBits::Sixteen => {
+            plane("depth", &t.depth, 2)?;
+            t.depth
+                .chunks_exact(2)
+                .map(|b| u16::from_le_bytes([b[0], b[1]]))
+                .collect()
+        }
+    };
+    let triples = |bytes: &[u8]| bytes.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    Ok(ReliefTexture {
+        camera,
+        depth_bits,
+        eye: vec3_from_pb(&name("eye"), t.eye.as_ref())?,
+        albedo: triples(&t.albedo),
+        normal: triples(&t.normal),
+        depth,
+    })
+}
+
+/// How soon a request is needed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Urgency {
+    Now,
+    /// Expected to be needed this many milliseconds from now.
+    Predicted {
+        in_ms: u64,
+    },
+}
+
+/// A validated impostor request.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Request {
+    pub scene: ContentHash,
+    pub object: String,
+    pub eye: Vec3,
+    pub size: u32,
+    pub depth_bits: DepthBits,
+    pub urgency: Urgency,
+    pub client_id: String,
+    pub request_id: u64,
+    pub progressive: bool,
+}
+
+/// Checks every field of an impostor request.
+pub fn request_from_pb(r: &pb::ImpostorRequest) -> Result<Request, Status> {
+    if r.object.is_empty() {
+        return Err(invalid("object", "empty"));
+    }
+    if r.client_id.is_empty() {
+        return Err(invalid("client_id", "empty"));
+    }
+    let urgency = match pb::Urgency::try_from(r.urgency) {
+        Ok(pb::Urgency::Now) => Urgency::Now,
+        Ok(pb::Urgency::Predicted) => Urgency::Predicted {
+            in_ms: r.needed_in_ms,
+        },
+        _ => {
+            return Err(invalid(
+                "urgency",
+                format_args!("{} is not NOW or PREDICTED", r.urgency),
+            ));
+        }
+    };
+    Ok(Request {
+        scene: hash_from_pb("scene_hash", &r.scene_hash)?,
+        object: r.object.clone(),
+        eye: vec3_from_pb("eye", r.eye.as_ref())?,
+        size: size_from_pb("size", r.size)?,
+        depth_bits: depth_bits_from_pb("depth_bits", r.depth_bits)?,
+        urgency,
+        client_id: r.client_id.clone(),
+        request_id: r.request_id,
+        progressive: r.progressive,
+    })
+}
+
+/// The content hash of an encoded scene bundle.
+pub fn bundle_hash(encoded: &[u8]) -> ContentHash {
+    let mut h = blake3::Hasher::new();
+    h.update(b"relief-scene-v1");
+    h.update(encoded);
+    ContentHash(*h.finalize().as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use relief_core::bounds::Aabb;
+
+    #[test]
+    fn textures_round_trip_and_bad_fields_are_named() {
+        for bits in [DepthBits::Eight, DepthBits::Sixteen] {
+            let bounds = Aabb {
+                min: Vec3::splat(-1.0),
+                max: Vec3::splat(1.0),
+            };
+            let eye = Vec3::new(0.5, 1.0, 4.0);
+            let mut t = ReliefTexture::empty(SourceCamera::facing(eye, &bounds, 5, 3).unwrap(), bits, eye);
+            t.depth[2] = 200;
+            t.albedo[2] = [1, 2, 3];
+            t.normal[7] = [9, 8, 7];
+            let wire = texture_to_pb(&t);
+            assert_eq!(texture_from_pb("texture", &wire).unwrap(), t);
+            let mut bad = wire.clone();
+            bad.albedo.pop();
+            let e = texture_from_pb("texture", &bad).unwrap_err();
+            assert_eq!(e.code(), tonic::Code::InvalidArgument);
+            assert!(e.message().contains("texture.albedo"), "{}", e.message());
+            let mut bad = wire.clone();
+            bad.origin = Some(pb::Vec3 {
+                x: 0.0,
+                y: f32::NAN,
+                z: 0.0,
+            });
+            assert!(
+                texture_from_pb("texture", &bad)
+                    .unwrap_err()
+                    .message()
+                    .contains("texture.origin.y")
+            );
+        }
+    }
+
+    #[test]
+    fn requests_are_checked_field_by_field() {
+        let good = pb::ImpostorRequest {
+            scene_hash: "ab".repeat(32),
+            object: "knot".into(),
+            eye: Some(pb::Vec3 {
+                x: 1.0,
+                y: 2.0,
+                z: 3.0,
+            }),
+            size: 256,
+            depth_bits: 8,
+            urgency: pb::Urgency::Now as i32,
+            needed_in_ms: 0,
+            client_id: "c".into(),
+            request_id: 7,
+            progressive: false,
+        };
+        assert!(request_from_pb(&good).is_ok());
+        let field_of = |r: pb::ImpostorRequest| request_from_pb(&r).unwrap_err().message().to_string();
+        assert!(
+            field_of(pb::ImpostorRequest {
+                eye: Some(pb::Vec3 {
+                    x: f32::NAN,
+                    y: 0.0,
+                    z: 0.0
+                }),
+                ..good.clone()
+            })
+            .contains("`eye.x`")
+        );
+        assert!(
+            field_of(pb::ImpostorRequest {
+                eye: None,
+                ..good.clone()
+            })
+            .contains("`eye`")
+        );
+        assert!(
+            field_of(pb::ImpostorRequest {
+                size: 0,
+                ..good.clone()
+            })
+            .contains("`size`")
+        );
+        assert!(
+            field_of(pb::ImpostorRequest {
+                depth_bits: 12,
+                ..good.clone()
+            })
+            .contains("`depth_bits`")
+        );
+        assert!(
+            field_of(pb::ImpostorRequest {
+                scene_hash: "xyz".into(),
+                ..good.clone()
+            })
+            .contains("`scene_hash`")
+        );
+        assert!(
+            field_of(pb::ImpostorRequest {
+                urgency: 0,
+                ..good.clone()
+            })
+            .contains("`urgency`")
+        );
+        assert!(
+            field_of(pb::ImpostorRequest {
+                object: String::new(),
+                ..good.clone()
+            })
+            .contains("`object`")
+        );
+    }
+}
