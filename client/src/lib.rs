@@ -10,6 +10,7 @@
 //! - [`warp`] — relief impostors shown from new eyes: every method of the sources.
 //! - [`composite`] — whole frames: geometry where cheap or near, impostors elsewhere.
 //! - [`evaluate`] — the orbit set-up of the error reports: bake, reference, show, compare.
+//! - [`remote`] — the client side of the protocol: scenes up, textures down, withdrawals.
 //! - [`report`] — the error-against-run-time measurement.
 //! - [`metrics`] — image error against the reference; warp-error predictions.
 
@@ -20,5 +21,6 @@ pub mod impostor;
 pub mod metrics;
 pub mod pyramid;
 pub mod raster;
+pub mod remote;
 pub mod report;
 pub mod warp;

@@ -1,7 +1,10 @@
 //! Relief's gRPC protocol: the code generated from `relief/v1/relief.proto` (in
 //! [`pb`]) and the checked conversions between wire messages and `relief-core` types
-//! (in [`convert`]) — every message is validated here, where it enters a process.
+//! (in [`convert`]) — every message is validated here, where it enters a process — and
+//! scene bundles ([`bundle`]), how scenes travel by content hash.
 
+pub mod auth;
+pub mod bundle;
 pub mod convert;
 
 /// The generated messages, clients and servers of package `relief.v1`.

@@ -45,3 +45,46 @@ pub fn shared_models() -> Option<PathBuf> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models");
     dir.is_dir().then_some(dir)
 }
+
+/// A child process killed (not just dropped) when the test is done with it.
+pub struct Running(pub std::process::Child);
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts `relief-server` on an ephemeral 127.0.0.1 port with `extra` flags; returns
+/// the process and its URL (read from the line it prints once bound).
+pub fn start_server(extra: &[&str]) -> (Running, String) {
+    use std::io::{BufRead, BufReader};
+    let mut child = command("relief-server")
+        .args(["--listen", "127.0.0.1:0"])
+        .args(extra)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("starting relief-server");
+    let stdout = child.stdout.take().expect("server stdout");
+    let mut line = String::new();
+    BufReader::new(stdout)
+        .read_line(&mut line)
+        .expect("reading the server's address");
+    let address = line
+        .trim()
+        .strip_prefix("relief-server listening on ")
+        .unwrap_or_else(|| panic!("unexpected first line from relief-server: {line:?}"))
+        .to_string();
+    (Running(child), format!("http://{address}"))
+}
+
+/// Starts a `relief-worker` dialling `url`.
+pub fn start_worker(url: &str, extra: &[&str]) -> Running {
+    let child = command("relief-worker")
+        .args(["--server", url, "--heartbeat-ms", "100"])
+        .args(extra)
+        .spawn()
+        .expect("starting relief-worker");
+    Running(child)
+}

@@ -26,6 +26,11 @@ pub fn builtin_names() -> Vec<&'static str> {
     BUILTINS.iter().map(|(name, _)| *name).collect()
 }
 
+/// The TOML text of a built-in scene.
+pub fn builtin_text(name: &str) -> Option<&'static str> {
+    BUILTINS.iter().find(|(n, _)| *n == name).map(|(_, text)| *text)
+}
+
 /// One object of a scene, its mesh already placed in world space.
 #[derive(Debug, Clone)]
 pub struct SceneObject {

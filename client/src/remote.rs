@@ -1,0 +1,93 @@
+//! The client's side of the protocol: upload scenes, ask for relief textures, withdraw
+//! predictions, read the server's counters.
+
+use tonic::codec::CompressionEncoding;
+use tonic::service::interceptor::InterceptedService;
+use tonic::transport::{Channel, Endpoint};
+use tonic::{Status, Streaming};
+
+use relief_core::hash::ContentHash;
+use relief_proto::auth::BearerToken;
+use relief_proto::bundle::Bundle;
+use relief_proto::convert::hash_from_pb;
+use relief_proto::pb;
+
+type Impostors = pb::impostors_client::ImpostorsClient<InterceptedService<Channel, BearerToken>>;
+type Scenes = pb::scenes_client::ScenesClient<InterceptedService<Channel, BearerToken>>;
+
+/// A connection to a Relief server.
+#[derive(Clone)]
+pub struct Remote {
+    scenes: Scenes,
+    impostors: Impostors,
+    /// This client's id in requests and withdrawals.
+    pub client_id: String,
+}
+
+/// Largest piece of a scene upload.
+const CHUNK: usize = 1 << 20;
+
+impl Remote {
+    /// Connects to `url` (e.g. `http://127.0.0.1:7411`); errors name the problem.
+    pub async fn connect(url: &str, token: Option<&str>, client_id: &str) -> Result<Remote, String> {
+        let endpoint = Endpoint::from_shared(url.to_string())
+            .map_err(|e| format!("`{url}` is not a URL: {e}"))?
+            .tcp_nodelay(true)
+            .connect_timeout(std::time::Duration::from_secs(5));
+        let channel = endpoint
+            .connect()
+            .await
+            .map_err(|e| format!("connecting to {url}: {e}"))?;
+        let auth = BearerToken::new(token)?;
+        Ok(Remote {
+            scenes: pb::scenes_client::ScenesClient::with_interceptor(channel.clone(), auth.clone())
+                .send_compressed(CompressionEncoding::Zstd)
+                .accept_compressed(CompressionEncoding::Zstd),
+            impostors: pb::impostors_client::ImpostorsClient::with_interceptor(channel, auth)
+                .send_compressed(CompressionEncoding::Zstd)
+                .accept_compressed(CompressionEncoding::Zstd)
+                .max_decoding_message_size(256 << 20),
+            client_id: client_id.to_string(),
+        })
+    }
+
+    /// Uploads a scene; returns the hash the server stored it under.
+    pub async fn put_scene(&mut self, bundle: &Bundle) -> Result<ContentHash, Status> {
+        let chunks: Vec<pb::SceneChunk> = bundle
+            .encoded
+            .chunks(CHUNK)
+            .map(|c| pb::SceneChunk { data: c.to_vec() })
+            .collect();
+        let reply = self
+            .scenes
+            .put_scene(tokio_stream::iter(chunks))
+            .await?
+            .into_inner();
+        hash_from_pb("hash", &reply.hash)
+    }
+
+    /// Asks for a texture; the stream yields the preview (if asked) and the final one.
+    pub async fn request(
+        &mut self,
+        request: pb::ImpostorRequest,
+    ) -> Result<Streaming<pb::ImpostorResult>, Status> {
+        Ok(self.impostors.request(request).await?.into_inner())
+    }
+
+    /// Withdraws this client's requests; returns how many were still open.
+    pub async fn withdraw(&mut self, request_ids: &[u64]) -> Result<u32, Status> {
+        let reply = self
+            .impostors
+            .withdraw(pb::WithdrawRequest {
+                client_id: self.client_id.clone(),
+                request_ids: request_ids.to_vec(),
+            })
+            .await?;
+        Ok(reply.into_inner().withdrawn)
+    }
+
+    /// The server's counters.
+    pub async fn stats(&mut self) -> Result<pb::StatsReply, Status> {
+        Ok(self.impostors.stats(pb::StatsRequest {}).await?.into_inner())
+    }
+}

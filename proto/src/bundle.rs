@@ -1,0 +1,221 @@
+//! Scene bundles: a scene and every file it needs, as one message addressed by its
+//! content hash — how a scene travels from a client to the server and on to workers.
+
+use std::path::{Component, Path, PathBuf};
+
+use prost::Message;
+
+use relief_core::hash::ContentHash;
+use relief_core::scene::Scene;
+use relief_core::{Error, Result};
+
+use crate::convert::bundle_hash;
+use crate::pb::{SceneBundle, SceneFile};
+
+/// Largest encoded bundle accepted (the default scene's is a few KiB; OBJ scans can be
+/// tens of MiB).
+pub const MAX_BUNDLE_BYTES: usize = 512 << 20;
+
+/// A bundle and its encoding and hash.
+#[derive(Debug, Clone)]
+pub struct Bundle {
+    pub bundle: SceneBundle,
+    pub encoded: Vec<u8>,
+    pub hash: ContentHash,
+}
+
+impl Bundle {
+    fn new(bundle: SceneBundle) -> Bundle {
+        let encoded = bundle.encode_to_vec();
+        Bundle {
+            hash: bundle_hash(&encoded),
+            bundle,
+            encoded,
+        }
+    }
+
+    /// Decodes a received bundle; errors say what is wrong with it.
+    pub fn decode(encoded: Vec<u8>) -> std::result::Result<Bundle, String> {
+        if encoded.len() > MAX_BUNDLE_BYTES {
+            return Err(format!(
+                "scene bundle of {} bytes exceeds {MAX_BUNDLE_BYTES}",
+                encoded.len()
+            ));
+        }
+        let bundle =
+            SceneBundle::decode(encoded.as_slice()).map_err(|e| format!("malformed scene bundle: {e}"))?;
+        if !bundle.files.iter().any(|f| f.path == bundle.root) {
+            return Err(format!("scene bundle has no file `{}` (its root)", bundle.root));
+        }
+        for f in &bundle.files {
+            safe_relative(&f.path)
+                .ok_or_else(|| format!("scene bundle path `{}` is not a plain relative path", f.path))?;
+        }
+        Ok(Bundle {
+            hash: bundle_hash(&encoded),
+            bundle,
+            encoded,
+        })
+    }
+
+    /// Writes the files under `dir/<hash>/` and loads the scene from there.
+    pub fn load(&self, dir: &Path) -> Result<Scene> {
+        let root = dir.join(self.hash.to_string());
+        for f in &self.bundle.files {
+            let relative = safe_relative(&f.path)
+                .ok_or_else(|| Error::Invalid(format!("bundle path `{}` is not relative", f.path)))?;
+            let path = root.join(relative);
+            if let Some(parent) = path.parent() {
+                std::fs::create_dir_all(parent).map_err(|e| Error::io(parent, e))?;
+            }
+            std::fs::write(&path, &f.data).map_err(|e| Error::io(&path, e))?;
+        }
+        let scene_path = root.join(&self.bundle.root);
+        Scene::load(&scene_path.to_string_lossy())
+    }
+}
+
+/// `path` as a relative path without `..`, root or prefix components.
+fn safe_relative(path: &str) -> Option<PathBuf> {
+    let p = Path::new(path);
+    let ok = !path.is_empty() && p.components().all(|c| matches!(c, Component::Normal(_)));
+    ok.then(|| p.to_path_buf())
+}
+
+/// The bundle of a `--scene` argument: a built-in name, a TOML scene file with the
+/// OBJ files it names, or a bare OBJ — each OBJ with its MTL files and their textures.
+pub fn bundle_for(spec: &str) -> Result<Bundle> {
+    let path = Path::new(spec);
+    let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let read = |p: &Path| std::fs::read(p).map_err(|e| Error::io(p, e));
+    let mut files = Vec::new();
+    let root = match extension.as_deref() {
+        Some("obj") => {
+            let name = file_name(path)?;
+            add_obj(path, &name, &mut files)?;
+            name
+        }
+        Some("toml") => {
+            let text = read(path)?;
+            let name = file_name(path)?;
+            let base = path.parent().unwrap_or(Path::new("."));
+            let table: toml::Table = std::str::from_utf8(&text)
+                .ok()
+                .and_then(|t| toml::from_str(t).ok())
+                .ok_or_else(|| Error::Scene {
+                    origin: spec.to_string(),
+                    message: "not valid TOML".into(),
+                })?;
+            let objs = table
+                .get("objects")
+                .and_then(|o| o.as_array())
+                .into_iter()
+                .flatten();
+            for obj in objs.filter_map(|o| o.get("obj").and_then(|v| v.as_str())) {
+                add_obj(&base.join(obj), obj, &mut files)?;
+            }
+            files.push(SceneFile {
+                path: name.clone(),
+                data: text,
+            });
+            name
+        }
+        _ => {
+            let text = relief_core::scene::builtin_text(spec)
+                .ok_or_else(|| Error::UnknownScene(spec.to_string()))?;
+            files.push(SceneFile {
+                path: format!("{spec}.toml"),
+                data: text.as_bytes().to_vec(),
+            });
+            format!("{spec}.toml")
+        }
+    };
+    Ok(Bundle::new(SceneBundle { root, files }))
+}
+
+fn file_name(path: &Path) -> Result<String> {
+    path.file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .ok_or_else(|| Error::Invalid(format!("{} has no file name", path.display())))
+}
+
+/// Adds an OBJ (as `name`), its MTL files and their texture maps.
+fn add_obj(path: &Path, name: &str, files: &mut Vec<SceneFile>) -> Result<()> {
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let name_dir = Path::new(name)
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default();
+    let referenced = |text: &[u8], keyword: &str| -> Vec<String> {
+        String::from_utf8_lossy(text)
+            .lines()
+            .filter_map(|l| l.trim().strip_prefix(keyword).map(|rest| rest.trim().to_string()))
+            .filter(|r| !r.is_empty())
+            .collect()
+    };
+    for mtl in referenced(&data, "mtllib ") {
+        let Ok(mtl_data) = std::fs::read(base.join(&mtl)) else {
+            continue; // A missing MTL is a warning when loading, not an error.
+        };
+        for texture in referenced(&mtl_data, "map_Kd ") {
+            if let Ok(bytes) = std::fs::read(base.join(&texture)) {
+                files.push(SceneFile {
+                    path: name_dir.join(&texture).to_string_lossy().into_owned(),
+                    data: bytes,
+                });
+            }
+        }
+        files.push(SceneFile {
+            path: name_dir.join(&mtl).to_string_lossy().into_owned(),
+            data: mtl_data,
+        });
+    }
+    files.push(SceneFile {
+        path: name.to_string(),
+        data,
+    });
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtin_bundle_round_trips_and_loads() {
+        let b = bundle_for("default").unwrap();
+        let again = Bundle::decode(b.encoded.clone()).unwrap();
+        assert_eq!(again.hash, b.hash);
+        assert_eq!(bundle_for("default").unwrap().hash, b.hash, "stable hash");
+        let dir = std::env::temp_dir().join(format!("relief-bundle-{}", std::process::id()));
+        let scene = again.load(&dir).unwrap();
+        assert!(scene.object("knot").is_ok());
+    }
+
+    #[test]
+    fn bad_bundles_are_refused() {
+        assert!(Bundle::decode(vec![0xff, 0xff, 0xff]).is_err());
+        let escape = SceneBundle {
+            root: "../x.toml".into(),
+            files: vec![SceneFile {
+                path: "../x.toml".into(),
+                data: vec![],
+            }],
+        };
+        assert!(
+            Bundle::decode(escape.encode_to_vec())
+                .unwrap_err()
+                .contains("relative")
+        );
+        let rootless = SceneBundle {
+            root: "a.toml".into(),
+            files: vec![],
+        };
+        assert!(
+            Bundle::decode(rootless.encode_to_vec())
+                .unwrap_err()
+                .contains("root")
+        );
+    }
+}

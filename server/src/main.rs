@@ -1,0 +1,182 @@
+//! `relief-server`: scene registry, scheduler, worker registry and result cache behind
+//! one gRPC address, with gRPC health checking and server reflection.
+//!
+//! Prints `relief-server listening on ADDR` once bound (so `--listen 127.0.0.1:0` can
+//! be used and the port read back); quiet otherwise, `RUST_LOG=info` for more.
+
+use std::io::IsTerminal;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use tonic::codec::CompressionEncoding;
+use tonic::transport::Server;
+use tonic::transport::server::TcpIncoming;
+use tonic::{Request, Status};
+
+use relief_proto::auth::BearerToken;
+use relief_proto::pb;
+use relief_server::service::{Service, Shared};
+use relief_server::state::{Limits, State};
+
+#[derive(Parser)]
+#[command(
+    name = "relief-server",
+    version,
+    about = "Relief's server: schedules relief-texture requests onto workers"
+)]
+struct Args {
+    /// Address to listen on (port 0 picks a free port).
+    #[arg(long, env = "RELIEF_LISTEN", default_value = "127.0.0.1:7411")]
+    listen: SocketAddr,
+    /// Shared secret clients and workers must send (`authorization: Bearer TOKEN`).
+    #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// Result cache size, MiB.
+    #[arg(long, env = "RELIEF_CACHE_MB", default_value = "512")]
+    cache_mb: usize,
+    /// A worker silent for this long (ms) loses its jobs to other workers.
+    #[arg(long, env = "RELIEF_LEASE_MS", default_value = "5000", value_parser = clap::value_parser!(u64).range(100..=3_600_000))]
+    lease_ms: u64,
+    /// Most requests waiting at once.
+    #[arg(long, env = "RELIEF_MAX_WAITING", default_value = "100000")]
+    max_waiting: usize,
+    /// Where received scenes are unpacked (default: a directory under the system's temp dir).
+    #[arg(long, env = "RELIEF_SCENE_DIR")]
+    scene_dir: Option<PathBuf>,
+}
+
+fn main() -> ExitCode {
+    let args = match Args::try_parse() {
+        Ok(a) => a,
+        Err(e) if e.use_stderr() => {
+            eprintln!(
+                "{}",
+                e.render()
+                    .to_string()
+                    .lines()
+                    .next()
+                    .unwrap_or("error: bad arguments")
+            );
+            return ExitCode::from(2);
+        }
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::SUCCESS;
+        }
+    };
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .init();
+    let runtime = match tokio::runtime::Runtime::new() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: starting the runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match runtime.block_on(serve(args)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+async fn serve(args: Args) -> Result<()> {
+    let scene_dir = args
+        .scene_dir
+        .unwrap_or_else(|| std::env::temp_dir().join(format!("relief-server-{}", std::process::id())));
+    std::fs::create_dir_all(&scene_dir).with_context(|| format!("creating {}", scene_dir.display()))?;
+    let lease = Duration::from_millis(args.lease_ms);
+    let shared = Shared::new(
+        State::new(Limits {
+            cache_bytes: args.cache_mb << 20,
+            lease,
+            max_waiting: args.max_waiting,
+        }),
+        scene_dir,
+    );
+    // Leases: a silent worker's jobs go back to the queue.
+    let watched = shared.clone();
+    tokio::spawn(async move {
+        let mut tick = tokio::time::interval(lease / 4);
+        loop {
+            tick.tick().await;
+            let mut state = watched.state();
+            state.expire_leases();
+            state.dispatch();
+        }
+    });
+    let token = BearerToken::new(args.token.as_deref()).map_err(|e| anyhow::anyhow!("--token: {e}"))?;
+    let check = move |request: Request<()>| -> Result<Request<()>, Status> {
+        match token.header() {
+            Some(expected) if request.metadata().get("authorization") != Some(expected) => Err(
+                Status::unauthenticated("missing or wrong `authorization: Bearer` token"),
+            ),
+            _ => Ok(request),
+        }
+    };
+    let service = Service(shared);
+    let scenes = pb::scenes_server::ScenesServer::new(service.clone())
+        .accept_compressed(CompressionEncoding::Zstd)
+        .send_compressed(CompressionEncoding::Zstd)
+        .max_decoding_message_size(64 << 20);
+    let impostors = pb::impostors_server::ImpostorsServer::new(service.clone())
+        .accept_compressed(CompressionEncoding::Zstd)
+        .send_compressed(CompressionEncoding::Zstd)
+        .max_encoding_message_size(256 << 20);
+    let workers = pb::workers_server::WorkersServer::new(service)
+        .accept_compressed(CompressionEncoding::Zstd)
+        .send_compressed(CompressionEncoding::Zstd)
+        .max_decoding_message_size(256 << 20);
+    let (health, health_service) = tonic_health::server::health_reporter();
+    health
+        .set_serving::<pb::scenes_server::ScenesServer<Service>>()
+        .await;
+    health
+        .set_serving::<pb::impostors_server::ImpostorsServer<Service>>()
+        .await;
+    health
+        .set_serving::<pb::workers_server::WorkersServer<Service>>()
+        .await;
+    let reflection = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
+        .build_v1()
+        .context("building the reflection service")?;
+    let listener = tokio::net::TcpListener::bind(args.listen)
+        .await
+        .with_context(|| format!("binding {}", args.listen))?;
+    let address = listener.local_addr()?;
+    println!("relief-server listening on {address}");
+    let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
+    Server::builder()
+        .add_service(health_service)
+        .add_service(reflection)
+        .add_service(tonic::service::interceptor::InterceptedService::new(
+            scenes,
+            check.clone(),
+        ))
+        .add_service(tonic::service::interceptor::InterceptedService::new(
+            impostors,
+            check.clone(),
+        ))
+        .add_service(tonic::service::interceptor::InterceptedService::new(
+            workers, check,
+        ))
+        .serve_with_incoming_shutdown(incoming, async {
+            let _ = tokio::signal::ctrl_c().await;
+        })
+        .await
+        .context("serving")?;
+    Ok(())
+}

@@ -1,0 +1,211 @@
+//! The gRPC services over [`State`]: `Scenes`, `Impostors` and `Workers`.
+
+use std::path::PathBuf;
+use std::pin::Pin;
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use tokio::sync::mpsc::unbounded_channel;
+use tokio_stream::Stream;
+use tokio_stream::wrappers::UnboundedReceiverStream;
+use tonic::{Request, Response, Status, Streaming};
+
+use relief_proto::bundle::{Bundle, MAX_BUNDLE_BYTES};
+use relief_proto::convert::{hash_from_pb, request_from_pb, texture_from_pb};
+use relief_proto::pb;
+
+use crate::state::{Admission, State, StoredScene};
+
+/// Pieces of at most this many bytes when sending a scene.
+const CHUNK: usize = 1 << 20;
+
+/// The server: its state under one lock, and where received scenes are unpacked.
+pub struct Shared {
+    state: Mutex<State>,
+    scene_dir: PathBuf,
+}
+
+impl Shared {
+    pub fn new(state: State, scene_dir: PathBuf) -> Arc<Shared> {
+        Arc::new(Shared {
+            state: Mutex::new(state),
+            scene_dir,
+        })
+    }
+
+    /// The state, even if a panicking thread poisoned the lock (every method leaves it
+    /// consistent between statements that matter).
+    pub fn state(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+}
+
+/// All three services share one [`Shared`].
+#[derive(Clone)]
+pub struct Service(pub Arc<Shared>);
+
+type BoxStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send>>;
+
+#[tonic::async_trait]
+impl pb::scenes_server::Scenes for Service {
+    async fn put_scene(
+        &self,
+        request: Request<Streaming<pb::SceneChunk>>,
+    ) -> Result<Response<pb::SceneRef>, Status> {
+        let mut chunks = request.into_inner();
+        let mut encoded = Vec::new();
+        while let Some(chunk) = chunks.message().await? {
+            if encoded.len() + chunk.data.len() > MAX_BUNDLE_BYTES {
+                return Err(Status::invalid_argument(format!(
+                    "field `data`: the scene exceeds {MAX_BUNDLE_BYTES} bytes"
+                )));
+            }
+            encoded.extend_from_slice(&chunk.data);
+        }
+        let bundle =
+            Bundle::decode(encoded).map_err(|e| Status::invalid_argument(format!("field `data`: {e}")))?;
+        let hash = bundle.hash;
+        if self.0.state().scene(&hash).is_none() {
+            let dir = self.0.scene_dir.clone();
+            let bundle = Arc::new(bundle);
+            let loading = bundle.clone();
+            let scene = tokio::task::spawn_blocking(move || loading.load(&dir))
+                .await
+                .map_err(|e| Status::internal(format!("loading the scene: {e}")))?
+                .map_err(|e| Status::invalid_argument(format!("the scene does not load: {e}")))?;
+            let objects = scene.objects.iter().map(|o| (o.name.clone(), o.bounds)).collect();
+            let stored = StoredScene {
+                encoded: Arc::new(bundle.encoded.clone()),
+                objects,
+            };
+            self.0.state().add_scene(hash, stored);
+            tracing::info!(%hash, objects = scene.objects.len(), "scene stored");
+        }
+        Ok(Response::new(pb::SceneRef {
+            hash: hash.to_string(),
+        }))
+    }
+
+    type GetSceneStream = BoxStream<pb::SceneChunk>;
+
+    async fn get_scene(
+        &self,
+        request: Request<pb::SceneRef>,
+    ) -> Result<Response<Self::GetSceneStream>, Status> {
+        let hash = hash_from_pb("hash", &request.get_ref().hash)?;
+        let scene = self
+            .0
+            .state()
+            .scene(&hash)
+            .ok_or_else(|| Status::not_found(format!("no scene with hash {hash}")))?;
+        let encoded = scene.encoded.clone();
+        let pieces: Vec<Result<pb::SceneChunk, Status>> = encoded
+            .chunks(CHUNK)
+            .map(|c| Ok(pb::SceneChunk { data: c.to_vec() }))
+            .collect();
+        Ok(Response::new(Box::pin(tokio_stream::iter(pieces))))
+    }
+}
+
+#[tonic::async_trait]
+impl pb::impostors_server::Impostors for Service {
+    type RequestStream = UnboundedReceiverStream<Result<pb::ImpostorResult, Status>>;
+
+    async fn request(
+        &self,
+        request: Request<pb::ImpostorRequest>,
+    ) -> Result<Response<Self::RequestStream>, Status> {
+        let r = request_from_pb(request.get_ref())?;
+        let (tx, rx) = unbounded_channel();
+        let mut state = self.0.state();
+        match state.admit(&r, tx.clone())? {
+            Admission::Cached(texture) => {
+                let _ = tx.send(Ok(pb::ImpostorResult {
+                    request_id: r.request_id,
+                    texture: Some((*texture).clone()),
+                    r#final: true,
+                    bake_ms: 0,
+                }));
+            }
+            Admission::Queued => state.dispatch(),
+        }
+        // Only the state keeps a sender now: the stream ends when the request does.
+        drop(tx);
+        Ok(Response::new(UnboundedReceiverStream::new(rx)))
+    }
+
+    async fn withdraw(
+        &self,
+        request: Request<pb::WithdrawRequest>,
+    ) -> Result<Response<pb::WithdrawReply>, Status> {
+        let r = request.get_ref();
+        if r.client_id.is_empty() {
+            return Err(Status::invalid_argument("field `client_id`: empty"));
+        }
+        let mut state = self.0.state();
+        let withdrawn = state.withdraw(&r.client_id, &r.request_ids);
+        state.dispatch();
+        Ok(Response::new(pb::WithdrawReply { withdrawn }))
+    }
+
+    async fn stats(&self, _: Request<pb::StatsRequest>) -> Result<Response<pb::StatsReply>, Status> {
+        Ok(Response::new(self.0.state().stats()))
+    }
+}
+
+#[tonic::async_trait]
+impl pb::workers_server::Workers for Service {
+    type SessionStream = UnboundedReceiverStream<Result<pb::ServerMessage, Status>>;
+
+    async fn session(
+        &self,
+        request: Request<Streaming<pb::WorkerMessage>>,
+    ) -> Result<Response<Self::SessionStream>, Status> {
+        let mut inbound = request.into_inner();
+        let register = match inbound.message().await?.and_then(|m| m.kind) {
+            Some(pb::worker_message::Kind::Register(r)) => r,
+            _ => {
+                return Err(Status::invalid_argument(
+                    "field `kind`: a session must start with `register`",
+                ));
+            }
+        };
+        let (tx, rx) = unbounded_channel();
+        let id = {
+            let mut state = self.0.state();
+            let id = state.add_worker(register.name.clone(), register.slots as usize, tx);
+            state.dispatch();
+            id
+        };
+        tracing::info!(worker = %register.name, slots = register.slots, "worker registered");
+        let shared = self.0.clone();
+        tokio::spawn(async move {
+            while let Ok(Some(message)) = inbound.message().await {
+                let mut state = shared.state();
+                state.touch(id);
+                match message.kind {
+                    Some(pb::worker_message::Kind::Result(r)) => {
+                        match r.texture.as_ref().map(|t| texture_from_pb("texture", t)) {
+                            Some(Ok(_)) => {
+                                let texture = r.texture.unwrap_or_default();
+                                state.result(id, r.job_id, texture, r.r#final, r.bake_ms);
+                            }
+                            Some(Err(e)) => {
+                                state.failed(id, r.job_id, &format!("invalid texture: {}", e.message()))
+                            }
+                            None => state.failed(id, r.job_id, "result without a texture"),
+                        }
+                    }
+                    Some(pb::worker_message::Kind::Failed(f)) => state.failed(id, f.job_id, &f.reason),
+                    Some(pb::worker_message::Kind::Heartbeat(_))
+                    | Some(pb::worker_message::Kind::Register(_))
+                    | None => {}
+                }
+                state.dispatch();
+            }
+            let mut state = shared.state();
+            state.remove_worker(id);
+            state.dispatch();
+        });
+        Ok(Response::new(UnboundedReceiverStream::new(rx)))
+    }
+}

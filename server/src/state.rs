@@ -1,0 +1,697 @@
+//! The server's state: scenes, jobs, waiters, workers, cache and counters, changed only
+//! under one lock by the methods here (no `await` inside), so every rule of the
+//! scheduler lives in this file.
+
+use std::collections::{BTreeSet, HashMap, HashSet, VecDeque};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use tokio::sync::mpsc::UnboundedSender;
+use tonic::Status;
+
+use relief_core::bounds::Aabb;
+use relief_core::hash::ContentHash;
+use relief_proto::convert::{Request, Urgency, vec3_to_pb};
+use relief_proto::pb;
+
+/// What a waiting client receives: results, or the error that ends its request.
+pub type ResultSender = UnboundedSender<Result<pb::ImpostorResult, Status>>;
+/// What a worker receives.
+pub type JobSender = UnboundedSender<Result<pb::ServerMessage, Status>>;
+
+/// A stored scene: its encoded bundle and the bounds of its objects (enough to check
+/// requests without loading meshes again).
+#[derive(Debug)]
+pub struct StoredScene {
+    pub encoded: Arc<Vec<u8>>,
+    pub objects: HashMap<String, Aabb>,
+}
+
+/// What makes two requests satisfiable by one texture.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct JobKey {
+    scene: ContentHash,
+    object: String,
+    eye: [u32; 3],
+    size: u32,
+    depth_bits: u32,
+}
+
+impl JobKey {
+    fn of(r: &Request) -> JobKey {
+        JobKey {
+            scene: r.scene,
+            object: r.object.clone(),
+            eye: r.eye.to_array().map(f32::to_bits),
+            size: r.size,
+            depth_bits: r.depth_bits.bits(),
+        }
+    }
+}
+
+/// Queue order: needed-now first, then nearest deadline, then arrival.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct Priority {
+    predicted: bool,
+    deadline_us: u64,
+    id: u64,
+}
+
+#[derive(Debug)]
+enum JobState {
+    Queued(Priority),
+    Running { worker: u64 },
+}
+
+#[derive(Debug)]
+struct Job {
+    key: JobKey,
+    spec: pb::Job,
+    state: JobState,
+    waiters: HashSet<WaiterId>,
+}
+
+/// A client's request: `(client_id, request_id)`.
+pub type WaiterId = (String, u64);
+
+#[derive(Debug)]
+struct Waiter {
+    job: u64,
+    tx: ResultSender,
+    arrived: Instant,
+}
+
+#[derive(Debug)]
+struct Worker {
+    name: String,
+    slots: usize,
+    running: HashSet<u64>,
+    tx: JobSender,
+    last_seen: Instant,
+}
+
+/// A finished texture kept for reuse.
+#[derive(Debug)]
+struct Cached {
+    texture: Arc<pb::ReliefTexture>,
+    bytes: usize,
+    used: u64,
+}
+
+/// Counters a person can read (see `Stats` in the protocol).
+#[derive(Debug, Default, Clone)]
+pub struct Counters {
+    pub requests: u64,
+    pub cache_hits: u64,
+    pub merged: u64,
+    pub withdrawn: u64,
+    pub requeued: u64,
+}
+
+/// Limits of the server.
+#[derive(Debug, Clone)]
+pub struct Limits {
+    /// Result cache size in bytes.
+    pub cache_bytes: usize,
+    /// A worker silent for this long loses its jobs to others.
+    pub lease: Duration,
+    /// Most requests waiting at once.
+    pub max_waiting: usize,
+}
+
+/// Everything the server knows.
+pub struct State {
+    limits: Limits,
+    epoch: Instant,
+    scenes: HashMap<ContentHash, Arc<StoredScene>>,
+    jobs: HashMap<u64, Job>,
+    queue: BTreeSet<Priority>,
+    by_key: HashMap<JobKey, u64>,
+    waiters: HashMap<WaiterId, Waiter>,
+    workers: HashMap<u64, Worker>,
+    cache: HashMap<JobKey, Cached>,
+    cache_bytes: usize,
+    next_id: u64,
+    clock: u64,
+    latencies: VecDeque<f32>,
+    pub counters: Counters,
+}
+
+/// How a request was taken in.
+#[derive(Debug)]
+pub enum Admission {
+    /// Served from the cache: this texture, now.
+    Cached(Arc<pb::ReliefTexture>),
+    /// Queued (or merged into a queued or running job); results follow on the sender.
+    Queued,
+}
+
+const LATENCY_SAMPLES: usize = 10_000;
+
+impl State {
+    pub fn new(limits: Limits) -> State {
+        State {
+            limits,
+            epoch: Instant::now(),
+            scenes: HashMap::new(),
+            jobs: HashMap::new(),
+            queue: BTreeSet::new(),
+            by_key: HashMap::new(),
+            waiters: HashMap::new(),
+            workers: HashMap::new(),
+            cache: HashMap::new(),
+            cache_bytes: 0,
+            next_id: 1,
+            clock: 0,
+            latencies: VecDeque::new(),
+            counters: Counters::default(),
+        }
+    }
+
+    fn next(&mut self) -> u64 {
+        self.next_id += 1;
+        self.next_id
+    }
+
+    pub fn add_scene(&mut self, hash: ContentHash, scene: StoredScene) {
+        self.scenes.insert(hash, Arc::new(scene));
+    }
+
+    pub fn scene(&self, hash: &ContentHash) -> Option<Arc<StoredScene>> {
+        self.scenes.get(hash).cloned()
+    }
+
+    /// Takes a validated request in: checks the scene, object and eye, answers from
+    /// the cache, merges it into a job that satisfies it, or queues a new job.
+    pub fn admit(&mut self, request: &Request, tx: ResultSender) -> Result<Admission, Status> {
+        let scene = self.scenes.get(&request.scene).ok_or_else(|| {
+            Status::not_found(format!("no scene with hash {} (upload it first)", request.scene))
+        })?;
+        let bounds = scene.objects.get(&request.object).ok_or_else(|| {
+            Status::not_found(format!("the scene has no object named `{}`", request.object))
+        })?;
+        if bounds.contains(request.eye) {
+            return Err(Status::failed_precondition(format!(
+                "the eye is inside the bounds of `{}`: draw it as geometry",
+                request.object
+            )));
+        }
+        self.counters.requests += 1;
+        let key = JobKey::of(request);
+        self.clock += 1;
+        if let Some(hit) = self.cache.get_mut(&key) {
+            hit.used = self.clock;
+            let texture = hit.texture.clone();
+            self.counters.cache_hits += 1;
+            self.latencies_push(0.0);
+            return Ok(Admission::Cached(texture));
+        }
+        let waiter_id = (request.client_id.clone(), request.request_id);
+        if self.waiters.contains_key(&waiter_id) {
+            return Err(Status::already_exists(format!(
+                "request {} of client `{}` is already pending",
+                request.request_id, request.client_id
+            )));
+        }
+        if self.waiters.len() >= self.limits.max_waiting {
+            return Err(Status::resource_exhausted(format!(
+                "{} requests already waiting (the server's limit)",
+                self.limits.max_waiting
+            )));
+        }
+        let now = Instant::now();
+        let deadline_us = now.duration_since(self.epoch).as_micros() as u64
+            + match request.urgency {
+                Urgency::Now => 0,
+                Urgency::Predicted { in_ms } => in_ms.saturating_mul(1000),
+            };
+        let predicted = matches!(request.urgency, Urgency::Predicted { .. });
+        let job_id = match self.by_key.get(&key).copied() {
+            Some(id) => {
+                self.counters.merged += 1;
+                // A more urgent request moves a queued job forward.
+                if let Some(job) = self.jobs.get_mut(&id)
+                    && let JobState::Queued(p) = job.state
+                {
+                    let better = Priority {
+                        predicted: p.predicted && predicted,
+                        deadline_us: p.deadline_us.min(deadline_us),
+                        id,
+                    };
+                    if better != p {
+                        self.queue.remove(&p);
+                        self.queue.insert(better);
+                        job.state = JobState::Queued(better);
+                    }
+                }
+                id
+            }
+            None => {
+                let id = self.next();
+                let priority = Priority {
+                    predicted,
+                    deadline_us,
+                    id,
+                };
+                let spec = pb::Job {
+                    job_id: id,
+                    scene_hash: request.scene.to_string(),
+                    object: request.object.clone(),
+                    eye: Some(vec3_to_pb(request.eye)),
+                    size: request.size,
+                    depth_bits: request.depth_bits.bits(),
+                    progressive: request.progressive,
+                };
+                self.jobs.insert(
+                    id,
+                    Job {
+                        key: key.clone(),
+                        spec,
+                        state: JobState::Queued(priority),
+                        waiters: HashSet::new(),
+                    },
+                );
+                self.queue.insert(priority);
+                self.by_key.insert(key, id);
+                id
+            }
+        };
+        if let Some(job) = self.jobs.get_mut(&job_id) {
+            job.waiters.insert(waiter_id.clone());
+            if request.progressive {
+                job.spec.progressive = true;
+            }
+        }
+        self.waiters.insert(
+            waiter_id,
+            Waiter {
+                job: job_id,
+                tx,
+                arrived: now,
+            },
+        );
+        Ok(Admission::Queued)
+    }
+
+    /// Registers a worker; returns its id.
+    pub fn add_worker(&mut self, name: String, slots: usize, tx: JobSender) -> u64 {
+        let id = self.next();
+        self.workers.insert(
+            id,
+            Worker {
+                name,
+                slots: slots.max(1),
+                running: HashSet::new(),
+                tx,
+                last_seen: Instant::now(),
+            },
+        );
+        id
+    }
+
+    /// The worker is alive.
+    pub fn touch(&mut self, worker: u64) {
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.last_seen = Instant::now();
+        }
+    }
+
+    /// The worker is gone: its running jobs go back to the queue, first in line.
+    pub fn remove_worker(&mut self, worker: u64) {
+        let Some(w) = self.workers.remove(&worker) else {
+            return;
+        };
+        tracing::info!(worker = %w.name, jobs = w.running.len(), "worker left; re-queueing its jobs");
+        for id in w.running {
+            if let Some(job) = self.jobs.get_mut(&id) {
+                let priority = Priority {
+                    predicted: false,
+                    deadline_us: 0,
+                    id,
+                };
+                job.state = JobState::Queued(priority);
+                self.queue.insert(priority);
+                self.counters.requeued += 1;
+            }
+        }
+    }
+
+    /// Workers silent past their lease are removed (and their jobs re-queued).
+    pub fn expire_leases(&mut self) {
+        let lease = self.limits.lease;
+        let expired: Vec<u64> = self
+            .workers
+            .iter()
+            .filter(|(_, w)| w.last_seen.elapsed() > lease)
+            .map(|(&id, _)| id)
+            .collect();
+        for id in expired {
+            self.remove_worker(id);
+        }
+    }
+
+    /// Hands queued jobs to workers with free slots, most urgent first.
+    pub fn dispatch(&mut self) {
+        loop {
+            let Some(&first) = self.queue.first() else {
+                return;
+            };
+            let Some((&worker_id, worker)) = self
+                .workers
+                .iter_mut()
+                .filter(|(_, w)| w.running.len() < w.slots)
+                .min_by_key(|(_, w)| w.running.len())
+            else {
+                return;
+            };
+            self.queue.remove(&first);
+            let Some(job) = self.jobs.get_mut(&first.id) else {
+                continue;
+            };
+            let message = pb::ServerMessage {
+                kind: Some(pb::server_message::Kind::Job(job.spec.clone())),
+            };
+            if worker.tx.send(Ok(message)).is_err() {
+                // The worker's stream is gone: put the job back and drop the worker.
+                self.queue.insert(first);
+                self.remove_worker(worker_id);
+                continue;
+            }
+            worker.running.insert(first.id);
+            job.state = JobState::Running { worker: worker_id };
+        }
+    }
+
+    /// A worker's result. Previews go to the waiters; the final texture also goes to
+    /// the cache and ends the job.
+    pub fn result(
+        &mut self,
+        worker: u64,
+        job_id: u64,
+        texture: pb::ReliefTexture,
+        is_final: bool,
+        bake_ms: u32,
+    ) {
+        let Some(job) = self.jobs.get(&job_id) else {
+            return; // Withdrawn meanwhile.
+        };
+        let texture = Arc::new(texture);
+        for waiter_id in &job.waiters {
+            if let Some(w) = self.waiters.get(waiter_id) {
+                let result = pb::ImpostorResult {
+                    request_id: waiter_id.1,
+                    texture: Some((*texture).clone()),
+                    r#final: is_final,
+                    bake_ms,
+                };
+                let _ = w.tx.send(Ok(result));
+            }
+        }
+        if is_final {
+            let bytes = texture.albedo.len() + texture.normal.len() + texture.depth.len();
+            let key = job.key.clone();
+            self.cache_insert(key, texture, bytes);
+            self.finish(worker, job_id);
+        }
+    }
+
+    /// A worker could not make a texture: the waiters get the reason.
+    pub fn failed(&mut self, worker: u64, job_id: u64, reason: &str) {
+        if let Some(job) = self.jobs.get(&job_id) {
+            for waiter_id in &job.waiters {
+                if let Some(w) = self.waiters.get(waiter_id) {
+                    let _ =
+                        w.tx.send(Err(Status::aborted(format!("the worker failed: {reason}"))));
+                }
+            }
+        }
+        self.finish(worker, job_id);
+    }
+
+    /// Ends a job: its waiters' streams close (their senders are dropped).
+    fn finish(&mut self, worker: u64, job_id: u64) {
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.running.remove(&job_id);
+        }
+        let Some(job) = self.jobs.remove(&job_id) else {
+            return;
+        };
+        self.by_key.remove(&job.key);
+        if let JobState::Queued(p) = job.state {
+            self.queue.remove(&p);
+        }
+        for waiter_id in job.waiters {
+            if let Some(w) = self.waiters.remove(&waiter_id) {
+                self.latencies_push(w.arrived.elapsed().as_secs_f32() * 1e3);
+            }
+        }
+    }
+
+    /// Withdraws requests; a job nobody waits for any more is cancelled (on its worker
+    /// too). Returns how many requests were withdrawn.
+    pub fn withdraw(&mut self, client_id: &str, request_ids: &[u64]) -> u32 {
+        let mut withdrawn = 0;
+        for &request_id in request_ids {
+            let Some(waiter) = self.waiters.remove(&(client_id.to_string(), request_id)) else {
+                continue;
+            };
+            withdrawn += 1;
+            self.counters.withdrawn += 1;
+            let _ = waiter.tx.send(Err(Status::cancelled("withdrawn")));
+            let Some(job) = self.jobs.get_mut(&waiter.job) else {
+                continue;
+            };
+            job.waiters.remove(&(client_id.to_string(), request_id));
+            if !job.waiters.is_empty() {
+                continue;
+            }
+            let job = self.jobs.remove(&waiter.job).expect("job present");
+            self.by_key.remove(&job.key);
+            match job.state {
+                JobState::Queued(p) => {
+                    self.queue.remove(&p);
+                }
+                JobState::Running { worker } => {
+                    if let Some(w) = self.workers.get_mut(&worker) {
+                        w.running.remove(&waiter.job);
+                        let cancel = pb::ServerMessage {
+                            kind: Some(pb::server_message::Kind::Cancel(pb::CancelJob {
+                                job_id: waiter.job,
+                            })),
+                        };
+                        let _ = w.tx.send(Ok(cancel));
+                    }
+                }
+            }
+        }
+        withdrawn
+    }
+
+    fn cache_insert(&mut self, key: JobKey, texture: Arc<pb::ReliefTexture>, bytes: usize) {
+        if bytes > self.limits.cache_bytes {
+            return;
+        }
+        self.clock += 1;
+        if let Some(old) = self.cache.insert(
+            key,
+            Cached {
+                texture,
+                bytes,
+                used: self.clock,
+            },
+        ) {
+            self.cache_bytes -= old.bytes;
+        }
+        self.cache_bytes += bytes;
+        while self.cache_bytes > self.limits.cache_bytes {
+            let Some(oldest) = self
+                .cache
+                .iter()
+                .min_by_key(|(_, c)| c.used)
+                .map(|(k, _)| k.clone())
+            else {
+                break;
+            };
+            if let Some(c) = self.cache.remove(&oldest) {
+                self.cache_bytes -= c.bytes;
+            }
+        }
+    }
+
+    fn latencies_push(&mut self, ms: f32) {
+        if self.latencies.len() == LATENCY_SAMPLES {
+            self.latencies.pop_front();
+        }
+        self.latencies.push_back(ms);
+    }
+
+    /// The counters as the protocol's `StatsReply`.
+    pub fn stats(&self) -> pb::StatsReply {
+        let mut sorted: Vec<f32> = self.latencies.iter().copied().collect();
+        sorted.sort_by(f32::total_cmp);
+        let percentile = |p: f32| {
+            if sorted.is_empty() {
+                0.0
+            } else {
+                sorted[((sorted.len() - 1) as f32 * p).round() as usize]
+            }
+        };
+        let queued = |predicted: bool| self.queue.iter().filter(|p| p.predicted == predicted).count() as u32;
+        pb::StatsReply {
+            queue_now: queued(false),
+            queue_predicted: queued(true),
+            jobs_in_flight: self.workers.values().map(|w| w.running.len() as u32).sum(),
+            workers: self.workers.len() as u32,
+            requests: self.counters.requests,
+            cache_hits: self.counters.cache_hits,
+            merged: self.counters.merged,
+            withdrawn: self.counters.withdrawn,
+            requeued: self.counters.requeued,
+            cache_bytes: self.cache_bytes as u64,
+            latency_ms_p50: percentile(0.5),
+            latency_ms_p99: percentile(0.99),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+    use relief_core::relief::DepthBits;
+    use tokio::sync::mpsc::unbounded_channel;
+
+    fn state_with_scene() -> (State, ContentHash) {
+        let mut s = State::new(Limits {
+            cache_bytes: 1 << 20,
+            lease: Duration::from_secs(5),
+            max_waiting: 100,
+        });
+        let hash = ContentHash([7; 32]);
+        let bounds = Aabb {
+            min: Vec3::splat(-1.0),
+            max: Vec3::splat(1.0),
+        };
+        s.add_scene(
+            hash,
+            StoredScene {
+                encoded: Arc::new(vec![]),
+                objects: [("ball".to_string(), bounds)].into_iter().collect(),
+            },
+        );
+        (s, hash)
+    }
+
+    fn request(scene: ContentHash, id: u64, eye: Vec3, urgency: Urgency) -> Request {
+        Request {
+            scene,
+            object: "ball".into(),
+            eye,
+            size: 16,
+            depth_bits: DepthBits::Eight,
+            urgency,
+            client_id: "c".into(),
+            request_id: id,
+            progressive: false,
+        }
+    }
+
+    fn next_job(
+        rx: &mut tokio::sync::mpsc::UnboundedReceiver<Result<pb::ServerMessage, Status>>,
+    ) -> Option<pb::Job> {
+        match rx.try_recv().ok()?.ok()?.kind? {
+            pb::server_message::Kind::Job(j) => Some(j),
+            pb::server_message::Kind::Cancel(_) => None,
+        }
+    }
+
+    #[test]
+    fn now_before_predicted_nearest_deadline_first_and_merging() {
+        let (mut s, hash) = state_with_scene();
+        let (tx, _rx) = unbounded_channel();
+        let eye = |x: f32| Vec3::new(x, 0.0, 5.0);
+        s.admit(
+            &request(hash, 1, eye(1.0), Urgency::Predicted { in_ms: 900 }),
+            tx.clone(),
+        )
+        .unwrap();
+        s.admit(
+            &request(hash, 2, eye(2.0), Urgency::Predicted { in_ms: 100 }),
+            tx.clone(),
+        )
+        .unwrap();
+        s.admit(&request(hash, 3, eye(3.0), Urgency::Now), tx.clone())
+            .unwrap();
+        // Same texture as request 2: merged.
+        s.admit(
+            &request(hash, 4, eye(2.0), Urgency::Predicted { in_ms: 50 }),
+            tx.clone(),
+        )
+        .unwrap();
+        assert_eq!(s.counters.merged, 1);
+        let (wtx, mut wrx) = unbounded_channel();
+        s.add_worker("w".into(), 3, wtx);
+        s.dispatch();
+        let order: Vec<f32> = std::iter::from_fn(|| next_job(&mut wrx))
+            .map(|j| j.eye.unwrap().x)
+            .collect();
+        assert_eq!(order, vec![3.0, 2.0, 1.0]);
+    }
+
+    #[test]
+    fn withdrawal_cancels_queued_and_running_jobs() {
+        let (mut s, hash) = state_with_scene();
+        let (tx, _rx) = unbounded_channel();
+        s.admit(
+            &request(hash, 1, Vec3::new(0.0, 0.0, 5.0), Urgency::Now),
+            tx.clone(),
+        )
+        .unwrap();
+        s.admit(
+            &request(hash, 2, Vec3::new(1.0, 0.0, 5.0), Urgency::Now),
+            tx.clone(),
+        )
+        .unwrap();
+        let (wtx, mut wrx) = unbounded_channel();
+        s.add_worker("w".into(), 1, wtx);
+        s.dispatch();
+        let running = next_job(&mut wrx).unwrap();
+        assert_eq!(s.withdraw("c", &[1, 2, 99]), 2);
+        // The running one is cancelled on the worker; nothing is left queued.
+        match wrx.try_recv().unwrap().unwrap().kind.unwrap() {
+            pb::server_message::Kind::Cancel(c) => assert_eq!(c.job_id, running.job_id),
+            other => panic!("expected a cancel, got {other:?}"),
+        }
+        assert_eq!(s.stats().queue_now, 0);
+        assert_eq!(s.stats().jobs_in_flight, 0);
+    }
+
+    #[test]
+    fn a_vanished_workers_jobs_are_requeued_and_bad_requests_refused() {
+        let (mut s, hash) = state_with_scene();
+        let (tx, _rx) = unbounded_channel();
+        s.admit(
+            &request(hash, 1, Vec3::new(0.0, 0.0, 5.0), Urgency::Now),
+            tx.clone(),
+        )
+        .unwrap();
+        let (wtx, _wrx) = unbounded_channel();
+        let w = s.add_worker("w".into(), 1, wtx);
+        s.dispatch();
+        assert_eq!(s.stats().jobs_in_flight, 1);
+        s.remove_worker(w);
+        assert_eq!((s.stats().queue_now, s.counters.requeued), (1, 1));
+        let inside = s
+            .admit(&request(hash, 2, Vec3::ZERO, Urgency::Now), tx.clone())
+            .unwrap_err();
+        assert_eq!(inside.code(), tonic::Code::FailedPrecondition);
+        let mut unknown = request(hash, 3, Vec3::new(0.0, 0.0, 5.0), Urgency::Now);
+        unknown.object = "cube".into();
+        assert_eq!(
+            s.admit(&unknown, tx.clone()).unwrap_err().code(),
+            tonic::Code::NotFound
+        );
+        unknown.scene = ContentHash([1; 32]);
+        assert_eq!(s.admit(&unknown, tx).unwrap_err().code(), tonic::Code::NotFound);
+    }
+}

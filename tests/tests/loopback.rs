@@ -1,0 +1,240 @@
+//! The distributed system on 127.0.0.1, real processes and sockets: server, workers,
+//! and a client asking for relief textures.
+
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use tonic::Code;
+
+use relief_client::remote::Remote;
+use relief_core::relief::DepthBits;
+use relief_core::scene::Scene;
+use relief_proto::bundle::bundle_for;
+use relief_proto::convert::{texture_from_pb, vec3_to_pb};
+use relief_proto::pb;
+use relief_tests::{start_server, start_worker};
+use relief_worker::bake;
+use relief_worker::tracer::ObjectTracer;
+
+fn request(
+    scene: &str,
+    object: &str,
+    eye: Vec3,
+    size: u32,
+    id: u64,
+    urgency: pb::Urgency,
+) -> pb::ImpostorRequest {
+    pb::ImpostorRequest {
+        scene_hash: scene.to_string(),
+        object: object.to_string(),
+        eye: Some(vec3_to_pb(eye)),
+        size,
+        depth_bits: 8,
+        urgency: urgency as i32,
+        needed_in_ms: 500,
+        client_id: "test".into(),
+        request_id: id,
+        progressive: false,
+    }
+}
+
+/// Waits (bounded) until `check` holds on the server's counters.
+async fn wait_for(
+    remote: &mut Remote,
+    what: &str,
+    check: impl Fn(&pb::StatsReply) -> bool,
+) -> pb::StatsReply {
+    let start = Instant::now();
+    loop {
+        let stats = remote.stats().await.expect("stats");
+        if check(&stats) {
+            return stats;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "timed out waiting for {what}: {stats:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// Collects a request's stream: previews and the final texture.
+async fn collect(
+    mut stream: tonic::Streaming<pb::ImpostorResult>,
+) -> Result<Vec<pb::ImpostorResult>, tonic::Status> {
+    let mut results = Vec::new();
+    while let Some(r) = stream.message().await? {
+        results.push(r);
+    }
+    Ok(results)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_texture_over_the_network_equals_a_local_bake() {
+    let (_server, url) = start_server(&[]);
+    let _workers = [start_worker(&url, &[]), start_worker(&url, &[])];
+    let mut remote = Remote::connect(&url, None, "test").await.unwrap();
+    let bundle = bundle_for("default").unwrap();
+    let hash = remote.put_scene(&bundle).await.unwrap();
+    assert_eq!(hash, bundle.hash);
+    wait_for(&mut remote, "two workers", |s| s.workers == 2).await;
+    let eye = Vec3::new(6.0, 2.5, 4.0);
+    let mut req = request(&hash.to_string(), "knot", eye, 128, 1, pb::Urgency::Now);
+    req.progressive = true;
+    let results = collect(remote.request(req.clone()).await.unwrap()).await.unwrap();
+    assert_eq!(results.len(), 2, "a preview, then the final texture");
+    assert!(!results[0].r#final && results[1].r#final);
+    let got = texture_from_pb("texture", results[1].texture.as_ref().unwrap()).unwrap();
+    let scene = Scene::load("default").unwrap();
+    let local = bake(
+        &ObjectTracer::new(scene.object("knot").unwrap()),
+        eye,
+        128,
+        DepthBits::Eight,
+    )
+    .unwrap();
+    assert_eq!(got, local, "the worker's texture differs from a local bake");
+    // Asked again: served from the cache.
+    req.request_id = 2;
+    req.progressive = false;
+    let again = collect(remote.request(req).await.unwrap()).await.unwrap();
+    assert_eq!(again.len(), 1);
+    let stats = remote.stats().await.unwrap();
+    assert_eq!((stats.requests, stats.cache_hits), (2, 1), "{stats:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_requests_are_refused_with_the_field_named() {
+    let (_server, url) = start_server(&[]);
+    let mut remote = Remote::connect(&url, None, "test").await.unwrap();
+    let hash = remote
+        .put_scene(&bundle_for("default").unwrap())
+        .await
+        .unwrap()
+        .to_string();
+    let eye = Vec3::new(6.0, 2.5, 4.0);
+    let refused = |r: Result<tonic::Streaming<pb::ImpostorResult>, tonic::Status>| r.expect_err("refused");
+    let mut nan = request(&hash, "knot", eye, 64, 1, pb::Urgency::Now);
+    nan.eye = Some(pb::Vec3 {
+        x: f32::NAN,
+        y: 0.0,
+        z: 0.0,
+    });
+    let e = refused(remote.request(nan).await);
+    assert_eq!(e.code(), Code::InvalidArgument);
+    assert!(e.message().contains("eye.x"), "{}", e.message());
+    let e = refused(
+        remote
+            .request(request(&hash, "teapot", eye, 64, 2, pb::Urgency::Now))
+            .await,
+    );
+    assert_eq!(e.code(), Code::NotFound);
+    assert!(e.message().contains("teapot"), "{}", e.message());
+    let inside = Vec3::new(3.0, 1.3, 0.0);
+    let e = refused(
+        remote
+            .request(request(&hash, "knot", inside, 64, 3, pb::Urgency::Now))
+            .await,
+    );
+    assert_eq!(e.code(), Code::FailedPrecondition);
+    let e = refused(
+        remote
+            .request(request(&"00".repeat(32), "knot", eye, 64, 4, pb::Urgency::Now))
+            .await,
+    );
+    assert_eq!(e.code(), Code::NotFound);
+    let e = refused(
+        remote
+            .request(request(&hash, "knot", eye, 0, 5, pb::Urgency::Now))
+            .await,
+    );
+    assert!(e.message().contains("`size`"), "{}", e.message());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn withdrawn_predictions_are_cancelled() {
+    let (_server, url) = start_server(&[]);
+    let mut remote = Remote::connect(&url, None, "test").await.unwrap();
+    let hash = remote
+        .put_scene(&bundle_for("default").unwrap())
+        .await
+        .unwrap()
+        .to_string();
+    // No worker yet: three predictions wait in the queue.
+    let mut streams = Vec::new();
+    for id in 1..=3 {
+        let eye = Vec3::new(6.0 + id as f32, 2.5, 4.0);
+        streams.push(
+            remote
+                .request(request(&hash, "knot", eye, 64, id, pb::Urgency::Predicted))
+                .await
+                .unwrap(),
+        );
+    }
+    wait_for(&mut remote, "three queued", |s| s.queue_predicted == 3).await;
+    assert_eq!(remote.withdraw(&[1, 2, 77]).await.unwrap(), 2);
+    let stats = wait_for(&mut remote, "one left", |s| s.queue_predicted == 1).await;
+    assert_eq!(stats.withdrawn, 2);
+    let third = streams.pop().unwrap();
+    for s in streams {
+        assert_eq!(collect(s).await.unwrap_err().code(), Code::Cancelled);
+    }
+    // A worker arrives and serves the one still wanted.
+    let _worker = start_worker(&url, &[]);
+    let results = collect(third).await.unwrap();
+    assert!(results.last().unwrap().r#final);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_killed_workers_job_is_answered_by_another() {
+    let (_server, url) = start_server(&["--lease-ms", "400"]);
+    let mut first = start_worker(&url, &[]);
+    let mut remote = Remote::connect(&url, None, "test").await.unwrap();
+    let hash = remote
+        .put_scene(&bundle_for("default").unwrap())
+        .await
+        .unwrap()
+        .to_string();
+    wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
+    // A big bake of the heavy object, so the worker is killed while holding it.
+    let eye = Vec3::new(0.5, 2.0, 8.0);
+    let stream = remote
+        .request(request(&hash, "rock", eye, 2048, 1, pb::Urgency::Now))
+        .await
+        .unwrap();
+    wait_for(&mut remote, "the job running", |s| s.jobs_in_flight == 1).await;
+    first.0.kill().unwrap();
+    let _second = start_worker(&url, &[]);
+    let results = collect(stream).await.expect("the request is still answered");
+    assert!(results.last().unwrap().r#final);
+    let stats = remote.stats().await.unwrap();
+    assert!(stats.requeued >= 1, "{stats:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn health_and_authentication() {
+    let (_server, url) = start_server(&["--token", "s3cret"]);
+    let channel = tonic::transport::Endpoint::from_shared(url.clone())
+        .unwrap()
+        .connect()
+        .await
+        .unwrap();
+    let mut health = tonic_health::pb::health_client::HealthClient::new(channel);
+    let reply = health
+        .check(tonic_health::pb::HealthCheckRequest {
+            service: "relief.v1.Impostors".into(),
+        })
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(
+        reply.status,
+        tonic_health::pb::health_check_response::ServingStatus::Serving as i32
+    );
+    let mut anonymous = Remote::connect(&url, None, "test").await.unwrap();
+    assert_eq!(anonymous.stats().await.unwrap_err().code(), Code::Unauthenticated);
+    let mut wrong = Remote::connect(&url, Some("guess"), "test").await.unwrap();
+    assert_eq!(wrong.stats().await.unwrap_err().code(), Code::Unauthenticated);
+    let mut right = Remote::connect(&url, Some("s3cret"), "test").await.unwrap();
+    assert!(right.stats().await.is_ok());
+}

@@ -1,0 +1,340 @@
+//! The worker's life: connect, register, take jobs, bake, send results; reconnect with
+//! backoff when the server goes away; drain and stop on SIGINT/SIGTERM.
+
+use std::collections::{HashMap, HashSet};
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::{Result, anyhow};
+use tokio::sync::{mpsc, watch};
+use tokio::task::JoinSet;
+use tokio_stream::wrappers::UnboundedReceiverStream;
+use tonic::codec::CompressionEncoding;
+use tonic::service::interceptor::InterceptedService;
+use tonic::transport::{Channel, Endpoint};
+
+use relief_core::hash::ContentHash;
+use relief_core::scene::Scene;
+use relief_proto::auth::BearerToken;
+use relief_proto::bundle::Bundle;
+use relief_proto::convert::{depth_bits_from_pb, hash_from_pb, size_from_pb, texture_to_pb, vec3_from_pb};
+use relief_proto::pb;
+use relief_worker::bake;
+use relief_worker::tracer::ObjectTracer;
+
+use crate::Args;
+
+type Scenes = pb::scenes_client::ScenesClient<InterceptedService<Channel, BearerToken>>;
+
+/// A scene this worker has loaded, with the BVHs built so far.
+struct Loaded {
+    scene: Scene,
+    tracers: Mutex<HashMap<String, Arc<ObjectTracer>>>,
+}
+
+/// What every job of a session shares.
+#[derive(Clone)]
+struct JobContext {
+    scenes: Scenes,
+    loaded: Arc<tokio::sync::Mutex<HashMap<ContentHash, Arc<Loaded>>>>,
+    scene_dir: PathBuf,
+    cancelled: Arc<Mutex<HashSet<u64>>>,
+    out: mpsc::UnboundedSender<pb::WorkerMessage>,
+}
+
+enum End {
+    /// Asked to stop, and every held job is finished.
+    Stopped,
+    /// The connection was lost (or never made).
+    Lost(anyhow::Error),
+}
+
+pub async fn run(args: Args) -> Result<()> {
+    let endpoint = Endpoint::from_shared(args.server.clone())
+        .map_err(|e| anyhow!("--server `{}` is not a URL: {e}", args.server))?
+        .tcp_nodelay(true)
+        .connect_timeout(Duration::from_secs(5));
+    let auth = BearerToken::new(args.token.as_deref()).map_err(|e| anyhow!("--token: {e}"))?;
+    let scene_dir = args
+        .scene_dir
+        .clone()
+        .unwrap_or_else(|| std::env::temp_dir().join(format!("relief-worker-{}", std::process::id())));
+    let name = args.name.clone().unwrap_or_else(|| {
+        let host = std::fs::read_to_string("/etc/hostname").unwrap_or_default();
+        format!("{}-{}", host.trim(), std::process::id())
+    });
+    let (stop_tx, stop) = watch::channel(false);
+    tokio::spawn(async move {
+        shutdown_signal().await;
+        let _ = stop_tx.send(true);
+    });
+    let loaded = Arc::new(tokio::sync::Mutex::new(HashMap::new()));
+    let mut backoff = Duration::from_millis(100);
+    loop {
+        if *stop.borrow() {
+            return Ok(());
+        }
+        let started = Instant::now();
+        match session(
+            &args,
+            &name,
+            &endpoint,
+            &auth,
+            &scene_dir,
+            loaded.clone(),
+            stop.clone(),
+        )
+        .await
+        {
+            End::Stopped => return Ok(()),
+            End::Lost(e) => {
+                if started.elapsed() > Duration::from_secs(10) {
+                    backoff = Duration::from_millis(100);
+                }
+                tracing::warn!(
+                    "session with {} ended: {e:#}; retrying in {backoff:?}",
+                    args.server
+                );
+                let mut stop = stop.clone();
+                tokio::select! {
+                    _ = tokio::time::sleep(backoff) => {}
+                    _ = stop.changed() => return Ok(()),
+                }
+                backoff = (backoff * 2).min(Duration::from_secs(5));
+            }
+        }
+    }
+}
+
+/// Resolves on SIGINT or SIGTERM.
+async fn shutdown_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = tokio::signal::ctrl_c() => {}
+                    _ = term.recv() => {}
+                }
+            }
+            Err(_) => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+async fn session(
+    args: &Args,
+    name: &str,
+    endpoint: &Endpoint,
+    auth: &BearerToken,
+    scene_dir: &std::path::Path,
+    loaded: Arc<tokio::sync::Mutex<HashMap<ContentHash, Arc<Loaded>>>>,
+    mut stop: watch::Receiver<bool>,
+) -> End {
+    let channel = match endpoint.connect().await {
+        Ok(c) => c,
+        Err(e) => return End::Lost(anyhow!("connecting: {e}")),
+    };
+    let mut workers = pb::workers_client::WorkersClient::with_interceptor(channel.clone(), auth.clone())
+        .send_compressed(CompressionEncoding::Zstd)
+        .accept_compressed(CompressionEncoding::Zstd)
+        .max_encoding_message_size(256 << 20);
+    let scenes = pb::scenes_client::ScenesClient::with_interceptor(channel, auth.clone())
+        .send_compressed(CompressionEncoding::Zstd)
+        .accept_compressed(CompressionEncoding::Zstd)
+        .max_decoding_message_size(1 << 30);
+    let (out, outbound) = mpsc::unbounded_channel();
+    let _ = out.send(pb::WorkerMessage {
+        kind: Some(pb::worker_message::Kind::Register(pb::Register {
+            name: name.to_string(),
+            slots: args.slots,
+        })),
+    });
+    let mut inbound = match workers.session(UnboundedReceiverStream::new(outbound)).await {
+        Ok(r) => r.into_inner(),
+        Err(e) => return End::Lost(anyhow!("opening the session: {}", e.message())),
+    };
+    tracing::info!("registered with {} as {name}", args.server);
+    let heartbeat = {
+        let out = out.clone();
+        let period = Duration::from_millis(args.heartbeat_ms);
+        tokio::spawn(async move {
+            let mut tick = tokio::time::interval(period);
+            loop {
+                tick.tick().await;
+                let beat = pb::WorkerMessage {
+                    kind: Some(pb::worker_message::Kind::Heartbeat(pb::Heartbeat {})),
+                };
+                if out.send(beat).is_err() {
+                    return;
+                }
+            }
+        })
+    };
+    let context = JobContext {
+        scenes,
+        loaded,
+        scene_dir: scene_dir.to_path_buf(),
+        cancelled: Arc::new(Mutex::new(HashSet::new())),
+        out,
+    };
+    let mut jobs = JoinSet::new();
+    let end = loop {
+        tokio::select! {
+            message = inbound.message() => match message {
+                Ok(Some(m)) => match m.kind {
+                    Some(pb::server_message::Kind::Job(job)) => {
+                        jobs.spawn(run_job(job, context.clone()));
+                    }
+                    Some(pb::server_message::Kind::Cancel(c)) => {
+                        context.cancelled.lock().unwrap_or_else(|p| p.into_inner()).insert(c.job_id);
+                    }
+                    None => {}
+                },
+                Ok(None) => break End::Lost(anyhow!("the server closed the session")),
+                Err(e) => break End::Lost(anyhow!("{}", e.message())),
+            },
+            Some(_) = jobs.join_next(), if !jobs.is_empty() => {}
+            _ = stop.changed() => {
+                // Drain: finish (and send) what we hold, take nothing new.
+                tracing::info!("stopping: finishing {} job(s)", jobs.len());
+                while jobs.join_next().await.is_some() {}
+                break End::Stopped;
+            }
+        }
+    };
+    heartbeat.abort();
+    end
+}
+
+/// Bakes one job and sends its result (a preview first when asked), or its failure.
+async fn run_job(job: pb::Job, context: JobContext) {
+    let id = job.job_id;
+    let out = context.out.clone();
+    if let Err(reason) = bake_job(job, &context).await {
+        let _ = out.send(pb::WorkerMessage {
+            kind: Some(pb::worker_message::Kind::Failed(pb::JobFailed {
+                job_id: id,
+                reason,
+            })),
+        });
+    }
+    context
+        .cancelled
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .remove(&id);
+}
+
+async fn bake_job(job: pb::Job, context: &JobContext) -> Result<(), String> {
+    let hash = hash_from_pb("scene_hash", &job.scene_hash).map_err(|e| e.message().to_string())?;
+    let eye = vec3_from_pb("eye", job.eye.as_ref()).map_err(|e| e.message().to_string())?;
+    let size = size_from_pb("size", job.size).map_err(|e| e.message().to_string())?;
+    let bits = depth_bits_from_pb("depth_bits", job.depth_bits).map_err(|e| e.message().to_string())?;
+    let loaded = scene(hash, context).await?;
+    let tracer = {
+        let cached = loaded
+            .tracers
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(&job.object)
+            .cloned();
+        match cached {
+            Some(t) => t,
+            None => {
+                let building = loaded.clone();
+                let name = job.object.clone();
+                let tracer = tokio::task::spawn_blocking(move || {
+                    building
+                        .scene
+                        .object(&name)
+                        .map(|o| Arc::new(ObjectTracer::new(o)))
+                        .map_err(|e| e.to_string())
+                })
+                .await
+                .map_err(|e| e.to_string())??;
+                loaded
+                    .tracers
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .insert(job.object.clone(), tracer.clone());
+                tracer
+            }
+        }
+    };
+    let mut sizes = vec![size];
+    if job.progressive && size >= 64 {
+        sizes.insert(0, size / 4);
+    }
+    for (k, edge) in sizes.iter().copied().enumerate() {
+        if context
+            .cancelled
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .contains(&job.job_id)
+        {
+            return Ok(());
+        }
+        let tracer = tracer.clone();
+        let start = Instant::now();
+        let texture = tokio::task::spawn_blocking(move || bake(&tracer, eye, edge, bits))
+            .await
+            .map_err(|e| e.to_string())?
+            .map_err(|e| e.to_string())?;
+        let result = pb::JobResult {
+            job_id: job.job_id,
+            texture: Some(texture_to_pb(&texture)),
+            r#final: k + 1 == sizes.len(),
+            bake_ms: start.elapsed().as_millis() as u32,
+        };
+        let _ = context.out.send(pb::WorkerMessage {
+            kind: Some(pb::worker_message::Kind::Result(result)),
+        });
+    }
+    Ok(())
+}
+
+/// The scene `hash`, fetched from the server and loaded the first time.
+async fn scene(hash: ContentHash, context: &JobContext) -> Result<Arc<Loaded>, String> {
+    let mut loaded = context.loaded.lock().await;
+    if let Some(s) = loaded.get(&hash) {
+        return Ok(s.clone());
+    }
+    let mut scenes = context.scenes.clone();
+    let mut stream = scenes
+        .get_scene(pb::SceneRef {
+            hash: hash.to_string(),
+        })
+        .await
+        .map_err(|e| format!("fetching scene {hash}: {}", e.message()))?
+        .into_inner();
+    let mut encoded = Vec::new();
+    while let Some(chunk) = stream
+        .message()
+        .await
+        .map_err(|e| format!("fetching scene {hash}: {}", e.message()))?
+    {
+        encoded.extend_from_slice(&chunk.data);
+    }
+    let bundle = Bundle::decode(encoded)?;
+    let dir = context.scene_dir.clone();
+    let scene = tokio::task::spawn_blocking(move || bundle.load(&dir))
+        .await
+        .map_err(|e| e.to_string())?
+        .map_err(|e| format!("loading scene {hash}: {e}"))?;
+    let entry = Arc::new(Loaded {
+        scene,
+        tracers: Mutex::new(HashMap::new()),
+    });
+    loaded.insert(hash, entry.clone());
+    Ok(entry)
+}

@@ -1,0 +1,81 @@
+//! `relief-worker`: dials a Relief server, registers, and bakes the relief textures the
+//! server assigns — with all its cores — until told to stop (SIGINT/SIGTERM: finishes
+//! the jobs it holds, then exits).
+
+mod daemon;
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+
+#[derive(Parser)]
+#[command(
+    name = "relief-worker",
+    version,
+    about = "Relief's worker: ray-traces relief textures for a server"
+)]
+pub struct Args {
+    /// The server's URL, e.g. http://10.0.0.5:7411.
+    #[arg(long, env = "RELIEF_SERVER")]
+    server: String,
+    /// Shared secret the server expects.
+    #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// Jobs baked at once (each uses every core).
+    #[arg(long, env = "RELIEF_SLOTS", default_value = "1", value_parser = clap::value_parser!(u32).range(1..=64))]
+    slots: u32,
+    /// Name in the server's logs (default: host name and process id).
+    #[arg(long, env = "RELIEF_WORKER_NAME")]
+    name: Option<String>,
+    /// Where fetched scenes are unpacked (default: under the system's temp dir).
+    #[arg(long, env = "RELIEF_SCENE_DIR")]
+    scene_dir: Option<PathBuf>,
+    /// Heartbeat period in milliseconds (keep well under the server's lease).
+    #[arg(long, default_value = "1000", value_parser = clap::value_parser!(u64).range(10..=600_000))]
+    heartbeat_ms: u64,
+}
+
+fn main() -> ExitCode {
+    let args = match Args::try_parse() {
+        Ok(a) => a,
+        Err(e) if e.use_stderr() => {
+            eprintln!(
+                "{}",
+                e.render()
+                    .to_string()
+                    .lines()
+                    .next()
+                    .unwrap_or("error: bad arguments")
+            );
+            return ExitCode::from(2);
+        }
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::SUCCESS;
+        }
+    };
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
+        .init();
+    let runtime = match tokio::runtime::Runtime::new() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: starting the runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match runtime.block_on(daemon::run(args)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
