@@ -25,6 +25,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The loopback demo: server and workers on 127.0.0.1, a camera flight with impostors.
+    Demo(commands::demo::DemoArgs),
     /// Ray-trace the relief texture of one object for an eye.
     Bake(commands::bake::BakeArgs),
     /// Ray-trace a reference frame of the whole scene (per-pixel Phong).
@@ -63,6 +65,7 @@ fn main() -> ExitCode {
         .with_ansi(std::io::stderr().is_terminal())
         .init();
     let result = match cli.command {
+        Command::Demo(args) => commands::demo::run(args),
         Command::Bake(args) => commands::bake::run(args),
         Command::Reference(args) => commands::reference::run(args),
         Command::Frame(args) => commands::frame::run(args),

@@ -2,6 +2,7 @@
 
 pub mod bake;
 pub mod bench;
+pub mod demo;
 pub mod frame;
 pub mod reference;
 pub mod report;

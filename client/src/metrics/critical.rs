@@ -118,6 +118,25 @@ impl CriticalPoints {
             .fold(0.0, f32::max)
     }
 
+    /// Each region's predicted gap, texels (0 for regions without a pair).
+    pub fn region_gaps(&self, params: &WarpParams) -> Vec<f32> {
+        self.pairs
+            .iter()
+            .map(|p| p.map_or(0.0, |p| p.gap(params)))
+            .collect()
+    }
+
+    /// How much wider than in `baseline` (from [`CriticalPoints::region_gaps`] at the
+    /// texture's own eye) the widest region's gap has grown: the part of the error the
+    /// move away from the texture's eye adds.
+    pub fn worst_growth(&self, params: &WarpParams, baseline: &[f32]) -> f32 {
+        self.region_gaps(params)
+            .iter()
+            .zip(baseline)
+            .map(|(g, b)| g - b)
+            .fold(0.0, f32::max)
+    }
+
     /// The sum of the regions' predicted gaps, texels (5.6).
     pub fn region_gap(&self, params: &WarpParams) -> f32 {
         self.pairs.iter().flatten().map(|p| p.gap(params)).sum()

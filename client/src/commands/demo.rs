@@ -1,0 +1,407 @@
+//! `relief demo`: the whole system on 127.0.0.1 — a server and workers as child
+//! processes, and this client flying the scene's camera path with impostors,
+//! asking for the textures it will need. Writes frames and `summary.json`.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command as Process, Stdio};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, anyhow, bail};
+use clap::Args;
+use glam::Vec3;
+use serde::Serialize;
+use tokio::sync::mpsc::unbounded_channel;
+
+use relief_client::composite::{near_plane, render_geometry};
+use relief_client::gbuffer::GBuffer;
+use relief_client::manager::{Config, Manager, Show};
+use relief_client::metrics::image::compare;
+use relief_client::raster::rasterize;
+use relief_client::remote::Remote;
+use relief_client::report::median;
+use relief_client::source::{spawn_local, spawn_remote};
+use relief_client::warp::{Method, display};
+use relief_core::camera::{Camera, PathSegment};
+use relief_core::scene::{Scene, SceneObject};
+use relief_proto::bundle::bundle_for;
+use relief_worker::{SceneTracer, render_reference};
+
+use crate::{args, progress};
+
+#[derive(Args)]
+pub struct DemoArgs {
+    /// Built-in scene name, .toml scene file, or .obj file.
+    #[arg(long, default_value = "default")]
+    scene: String,
+    /// Frames to fly (default: the scene's whole camera path).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    frames: Option<u32>,
+    /// Output directory: frame_NNNNN.png and summary.json.
+    #[arg(long, default_value = "out/demo")]
+    out: PathBuf,
+    /// Workers to start.
+    #[arg(long, default_value = "2", value_parser = clap::value_parser!(u32).range(0..=64))]
+    workers: u32,
+    /// Use this server instead of starting one (e.g. http://10.0.0.5:7411).
+    #[arg(long, env = "RELIEF_SERVER")]
+    server: Option<String>,
+    /// Shared secret of the server given with --server.
+    #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// Network delay injected on the client side (half each way), milliseconds.
+    #[arg(long, default_value = "0", value_parser = clap::value_parser!(u64).range(0..=60_000))]
+    rtt_ms: u64,
+    /// Only ask for textures when they are needed (the baseline without prediction).
+    #[arg(long)]
+    no_predict: bool,
+    /// Largest growth of the predicted warp gap (screen pixels) before a texture is
+    /// replaced: the impostor lifetime knob.
+    #[arg(long, default_value = "2.0")]
+    tolerance: f32,
+    /// Compare with the ray-traced reference every K-th frame (0: never).
+    #[arg(long, default_value = "20")]
+    reference_every: u32,
+    /// Time the all-geometry frame every K-th frame.
+    #[arg(long, default_value = "10", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    geometry_every: u32,
+    /// Write every K-th frame as PNG (0: none).
+    #[arg(long, default_value = "10")]
+    write_every: u32,
+    /// Frame size WIDTHxHEIGHT.
+    #[arg(long, default_value = "640x360", value_parser = args::frame_size)]
+    size: (u32, u32),
+    /// Frames per second the camera moves at (frames are paced to it).
+    #[arg(long, default_value = "30", value_parser = clap::value_parser!(u32).range(1..=1000))]
+    fps: u32,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// What `summary.json` holds.
+#[derive(Serialize)]
+struct Summary {
+    frames: u32,
+    frame_ms_p50: f64,
+    frame_ms_p95: f64,
+    geometry_frame_ms_p50: f64,
+    requests_now: u64,
+    requests_predicted: u64,
+    withdrawn: u64,
+    latency_ms_p50: f64,
+    latency_ms_p99: f64,
+    /// Needed textures already there or in flight, and the needs counted.
+    prediction_hits: u64,
+    needs: u64,
+    stale_frames: u64,
+    /// New textures received per full turn for each object orbited by the path.
+    regenerations_per_orbit: std::collections::BTreeMap<String, f64>,
+    psnr_db_mean: f64,
+    psnr_db_min: f64,
+    rtt_ms: u64,
+    predict: bool,
+    tolerance: f32,
+    workers: u32,
+    source: String,
+}
+
+/// Child processes, killed when dropped.
+struct Children(Vec<Child>);
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        // Workers before the server they talk to.
+        for c in self.0.iter_mut().rev() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// A binary installed next to this one.
+fn sibling(name: &str) -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("locating the relief binary")?;
+    let path = exe.with_file_name(name);
+    if !path.is_file() {
+        bail!(
+            "{} not found next to {} (build the workspace: cargo build --release)",
+            name,
+            exe.display()
+        );
+    }
+    Ok(path)
+}
+
+/// Starts a server on an ephemeral 127.0.0.1 port; returns it and its URL.
+fn start_server(children: &mut Children, dir: &Path) -> Result<String> {
+    let mut child = Process::new(sibling("relief-server")?)
+        .args(["--listen", "127.0.0.1:0", "--lease-ms", "2000"])
+        .arg("--scene-dir")
+        .arg(dir)
+        .stdout(Stdio::piped())
+        .spawn()
+        .context("starting relief-server")?;
+    let stdout = child.stdout.take().context("server stdout")?;
+    children.0.push(child);
+    let mut line = String::new();
+    BufReader::new(stdout)
+        .read_line(&mut line)
+        .context("reading the server's address")?;
+    let address = line
+        .trim()
+        .strip_prefix("relief-server listening on ")
+        .ok_or_else(|| anyhow!("relief-server did not start: {line:?}"))?;
+    Ok(format!("http://{address}"))
+}
+
+/// The index of the object an orbit segment circles, if any.
+fn orbited(scene: &Scene, segment: &PathSegment) -> Option<usize> {
+    let PathSegment::Orbit { center, .. } = segment else {
+        return None;
+    };
+    let c = Vec3::from_array(*center);
+    scene
+        .objects
+        .iter()
+        .position(|o| o.bounds.expanded(1e-3).contains(c) && o.mesh.triangle_count() >= 1000)
+}
+
+pub fn run(args: DemoArgs) -> Result<()> {
+    if !(args.tolerance.is_finite() && args.tolerance > 0.0) {
+        bail!("--tolerance must be a positive number of pixels");
+    }
+    let scene = Arc::new(Scene::load(&args.scene)?);
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let mut children = Children(Vec::new());
+    let bar = progress::spinner("starting server and workers");
+    let url = match &args.server {
+        Some(url) => Some(url.clone()),
+        None => match sibling("relief-worker")
+            .and_then(|_| start_server(&mut children, &args.out.join("server-scenes")))
+        {
+            Ok(url) => Some(url),
+            Err(e) => {
+                eprintln!("warning: no server ({e:#}); generating textures in-process");
+                None
+            }
+        },
+    };
+    if args.server.is_none()
+        && let Some(url) = &url
+    {
+        let worker = sibling("relief-worker")?;
+        for k in 0..args.workers {
+            let child = Process::new(&worker)
+                .args([
+                    "--server",
+                    url,
+                    "--name",
+                    &format!("demo-{k}"),
+                    "--heartbeat-ms",
+                    "250",
+                ])
+                .arg("--scene-dir")
+                .arg(args.out.join(format!("worker-{k}-scenes")))
+                .spawn()
+                .context("starting relief-worker")?;
+            children.0.push(child);
+        }
+    }
+    let (commands_tx, commands_rx) = unbounded_channel();
+    let (arrivals_tx, arrivals_rx) = unbounded_channel();
+    let source = match &url {
+        Some(url) => runtime.block_on(async {
+            let mut remote = Remote::connect(
+                url,
+                args.token.as_deref(),
+                &format!("demo-{}", std::process::id()),
+            )
+            .await
+            .map_err(|e| anyhow!(e))?;
+            let bundle = bundle_for(&args.scene)?;
+            let hash = remote
+                .put_scene(&bundle)
+                .await
+                .map_err(|e| anyhow!("uploading the scene: {}", e.message()))?;
+            if args.server.is_none() {
+                let start = Instant::now();
+                while remote.stats().await.map_or(0, |s| s.workers) < args.workers {
+                    if start.elapsed() > Duration::from_secs(20) {
+                        bail!("the workers did not register within 20 s");
+                    }
+                    tokio::time::sleep(Duration::from_millis(20)).await;
+                }
+            }
+            spawn_remote(
+                remote,
+                hash,
+                scene.clone(),
+                commands_rx,
+                arrivals_tx,
+                Duration::from_millis(args.rtt_ms),
+            );
+            Ok::<_, anyhow::Error>(format!("server {url}"))
+        })?,
+        None => {
+            spawn_local(scene.clone(), commands_rx, arrivals_tx);
+            "in-process generator".to_string()
+        }
+    };
+    let config = Config {
+        tolerance: args.tolerance,
+        predict: !args.no_predict,
+        ..Config::default()
+    };
+    let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
+    let frames = args.frames.unwrap_or(scene.path.frame_count().max(1));
+    let (w, h) = args.size;
+    let tracer = (args.reference_every > 0).then(|| SceneTracer::new(&scene));
+    bar.finish_and_clear();
+    let bar = progress::bar(frames as u64, "flying");
+    let mut gbuffer = GBuffer::new(w, h);
+    let mut frame_ms = Vec::new();
+    let mut geometry_ms = Vec::new();
+    let mut psnr = Vec::new();
+    // Orbit segments: their frame range, object and turns.
+    let mut orbits = Vec::new();
+    let mut first = 0u32;
+    for segment in &scene.path.segments {
+        let n = match segment {
+            PathSegment::Orbit { frames, .. } | PathSegment::Fly { frames, .. } => *frames,
+        };
+        if let (Some(object), PathSegment::Orbit { turns, .. }) = (orbited(&scene, segment), segment) {
+            orbits.push((first, first + n, object, *turns, 0u64));
+        }
+        first += n;
+    }
+    let start = Instant::now();
+    let period = Duration::from_secs_f64(1.0 / args.fps as f64);
+    for frame in 0..frames {
+        // Pace the camera to real time: latency is real.
+        let due = period * frame;
+        if let Some(wait) = due.checked_sub(start.elapsed()) {
+            std::thread::sleep(wait);
+        }
+        for orbit in &mut orbits {
+            if frame == orbit.0 {
+                orbit.4 = manager.received(orbit.2);
+            }
+            if frame + 1 == orbit.1 || (frame + 1 == frames && frame < orbit.1 && frame >= orbit.0) {
+                orbit.4 = manager.received(orbit.2) - orbit.4;
+            }
+        }
+        let Some(pose) = scene.path.pose(frame) else { break };
+        let camera = Camera::look_at(pose.eye, pose.target, Vec3::Y, scene.fov_y_degrees, w, h)
+            .map_err(|e| anyhow!(e))?;
+        let began = Instant::now();
+        let shows = manager.frame(&scene, &camera, start.elapsed().as_secs_f64());
+        gbuffer.clear();
+        let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
+        for (k, show) in shows.iter().enumerate() {
+            match *show {
+                Show::Geometry => geometry.push((k as u32, &scene.objects[k])),
+                Show::Impostor { texture, level } => {
+                    let impostor = &manager.pyramid(k, texture).levels[level];
+                    if display(Method::Interleaved, impostor, k as u32, &camera, &mut gbuffer).is_err() {
+                        geometry.push((k as u32, &scene.objects[k]));
+                    }
+                }
+            }
+        }
+        rasterize(&geometry, &camera, near_plane(&scene), &mut gbuffer);
+        let image = gbuffer.shade(&scene, &camera);
+        frame_ms.push(began.elapsed().as_secs_f64() * 1e3);
+        if args.write_every > 0 && frame % args.write_every == 0 {
+            image.save_png(&args.out.join(format!("frame_{frame:05}.png")))?;
+        }
+        if let Some(tracer) = &tracer
+            && frame % args.reference_every == 0
+        {
+            let reference = render_reference(tracer, &camera);
+            psnr.push(compare(&image, &reference, None).psnr_db);
+        }
+        if frame % args.geometry_every == 0 {
+            let mut all = GBuffer::new(w, h);
+            let began = Instant::now();
+            drop(render_geometry(&scene, &camera, &mut all));
+            geometry_ms.push(began.elapsed().as_secs_f64() * 1e3);
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let counters = &manager.counters;
+    let percentile = |values: &[f64], p: f64| {
+        let mut v = values.to_vec();
+        v.sort_by(f64::total_cmp);
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v[((v.len() - 1) as f64 * p).round() as usize]
+        }
+    };
+    let finite: Vec<f64> = psnr.iter().copied().filter(|p| p.is_finite()).collect();
+    let summary = Summary {
+        frames,
+        frame_ms_p50: median(frame_ms.clone()),
+        frame_ms_p95: percentile(&frame_ms, 0.95),
+        geometry_frame_ms_p50: median(geometry_ms),
+        requests_now: counters.requests_now,
+        requests_predicted: counters.requests_predicted,
+        withdrawn: counters.withdrawn,
+        latency_ms_p50: percentile(&counters.latencies_ms, 0.5),
+        latency_ms_p99: percentile(&counters.latencies_ms, 0.99),
+        prediction_hits: counters.prediction_hits,
+        needs: counters.needs,
+        stale_frames: counters.stale_frames,
+        regenerations_per_orbit: orbits
+            .iter()
+            .map(|&(_, _, object, turns, count)| {
+                (
+                    scene.objects[object].name.clone(),
+                    count as f64 / turns.max(1e-3) as f64,
+                )
+            })
+            .collect(),
+        psnr_db_mean: finite.iter().sum::<f64>() / finite.len().max(1) as f64,
+        psnr_db_min: finite.iter().copied().fold(f64::INFINITY, f64::min),
+        rtt_ms: args.rtt_ms,
+        predict: !args.no_predict,
+        tolerance: args.tolerance,
+        workers: args.workers,
+        source,
+    };
+    let json = serde_json::to_string_pretty(&summary)?;
+    std::fs::write(args.out.join("summary.json"), &json).context("writing summary.json")?;
+    if args.json {
+        println!("{json}");
+    } else {
+        println!(
+            "{} frames ({}x{}) from {}: frame {:.1} ms p50 / {:.1} p95 (all geometry {:.1} ms); \
+             {} requests now, {} predicted, latency {:.0} ms p50 / {:.0} p99; {} stale frames; PSNR {:.1} dB mean, {:.1} min -> {}",
+            summary.frames,
+            w,
+            h,
+            summary.source,
+            summary.frame_ms_p50,
+            summary.frame_ms_p95,
+            summary.geometry_frame_ms_p50,
+            summary.requests_now,
+            summary.requests_predicted,
+            summary.latency_ms_p50,
+            summary.latency_ms_p99,
+            summary.stale_frames,
+            summary.psnr_db_mean,
+            summary.psnr_db_min,
+            args.out.display()
+        );
+    }
+    drop(children);
+    Ok(())
+}

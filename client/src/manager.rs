@@ -1,0 +1,438 @@
+//! The impostor manager: per object and frame, decide geometry / warp / regenerate,
+//! keep a cache of relief textures, and ask for the textures the eye will need —
+//! predicted ahead of need, early enough to cover the measured round trip — without
+//! ever waiting for the network: requests go out on a channel, textures come back on
+//! another, and each frame takes whatever has arrived.
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use glam::Vec3;
+use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender};
+
+use relief_core::camera::Camera;
+use relief_core::relief::{DepthBits, ReliefTexture};
+use relief_core::scene::Scene;
+
+use crate::composite::{CHEAP_TRIANGLES, MAX_TEXTURE, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason};
+use crate::metrics::critical::CriticalPoints;
+use crate::metrics::schaufler::{initial_resolution, needs_finer_texture};
+use crate::predict::Predictor;
+use crate::pyramid::Pyramid;
+use crate::warp::params::WarpParams;
+
+/// A texture the manager wants made.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TextureRequest {
+    pub id: u64,
+    pub object: String,
+    pub eye: Vec3,
+    pub size: u32,
+    pub depth_bits: DepthBits,
+    /// `None`: needed now; `Some(ms)`: expected to be needed in `ms`.
+    pub needed_in_ms: Option<u64>,
+}
+
+/// What the manager sends to whoever makes textures.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Command {
+    Request(TextureRequest),
+    Withdraw(Vec<u64>),
+}
+
+/// What comes back.
+#[derive(Debug)]
+pub enum Arrival {
+    Texture {
+        id: u64,
+        texture: ReliefTexture,
+        is_final: bool,
+    },
+    Failed {
+        id: u64,
+        reason: String,
+    },
+}
+
+/// Tuning of the manager.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Largest growth of the predicted gap (worst of 8×8 regions, eq. 5-5…5-7, over
+    /// the gaps at the texture's own eye), in screen pixels, before a texture counts
+    /// as stale and a new one is needed.
+    pub tolerance: f32,
+    /// Ask for predicted textures (off: only when needed now).
+    pub predict: bool,
+    /// Round-trip estimate (seconds) before any request has been measured.
+    pub initial_latency: f64,
+    /// Textures kept per object.
+    pub keep: usize,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            tolerance: 2.0,
+            predict: true,
+            initial_latency: 0.15,
+            keep: 8,
+        }
+    }
+}
+
+/// A texture held for an object.
+struct Held {
+    pyramid: Pyramid,
+    critical: CriticalPoints,
+    /// The regions' gaps at the texture's own eye: what it shows at best.
+    baseline: Vec<f32>,
+    eye: Vec3,
+    is_final: bool,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    object: usize,
+    eye: Vec3,
+    predicted: bool,
+    sent: Instant,
+}
+
+#[derive(Default)]
+struct ObjectState {
+    held: Vec<Held>,
+    /// Angle (radians) over which textures of this object have stayed valid, learnt.
+    valid_angle: Option<f32>,
+    /// Textures of this object requested.
+    requested: u64,
+    /// Final textures of this object received.
+    received: u64,
+}
+
+/// How an object is drawn this frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Show {
+    Geometry,
+    /// Held texture `texture`, pyramid level `level`.
+    Impostor {
+        texture: usize,
+        level: usize,
+    },
+}
+
+/// Counters for the demo's summary.
+#[derive(Debug, Clone, Default)]
+pub struct Counters {
+    pub requests_now: u64,
+    pub requests_predicted: u64,
+    pub withdrawn: u64,
+    /// Request → final texture, milliseconds.
+    pub latencies_ms: Vec<f64>,
+    /// Frames × objects where a valid texture was needed.
+    pub needs: u64,
+    /// … and one was there or already asked for.
+    pub prediction_hits: u64,
+    /// Frames where some impostor was shown above tolerance or missing.
+    pub stale_frames: u64,
+}
+
+/// The manager of one client.
+pub struct Manager {
+    config: Config,
+    objects: Vec<ObjectState>,
+    predictor: Predictor,
+    pending: HashMap<u64, Pending>,
+    next_id: u64,
+    commands: UnboundedSender<Command>,
+    arrivals: UnboundedReceiver<Arrival>,
+    latency: f64,
+    pub counters: Counters,
+}
+
+/// The angle at `centre` between two eyes.
+fn angle_between(centre: Vec3, a: Vec3, b: Vec3) -> f32 {
+    (a - centre).angle_between(b - centre)
+}
+
+impl Manager {
+    pub fn new(
+        scene: &Scene,
+        config: Config,
+        commands: UnboundedSender<Command>,
+        arrivals: UnboundedReceiver<Arrival>,
+    ) -> Self {
+        Manager {
+            latency: config.initial_latency,
+            config,
+            objects: scene.objects.iter().map(|_| ObjectState::default()).collect(),
+            predictor: Predictor::default(),
+            pending: HashMap::new(),
+            next_id: 1,
+            commands,
+            arrivals,
+            counters: Counters::default(),
+        }
+    }
+
+    /// Textures requested per object so far.
+    pub fn requested(&self, object: usize) -> u64 {
+        self.objects.get(object).map_or(0, |o| o.requested)
+    }
+
+    /// Final textures received per object so far: the regenerations.
+    pub fn received(&self, object: usize) -> u64 {
+        self.objects.get(object).map_or(0, |o| o.received)
+    }
+
+    /// The held texture `texture` of `object`.
+    pub fn pyramid(&self, object: usize, texture: usize) -> &Pyramid {
+        &self.objects[object].held[texture].pyramid
+    }
+
+    /// Takes in what has arrived (never waits).
+    fn drain(&mut self, eye: Vec3, scene: &Scene) {
+        while let Ok(arrival) = self.arrivals.try_recv() {
+            match arrival {
+                Arrival::Texture {
+                    id,
+                    texture,
+                    is_final,
+                } => {
+                    let Some(p) = self.pending.get(&id).copied() else {
+                        continue; // Withdrawn meanwhile.
+                    };
+                    if is_final {
+                        self.pending.remove(&id);
+                        let ms = p.sent.elapsed().as_secs_f64() * 1e3;
+                        self.counters.latencies_ms.push(ms);
+                        // Follow the measured round trip (smoothed).
+                        self.latency = 0.8 * self.latency + 0.2 * ms / 1e3;
+                    }
+                    let critical = CriticalPoints::find(&texture, 8, 8);
+                    let baseline = WarpParams::new(&texture, texture.eye).map_or_else(
+                        |_| vec![0.0; critical.pairs.len()],
+                        |params| critical.region_gaps(&params),
+                    );
+                    let state = &mut self.objects[p.object];
+                    state.received += is_final as u64;
+                    // A final texture replaces its own preview.
+                    state.held.retain(|h| h.is_final || h.eye != p.eye);
+                    state.held.push(Held {
+                        eye: p.eye,
+                        pyramid: Pyramid::new(texture, MIN_TEXTURE),
+                        critical,
+                        baseline,
+                        is_final,
+                    });
+                    // Keep the textures nearest the eye.
+                    if state.held.len() > self.config.keep {
+                        let centre = scene.objects[p.object].bounds.center();
+                        state.held.sort_by(|a, b| {
+                            angle_between(centre, a.eye, eye).total_cmp(&angle_between(centre, b.eye, eye))
+                        });
+                        state.held.truncate(self.config.keep);
+                    }
+                }
+                Arrival::Failed { id, reason } => {
+                    tracing::warn!("texture request {id} failed: {reason}");
+                    self.pending.remove(&id);
+                }
+            }
+        }
+    }
+
+    /// How much each held texture of `object` degrades when warped to `eye`: the growth
+    /// of its widest predicted gap over the gaps it has at its own eye, in screen pixels
+    /// (`INFINITY` when it cannot be warped there or is too coarse for `camera`).
+    fn gaps(&self, object: usize, eye: Vec3, camera: &Camera) -> Vec<f32> {
+        let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
+        self.objects[object]
+            .held
+            .iter()
+            .map(|h| {
+                let texture = &h.pyramid.levels[0].texture;
+                if needs_finer_texture(&texture.camera, &Camera { eye, ..*camera }, 2.0 * TEXEL_TOLERANCE) {
+                    return f32::INFINITY;
+                }
+                let Ok(params) = WarpParams::new(texture, eye) else {
+                    return f32::INFINITY;
+                };
+                // Texels to pixels: a texel's size seen from the eye.
+                let centre = texture.camera.origin
+                    + texture.camera.a * (texture.camera.width as f32 * 0.5)
+                    + texture.camera.b * (texture.camera.height as f32 * 0.5);
+                let texel = texture.camera.a.length().max(texture.camera.b.length());
+                let pixels_per_texel = texel * focal / centre.distance(eye).max(f32::MIN_POSITIVE);
+                h.critical.worst_growth(&params, &h.baseline) * pixels_per_texel
+            })
+            .collect()
+    }
+
+    /// Whether a request for `object` is already out (one at a time per object keeps
+    /// the queue short; a stale one is withdrawn by [`Manager::predict_for`]).
+    fn pending_for(&self, object: usize) -> bool {
+        self.pending.values().any(|p| p.object == object)
+    }
+
+    fn request(
+        &mut self,
+        scene: &Scene,
+        object: usize,
+        eye: Vec3,
+        camera: &Camera,
+        needed_in_ms: Option<u64>,
+    ) {
+        let o = &scene.objects[object];
+        let centre = o.bounds.center();
+        let size = initial_resolution(
+            camera.height,
+            o.bounds.extent().length(),
+            centre.distance(eye),
+            camera.fov_y,
+        )
+        .next_power_of_two()
+        .clamp(MIN_TEXTURE.max(32), MAX_TEXTURE.min(512));
+        let id = self.next_id;
+        self.next_id += 1;
+        let request = TextureRequest {
+            id,
+            object: o.name.clone(),
+            eye,
+            size,
+            depth_bits: DepthBits::Eight,
+            needed_in_ms,
+        };
+        if self.commands.send(Command::Request(request)).is_err() {
+            return;
+        }
+        self.pending.insert(
+            id,
+            Pending {
+                object,
+                eye,
+                predicted: needed_in_ms.is_some(),
+                sent: Instant::now(),
+            },
+        );
+        self.objects[object].requested += 1;
+        match needed_in_ms {
+            Some(_) => self.counters.requests_predicted += 1,
+            None => self.counters.requests_now += 1,
+        }
+    }
+
+    /// Decides how each object is drawn from `camera` at time `t` (seconds), asking for
+    /// textures as needed. Never blocks.
+    pub fn frame(&mut self, scene: &Scene, camera: &Camera, t: f64) -> Vec<Show> {
+        self.drain(camera.eye, scene);
+        self.predictor.observe(t, camera.eye);
+        let mut stale = false;
+        let mut shows = Vec::with_capacity(scene.objects.len());
+        for (k, object) in scene.objects.iter().enumerate() {
+            if object.mesh.triangle_count() < CHEAP_TRIANGLES || geometry_reason(object, camera.eye).is_some()
+            {
+                shows.push(Show::Geometry);
+                continue;
+            }
+            let centre = object.bounds.center();
+            let gaps = self.gaps(k, camera.eye, camera);
+            let best = gaps
+                .iter()
+                .enumerate()
+                .min_by(|a, b| a.1.total_cmp(b.1))
+                .map(|(i, &g)| (i, g));
+            self.counters.needs += 1;
+            let valid = best.is_some_and(|(_, g)| g <= self.config.tolerance);
+            if valid || self.pending_for(k) {
+                self.counters.prediction_hits += 1;
+            }
+            if !valid {
+                stale = true;
+                // Learn how far textures of this object stay valid.
+                if let Some((i, g)) = best
+                    && g.is_finite()
+                {
+                    let angle = angle_between(centre, self.objects[k].held[i].eye, camera.eye)
+                        .max(0.5f32.to_radians());
+                    let learnt = self.objects[k]
+                        .valid_angle
+                        .map_or(angle, |a| 0.7 * a + 0.3 * angle);
+                    self.objects[k].valid_angle = Some(learnt);
+                }
+                if !self.pending_for(k) {
+                    self.request(scene, k, camera.eye, camera, None);
+                }
+            }
+            if self.config.predict {
+                self.predict_for(scene, k, camera);
+            }
+            shows.push(match best {
+                Some((i, g)) if g.is_finite() => {
+                    let level = self.objects[k].held[i].pyramid.level_for(camera, TEXEL_TOLERANCE);
+                    Show::Impostor { texture: i, level }
+                }
+                _ => Show::Geometry,
+            });
+        }
+        if stale {
+            self.counters.stale_frames += 1;
+        }
+        shows
+    }
+
+    /// Asks ahead for the texture the eye will need after the round trip, and withdraws
+    /// predictions the motion has left behind.
+    fn predict_for(&mut self, scene: &Scene, k: usize, camera: &Camera) {
+        let centre = scene.objects[k].bounds.center();
+        let valid_angle = self.objects[k].valid_angle.unwrap_or(4f32.to_radians());
+        // How fast the eye turns around this object.
+        let step = 0.05;
+        let (Some(now), Some(soon)) = (self.predictor.predict(0.0), self.predictor.predict(step)) else {
+            return;
+        };
+        let turn_rate = angle_between(centre, now, soon) as f64 / step;
+        // Bake for the middle of the span the texture will serve after it arrives.
+        let serve = if turn_rate > 1e-4 {
+            0.5 * valid_angle as f64 / turn_rate
+        } else {
+            0.0
+        };
+        let horizon = (self.latency * 1.5 + serve).min(3.0);
+        let Some(future) = self.predictor.predict(horizon) else {
+            return;
+        };
+        if scene.objects[k]
+            .bounds
+            .expanded(scene.objects[k].bounds.extent().length() * 0.05)
+            .contains(future)
+        {
+            return;
+        }
+        let covered = self
+            .gaps(k, future, camera)
+            .iter()
+            .any(|&g| g <= self.config.tolerance)
+            || self.pending_for(k);
+        if !covered {
+            self.request(scene, k, future, camera, Some((self.latency * 1e3) as u64));
+        }
+        // Predictions neither the eye nor its future will meet any more.
+        let stale: Vec<u64> = self
+            .pending
+            .iter()
+            .filter(|(_, p)| p.object == k && p.predicted)
+            .filter(|(_, p)| {
+                angle_between(centre, p.eye, camera.eye) > 2.0 * valid_angle
+                    && angle_between(centre, p.eye, future) > 2.0 * valid_angle
+            })
+            .map(|(&id, _)| id)
+            .collect();
+        if !stale.is_empty() {
+            for id in &stale {
+                self.pending.remove(id);
+            }
+            self.counters.withdrawn += stale.len() as u64;
+            let _ = self.commands.send(Command::Withdraw(stale));
+        }
+    }
+}

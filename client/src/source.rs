@@ -1,0 +1,193 @@
+//! Where the manager's textures come from: a Relief server over gRPC (with an
+//! optional injected round trip, to show latency hiding), or the in-process generator
+//! — the same ray tracer on one low-priority thread — when no server answers.
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
+
+use relief_core::hash::ContentHash;
+use relief_core::scene::Scene;
+use relief_proto::convert::{texture_from_pb, vec3_to_pb};
+use relief_proto::pb;
+use relief_worker::bake;
+use relief_worker::tracer::ObjectTracer;
+
+use crate::manager::{Arrival, Command, TextureRequest};
+use crate::remote::Remote;
+
+fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::ImpostorRequest {
+    pb::ImpostorRequest {
+        scene_hash: scene.to_string(),
+        object: request.object.clone(),
+        eye: Some(vec3_to_pb(request.eye)),
+        size: request.size,
+        depth_bits: request.depth_bits.bits(),
+        urgency: if request.needed_in_ms.is_some() {
+            pb::Urgency::Predicted
+        } else {
+            pb::Urgency::Now
+        } as i32,
+        needed_in_ms: request.needed_in_ms.unwrap_or(0),
+        client_id: client_id.to_string(),
+        request_id: request.id,
+        progressive: request.needed_in_ms.is_none(),
+    }
+}
+
+/// Serves `commands` with `remote` on the current tokio runtime; `rtt` is added to
+/// every exchange (half each way). A request the server cannot take (unreachable)
+/// goes to the local generator instead.
+pub fn spawn_remote(
+    remote: Remote,
+    scene_hash: ContentHash,
+    scene: Arc<Scene>,
+    mut commands: UnboundedReceiver<Command>,
+    arrivals: UnboundedSender<Arrival>,
+    rtt: Duration,
+) {
+    let half = rtt / 2;
+    let (local_tx, local_rx) = unbounded_channel();
+    spawn_local(scene, local_rx, arrivals.clone());
+    tokio::spawn(async move {
+        while let Some(command) = commands.recv().await {
+            let mut remote = remote.clone();
+            let arrivals = arrivals.clone();
+            let local = local_tx.clone();
+            tokio::spawn(async move {
+                tokio::time::sleep(half).await;
+                match command {
+                    Command::Withdraw(ids) => {
+                        let _ = remote.withdraw(&ids).await;
+                        let _ = local.send(Command::Withdraw(ids));
+                    }
+                    Command::Request(request) => {
+                        let wire = to_pb(&request, scene_hash, &remote.client_id);
+                        let mut stream = match remote.request(wire).await {
+                            Ok(s) => s,
+                            Err(e) if e.code() == tonic::Code::Unavailable => {
+                                let _ = local.send(Command::Request(request));
+                                return;
+                            }
+                            Err(e) => {
+                                let _ = arrivals.send(Arrival::Failed {
+                                    id: request.id,
+                                    reason: e.message().to_string(),
+                                });
+                                return;
+                            }
+                        };
+                        loop {
+                            match stream.message().await {
+                                Ok(Some(result)) => {
+                                    tokio::time::sleep(half).await;
+                                    let texture =
+                                        result.texture.as_ref().map(|t| texture_from_pb("texture", t));
+                                    let arrival = match texture {
+                                        Some(Ok(texture)) => Arrival::Texture {
+                                            id: request.id,
+                                            texture,
+                                            is_final: result.r#final,
+                                        },
+                                        Some(Err(e)) => Arrival::Failed {
+                                            id: request.id,
+                                            reason: e.message().to_string(),
+                                        },
+                                        None => Arrival::Failed {
+                                            id: request.id,
+                                            reason: "a result without a texture".into(),
+                                        },
+                                    };
+                                    let _ = arrivals.send(arrival);
+                                }
+                                Ok(None) => return,
+                                Err(e) if e.code() == tonic::Code::Cancelled => return,
+                                Err(e) => {
+                                    let _ = arrivals.send(Arrival::Failed {
+                                        id: request.id,
+                                        reason: e.message().to_string(),
+                                    });
+                                    return;
+                                }
+                            }
+                        }
+                    }
+                }
+            });
+        }
+    });
+}
+
+/// Serves `commands` in-process on one low-priority thread: needed-now requests first,
+/// withdrawn ones dropped.
+pub fn spawn_local(
+    scene: Arc<Scene>,
+    mut commands: UnboundedReceiver<Command>,
+    arrivals: UnboundedSender<Arrival>,
+) {
+    std::thread::Builder::new()
+        .name("relief-local-generator".into())
+        .spawn(move || {
+            let Ok(pool) = rayon::ThreadPoolBuilder::new().num_threads(1).build() else {
+                return;
+            };
+            let mut tracers: HashMap<String, ObjectTracer> = HashMap::new();
+            let mut queue: VecDeque<TextureRequest> = VecDeque::new();
+            loop {
+                // Take everything that has come in; wait only when idle.
+                let next = if queue.is_empty() {
+                    commands.blocking_recv()
+                } else {
+                    commands.try_recv().ok()
+                };
+                match next {
+                    Some(Command::Request(r)) => {
+                        if r.needed_in_ms.is_none() {
+                            queue.push_front(r);
+                        } else {
+                            queue.push_back(r);
+                        }
+                        continue;
+                    }
+                    Some(Command::Withdraw(ids)) => {
+                        queue.retain(|r| !ids.contains(&r.id));
+                        continue;
+                    }
+                    None if queue.is_empty() => return,
+                    None => {}
+                }
+                let Some(request) = queue.pop_front() else {
+                    continue;
+                };
+                let arrival = match scene.object(&request.object) {
+                    Err(e) => Arrival::Failed {
+                        id: request.id,
+                        reason: e.to_string(),
+                    },
+                    Ok(object) => {
+                        let tracer = tracers
+                            .entry(request.object.clone())
+                            .or_insert_with(|| pool.install(|| ObjectTracer::new(object)));
+                        match pool.install(|| bake(tracer, request.eye, request.size, request.depth_bits)) {
+                            Ok(texture) => Arrival::Texture {
+                                id: request.id,
+                                texture,
+                                is_final: true,
+                            },
+                            Err(e) => Arrival::Failed {
+                                id: request.id,
+                                reason: e.to_string(),
+                            },
+                        }
+                    }
+                };
+                if arrivals.send(arrival).is_err() {
+                    return;
+                }
+            }
+        })
+        .map(drop)
+        .unwrap_or_else(|e| tracing::warn!("no local generator: {e}"));
+}
