@@ -27,6 +27,8 @@ struct Cli {
 enum Command {
     /// The loopback demo: server and workers on 127.0.0.1, a camera flight with impostors.
     Demo(commands::demo::DemoArgs),
+    /// The same client flight against a remote server (`--server URL` required).
+    Render(commands::demo::DemoArgs),
     /// Ray-trace the relief texture of one object for an eye.
     Bake(commands::bake::BakeArgs),
     /// Ray-trace a reference frame of the whole scene (per-pixel Phong).
@@ -66,6 +68,10 @@ fn main() -> ExitCode {
         .init();
     let result = match cli.command {
         Command::Demo(args) => commands::demo::run(args),
+        Command::Render(args) if args.server.is_none() => Err(anyhow::anyhow!(
+            "render needs --server URL (or RELIEF_SERVER); `relief demo` starts its own"
+        )),
+        Command::Render(args) => commands::demo::run(args),
         Command::Bake(args) => commands::bake::run(args),
         Command::Reference(args) => commands::reference::run(args),
         Command::Frame(args) => commands::frame::run(args),

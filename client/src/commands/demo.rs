@@ -46,7 +46,7 @@ pub struct DemoArgs {
     workers: u32,
     /// Use this server instead of starting one (e.g. http://10.0.0.5:7411).
     #[arg(long, env = "RELIEF_SERVER")]
-    server: Option<String>,
+    pub server: Option<String>,
     /// Shared secret of the server given with --server.
     #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
     token: Option<String>,
