@@ -43,8 +43,8 @@ impl Remote {
             scenes: pb::scenes_client::ScenesClient::with_interceptor(channel.clone(), auth.clone())
                 .send_compressed(CompressionEncoding::Zstd)
                 .accept_compressed(CompressionEncoding::Zstd),
+            // Requests to Impostors are a few bytes: sent plain; textures come back compressed.
             impostors: pb::impostors_client::ImpostorsClient::with_interceptor(channel, auth)
-                .send_compressed(CompressionEncoding::Zstd)
                 .accept_compressed(CompressionEncoding::Zstd)
                 .max_decoding_message_size(256 << 20),
             client_id: client_id.to_string(),

@@ -43,6 +43,13 @@ impl Shared {
 #[derive(Clone)]
 pub struct Service(pub Arc<Shared>);
 
+/// A reply of a few bytes: compressing it would cost more than it saves.
+fn small<T>(message: T) -> Response<T> {
+    let mut response = Response::new(message);
+    response.disable_compression();
+    response
+}
+
 type BoxStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send>>;
 
 #[tonic::async_trait]
@@ -144,11 +151,11 @@ impl pb::impostors_server::Impostors for Service {
         let mut state = self.0.state();
         let withdrawn = state.withdraw(&r.client_id, &r.request_ids);
         state.dispatch();
-        Ok(Response::new(pb::WithdrawReply { withdrawn }))
+        Ok(small(pb::WithdrawReply { withdrawn }))
     }
 
     async fn stats(&self, _: Request<pb::StatsRequest>) -> Result<Response<pb::StatsReply>, Status> {
-        Ok(Response::new(self.0.state().stats()))
+        Ok(small(self.0.state().stats()))
     }
 }
 

@@ -2,9 +2,7 @@
 //! processes, and this client flying the scene's camera path with impostors,
 //! asking for the textures it will need. Writes frames and `summary.json`.
 
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command as Process, Stdio};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -28,6 +26,7 @@ use relief_core::scene::{Scene, SceneObject};
 use relief_proto::bundle::bundle_for;
 use relief_worker::{SceneTracer, render_reference};
 
+use super::processes::{Children, sibling, start_server, start_workers};
 use crate::{args, progress};
 
 #[derive(Args)]
@@ -107,55 +106,6 @@ struct Summary {
     source: String,
 }
 
-/// Child processes, killed when dropped.
-struct Children(Vec<Child>);
-
-impl Drop for Children {
-    fn drop(&mut self) {
-        // Workers before the server they talk to.
-        for c in self.0.iter_mut().rev() {
-            let _ = c.kill();
-            let _ = c.wait();
-        }
-    }
-}
-
-/// A binary installed next to this one.
-fn sibling(name: &str) -> Result<PathBuf> {
-    let exe = std::env::current_exe().context("locating the relief binary")?;
-    let path = exe.with_file_name(name);
-    if !path.is_file() {
-        bail!(
-            "{} not found next to {} (build the workspace: cargo build --release)",
-            name,
-            exe.display()
-        );
-    }
-    Ok(path)
-}
-
-/// Starts a server on an ephemeral 127.0.0.1 port; returns it and its URL.
-fn start_server(children: &mut Children, dir: &Path) -> Result<String> {
-    let mut child = Process::new(sibling("relief-server")?)
-        .args(["--listen", "127.0.0.1:0", "--lease-ms", "2000"])
-        .arg("--scene-dir")
-        .arg(dir)
-        .stdout(Stdio::piped())
-        .spawn()
-        .context("starting relief-server")?;
-    let stdout = child.stdout.take().context("server stdout")?;
-    children.0.push(child);
-    let mut line = String::new();
-    BufReader::new(stdout)
-        .read_line(&mut line)
-        .context("reading the server's address")?;
-    let address = line
-        .trim()
-        .strip_prefix("relief-server listening on ")
-        .ok_or_else(|| anyhow!("relief-server did not start: {line:?}"))?;
-    Ok(format!("http://{address}"))
-}
-
 /// The index of the object an orbit segment circles, if any.
 fn orbited(scene: &Scene, segment: &PathSegment) -> Option<usize> {
     let PathSegment::Orbit { center, .. } = segment else {
@@ -196,23 +146,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     if args.server.is_none()
         && let Some(url) = &url
     {
-        let worker = sibling("relief-worker")?;
-        for k in 0..args.workers {
-            let child = Process::new(&worker)
-                .args([
-                    "--server",
-                    url,
-                    "--name",
-                    &format!("demo-{k}"),
-                    "--heartbeat-ms",
-                    "250",
-                ])
-                .arg("--scene-dir")
-                .arg(args.out.join(format!("worker-{k}-scenes")))
-                .spawn()
-                .context("starting relief-worker")?;
-            children.0.push(child);
-        }
+        start_workers(&mut children, url, args.workers, &args.out)?;
     }
     let (commands_tx, commands_rx) = unbounded_channel();
     let (arrivals_tx, arrivals_rx) = unbounded_channel();

@@ -4,5 +4,6 @@ pub mod bake;
 pub mod bench;
 pub mod demo;
 pub mod frame;
+pub mod processes;
 pub mod reference;
 pub mod report;

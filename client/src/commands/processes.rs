@@ -1,0 +1,78 @@
+//! Child processes of the commands that run the whole system on 127.0.0.1.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+use anyhow::{Context, Result, anyhow, bail};
+
+/// Child processes, killed when dropped.
+pub struct Children(pub Vec<Child>);
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        // Workers before the server they talk to.
+        for c in self.0.iter_mut().rev() {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
+/// A binary installed next to this one.
+pub fn sibling(name: &str) -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("locating the relief binary")?;
+    let path = exe.with_file_name(name);
+    if !path.is_file() {
+        bail!(
+            "{} not found next to {} (build the workspace: cargo build --release)",
+            name,
+            exe.display()
+        );
+    }
+    Ok(path)
+}
+
+/// Starts a server on an ephemeral 127.0.0.1 port; returns it and its URL.
+pub fn start_server(children: &mut Children, dir: &Path) -> Result<String> {
+    let mut child = Command::new(sibling("relief-server")?)
+        .args(["--listen", "127.0.0.1:0", "--lease-ms", "2000"])
+        .arg("--scene-dir")
+        .arg(dir)
+        .stdout(Stdio::piped())
+        .spawn()
+        .context("starting relief-server")?;
+    let stdout = child.stdout.take().context("server stdout")?;
+    children.0.push(child);
+    let mut line = String::new();
+    BufReader::new(stdout)
+        .read_line(&mut line)
+        .context("reading the server's address")?;
+    let address = line
+        .trim()
+        .strip_prefix("relief-server listening on ")
+        .ok_or_else(|| anyhow!("relief-server did not start: {line:?}"))?;
+    Ok(format!("http://{address}"))
+}
+
+/// Starts `count` workers dialling `url`, unpacking scenes under `dir`.
+pub fn start_workers(children: &mut Children, url: &str, count: u32, dir: &Path) -> Result<()> {
+    let worker = sibling("relief-worker")?;
+    for k in 0..count {
+        let child = Command::new(&worker)
+            .args([
+                "--server",
+                url,
+                "--name",
+                &format!("local-{k}"),
+                "--heartbeat-ms",
+                "250",
+            ])
+            .arg("--scene-dir")
+            .arg(dir.join(format!("worker-{k}-scenes")))
+            .spawn()
+            .context("starting relief-worker")?;
+        children.0.push(child);
+    }
+    Ok(())
+}
