@@ -12,7 +12,7 @@ use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender};
 
 use relief_core::camera::Camera;
 use relief_core::relief::{DepthBits, ReliefTexture};
-use relief_core::scene::Scene;
+use relief_core::scene::{Scene, SceneObject};
 
 use crate::composite::{CHEAP_TRIANGLES, MAX_TEXTURE, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason};
 use crate::metrics::critical::CriticalPoints;
@@ -109,6 +109,43 @@ struct ObjectState {
     received: u64,
 }
 
+/// How well a held texture serves an eye.
+#[derive(Debug, Clone, Copy)]
+struct Grade {
+    /// Growth of the widest predicted gap, screen pixels.
+    growth: f32,
+    /// Too coarse for the screen while a finer texture can be had.
+    coarse: bool,
+}
+
+/// Beyond this turn around the object, or this change of distance, a texture is not
+/// used whatever the gap metric says: the metric sees holes between neighbours, not
+/// the stretching of a view seen from far off its axis.
+const MAX_TURN: f32 = 40.0 * std::f32::consts::PI / 180.0;
+const MAX_DISTANCE_RATIO: f32 = 1.6;
+
+/// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`.
+fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
+    let texture = &held.pyramid.levels[0].texture;
+    let c = &texture.camera;
+    let middle =
+        c.origin + c.a * (c.width as f32 * 0.5) + c.b * (c.height as f32 * 0.5) + c.f * (c.depth_far * 0.5);
+    let ratio = (eye - middle).length() / (held.eye - middle).length();
+    if angle_between(middle, held.eye, eye) > MAX_TURN
+        || !(1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO).contains(&ratio)
+    {
+        return f32::INFINITY;
+    }
+    let Ok(params) = WarpParams::new(texture, eye) else {
+        return f32::INFINITY;
+    };
+    let centre = c.origin + c.a * (c.width as f32 * 0.5) + c.b * (c.height as f32 * 0.5);
+    let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
+    let pixels_per_texel =
+        c.a.length().max(c.b.length()) * focal / centre.distance(eye).max(f32::MIN_POSITIVE);
+    held.critical.worst_growth(&params, &held.baseline) * pixels_per_texel
+}
+
 /// How an object is drawn this frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Show {
@@ -147,6 +184,28 @@ pub struct Manager {
     arrivals: UnboundedReceiver<Arrival>,
     latency: f64,
     pub counters: Counters,
+}
+
+/// How far (radians) around `centre`, turning the texture's eye about the vertical,
+/// `held` stays within `tolerance`: probed at doubling angles, then halved back.
+fn probe_valid_angle(held: &Held, centre: Vec3, camera: &Camera, tolerance: f32) -> f32 {
+    let within = |angle: f32| {
+        [angle, -angle].iter().all(|&a| {
+            let eye = centre + glam::Quat::from_rotation_y(a) * (held.eye - centre);
+            growth(held, eye, camera) <= tolerance
+        })
+    };
+    let mut angle = 0.5f32.to_radians();
+    while angle < std::f32::consts::FRAC_PI_2 && within(angle * 2.0) {
+        angle *= 2.0;
+    }
+    // Refine between `angle` (within) and twice it (not).
+    let (mut lo, mut hi) = (angle, angle * 2.0);
+    for _ in 0..4 {
+        let mid = 0.5 * (lo + hi);
+        if within(mid) { lo = mid } else { hi = mid }
+    }
+    lo
 }
 
 /// The angle at `centre` between two eyes.
@@ -190,7 +249,8 @@ impl Manager {
     }
 
     /// Takes in what has arrived (never waits).
-    fn drain(&mut self, eye: Vec3, scene: &Scene) {
+    fn drain(&mut self, camera: &Camera, scene: &Scene) {
+        let eye = camera.eye;
         while let Ok(arrival) = self.arrivals.try_recv() {
             match arrival {
                 Arrival::Texture {
@@ -217,13 +277,19 @@ impl Manager {
                     state.received += is_final as u64;
                     // A final texture replaces its own preview.
                     state.held.retain(|h| h.is_final || h.eye != p.eye);
-                    state.held.push(Held {
+                    let held = Held {
                         eye: p.eye,
                         pyramid: Pyramid::new(texture, MIN_TEXTURE),
                         critical,
                         baseline,
                         is_final,
-                    });
+                    };
+                    if is_final {
+                        let centre = scene.objects[p.object].bounds.center();
+                        state.valid_angle =
+                            Some(probe_valid_angle(&held, centre, camera, self.config.tolerance));
+                    }
+                    state.held.push(held);
                     // Keep the textures nearest the eye.
                     if state.held.len() > self.config.keep {
                         let centre = scene.objects[p.object].bounds.center();
@@ -241,37 +307,52 @@ impl Manager {
         }
     }
 
-    /// How much each held texture of `object` degrades when warped to `eye`: the growth
-    /// of its widest predicted gap over the gaps it has at its own eye, in screen pixels
-    /// (`INFINITY` when it cannot be warped there or is too coarse for `camera`).
-    fn gaps(&self, object: usize, eye: Vec3, camera: &Camera) -> Vec<f32> {
-        let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
+    /// How each held texture of `object` would do warped to `eye`: the growth of its
+    /// widest predicted gap over the gaps it has at its own eye, in screen pixels
+    /// (`INFINITY` when it cannot be warped there), and whether it is too coarse for
+    /// the screen while a finer one can be had (eq. 4-1).
+    fn grades(&self, scene: &Scene, object: usize, eye: Vec3, camera: &Camera) -> Vec<Grade> {
         self.objects[object]
             .held
             .iter()
-            .map(|h| {
-                let texture = &h.pyramid.levels[0].texture;
-                if needs_finer_texture(&texture.camera, &Camera { eye, ..*camera }, 2.0 * TEXEL_TOLERANCE) {
-                    return f32::INFINITY;
-                }
-                let Ok(params) = WarpParams::new(texture, eye) else {
-                    return f32::INFINITY;
-                };
-                // Texels to pixels: a texel's size seen from the eye.
-                let centre = texture.camera.origin
-                    + texture.camera.a * (texture.camera.width as f32 * 0.5)
-                    + texture.camera.b * (texture.camera.height as f32 * 0.5);
-                let texel = texture.camera.a.length().max(texture.camera.b.length());
-                let pixels_per_texel = texel * focal / centre.distance(eye).max(f32::MIN_POSITIVE);
-                h.critical.worst_growth(&params, &h.baseline) * pixels_per_texel
+            .map(|h| Grade {
+                growth: growth(h, eye, camera),
+                coarse: {
+                    let texture = &h.pyramid.levels[0].texture;
+                    needs_finer_texture(&texture.camera, &Camera { eye, ..*camera }, 2.0 * TEXEL_TOLERANCE)
+                        && texture.camera.width < Self::size_for(&scene.objects[object], eye, camera)
+                },
             })
             .collect()
     }
 
-    /// Whether a request for `object` is already out (one at a time per object keeps
-    /// the queue short; a stale one is withdrawn by [`Manager::predict_for`]).
-    fn pending_for(&self, object: usize) -> bool {
-        self.pending.values().any(|p| p.object == object)
+    /// The angle around an object over which its newest texture stays within tolerance.
+    fn valid_angle(&self, object: usize) -> f32 {
+        self.objects[object].valid_angle.unwrap_or(4f32.to_radians())
+    }
+
+    /// Whether a request already out for `object` will serve `eye`.
+    fn pending_covers(&self, object: usize, centre: Vec3, eye: Vec3) -> bool {
+        let reach = 0.8 * self.valid_angle(object);
+        self.pending.values().any(|p| {
+            p.object == object
+                && angle_between(centre, p.eye, eye) < reach
+                && ((p.eye - centre).length() / (eye - centre).length() - 1.0).abs() < 0.2
+        })
+    }
+
+    /// The texture edge to ask for: what the screen can show of the object from `eye`
+    /// (eq. 5-1), as a power of two within the limits.
+    fn size_for(object: &SceneObject, eye: Vec3, camera: &Camera) -> u32 {
+        let centre = object.bounds.center();
+        initial_resolution(
+            camera.height,
+            object.bounds.extent().length(),
+            centre.distance(eye),
+            camera.fov_y,
+        )
+        .next_power_of_two()
+        .clamp(MIN_TEXTURE.max(32), MAX_TEXTURE.min(512))
     }
 
     fn request(
@@ -283,15 +364,7 @@ impl Manager {
         needed_in_ms: Option<u64>,
     ) {
         let o = &scene.objects[object];
-        let centre = o.bounds.center();
-        let size = initial_resolution(
-            camera.height,
-            o.bounds.extent().length(),
-            centre.distance(eye),
-            camera.fov_y,
-        )
-        .next_power_of_two()
-        .clamp(MIN_TEXTURE.max(32), MAX_TEXTURE.min(512));
+        let size = Self::size_for(o, eye, camera);
         let id = self.next_id;
         self.next_id += 1;
         let request = TextureRequest {
@@ -321,10 +394,35 @@ impl Manager {
         }
     }
 
+    /// Before the first frame: asks for the textures `camera` needs and waits (at most
+    /// `limit`) until they are all there, so a flight starts with its impostors ready.
+    /// Returns whether they all arrived. Counters start afresh afterwards.
+    pub fn warm_up(&mut self, scene: &Scene, camera: &Camera, limit: std::time::Duration) -> bool {
+        let start = Instant::now();
+        let ready = loop {
+            let before = self.counters.stale_frames;
+            self.frame(scene, camera, 0.0);
+            if self.counters.stale_frames == before {
+                break true;
+            }
+            if start.elapsed() > limit {
+                break false;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        };
+        self.predictor = Predictor::default();
+        self.counters = Counters::default();
+        for o in &mut self.objects {
+            o.requested = 0;
+            o.received = 0;
+        }
+        ready
+    }
+
     /// Decides how each object is drawn from `camera` at time `t` (seconds), asking for
     /// textures as needed. Never blocks.
     pub fn frame(&mut self, scene: &Scene, camera: &Camera, t: f64) -> Vec<Show> {
-        self.drain(camera.eye, scene);
+        self.drain(camera, scene);
         self.predictor.observe(t, camera.eye);
         let mut stale = false;
         let mut shows = Vec::with_capacity(scene.objects.len());
@@ -335,39 +433,30 @@ impl Manager {
                 continue;
             }
             let centre = object.bounds.center();
-            let gaps = self.gaps(k, camera.eye, camera);
-            let best = gaps
+            let grades = self.grades(scene, k, camera.eye, camera);
+            let best = grades
                 .iter()
                 .enumerate()
-                .min_by(|a, b| a.1.total_cmp(b.1))
-                .map(|(i, &g)| (i, g));
+                .min_by(|a, b| a.1.growth.total_cmp(&b.1.growth))
+                .map(|(i, g)| (i, *g));
             self.counters.needs += 1;
-            let valid = best.is_some_and(|(_, g)| g <= self.config.tolerance);
-            if valid || self.pending_for(k) {
+            let valid = best.is_some_and(|(_, g)| g.growth <= self.config.tolerance);
+            let coarse = best.is_some_and(|(_, g)| g.coarse);
+            if valid || self.pending_covers(k, centre, camera.eye) {
                 self.counters.prediction_hits += 1;
             }
             if !valid {
+                tracing::debug!(object = %object.name, best = ?best, held = self.objects[k].held.len(), "stale");
                 stale = true;
-                // Learn how far textures of this object stay valid.
-                if let Some((i, g)) = best
-                    && g.is_finite()
-                {
-                    let angle = angle_between(centre, self.objects[k].held[i].eye, camera.eye)
-                        .max(0.5f32.to_radians());
-                    let learnt = self.objects[k]
-                        .valid_angle
-                        .map_or(angle, |a| 0.7 * a + 0.3 * angle);
-                    self.objects[k].valid_angle = Some(learnt);
-                }
-                if !self.pending_for(k) {
-                    self.request(scene, k, camera.eye, camera, None);
-                }
+            }
+            if (!valid || coarse) && !self.pending_covers(k, centre, camera.eye) {
+                self.request(scene, k, camera.eye, camera, None);
             }
             if self.config.predict {
                 self.predict_for(scene, k, camera);
             }
             shows.push(match best {
-                Some((i, g)) if g.is_finite() => {
+                Some((i, g)) if g.growth.is_finite() => {
                     let level = self.objects[k].held[i].pyramid.level_for(camera, TEXEL_TOLERANCE);
                     Show::Impostor { texture: i, level }
                 }
@@ -380,50 +469,39 @@ impl Manager {
         shows
     }
 
-    /// Asks ahead for the texture the eye will need after the round trip, and withdraws
-    /// predictions the motion has left behind.
+    /// Asks ahead for the texture the eye will need once a request made now comes
+    /// back, and withdraws predictions the motion has left behind.
     fn predict_for(&mut self, scene: &Scene, k: usize, camera: &Camera) {
-        let centre = scene.objects[k].bounds.center();
-        let valid_angle = self.objects[k].valid_angle.unwrap_or(4f32.to_radians());
-        // How fast the eye turns around this object.
-        let step = 0.05;
-        let (Some(now), Some(soon)) = (self.predictor.predict(0.0), self.predictor.predict(step)) else {
-            return;
-        };
-        let turn_rate = angle_between(centre, now, soon) as f64 / step;
-        // Bake for the middle of the span the texture will serve after it arrives.
-        let serve = if turn_rate > 1e-4 {
-            0.5 * valid_angle as f64 / turn_rate
-        } else {
-            0.0
-        };
-        let horizon = (self.latency * 1.5 + serve).min(3.0);
+        let object = &scene.objects[k];
+        let centre = object.bounds.center();
+        let horizon = (self.latency * 1.25 + 0.05).min(3.0);
         let Some(future) = self.predictor.predict(horizon) else {
             return;
         };
-        if scene.objects[k]
+        if object
             .bounds
-            .expanded(scene.objects[k].bounds.extent().length() * 0.05)
+            .expanded(object.bounds.extent().length() * 0.05)
             .contains(future)
         {
             return;
         }
         let covered = self
-            .gaps(k, future, camera)
+            .grades(scene, k, future, camera)
             .iter()
-            .any(|&g| g <= self.config.tolerance)
-            || self.pending_for(k);
+            .any(|g| g.growth <= self.config.tolerance && !g.coarse)
+            || self.pending_covers(k, centre, future);
         if !covered {
-            self.request(scene, k, future, camera, Some((self.latency * 1e3) as u64));
+            self.request(scene, k, future, camera, Some((horizon * 1e3) as u64));
         }
         // Predictions neither the eye nor its future will meet any more.
+        let reach = 2.0 * self.valid_angle(k);
         let stale: Vec<u64> = self
             .pending
             .iter()
             .filter(|(_, p)| p.object == k && p.predicted)
             .filter(|(_, p)| {
-                angle_between(centre, p.eye, camera.eye) > 2.0 * valid_angle
-                    && angle_between(centre, p.eye, future) > 2.0 * valid_angle
+                angle_between(centre, p.eye, camera.eye) > reach
+                    && angle_between(centre, p.eye, future) > reach
             })
             .map(|(&id, _)| id)
             .collect();

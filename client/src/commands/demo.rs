@@ -37,7 +37,7 @@ pub struct DemoArgs {
     /// Frames to fly (default: the scene's whole camera path).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     frames: Option<u32>,
-    /// Output directory: frame_NNNNN.png and summary.json.
+    /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, worst_frame*.png.
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
     /// Workers to start.
@@ -197,12 +197,22 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let frames = args.frames.unwrap_or(scene.path.frame_count().max(1));
     let (w, h) = args.size;
     let tracer = (args.reference_every > 0).then(|| SceneTracer::new(&scene));
+    if let Some(pose) = scene.path.pose(0) {
+        bar.set_message("waiting for the first textures");
+        let camera = Camera::look_at(pose.eye, pose.target, Vec3::Y, scene.fov_y_degrees, w, h)
+            .map_err(|e| anyhow!(e))?;
+        if !manager.warm_up(&scene, &camera, Duration::from_secs(20)) {
+            eprintln!("warning: the first textures did not all arrive within 20 s");
+        }
+    }
     bar.finish_and_clear();
     let bar = progress::bar(frames as u64, "flying");
     let mut gbuffer = GBuffer::new(w, h);
     let mut frame_ms = Vec::new();
     let mut geometry_ms = Vec::new();
     let mut psnr = Vec::new();
+    let mut psnr_log = String::from("frame,psnr_db\n");
+    let mut worst = (f64::INFINITY, 0u32);
     // Orbit segments: their frame range, object and turns.
     let mut orbits = Vec::new();
     let mut first = 0u32;
@@ -259,7 +269,14 @@ pub fn run(args: DemoArgs) -> Result<()> {
             && frame % args.reference_every == 0
         {
             let reference = render_reference(tracer, &camera);
-            psnr.push(compare(&image, &reference, None).psnr_db);
+            let p = compare(&image, &reference, None).psnr_db;
+            psnr.push(p);
+            psnr_log.push_str(&format!("{frame},{p:.3}\n"));
+            if p < worst.0 {
+                worst = (p, frame);
+                image.save_png(&args.out.join("worst_frame.png"))?;
+                reference.save_png(&args.out.join("worst_frame_reference.png"))?;
+            }
         }
         if frame % args.geometry_every == 0 {
             let mut all = GBuffer::new(w, h);
@@ -311,6 +328,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         workers: args.workers,
         source,
     };
+    std::fs::write(args.out.join("psnr.csv"), psnr_log).context("writing psnr.csv")?;
     let json = serde_json::to_string_pretty(&summary)?;
     std::fs::write(args.out.join("summary.json"), &json).context("writing summary.json")?;
     if args.json {
