@@ -35,6 +35,9 @@ enum Command {
     Reference(commands::reference::ReferenceArgs),
     /// One composited frame (geometry + impostors) and its speed against all geometry.
     Frame(commands::frame::FrameArgs),
+    /// Many simulated clients against one server: latency, stalls and image error for
+    /// each error tolerance (impostor lifetime).
+    Load(commands::load::LoadArgs),
     /// Measurements written as CSV, JSON and plots.
     #[command(subcommand)]
     Report(commands::report::ReportCommand),
@@ -75,6 +78,7 @@ fn main() -> ExitCode {
         Command::Bake(args) => commands::bake::run(args),
         Command::Reference(args) => commands::reference::run(args),
         Command::Frame(args) => commands::frame::run(args),
+        Command::Load(args) => commands::load::run(args),
         Command::Report(command) => commands::report::run(command),
         Command::Bench(command) => commands::bench::run(command),
     };

@@ -11,15 +11,21 @@ use glam::Vec3;
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender};
 
 use relief_core::camera::Camera;
+use relief_core::frame::Frame;
 use relief_core::relief::{DepthBits, ReliefTexture};
 use relief_core::scene::{Scene, SceneObject};
 
-use crate::composite::{CHEAP_TRIANGLES, MAX_TEXTURE, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason};
+use crate::composite::{
+    CHEAP_TRIANGLES, MAX_TEXTURE, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason, near_plane,
+};
+use crate::gbuffer::GBuffer;
 use crate::metrics::critical::CriticalPoints;
 use crate::metrics::schaufler::{initial_resolution, needs_finer_texture};
 use crate::predict::Predictor;
 use crate::pyramid::Pyramid;
+use crate::raster::rasterize;
 use crate::warp::params::WarpParams;
+use crate::warp::{Method, display};
 
 /// A texture the manager wants made.
 #[derive(Debug, Clone, PartialEq)]
@@ -246,6 +252,26 @@ impl Manager {
     /// The held texture `texture` of `object`.
     pub fn pyramid(&self, object: usize, texture: usize) -> &Pyramid {
         &self.objects[object].held[texture].pyramid
+    }
+
+    /// Draws a frame as [`Manager::frame`] decided: impostors warped (falling back to
+    /// geometry where a warp is refused), geometry rasterized, one shading pass.
+    pub fn render(&self, scene: &Scene, shows: &[Show], camera: &Camera, gbuffer: &mut GBuffer) -> Frame {
+        gbuffer.clear();
+        let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
+        for (k, show) in shows.iter().enumerate() {
+            match *show {
+                Show::Geometry => geometry.push((k as u32, &scene.objects[k])),
+                Show::Impostor { texture, level } => {
+                    let impostor = &self.pyramid(k, texture).levels[level];
+                    if display(Method::Interleaved, impostor, k as u32, camera, gbuffer).is_err() {
+                        geometry.push((k as u32, &scene.objects[k]));
+                    }
+                }
+            }
+        }
+        rasterize(&geometry, camera, near_plane(scene), gbuffer);
+        gbuffer.shade(scene, camera)
     }
 
     /// Takes in what has arrived (never waits).

@@ -12,17 +12,15 @@ use glam::Vec3;
 use serde::Serialize;
 use tokio::sync::mpsc::unbounded_channel;
 
-use relief_client::composite::{near_plane, render_geometry};
+use relief_client::composite::render_geometry;
 use relief_client::gbuffer::GBuffer;
-use relief_client::manager::{Config, Manager, Show};
+use relief_client::manager::{Config, Manager};
 use relief_client::metrics::image::compare;
-use relief_client::raster::rasterize;
 use relief_client::remote::Remote;
 use relief_client::report::median;
 use relief_client::source::{spawn_local, spawn_remote};
-use relief_client::warp::{Method, display};
 use relief_core::camera::{Camera, PathSegment};
-use relief_core::scene::{Scene, SceneObject};
+use relief_core::scene::Scene;
 use relief_proto::bundle::bundle_for;
 use relief_worker::{SceneTracer, render_reference};
 
@@ -246,21 +244,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
             .map_err(|e| anyhow!(e))?;
         let began = Instant::now();
         let shows = manager.frame(&scene, &camera, start.elapsed().as_secs_f64());
-        gbuffer.clear();
-        let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
-        for (k, show) in shows.iter().enumerate() {
-            match *show {
-                Show::Geometry => geometry.push((k as u32, &scene.objects[k])),
-                Show::Impostor { texture, level } => {
-                    let impostor = &manager.pyramid(k, texture).levels[level];
-                    if display(Method::Interleaved, impostor, k as u32, &camera, &mut gbuffer).is_err() {
-                        geometry.push((k as u32, &scene.objects[k]));
-                    }
-                }
-            }
-        }
-        rasterize(&geometry, &camera, near_plane(&scene), &mut gbuffer);
-        let image = gbuffer.shade(&scene, &camera);
+        let image = manager.render(&scene, &shows, &camera, &mut gbuffer);
         frame_ms.push(began.elapsed().as_secs_f64() * 1e3);
         if args.write_every > 0 && frame % args.write_every == 0 {
             image.save_png(&args.out.join(format!("frame_{frame:05}.png")))?;

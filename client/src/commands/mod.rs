@@ -4,6 +4,7 @@ pub mod bake;
 pub mod bench;
 pub mod demo;
 pub mod frame;
+pub mod load;
 pub mod processes;
 pub mod reference;
 pub mod report;

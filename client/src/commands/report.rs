@@ -150,7 +150,7 @@ fn error_vs_time(args: ErrorVsTimeArgs) -> Result<()> {
     Ok(())
 }
 
-fn register_font() -> Result<()> {
+pub(crate) fn register_font() -> Result<()> {
     plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
         .map_err(|_| anyhow!("the embedded plot font could not be loaded"))
 }
@@ -195,10 +195,11 @@ fn plotted_psnr(psnr: f64) -> f64 {
     psnr.min(60.0)
 }
 
-fn draw_chart(
+/// A line chart: one curve per series (points keyed for order), PNG at `path`.
+pub(crate) fn draw_chart(
     path: &Path,
     title: &str,
-    x_desc: &str,
+    (x_desc, y_desc): (&str, &str),
     series: &BTreeMap<String, BTreeMap<i64, (f64, f64)>>,
     log_x: bool,
 ) -> Result<()> {
@@ -236,7 +237,7 @@ fn draw_chart(
                 chart
                     .configure_mesh()
                     .x_desc(x_desc)
-                    .y_desc("PSNR (dB)")
+                    .y_desc(y_desc)
                     .draw()
                     .map_err(|e| anyhow!("plot: {e}"))?;
                 for (i, (method, s)) in series.iter().enumerate() {
@@ -293,7 +294,7 @@ fn plot_error_vs_time(rows: &[Row], options: &Options, path: &Path) -> Result<()
         &format!(
             "Impostor PSNR vs display time, {angle}° from the source eye (texture sizes; mean over objects)"
         ),
-        "display time per frame (ms, log scale)",
+        ("display time per frame (ms, log scale)", "PSNR (dB)"),
         &series,
         true,
     )
@@ -311,7 +312,7 @@ fn plot_error_vs_angle(rows: &[Row], options: &Options, path: &Path) -> Result<(
     draw_chart(
         path,
         &format!("Impostor PSNR vs angle from the source eye ({size}² textures; mean over objects)"),
-        "angle between source and destination eye (degrees)",
+        ("angle between source and destination eye (degrees)", "PSNR (dB)"),
         &series,
         false,
     )

@@ -1,0 +1,345 @@
+//! `relief load`: many simulated clients flying the camera path against one server,
+//! for each error tolerance (hence impostor lifetime): how request latency, stalls and
+//! image error move. Writes `load.csv` and plots.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, anyhow, bail};
+use clap::Args;
+use glam::Vec3;
+use serde::Serialize;
+use tokio::sync::mpsc::unbounded_channel;
+
+use relief_client::gbuffer::GBuffer;
+use relief_client::manager::{Config, Counters, Manager};
+use relief_client::metrics::image::compare;
+use relief_client::remote::Remote;
+use relief_client::source::spawn_remote;
+use relief_core::camera::Camera;
+use relief_core::scene::Scene;
+use relief_proto::bundle::bundle_for;
+use relief_worker::{SceneTracer, render_reference};
+
+use super::processes::{Children, start_server, start_workers};
+use super::report::{draw_chart, register_font};
+use crate::{args, progress};
+
+#[derive(Args)]
+pub struct LoadArgs {
+    /// Built-in scene name, .toml scene file, or .obj file.
+    #[arg(long, default_value = "default")]
+    scene: String,
+    /// Simulated clients, each on its own place along the camera path.
+    #[arg(long, default_value = "8", value_parser = clap::value_parser!(u32).range(1..=256))]
+    clients: u32,
+    /// Tolerances (pixels of predicted gap growth) to run, comma-separated.
+    #[arg(long, default_value = "4,8,16,32,64", value_delimiter = ',')]
+    tolerances: Vec<f32>,
+    /// Frames each client flies per tolerance.
+    #[arg(long, default_value = "150", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    frames: u32,
+    /// Camera pace.
+    #[arg(long, default_value = "30", value_parser = clap::value_parser!(u32).range(1..=1000))]
+    fps: u32,
+    /// Workers to start for each run.
+    #[arg(long, default_value = "2", value_parser = clap::value_parser!(u32).range(1..=64))]
+    workers: u32,
+    /// Network delay injected on the clients' side, milliseconds.
+    #[arg(long, default_value = "0", value_parser = clap::value_parser!(u64).range(0..=60_000))]
+    rtt_ms: u64,
+    /// Frame size of the image-error samples (client 0 renders and compares).
+    #[arg(long, default_value = "320x180", value_parser = args::frame_size)]
+    size: (u32, u32),
+    /// Client 0 compares with the ray-traced reference every K-th frame.
+    #[arg(long, default_value = "25", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    reference_every: u32,
+    /// Output directory: load.csv, load_latency.png, load_stalls.png.
+    #[arg(long, default_value = "out/load")]
+    out: PathBuf,
+    /// Print the rows as a JSON array.
+    #[arg(long)]
+    json: bool,
+}
+
+/// One tolerance's results: a CSV row.
+#[derive(Serialize, Clone)]
+struct Row {
+    tolerance_px: f32,
+    clients: u32,
+    frames: u64,
+    requests_now: u64,
+    requests_predicted: u64,
+    requests_per_s: f64,
+    latency_ms_p50: f64,
+    latency_ms_p99: f64,
+    /// Fraction of client frames with an impostor beyond tolerance or missing.
+    stall_frac: f64,
+    /// Final textures received per client per second of flight.
+    textures_per_client_s: f64,
+    psnr_db_mean: f64,
+    psnr_db_min: f64,
+}
+
+const HEADER: &str = "tolerance_px,clients,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,stall_frac,textures_per_client_s,psnr_db_mean,psnr_db_min";
+
+impl Row {
+    fn csv(&self) -> String {
+        format!(
+            "{},{},{},{},{},{:.2},{:.2},{:.2},{:.4},{:.3},{:.2},{:.2}",
+            self.tolerance_px,
+            self.clients,
+            self.frames,
+            self.requests_now,
+            self.requests_predicted,
+            self.requests_per_s,
+            self.latency_ms_p50,
+            self.latency_ms_p99,
+            self.stall_frac,
+            self.textures_per_client_s,
+            self.psnr_db_mean,
+            self.psnr_db_min
+        )
+    }
+}
+
+fn percentile(values: &[f64], p: f64) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        f64::NAN
+    } else {
+        v[((v.len() - 1) as f64 * p).round() as usize]
+    }
+}
+
+/// What one simulated client brings back.
+struct ClientResult {
+    counters: Counters,
+    received: u64,
+    psnr: Vec<f64>,
+}
+
+pub fn run(args: LoadArgs) -> Result<()> {
+    if args.tolerances.is_empty() || args.tolerances.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
+        bail!("--tolerances must be positive numbers of pixels");
+    }
+    let scene = Arc::new(Scene::load(&args.scene)?);
+    let path_frames = scene.path.frame_count().max(1);
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let tracer = Arc::new(SceneTracer::new(&scene));
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let bar = progress::bar(args.tolerances.len() as u64, "load runs");
+    let mut rows = Vec::new();
+    for &tolerance in &args.tolerances {
+        bar.set_message(format!("tolerance {tolerance} px"));
+        let mut children = Children(Vec::new());
+        let url = start_server(&mut children, &args.out.join("server-scenes"))?;
+        start_workers(&mut children, &url, args.workers, &args.out)?;
+        let (remote, hash) = runtime.block_on(async {
+            let mut remote = Remote::connect(&url, None, "load")
+                .await
+                .map_err(|e| anyhow!(e))?;
+            let hash = remote
+                .put_scene(&bundle_for(&args.scene)?)
+                .await
+                .map_err(|e| anyhow!("uploading the scene: {}", e.message()))?;
+            let start = Instant::now();
+            while remote.stats().await.map_or(0, |s| s.workers) < args.workers {
+                if start.elapsed() > Duration::from_secs(20) {
+                    bail!("the workers did not register within 20 s");
+                }
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+            Ok((remote, hash))
+        })?;
+        let started = Instant::now();
+        let handles: Vec<_> = (0..args.clients)
+            .map(|c| {
+                let (commands_tx, commands_rx) = unbounded_channel();
+                let (arrivals_tx, arrivals_rx) = unbounded_channel();
+                let mut remote = remote.clone();
+                remote.client_id = format!("load-{c}");
+                {
+                    let _guard = runtime.enter();
+                    spawn_remote(
+                        remote,
+                        hash,
+                        scene.clone(),
+                        commands_rx,
+                        arrivals_tx,
+                        Duration::from_millis(args.rtt_ms),
+                    );
+                }
+                let config = Config {
+                    tolerance,
+                    ..Config::default()
+                };
+                let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
+                let scene = scene.clone();
+                let tracer = tracer.clone();
+                let (frames, fps, size, every) = (args.frames, args.fps, args.size, args.reference_every);
+                let offset = c * path_frames / args.clients;
+                std::thread::spawn(move || {
+                    fly(&scene, &tracer, &mut manager, c, offset, frames, fps, size, every)
+                })
+            })
+            .collect();
+        let results: Vec<ClientResult> = handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .map_err(|_| anyhow!("a simulated client panicked"))
+                    .and_then(|r| r)
+            })
+            .collect::<Result<_>>()?;
+        let seconds = started.elapsed().as_secs_f64();
+        drop(children);
+        let latencies: Vec<f64> = results
+            .iter()
+            .flat_map(|r| r.counters.latencies_ms.clone())
+            .collect();
+        let psnr: Vec<f64> = results
+            .iter()
+            .flat_map(|r| r.psnr.clone())
+            .filter(|p| p.is_finite())
+            .collect();
+        let sum = |f: &dyn Fn(&ClientResult) -> u64| results.iter().map(f).sum::<u64>();
+        let (now, predicted) = (
+            sum(&|r| r.counters.requests_now),
+            sum(&|r| r.counters.requests_predicted),
+        );
+        let frames = args.frames as u64 * args.clients as u64;
+        rows.push(Row {
+            tolerance_px: tolerance,
+            clients: args.clients,
+            frames,
+            requests_now: now,
+            requests_predicted: predicted,
+            requests_per_s: (now + predicted) as f64 / seconds,
+            latency_ms_p50: percentile(&latencies, 0.5),
+            latency_ms_p99: percentile(&latencies, 0.99),
+            stall_frac: sum(&|r| r.counters.stale_frames) as f64 / frames as f64,
+            textures_per_client_s: sum(&|r| r.received) as f64 / args.clients as f64 / seconds,
+            psnr_db_mean: psnr.iter().sum::<f64>() / psnr.len().max(1) as f64,
+            psnr_db_min: psnr.iter().copied().fold(f64::INFINITY, f64::min),
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let mut csv = String::from(HEADER) + "\n";
+    for row in &rows {
+        csv += &row.csv();
+        csv.push('\n');
+    }
+    std::fs::write(args.out.join("load.csv"), csv).context("writing load.csv")?;
+    register_font()?;
+    let series = |name: &str, value: &dyn Fn(&Row) -> f64| -> (String, BTreeMap<i64, (f64, f64)>) {
+        let points = rows
+            .iter()
+            .map(|r| {
+                (
+                    (r.tolerance_px * 1000.0) as i64,
+                    (r.tolerance_px as f64, value(r)),
+                )
+            })
+            .filter(|(_, (_, y))| y.is_finite())
+            .collect();
+        (name.to_string(), points)
+    };
+    let title = format!(
+        "{} clients, {} workers, RTT +{} ms",
+        args.clients, args.workers, args.rtt_ms
+    );
+    draw_chart(
+        &args.out.join("load_latency.png"),
+        &format!("Request latency vs tolerance ({title})"),
+        (
+            "tolerance (pixels of gap growth; larger = longer impostor life, log)",
+            "latency (ms)",
+        ),
+        &[
+            series("p50", &|r| r.latency_ms_p50),
+            series("p99", &|r| r.latency_ms_p99),
+        ]
+        .into_iter()
+        .collect(),
+        true,
+    )?;
+    draw_chart(
+        &args.out.join("load_stalls.png"),
+        &format!("Stalls, PSNR and request rate vs tolerance ({title})"),
+        (
+            "tolerance (pixels of gap growth, log)",
+            "% stalled frames · PSNR dB · requests/s",
+        ),
+        &[
+            series("stalled frames (%)", &|r| 100.0 * r.stall_frac),
+            series("PSNR mean (dB)", &|r| r.psnr_db_mean),
+            series("requests per second", &|r| r.requests_per_s),
+        ]
+        .into_iter()
+        .collect(),
+        true,
+    )?;
+    if args.json {
+        println!("{}", serde_json::to_string(&rows)?);
+    } else {
+        println!("{HEADER}");
+        for row in &rows {
+            println!("{}", row.csv());
+        }
+    }
+    Ok(())
+}
+
+/// One simulated client: flies `frames` frames of the path from `offset`, paced to
+/// `fps`; client 0 also renders and compares every `every`-th frame.
+#[allow(clippy::too_many_arguments)]
+fn fly(
+    scene: &Scene,
+    tracer: &SceneTracer,
+    manager: &mut Manager,
+    client: u32,
+    offset: u32,
+    frames: u32,
+    fps: u32,
+    (w, h): (u32, u32),
+    every: u32,
+) -> Result<ClientResult> {
+    let total = scene.path.frame_count().max(1);
+    let camera_at = |frame: u32| -> Result<Camera> {
+        let pose = scene
+            .path
+            .pose((frame + offset) % total)
+            .context("the scene has no camera path")?;
+        Camera::look_at(pose.eye, pose.target, Vec3::Y, scene.fov_y_degrees, w, h).map_err(|e| anyhow!(e))
+    };
+    manager.warm_up(scene, &camera_at(0)?, Duration::from_secs(20));
+    let period = Duration::from_secs_f64(1.0 / fps as f64);
+    let start = Instant::now();
+    let mut psnr = Vec::new();
+    let mut gbuffer = GBuffer::new(w, h);
+    for frame in 0..frames {
+        if let Some(wait) = (period * frame).checked_sub(start.elapsed()) {
+            std::thread::sleep(wait);
+        }
+        let camera = camera_at(frame)?;
+        let shows = manager.frame(scene, &camera, start.elapsed().as_secs_f64());
+        if client == 0 && frame % every == 0 {
+            let image = manager.render(scene, &shows, &camera, &mut gbuffer);
+            psnr.push(compare(&image, &render_reference(tracer, &camera), None).psnr_db);
+        }
+    }
+    let received = (0..scene.objects.len()).map(|k| manager.received(k)).sum();
+    Ok(ClientResult {
+        counters: manager.counters.clone(),
+        received,
+        psnr,
+    })
+}

@@ -1,0 +1,43 @@
+//! `relief load` on 127.0.0.1: simulated clients per tolerance, a CSV row each, plots.
+
+use relief_tests::{relief, scratch};
+
+#[test]
+fn load_runs_write_a_row_per_tolerance_and_plots() {
+    let out = scratch("load");
+    let run = relief(&[
+        "load",
+        "--clients",
+        "2",
+        "--tolerances",
+        "8,64",
+        "--frames",
+        "20",
+        "--size",
+        "64x36",
+        "--reference-every",
+        "10",
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let rows: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let rows = rows.as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for row in rows {
+        assert_eq!(row["clients"], 2);
+        assert_eq!(row["frames"], 40);
+        assert!(
+            row["requests_now"].as_u64().unwrap() + row["requests_predicted"].as_u64().unwrap() > 0,
+            "{row}"
+        );
+        assert!(row["latency_ms_p50"].as_f64().unwrap() > 0.0, "{row}");
+    }
+    let csv = std::fs::read_to_string(out.join("load.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "{csv}");
+    assert!(csv.starts_with("tolerance_px,clients,frames,"));
+    for plot in ["load_latency.png", "load_stalls.png"] {
+        assert!(out.join(plot).is_file(), "{plot} missing");
+    }
+}
