@@ -7,7 +7,6 @@ mod args;
 mod commands;
 mod progress;
 
-use std::io::IsTerminal;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
@@ -47,28 +46,11 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let cli = match Cli::try_parse() {
+    let cli: Cli = match relief_core::cli::parse() {
         Ok(cli) => cli,
-        Err(e) if e.use_stderr() => {
-            // One line naming the problem, as for every other error.
-            let text = e.render().to_string();
-            eprintln!("{}", text.lines().next().unwrap_or("error: bad arguments"));
-            return ExitCode::from(2);
-        }
-        Err(e) => {
-            // --help / --version.
-            let _ = e.print();
-            return ExitCode::SUCCESS;
-        }
+        Err(code) => return code,
     };
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .init();
+    relief_core::cli::init_logging();
     let result = match cli.command {
         Command::Demo(args) => commands::demo::run(args),
         Command::Render(args) if args.server.is_none() => Err(anyhow::anyhow!(
@@ -82,11 +64,5 @@ fn main() -> ExitCode {
         Command::Report(command) => commands::report::run(command),
         Command::Bench(command) => commands::bench::run(command),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    relief_core::cli::finish(result)
 }

@@ -86,6 +86,24 @@ impl Remote {
         Ok(reply.into_inner().withdrawn)
     }
 
+    /// Waits until at least `count` workers are registered, polling the counters;
+    /// an error after `limit`.
+    pub async fn wait_for_workers(&mut self, count: u32, limit: std::time::Duration) -> Result<(), String> {
+        let start = std::time::Instant::now();
+        loop {
+            let workers = self.stats().await.map_err(|e| e.message().to_string())?.workers;
+            if workers >= count {
+                return Ok(());
+            }
+            if start.elapsed() > limit {
+                return Err(format!(
+                    "{workers} of {count} workers registered within {limit:?}"
+                ));
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+        }
+    }
+
     /// The server's counters.
     pub async fn stats(&mut self) -> Result<pb::StatsReply, Status> {
         Ok(self.impostors.stats(pb::StatsRequest {}).await?.into_inner())

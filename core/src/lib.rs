@@ -14,10 +14,12 @@
 //! - [`shading`] — the one lighting model (per-pixel Phong) that the reference renderer
 //!   and the client's display stage share.
 //! - [`hash`] — content hashes, so that machines agree on what they render.
+//! - [`cli`] — start-up shared by the binaries: argument errors, logging, exit codes.
 //! - [`vector`] — parsing and validation of user-given vectors.
 
 pub mod bounds;
 pub mod camera;
+pub mod cli;
 pub mod error;
 pub mod frame;
 pub mod generators;

@@ -554,9 +554,10 @@ fn rpc(args: RpcArgs) -> Result<()> {
             .put_scene(&bundle)
             .await
             .map_err(|e| anyhow::anyhow!(e.message().to_string()))?;
-        while remote.stats().await.map_or(0, |s| s.workers) < args.workers {
-            tokio::time::sleep(std::time::Duration::from_millis(20)).await;
-        }
+        remote
+            .wait_for_workers(args.workers, std::time::Duration::from_secs(20))
+            .await
+            .map_err(|e| anyhow::anyhow!(e))?;
         bar.set_message("control-plane calls");
         let mut echo = Vec::new();
         let mut stats = Vec::new();

@@ -163,13 +163,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
                 .await
                 .map_err(|e| anyhow!("uploading the scene: {}", e.message()))?;
             if args.server.is_none() {
-                let start = Instant::now();
-                while remote.stats().await.map_or(0, |s| s.workers) < args.workers {
-                    if start.elapsed() > Duration::from_secs(20) {
-                        bail!("the workers did not register within 20 s");
-                    }
-                    tokio::time::sleep(Duration::from_millis(20)).await;
-                }
+                remote
+                    .wait_for_workers(args.workers, Duration::from_secs(20))
+                    .await
+                    .map_err(|e| anyhow!(e))?;
             }
             spawn_remote(
                 remote,

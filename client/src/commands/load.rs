@@ -149,14 +149,11 @@ pub fn run(args: LoadArgs) -> Result<()> {
                 .put_scene(&bundle_for(&args.scene)?)
                 .await
                 .map_err(|e| anyhow!("uploading the scene: {}", e.message()))?;
-            let start = Instant::now();
-            while remote.stats().await.map_or(0, |s| s.workers) < args.workers {
-                if start.elapsed() > Duration::from_secs(20) {
-                    bail!("the workers did not register within 20 s");
-                }
-                tokio::time::sleep(Duration::from_millis(20)).await;
-            }
-            Ok((remote, hash))
+            remote
+                .wait_for_workers(args.workers, Duration::from_secs(20))
+                .await
+                .map_err(|e| anyhow!(e))?;
+            Ok::<_, anyhow::Error>((remote, hash))
         })?;
         let started = Instant::now();
         let handles: Vec<_> = (0..args.clients)
