@@ -3,7 +3,7 @@
 
 use tonic::codec::CompressionEncoding;
 use tonic::service::interceptor::InterceptedService;
-use tonic::transport::{Channel, Endpoint};
+use tonic::transport::Channel;
 use tonic::{Status, Streaming};
 
 use relief_core::hash::ContentHash;
@@ -30,10 +30,18 @@ const CHUNK: usize = 1 << 20;
 impl Remote {
     /// Connects to `url` (e.g. `http://127.0.0.1:7411`); errors name the problem.
     pub async fn connect(url: &str, token: Option<&str>, client_id: &str) -> Result<Remote, String> {
-        let endpoint = Endpoint::from_shared(url.to_string())
-            .map_err(|e| format!("`{url}` is not a URL: {e}"))?
-            .tcp_nodelay(true)
-            .connect_timeout(std::time::Duration::from_secs(5));
+        Self::connect_with(url, token, None, client_id).await
+    }
+
+    /// As [`Remote::connect`], trusting the certificates in the PEM file `ca` too (for
+    /// an `https://` server with a self-signed certificate).
+    pub async fn connect_with(
+        url: &str,
+        token: Option<&str>,
+        ca: Option<&std::path::Path>,
+        client_id: &str,
+    ) -> Result<Remote, String> {
+        let endpoint = relief_proto::connect::endpoint(url, ca)?;
         let channel = endpoint
             .connect()
             .await

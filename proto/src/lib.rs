@@ -5,6 +5,7 @@
 
 pub mod auth;
 pub mod bundle;
+pub mod connect;
 pub mod convert;
 
 /// The generated messages, clients and servers of package `relief.v1`.

@@ -1,8 +1,8 @@
 //! `relief-server`: scene registry, scheduler, worker registry and result cache behind
 //! one gRPC address, with gRPC health checking and server reflection.
 //!
-//! Prints `relief-server listening on ADDR` once bound (so `--listen 127.0.0.1:0` can
-//! be used and the port read back); quiet otherwise, `RUST_LOG=info` for more.
+//! Prints `relief-server listening on URL` once bound (so `--listen 127.0.0.1:0` can be
+//! used and the URL read back); quiet otherwise, `RUST_LOG=info` for more.
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -34,6 +34,12 @@ struct Args {
     /// Shared secret clients and workers must send (`authorization: Bearer TOKEN`).
     #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
     token: Option<String>,
+    /// PEM certificate chain: serve TLS (https://) with it and --tls-key.
+    #[arg(long, env = "RELIEF_TLS_CERT", requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// PEM private key of --tls-cert.
+    #[arg(long, env = "RELIEF_TLS_KEY", requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
     /// Result cache size, MiB.
     #[arg(long, env = "RELIEF_CACHE_MB", default_value = "512")]
     cache_mb: usize,
@@ -124,9 +130,18 @@ async fn serve(args: Args) -> Result<()> {
         .await
         .with_context(|| format!("binding {}", args.listen))?;
     let address = listener.local_addr()?;
-    println!("relief-server listening on {address}");
+    let scheme = if args.tls_cert.is_some() { "https" } else { "http" };
+    println!("relief-server listening on {scheme}://{address}");
     let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
-    Server::builder()
+    let mut builder = Server::builder();
+    if let (Some(cert), Some(key)) = (&args.tls_cert, &args.tls_key) {
+        let read = |p: &PathBuf| std::fs::read(p).with_context(|| format!("reading {}", p.display()));
+        let identity = tonic::transport::Identity::from_pem(read(cert)?, read(key)?);
+        builder = builder
+            .tls_config(tonic::transport::ServerTlsConfig::new().identity(identity))
+            .context("the TLS certificate or key is not usable")?;
+    }
+    builder
         .add_service(health_service)
         .add_service(reflection)
         .add_service(tonic::service::interceptor::InterceptedService::new(

@@ -71,12 +71,12 @@ pub fn start_server(extra: &[&str]) -> (Running, String) {
     BufReader::new(stdout)
         .read_line(&mut line)
         .expect("reading the server's address");
-    let address = line
+    let url = line
         .trim()
         .strip_prefix("relief-server listening on ")
         .unwrap_or_else(|| panic!("unexpected first line from relief-server: {line:?}"))
         .to_string();
-    (Running(child), format!("http://{address}"))
+    (Running(child), url)
 }
 
 /// Starts a `relief-worker` dialling `url`.

@@ -238,3 +238,56 @@ async fn health_and_authentication() {
     let mut right = Remote::connect(&url, Some("s3cret"), "test").await.unwrap();
     assert!(right.stats().await.is_ok());
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tls_with_a_self_signed_certificate() {
+    let dir = relief_tests::scratch("tls");
+    let issued =
+        rcgen::generate_simple_self_signed(vec!["localhost".to_string(), "127.0.0.1".to_string()]).unwrap();
+    let (cert, key) = (dir.join("cert.pem"), dir.join("key.pem"));
+    std::fs::write(&cert, issued.cert.pem()).unwrap();
+    std::fs::write(&key, issued.signing_key.serialize_pem()).unwrap();
+    let (_server, url) = start_server(&[
+        "--tls-cert",
+        cert.to_str().unwrap(),
+        "--tls-key",
+        key.to_str().unwrap(),
+    ]);
+    assert!(url.starts_with("https://"), "{url}");
+    // A worker trusting the certificate serves a request over TLS end to end.
+    let _worker = start_worker(&url, &["--tls-ca", cert.to_str().unwrap()]);
+    let mut remote = Remote::connect_with(&url, None, Some(&cert), "test")
+        .await
+        .unwrap();
+    let hash = remote
+        .put_scene(&bundle_for("default").unwrap())
+        .await
+        .unwrap()
+        .to_string();
+    wait_for(&mut remote, "the worker over TLS", |s| s.workers == 1).await;
+    let results = collect(
+        remote
+            .request(request(
+                &hash,
+                "sphere",
+                Vec3::new(-3.0, 2.0, 5.0),
+                32,
+                1,
+                pb::Urgency::Now,
+            ))
+            .await
+            .unwrap(),
+    )
+    .await
+    .unwrap();
+    assert!(results.last().unwrap().r#final);
+    // Without trusting the certificate the connection is refused.
+    let mut untrusting = match Remote::connect(&url, None, "test").await {
+        Err(e) => {
+            assert!(e.contains("connecting"), "{e}");
+            return;
+        }
+        Ok(r) => r,
+    };
+    assert!(untrusting.stats().await.is_err());
+}

@@ -51,10 +51,8 @@ enum End {
 }
 
 pub async fn run(args: Args) -> Result<()> {
-    let endpoint = Endpoint::from_shared(args.server.clone())
-        .map_err(|e| anyhow!("--server `{}` is not a URL: {e}", args.server))?
-        .tcp_nodelay(true)
-        .connect_timeout(Duration::from_secs(5));
+    let endpoint = relief_proto::connect::endpoint(&args.server, args.tls_ca.as_deref())
+        .map_err(|e| anyhow!("--server: {e}"))?;
     let auth = BearerToken::new(args.token.as_deref()).map_err(|e| anyhow!("--token: {e}"))?;
     let scene_dir = args
         .scene_dir

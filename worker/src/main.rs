@@ -19,6 +19,10 @@ pub struct Args {
     /// The server's URL, e.g. http://10.0.0.5:7411.
     #[arg(long, env = "RELIEF_SERVER")]
     server: String,
+    /// PEM file of certificates to trust for an `https://` server (e.g. its
+    /// self-signed certificate); the system's roots are trusted too.
+    #[arg(long, env = "RELIEF_TLS_CA")]
+    tls_ca: Option<PathBuf>,
     /// Shared secret the server expects.
     #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
     token: Option<String>,

@@ -44,6 +44,9 @@ pub struct DemoArgs {
     /// Use this server instead of starting one (e.g. http://10.0.0.5:7411).
     #[arg(long, env = "RELIEF_SERVER")]
     pub server: Option<String>,
+    /// PEM file of certificates to trust for an `https://` --server.
+    #[arg(long, env = "RELIEF_TLS_CA")]
+    tls_ca: Option<PathBuf>,
     /// Shared secret of the server given with --server.
     #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
     token: Option<String>,

@@ -48,11 +48,11 @@ pub fn start_server(children: &mut Children, dir: &Path) -> Result<String> {
     BufReader::new(stdout)
         .read_line(&mut line)
         .context("reading the server's address")?;
-    let address = line
+    let url = line
         .trim()
         .strip_prefix("relief-server listening on ")
         .ok_or_else(|| anyhow!("relief-server did not start: {line:?}"))?;
-    Ok(format!("http://{address}"))
+    Ok(url.to_string())
 }
 
 /// Starts `count` workers dialling `url`, unpacking scenes under `dir`.
