@@ -20,11 +20,13 @@ use crate::composite::{
 };
 use crate::gbuffer::GBuffer;
 use crate::metrics::critical::CriticalPoints;
-use crate::metrics::schaufler::{initial_resolution, needs_finer_texture};
+use crate::metrics::schaufler::{initial_resolution, needs_finer_texture, sprite_still_valid};
 use crate::predict::Predictor;
 use crate::pyramid::Pyramid;
 use crate::raster::rasterize;
 use crate::warp::params::WarpParams;
+use crate::warp::sprite::Sprite;
+use crate::warp::texmap::volume_rect;
 use crate::warp::{Method, display};
 
 /// A texture the manager wants made.
@@ -163,9 +165,21 @@ pub enum Show {
     },
 }
 
+/// The last image of an impostor, kept to be redrawn while the eye stays put.
+struct Kept {
+    sprite: Sprite,
+    /// The eye it was drawn from.
+    eye: Vec3,
+    /// Which texture (by its eye) and pyramid level it shows.
+    key: (Vec3, usize),
+}
+
 /// Counters for the demo's summary.
 #[derive(Debug, Clone, Default)]
 pub struct Counters {
+    /// Impostors redrawn as sprites (no warp) and impostors warped.
+    pub sprites: u64,
+    pub warps: u64,
     pub requests_now: u64,
     pub requests_predicted: u64,
     pub withdrawn: u64,
@@ -189,6 +203,7 @@ pub struct Manager {
     commands: UnboundedSender<Command>,
     arrivals: UnboundedReceiver<Arrival>,
     latency: f64,
+    sprites: Vec<Option<Kept>>,
     pub counters: Counters,
 }
 
@@ -235,6 +250,7 @@ impl Manager {
             next_id: 1,
             commands,
             arrivals,
+            sprites: Vec::new(),
             counters: Counters::default(),
         }
     }
@@ -254,19 +270,43 @@ impl Manager {
         &self.objects[object].held[texture].pyramid
     }
 
-    /// Draws a frame as [`Manager::frame`] decided: impostors warped (falling back to
-    /// geometry where a warp is refused), geometry rasterized, one shading pass.
-    pub fn render(&self, scene: &Scene, shows: &[Show], camera: &Camera, gbuffer: &mut GBuffer) -> Frame {
+    /// Draws a frame as [`Manager::frame`] decided: each impostor redrawn as the
+    /// sprite it was last frame while Schaufler's test holds (no warp), else warped
+    /// (falling back to geometry where a warp is refused); geometry rasterized; one
+    /// shading pass.
+    pub fn render(&mut self, scene: &Scene, shows: &[Show], camera: &Camera, gbuffer: &mut GBuffer) -> Frame {
         gbuffer.clear();
+        self.sprites.resize_with(scene.objects.len(), || None);
         let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
         for (k, show) in shows.iter().enumerate() {
             match *show {
-                Show::Geometry => geometry.push((k as u32, &scene.objects[k])),
+                Show::Geometry => {
+                    self.sprites[k] = None;
+                    geometry.push((k as u32, &scene.objects[k]));
+                }
                 Show::Impostor { texture, level } => {
-                    let impostor = &self.pyramid(k, texture).levels[level];
-                    if display(Method::Interleaved, impostor, k as u32, camera, gbuffer).is_err() {
-                        geometry.push((k as u32, &scene.objects[k]));
+                    let key = (self.objects[k].held[texture].eye, level);
+                    if let Some(kept) = &self.sprites[k]
+                        && kept.key == key
+                        && sprite_still_valid(&scene.objects[k].bounds, kept.eye, camera)
+                    {
+                        kept.sprite.draw(gbuffer);
+                        self.counters.sprites += 1;
+                        continue;
                     }
+                    let impostor = &self.objects[k].held[texture].pyramid.levels[level];
+                    if display(Method::Interleaved, impostor, k as u32, camera, gbuffer).is_err() {
+                        self.sprites[k] = None;
+                        geometry.push((k as u32, &scene.objects[k]));
+                        continue;
+                    }
+                    self.counters.warps += 1;
+                    let rect = volume_rect(camera, &impostor.texture.camera);
+                    self.sprites[k] = Sprite::capture_in(gbuffer, k as u32, rect).map(|sprite| Kept {
+                        sprite,
+                        eye: camera.eye,
+                        key,
+                    });
                 }
             }
         }

@@ -96,6 +96,9 @@ struct Summary {
     prediction_hits: u64,
     needs: u64,
     stale_frames: u64,
+    /// Impostors redrawn unchanged while Schaufler's sprite test held, and warped.
+    sprites: u64,
+    warps: u64,
     /// New textures received per full turn for each object orbited by the path.
     regenerations_per_orbit: std::collections::BTreeMap<String, f64>,
     psnr_db_mean: f64,
@@ -295,6 +298,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         prediction_hits: counters.prediction_hits,
         needs: counters.needs,
         stale_frames: counters.stale_frames,
+        sprites: counters.sprites,
+        warps: counters.warps,
         regenerations_per_orbit: orbits
             .iter()
             .map(|&(_, _, object, turns, count)| {

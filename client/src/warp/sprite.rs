@@ -16,15 +16,27 @@ pub struct Sprite {
 impl Sprite {
     /// Keeps the pixels of `object` from `gbuffer` (the bounding rectangle of them).
     pub fn capture(gbuffer: &GBuffer, object: u32) -> Option<Sprite> {
+        Self::capture_in(gbuffer, object, (0, 0, gbuffer.width, gbuffer.height))
+    }
+
+    /// As [`Sprite::capture`], looking only inside the screen rectangle
+    /// `(x0, y0, x1, y1)` (exclusive ends) where the object can be.
+    pub fn capture_in(gbuffer: &GBuffer, object: u32, rect: (u32, u32, u32, u32)) -> Option<Sprite> {
         let w = gbuffer.width as usize;
+        let (rx0, ry0) = (rect.0 as usize, rect.1 as usize);
+        let (rx1, ry1) = (
+            (rect.2 as usize).min(w),
+            (rect.3 as usize).min(gbuffer.height as usize),
+        );
         let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
-        for (k, p) in gbuffer.pixels.iter().enumerate() {
-            if p.object == object {
-                let (x, y) = (k % w, k / w);
-                x0 = x0.min(x);
-                y0 = y0.min(y);
-                x1 = x1.max(x + 1);
-                y1 = y1.max(y + 1);
+        for y in ry0..ry1 {
+            for x in rx0..rx1 {
+                if gbuffer.pixels[y * w + x].object == object {
+                    x0 = x0.min(x);
+                    y0 = y0.min(y);
+                    x1 = x1.max(x + 1);
+                    y1 = y1.max(y + 1);
+                }
             }
         }
         if x0 == usize::MAX {

@@ -40,9 +40,9 @@ pub(crate) fn screen_rect(camera: &Camera, corners: &[Vec3]) -> (u32, u32, u32, 
     )
 }
 
-/// The screen rectangle the texture's whole volume (its quad, from depth 0 to
-/// `depth_far`) can cover.
-pub(crate) fn volume_rect(camera: &Camera, c: &SourceCamera) -> (u32, u32, u32, u32) {
+/// The screen rectangle `(x0, y0, x1, y1)` the texture's whole volume (its quad, from
+/// depth 0 to `depth_far`) can cover.
+pub fn volume_rect(camera: &Camera, c: &SourceCamera) -> (u32, u32, u32, u32) {
     let (w, h) = (c.width as f32, c.height as f32);
     let corners: Vec<Vec3> = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
         .into_iter()
