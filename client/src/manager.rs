@@ -80,7 +80,7 @@ pub struct Config {
 impl Default for Config {
     fn default() -> Self {
         Config {
-            tolerance: 2.0,
+            tolerance: 24.0,
             predict: true,
             initial_latency: 0.15,
             keep: 8,

@@ -58,7 +58,7 @@ pub struct DemoArgs {
     no_predict: bool,
     /// Largest growth of the predicted warp gap (screen pixels) before a texture is
     /// replaced: the impostor lifetime knob.
-    #[arg(long, default_value = "2.0")]
+    #[arg(long, default_value = "24")]
     tolerance: f32,
     /// Compare with the ray-traced reference every K-th frame (0: never).
     #[arg(long, default_value = "20")]
