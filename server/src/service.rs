@@ -121,10 +121,18 @@ impl pb::impostors_server::Impostors for Service {
         &self,
         request: Request<pb::ImpostorRequest>,
     ) -> Result<Response<Self::RequestStream>, Status> {
+        let began = std::time::Instant::now();
         let r = request_from_pb(request.get_ref())?;
+        let span =
+            tracing::info_span!("request", client = %r.client_id, id = r.request_id, object = %r.object);
+        let _entered = span.enter();
         let (tx, rx) = unbounded_channel();
         let mut state = self.0.state();
-        match state.admit(&r, tx.clone())? {
+        let admission = state.admit(&r, tx.clone());
+        if let Err(e) = &admission {
+            tracing::info!(code = ?e.code(), "refused: {}", e.message());
+        }
+        match admission? {
             Admission::Cached(texture) => {
                 let _ = tx.send(Ok(pb::ImpostorResult {
                     request_id: r.request_id,
@@ -135,6 +143,8 @@ impl pb::impostors_server::Impostors for Service {
             }
             Admission::Queued => state.dispatch(),
         }
+        state.record_handling(began.elapsed().as_secs_f32() * 1e6);
+        tracing::debug!(urgency = ?r.urgency, "admitted");
         // Only the state keeps a sender now: the stream ends when the request does.
         drop(tx);
         Ok(Response::new(UnboundedReceiverStream::new(rx)))
@@ -187,6 +197,8 @@ impl pb::workers_server::Workers for Service {
         let shared = self.0.clone();
         tokio::spawn(async move {
             while let Ok(Some(message)) = inbound.message().await {
+                let began = std::time::Instant::now();
+                let is_result = matches!(message.kind, Some(pb::worker_message::Kind::Result(_)));
                 let mut state = shared.state();
                 state.touch(id);
                 match message.kind {
@@ -208,6 +220,9 @@ impl pb::workers_server::Workers for Service {
                     | None => {}
                 }
                 state.dispatch();
+                if is_result {
+                    state.record_handling(began.elapsed().as_secs_f32() * 1e6);
+                }
             }
             let mut state = shared.state();
             state.remove_worker(id);

@@ -134,6 +134,7 @@ pub struct State {
     next_id: u64,
     clock: u64,
     latencies: VecDeque<f32>,
+    handling: VecDeque<f32>,
     pub counters: Counters,
 }
 
@@ -147,6 +148,14 @@ pub enum Admission {
 }
 
 const LATENCY_SAMPLES: usize = 10_000;
+
+/// Appends to a bounded window of recent samples.
+fn push_sample(samples: &mut VecDeque<f32>, value: f32) {
+    if samples.len() == LATENCY_SAMPLES {
+        samples.pop_front();
+    }
+    samples.push_back(value);
+}
 
 impl State {
     pub fn new(limits: Limits) -> State {
@@ -164,6 +173,7 @@ impl State {
             next_id: 1,
             clock: 0,
             latencies: VecDeque::new(),
+            handling: VecDeque::new(),
             counters: Counters::default(),
         }
     }
@@ -519,21 +529,27 @@ impl State {
     }
 
     fn latencies_push(&mut self, ms: f32) {
-        if self.latencies.len() == LATENCY_SAMPLES {
-            self.latencies.pop_front();
-        }
-        self.latencies.push_back(ms);
+        push_sample(&mut self.latencies, ms);
+    }
+
+    /// Records the time (µs) the server's code spent on one request or result.
+    pub fn record_handling(&mut self, us: f32) {
+        push_sample(&mut self.handling, us);
     }
 
     /// The counters as the protocol's `StatsReply`.
     pub fn stats(&self) -> pb::StatsReply {
-        let mut sorted: Vec<f32> = self.latencies.iter().copied().collect();
-        sorted.sort_by(f32::total_cmp);
-        let percentile = |p: f32| {
-            if sorted.is_empty() {
+        let sorted = |samples: &VecDeque<f32>| {
+            let mut v: Vec<f32> = samples.iter().copied().collect();
+            v.sort_by(f32::total_cmp);
+            v
+        };
+        let (latencies, handling) = (sorted(&self.latencies), sorted(&self.handling));
+        let percentile = |v: &[f32], p: f32| {
+            if v.is_empty() {
                 0.0
             } else {
-                sorted[((sorted.len() - 1) as f32 * p).round() as usize]
+                v[((v.len() - 1) as f32 * p).round() as usize]
             }
         };
         let queued = |predicted: bool| self.queue.iter().filter(|p| p.predicted == predicted).count() as u32;
@@ -548,8 +564,10 @@ impl State {
             withdrawn: self.counters.withdrawn,
             requeued: self.counters.requeued,
             cache_bytes: self.cache_bytes as u64,
-            latency_ms_p50: percentile(0.5),
-            latency_ms_p99: percentile(0.99),
+            latency_ms_p50: percentile(&latencies, 0.5),
+            latency_ms_p99: percentile(&latencies, 0.99),
+            handling_us_p50: percentile(&handling, 0.5),
+            handling_us_p99: percentile(&handling, 0.99),
         }
     }
 }

@@ -62,6 +62,10 @@ struct RpcReport {
     bake_ms_p50: f64,
     /// Request latency minus bake time: queueing, transfer and the server.
     overhead_ms_p50: f64,
+    /// Time the server's own code spends per message (request in, result on), as it
+    /// reports it.
+    server_handling_us_p50: f64,
+    server_handling_us_p99: f64,
     requests: u32,
     size: u32,
     workers: u32,
@@ -621,6 +625,10 @@ fn rpc(args: RpcArgs) -> Result<()> {
             v[((v.len() - 1) as f64 * p).round() as usize]
         };
         let overhead: Vec<f64> = latency.iter().zip(&bake).map(|(l, b)| l - b).collect();
+        let server = remote
+            .stats()
+            .await
+            .map_err(|e| anyhow::anyhow!(e.message().to_string()))?;
         let echo_us_p50 = percentile(&echo, 0.5);
         let stats_us_p50 = percentile(&stats, 0.5);
         Ok::<_, anyhow::Error>(RpcReport {
@@ -631,6 +639,8 @@ fn rpc(args: RpcArgs) -> Result<()> {
             request_ms_p99: percentile(&latency, 0.99),
             bake_ms_p50: percentile(&bake, 0.5),
             overhead_ms_p50: percentile(&overhead, 0.5),
+            server_handling_us_p50: server.handling_us_p50 as f64,
+            server_handling_us_p99: server.handling_us_p99 as f64,
             requests: args.requests,
             size: args.size,
             workers: args.workers,
@@ -642,7 +652,7 @@ fn rpc(args: RpcArgs) -> Result<()> {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         println!(
-            "loopback: bare gRPC call {:.0} µs p50, Stats {:.0} µs p50 ({:.2}x); {}² {} requests: {:.1} ms p50 / {:.1} ms p99 end to end, bake {:.1} ms, overhead {:.1} ms p50",
+            "loopback: bare gRPC call {:.0} µs p50, Stats {:.0} µs p50 ({:.2}x); {}² {} requests: {:.1} ms p50 / {:.1} ms p99 end to end, bake {:.1} ms, overhead {:.1} ms p50, server's own handling {:.0} µs p50 / {:.0} p99",
             report.echo_us_p50,
             report.stats_us_p50,
             report.control_ratio,
@@ -651,7 +661,9 @@ fn rpc(args: RpcArgs) -> Result<()> {
             report.request_ms_p50,
             report.request_ms_p99,
             report.bake_ms_p50,
-            report.overhead_ms_p50
+            report.overhead_ms_p50,
+            report.server_handling_us_p50,
+            report.server_handling_us_p99
         );
     }
     Ok(())
