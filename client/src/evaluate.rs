@@ -56,8 +56,8 @@ impl Solo {
         centre + dir * self.distance
     }
 
-    /// A square camera at `eye` looking at the object's centre, the object filling
-    /// about `fill` of the frame height.
+    /// A square camera at `eye` looking at the object's centre, its field of view just
+    /// wide enough for the object's bounding sphere (with 10 % to spare).
     pub fn camera(&self, eye: Vec3, size: u32) -> Camera {
         let centre = self.scene.objects[0].bounds.center();
         let radius = self.scene.objects[0].bounds.extent().length() * 0.5;
@@ -65,9 +65,15 @@ impl Solo {
         Camera::look_at(eye, centre, Vec3::Y, fov, size, size).expect("orbit camera is valid")
     }
 
-    /// Bakes the object's relief texture for `eye`.
-    pub fn bake(&self, eye: Vec3, size: u32, bits: DepthBits) -> ReliefTexture {
-        bake(&self.object_tracer, eye, size, bits).expect("orbit eyes are outside the bounds")
+    /// Bakes the object's relief texture for `eye` (an error for an object too
+    /// degenerate to orbit, whose eyes fall inside its bounds).
+    pub fn bake(
+        &self,
+        eye: Vec3,
+        size: u32,
+        bits: DepthBits,
+    ) -> Result<ReliefTexture, relief_worker::BakeError> {
+        bake(&self.object_tracer, eye, size, bits)
     }
 
     /// The ray-traced reference frame.

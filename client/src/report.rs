@@ -151,7 +151,10 @@ pub fn error_vs_time(
             frames: Vec::new(),
         };
         for &size in &options.sizes {
-            let impostor = Impostor::new(solo.bake(source_eye, size, DepthBits::Eight));
+            let texture = solo
+                .bake(source_eye, size, DepthBits::Eight)
+                .map_err(|e| relief_core::Error::Invalid(e.to_string()))?;
+            let impostor = Impostor::new(texture);
             let critical = CriticalPoints::find(&impostor.texture, 8, 8);
             // The sprite is what the sources' best warp showed at the source eye.
             let mut at_source = GBuffer::new(options.frame_size, options.frame_size);

@@ -17,7 +17,7 @@ fn critical_point_prediction_tracks_the_measured_gap() {
     let scene = Scene::load("default").unwrap();
     for (name, factor) in [("sphere", 1.1f32), ("knot", 1.1)] {
         let solo = Solo::new(&scene, name, 3.0).unwrap();
-        let texture = Impostor::new(solo.bake(solo.eye(0.0), 128, DepthBits::Eight)).texture;
+        let texture = Impostor::new(solo.bake(solo.eye(0.0), 128, DepthBits::Eight).unwrap()).texture;
         let critical = CriticalPoints::find(&texture, 8, 8);
         let mut last = (0.0f32, 0.0f32);
         for angle in [5.0f32, 10.0, 20.0, 40.0] {
@@ -59,8 +59,8 @@ fn schaufler_tests_on_an_orbit() {
     let turned = solo.camera(solo.eye(5.0), 512);
     assert!(!sprite_still_valid(&bounds, source, &turned), "5° is many pixels");
     // 64 texels across an object that covers ~230 of 512 pixels is too coarse; 512 is not.
-    let coarse = solo.bake(source, 64, DepthBits::Eight);
-    let fine = solo.bake(source, 512, DepthBits::Eight);
+    let coarse = solo.bake(source, 64, DepthBits::Eight).unwrap();
+    let fine = solo.bake(source, 512, DepthBits::Eight).unwrap();
     assert!(needs_finer_texture(&coarse.camera, &camera, 1.0));
     assert!(!needs_finer_texture(&fine.camera, &camera, 1.0));
 }

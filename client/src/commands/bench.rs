@@ -227,7 +227,7 @@ fn warp(args: WarpArgs) -> Result<()> {
     let bar = progress::spinner("baking");
     let scene = Scene::load(&args.scene)?;
     let solo = Solo::new(&scene, &args.object, 3.0)?;
-    let impostor = Impostor::new(solo.bake(solo.eye(0.0), args.size, DepthBits::Eight));
+    let impostor = Impostor::new(solo.bake(solo.eye(0.0), args.size, DepthBits::Eight)?);
     let camera = solo.camera(solo.eye(args.angle), args.frame_size);
     let params = WarpParams::new(&impostor.texture, camera.eye)?;
     let texture = &impostor.texture;
