@@ -141,6 +141,18 @@ pub fn fill(layer: &mut Layer, levels: usize, tolerance: impl Fn(f32, usize) -> 
                             candidates[k] = (w, coarse.pixels[qy as usize * coarse.width + qx as usize]);
                         }
                     }
+                    // A valid pixel in front of every coarse candidate stays as it is:
+                    // skip the blend.
+                    if pixel.valid {
+                        let nearest = candidates
+                            .iter()
+                            .filter(|(w, c)| c.valid && *w > 0.0)
+                            .map(|(_, c)| c.depth)
+                            .fold(f32::INFINITY, f32::min);
+                        if pixel.depth <= nearest + tolerance(nearest.min(pixel.depth), level) {
+                            continue;
+                        }
+                    }
                     let blend = front_average(&candidates, |d| tolerance(d, level + 1));
                     if !blend.valid {
                         continue;
