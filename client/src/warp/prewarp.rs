@@ -162,13 +162,14 @@ fn span(
         if dir > 0.0 {
             let first = (a.pos - 0.5).floor() as i64 + 1;
             let last = (b.pos - 0.5).floor() as i64;
-            for x in first..=last {
+            // (Half-open ranges: `..=` iterates measurably slower here.)
+            for x in first..last + 1 {
                 emit(x, at(a, b, inv, x, &interpolate));
             }
         } else {
             let first = (a.pos - 0.5).ceil() as i64 - 1;
             let last = (b.pos - 0.5).ceil() as i64;
-            for x in (last..=first).rev() {
+            for x in (last..first + 1).rev() {
                 emit(x, at(a, b, inv, x, &interpolate));
             }
         }
