@@ -101,8 +101,9 @@ struct Summary {
     warps: u64,
     /// New textures received per full turn for each object orbited by the path.
     regenerations_per_orbit: std::collections::BTreeMap<String, f64>,
-    psnr_db_mean: f64,
-    psnr_db_min: f64,
+    /// `null` when no frame was compared (`--reference-every 0`).
+    psnr_db_mean: Option<f64>,
+    psnr_db_min: Option<f64>,
     rtt_ms: u64,
     predict: bool,
     tolerance: f32,
@@ -309,8 +310,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
                 )
             })
             .collect(),
-        psnr_db_mean: finite.iter().sum::<f64>() / finite.len().max(1) as f64,
-        psnr_db_min: finite.iter().copied().fold(f64::INFINITY, f64::min),
+        psnr_db_mean: (!finite.is_empty()).then(|| finite.iter().sum::<f64>() / finite.len() as f64),
+        psnr_db_min: finite.iter().copied().reduce(f64::min),
         rtt_ms: args.rtt_ms,
         predict: !args.no_predict,
         tolerance: args.tolerance,
@@ -325,7 +326,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     } else {
         println!(
             "{} frames ({}x{}) from {}: frame {:.1} ms p50 / {:.1} p95 (all geometry {:.1} ms); \
-             {} requests now, {} predicted, latency {:.0} ms p50 / {:.0} p99; {} stale frames; PSNR {:.1} dB mean, {:.1} min -> {}",
+             {} requests now, {} predicted, latency {:.0} ms p50 / {:.0} p99; {} stale frames; PSNR {} -> {}",
             summary.frames,
             w,
             h,
@@ -338,8 +339,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
             summary.latency_ms_p50,
             summary.latency_ms_p99,
             summary.stale_frames,
-            summary.psnr_db_mean,
-            summary.psnr_db_min,
+            match (summary.psnr_db_mean, summary.psnr_db_min) {
+                (Some(mean), Some(min)) => format!("{mean:.1} dB mean, {min:.1} min"),
+                _ => "not measured".to_string(),
+            },
             args.out.display()
         );
     }

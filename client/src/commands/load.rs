@@ -223,8 +223,13 @@ pub fn run(args: LoadArgs) -> Result<()> {
             latency_ms_p99: percentile(&latencies, 0.99),
             stall_frac: sum(&|r| r.counters.stale_frames) as f64 / frames as f64,
             textures_per_client_s: sum(&|r| r.received) as f64 / args.clients as f64 / seconds,
-            psnr_db_mean: psnr.iter().sum::<f64>() / psnr.len().max(1) as f64,
-            psnr_db_min: psnr.iter().copied().fold(f64::INFINITY, f64::min),
+            // NaN (null in JSON) when no frame was compared.
+            psnr_db_mean: if psnr.is_empty() {
+                f64::NAN
+            } else {
+                psnr.iter().sum::<f64>() / psnr.len() as f64
+            },
+            psnr_db_min: psnr.iter().copied().reduce(f64::min).unwrap_or(f64::NAN),
         });
         bar.inc(1);
     }
