@@ -53,7 +53,8 @@ pub enum Command {
 pub enum Arrival {
     Texture {
         id: u64,
-        texture: ReliefTexture,
+        /// Prepared where it arrived ([`Prepared::new`]), not in the frame loop.
+        texture: Box<Prepared>,
         is_final: bool,
     },
     Failed {
@@ -85,6 +86,37 @@ impl Default for Config {
             initial_latency: 0.15,
             keep: 8,
         }
+    }
+}
+
+/// A texture made ready for the frame loop: its pyramid (with texel connectivity),
+/// critical points and the gaps it shows at its own eye. Building this takes
+/// milliseconds for big textures, so the texture sources do it on their own threads.
+pub struct Prepared {
+    pyramid: Pyramid,
+    critical: CriticalPoints,
+    baseline: Vec<f32>,
+}
+
+impl Prepared {
+    pub fn new(texture: ReliefTexture) -> Prepared {
+        let critical = CriticalPoints::find(&texture, 8, 8);
+        let baseline = WarpParams::new(&texture, texture.eye).map_or_else(
+            |_| vec![0.0; critical.pairs.len()],
+            |params| critical.region_gaps(&params),
+        );
+        Prepared {
+            pyramid: Pyramid::new(texture, MIN_TEXTURE),
+            critical,
+            baseline,
+        }
+    }
+}
+
+impl std::fmt::Debug for Prepared {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let c = &self.pyramid.levels[0].texture.camera;
+        write!(f, "Prepared({}x{})", c.width, c.height)
     }
 }
 
@@ -334,18 +366,18 @@ impl Manager {
                         // Follow the measured round trip (smoothed).
                         self.latency = 0.8 * self.latency + 0.2 * ms / 1e3;
                     }
-                    let critical = CriticalPoints::find(&texture, 8, 8);
-                    let baseline = WarpParams::new(&texture, texture.eye).map_or_else(
-                        |_| vec![0.0; critical.pairs.len()],
-                        |params| critical.region_gaps(&params),
-                    );
+                    let Prepared {
+                        pyramid,
+                        critical,
+                        baseline,
+                    } = *texture;
                     let state = &mut self.objects[p.object];
                     state.received += is_final as u64;
                     // A final texture replaces its own preview.
                     state.held.retain(|h| h.is_final || h.eye != p.eye);
                     let held = Held {
                         eye: p.eye,
-                        pyramid: Pyramid::new(texture, MIN_TEXTURE),
+                        pyramid,
                         critical,
                         baseline,
                         is_final,

@@ -15,7 +15,7 @@ use relief_proto::pb;
 use relief_worker::bake;
 use relief_worker::tracer::ObjectTracer;
 
-use crate::manager::{Arrival, Command, TextureRequest};
+use crate::manager::{Arrival, Command, Prepared, TextureRequest};
 use crate::remote::Remote;
 
 fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::ImpostorRequest {
@@ -88,7 +88,7 @@ pub fn spawn_remote(
                                     let arrival = match texture {
                                         Some(Ok(texture)) => Arrival::Texture {
                                             id: request.id,
-                                            texture,
+                                            texture: Box::new(Prepared::new(texture)),
                                             is_final: result.r#final,
                                         },
                                         Some(Err(e)) => Arrival::Failed {
@@ -173,7 +173,7 @@ pub fn spawn_local(
                         match pool.install(|| bake(tracer, request.eye, request.size, request.depth_bits)) {
                             Ok(texture) => Arrival::Texture {
                                 id: request.id,
-                                texture,
+                                texture: Box::new(Prepared::new(texture)),
                                 is_final: true,
                             },
                             Err(e) => Arrival::Failed {
