@@ -206,15 +206,15 @@ impl pb::workers_server::Workers for Service {
                         match r.texture.as_ref().map(|t| texture_from_pb("texture", t)) {
                             Some(Ok(_)) => {
                                 let texture = r.texture.unwrap_or_default();
-                                state.result(id, r.job_id, texture, r.r#final, r.bake_ms);
+                                state.result(r.job_id, texture, r.r#final, r.bake_ms);
                             }
                             Some(Err(e)) => {
-                                state.failed(id, r.job_id, &format!("invalid texture: {}", e.message()))
+                                state.failed(r.job_id, &format!("invalid texture: {}", e.message()))
                             }
-                            None => state.failed(id, r.job_id, "result without a texture"),
+                            None => state.failed(r.job_id, "result without a texture"),
                         }
                     }
-                    Some(pb::worker_message::Kind::Failed(f)) => state.failed(id, f.job_id, &f.reason),
+                    Some(pb::worker_message::Kind::Failed(f)) => state.failed(f.job_id, &f.reason),
                     Some(pb::worker_message::Kind::Heartbeat(_))
                     | Some(pb::worker_message::Kind::Register(_))
                     | None => {}

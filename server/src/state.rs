@@ -394,14 +394,7 @@ impl State {
 
     /// A worker's result. Previews go to the waiters; the final texture also goes to
     /// the cache and ends the job.
-    pub fn result(
-        &mut self,
-        worker: u64,
-        job_id: u64,
-        texture: pb::ReliefTexture,
-        is_final: bool,
-        bake_ms: u32,
-    ) {
+    pub fn result(&mut self, job_id: u64, texture: pb::ReliefTexture, is_final: bool, bake_ms: u32) {
         let Some(job) = self.jobs.get(&job_id) else {
             return; // Withdrawn meanwhile.
         };
@@ -421,12 +414,12 @@ impl State {
             let bytes = texture.albedo.len() + texture.normal.len() + texture.depth.len();
             let key = job.key.clone();
             self.cache_insert(key, texture, bytes);
-            self.finish(worker, job_id);
+            self.finish(job_id);
         }
     }
 
     /// A worker could not make a texture: the waiters get the reason.
-    pub fn failed(&mut self, worker: u64, job_id: u64, reason: &str) {
+    pub fn failed(&mut self, job_id: u64, reason: &str) {
         if let Some(job) = self.jobs.get(&job_id) {
             for waiter_id in &job.waiters {
                 if let Some(w) = self.waiters.get(waiter_id) {
@@ -435,20 +428,25 @@ impl State {
                 }
             }
         }
-        self.finish(worker, job_id);
+        self.finish(job_id);
     }
 
-    /// Ends a job: its waiters' streams close (their senders are dropped).
-    fn finish(&mut self, worker: u64, job_id: u64) {
-        if let Some(w) = self.workers.get_mut(&worker) {
-            w.running.remove(&job_id);
-        }
+    /// Ends a job: it leaves the queue or frees its worker's slot, and its waiters'
+    /// streams close (their senders are dropped).
+    fn finish(&mut self, job_id: u64) {
         let Some(job) = self.jobs.remove(&job_id) else {
             return;
         };
         self.by_key.remove(&job.key);
-        if let JobState::Queued(p) = job.state {
-            self.queue.remove(&p);
+        match job.state {
+            JobState::Queued(p) => {
+                self.queue.remove(&p);
+            }
+            JobState::Running { worker } => {
+                if let Some(w) = self.workers.get_mut(&worker) {
+                    w.running.remove(&job_id);
+                }
+            }
         }
         for waiter_id in job.waiters {
             if let Some(w) = self.waiters.remove(&waiter_id) {
@@ -475,24 +473,18 @@ impl State {
             if !job.waiters.is_empty() {
                 continue;
             }
-            let job = self.jobs.remove(&waiter.job).expect("job present");
-            self.by_key.remove(&job.key);
-            match job.state {
-                JobState::Queued(p) => {
-                    self.queue.remove(&p);
-                }
-                JobState::Running { worker } => {
-                    if let Some(w) = self.workers.get_mut(&worker) {
-                        w.running.remove(&waiter.job);
-                        let cancel = pb::ServerMessage {
-                            kind: Some(pb::server_message::Kind::Cancel(pb::CancelJob {
-                                job_id: waiter.job,
-                            })),
-                        };
-                        let _ = w.tx.send(Ok(cancel));
-                    }
-                }
+            // Nobody waits any more: stop the worker running it, then end it.
+            if let JobState::Running { worker } = job.state
+                && let Some(w) = self.workers.get(&worker)
+            {
+                let cancel = pb::ServerMessage {
+                    kind: Some(pb::server_message::Kind::Cancel(pb::CancelJob {
+                        job_id: waiter.job,
+                    })),
+                };
+                let _ = w.tx.send(Ok(cancel));
             }
+            self.finish(waiter.job);
         }
         withdrawn
     }
