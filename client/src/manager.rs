@@ -15,9 +15,7 @@ use relief_core::frame::Frame;
 use relief_core::relief::{DepthBits, ReliefTexture};
 use relief_core::scene::{Scene, SceneObject};
 
-use crate::composite::{
-    CHEAP_TRIANGLES, MAX_TEXTURE, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason, near_plane,
-};
+use crate::composite::{MAX_TEXTURE, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason, near_plane};
 use crate::gbuffer::GBuffer;
 use crate::metrics::critical::CriticalPoints;
 use crate::metrics::schaufler::{initial_resolution, needs_finer_texture, sprite_still_valid};
@@ -168,8 +166,8 @@ const MAX_DISTANCE_RATIO: f32 = 1.6;
 fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     let texture = &held.pyramid.levels[0].texture;
     let c = &texture.camera;
-    let middle =
-        c.origin + c.a * (c.width as f32 * 0.5) + c.b * (c.height as f32 * 0.5) + c.f * (c.depth_far * 0.5);
+    let centre = c.plane_centre();
+    let middle = centre + c.f * (c.depth_far * 0.5);
     let ratio = (eye - middle).length() / (held.eye - middle).length();
     if angle_between(middle, held.eye, eye) > MAX_TURN
         || !(1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO).contains(&ratio)
@@ -179,7 +177,6 @@ fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     let Ok(params) = WarpParams::new(texture, eye) else {
         return f32::INFINITY;
     };
-    let centre = c.origin + c.a * (c.width as f32 * 0.5) + c.b * (c.height as f32 * 0.5);
     let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
     let pixels_per_texel =
         c.a.length().max(c.b.length()) * focal / centre.distance(eye).max(f32::MIN_POSITIVE);
@@ -525,8 +522,7 @@ impl Manager {
         let mut stale = false;
         let mut shows = Vec::with_capacity(scene.objects.len());
         for (k, object) in scene.objects.iter().enumerate() {
-            if object.mesh.triangle_count() < CHEAP_TRIANGLES || geometry_reason(object, camera.eye).is_some()
-            {
+            if geometry_reason(object, camera.eye).is_some() {
                 shows.push(Show::Geometry);
                 continue;
             }

@@ -148,6 +148,11 @@ impl SourceCamera {
         })
     }
 
+    /// The centre of the image plane (`t = 0`).
+    pub fn plane_centre(&self) -> Vec3 {
+        self.origin + self.a * (self.width as f32 * 0.5) + self.b * (self.height as f32 * 0.5)
+    }
+
     /// The point where texel `(i, j)`'s ray crosses the image plane (`t = 0`).
     #[inline]
     pub fn texel_origin(&self, i: u32, j: u32) -> Vec3 {

@@ -34,8 +34,7 @@ pub fn sprite_still_valid(bounds: &Aabb, old_eye: Vec3, camera: &Camera) -> bool
 /// β_impostor: the angle one texel subtends from `eye`, at the texture's nearest
 /// point (the centre of its image plane).
 pub fn texel_angle(texture: &SourceCamera, eye: Vec3) -> f32 {
-    let centre =
-        texture.origin + texture.a * (texture.width as f32 * 0.5) + texture.b * (texture.height as f32 * 0.5);
+    let centre = texture.plane_centre();
     let distance = centre.distance(eye).max(f32::MIN_POSITIVE);
     2.0 * (0.5 * texture.a.length().max(texture.b.length()) / distance).atan()
 }
