@@ -1,8 +1,6 @@
 //! The measurement set-up shared by the reports and tests: one object alone, a source
 //! eye on an orbit around it, a destination eye turned by an angle on the same orbit,
-//! the ray-traced reference from the destination, and a method's frame to compare.
-
-use std::time::Instant;
+//! the ray-traced reference from the destination, and the comparison of a frame with it.
 
 use glam::Vec3;
 
@@ -13,10 +11,7 @@ use relief_core::scene::Scene;
 use relief_worker::tracer::{ObjectTracer, SceneTracer};
 use relief_worker::{bake, render_reference};
 
-use crate::gbuffer::GBuffer;
-use crate::impostor::Impostor;
 use crate::metrics::image::{ImageError, compare};
-use crate::warp::{Method, WarpError, display};
 
 /// One object of a scene, alone, ready to be baked and ray-traced.
 pub struct Solo {
@@ -79,21 +74,6 @@ impl Solo {
     /// The ray-traced reference frame.
     pub fn reference(&self, camera: &Camera) -> Frame {
         render_reference(&self.tracer, camera)
-    }
-
-    /// Shows `impostor` with `method` from `camera`; the shaded frame and the time the
-    /// display (warp + reconstruction) took.
-    pub fn show(
-        &self,
-        method: Method,
-        impostor: &Impostor,
-        camera: &Camera,
-    ) -> Result<(Frame, f64), WarpError> {
-        let mut gbuffer = GBuffer::new(camera.width, camera.height);
-        let start = Instant::now();
-        display(method, impostor, 0, camera, &mut gbuffer)?;
-        let ms = start.elapsed().as_secs_f64() * 1e3;
-        Ok((gbuffer.shade(&self.scene, camera), ms))
     }
 
     /// Error of `frame` against `reference` on the object's pixels.

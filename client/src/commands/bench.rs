@@ -141,19 +141,25 @@ pub fn run(command: BenchCommand) -> Result<()> {
 }
 
 /// Median wall time of `runs` calls of `f`, in milliseconds, after one warm-up call.
-fn median_ms(runs: u32, f: impl FnMut()) -> f64 {
-    median_ms_after(runs, || {}, f)
+fn median_ms(runs: u32, mut f: impl FnMut()) -> f64 {
+    median_ms_after(runs, &mut (), |_| {}, |_| f())
 }
 
-/// As [`median_ms`], running the untimed `setup` before each call.
-fn median_ms_after(runs: u32, mut setup: impl FnMut(), mut f: impl FnMut()) -> f64 {
-    setup();
-    f();
+/// As [`median_ms`] for calls on `state`, running the untimed `setup` on it before
+/// each call.
+fn median_ms_after<S>(
+    runs: u32,
+    state: &mut S,
+    mut setup: impl FnMut(&mut S),
+    mut f: impl FnMut(&mut S),
+) -> f64 {
+    setup(state);
+    f(state);
     let times: Vec<f64> = (0..runs)
         .map(|_| {
-            setup();
+            setup(state);
             let start = Instant::now();
-            f();
+            f(state);
             start.elapsed().as_secs_f64() * 1e3
         })
         .collect();
@@ -280,17 +286,14 @@ fn warp(args: WarpArgs) -> Result<()> {
     let mut methods = std::collections::BTreeMap::new();
     for method in Method::ALL {
         bar.set_message(method.name());
-        let cleared = std::cell::RefCell::new(&mut gbuffer);
         let ms = median_ms_after(
             args.runs,
-            || cleared.borrow_mut().clear(),
-            || {
-                let gbuffer = &mut **cleared.borrow_mut();
-                match (method, &sprite) {
-                    (Method::Sprite, Some(s)) => s.draw(gbuffer),
-                    (Method::Sprite, None) => {}
-                    _ => drop(display(method, &impostor, 0, &camera, gbuffer)),
-                }
+            &mut gbuffer,
+            |g| g.clear(),
+            |gbuffer| match (method, &sprite) {
+                (Method::Sprite, Some(s)) => s.draw(gbuffer),
+                (Method::Sprite, None) => {}
+                _ => drop(display(method, &impostor, 0, &camera, gbuffer)),
             },
         );
         let variant = match method {
@@ -340,12 +343,11 @@ fn warp(args: WarpArgs) -> Result<()> {
                 };
             }
         }
-        let mut layer = sparse.clone();
-        let cell = std::cell::RefCell::new(&mut layer);
         median_ms_after(
             args.runs,
-            || cell.borrow_mut().pixels.copy_from_slice(&sparse.pixels),
-            || fill(&mut cell.borrow_mut(), 2, |d, l| 0.01 * d * (1 << l) as f32),
+            &mut sparse.clone(),
+            |layer| layer.pixels.copy_from_slice(&sparse.pixels),
+            |layer| fill(layer, 2, |d, l| 0.01 * d * (1 << l) as f32),
         )
     };
     bar.set_message("multi-resolution");
@@ -360,12 +362,12 @@ fn warp(args: WarpArgs) -> Result<()> {
         let pyramid = Pyramid::new(impostor.texture.clone(), 16);
         let level = pyramid.level_for(&far, 1.0);
         let mut time = |imp: &Impostor| {
-            let cell = std::cell::RefCell::new(&mut gbuffer);
             median_ms_after(
                 args.runs,
-                || cell.borrow_mut().clear(),
-                || {
-                    let _ = display(Method::Interleaved, imp, 0, &far, &mut cell.borrow_mut());
+                &mut gbuffer,
+                |g| g.clear(),
+                |g| {
+                    let _ = display(Method::Interleaved, imp, 0, &far, g);
                 },
             )
         };
