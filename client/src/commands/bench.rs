@@ -337,9 +337,8 @@ fn warp(args: WarpArgs) -> Result<()> {
             for x in (0..1280).step_by(2) {
                 sparse.pixels[y * 1280 + x] = Splat {
                     depth: 5.0 + (x as f32 * 0.01).sin(),
-                    albedo: glam::Vec3::splat(0.5),
-                    normal: glam::Vec3::Z,
-                    valid: true,
+                    albedo: [128; 3],
+                    normal: [128, 128, 255],
                 };
             }
         }

@@ -117,19 +117,17 @@ fn project(impostor: &Impostor, camera: &Camera) -> Result<Option<Projection>, W
 }
 
 fn splat_of(impostor: &Impostor, p: &Point) -> Splat {
-    let [r, g, b] = impostor.texture.albedo[p.texel];
     Splat {
         depth: p.depth,
-        albedo: Vec3::new(r as f32, g as f32, b as f32) / 255.0,
-        normal: decode_normal(impostor.texture.normal[p.texel]),
-        valid: true,
+        albedo: impostor.texture.albedo[p.texel],
+        normal: impostor.texture.normal[p.texel],
     }
 }
 
 /// Writes the valid pixels of `layer` at `(x0, y0)` into the frame.
 fn merge(layer: &Layer, keep: impl Fn(usize) -> bool, x0: u32, y0: u32, object: u32, gbuffer: &mut GBuffer) {
     for (k, s) in layer.pixels.iter().enumerate() {
-        if s.valid && keep(k) {
+        if s.is_valid() && keep(k) {
             let (x, y) = (
                 (k % layer.width) as i64 + x0 as i64,
                 (k / layer.width) as i64 + y0 as i64,
@@ -140,8 +138,8 @@ fn merge(layer: &Layer, keep: impl Fn(usize) -> bool, x0: u32, y0: u32, object: 
                 GPixel {
                     depth: s.depth,
                     object,
-                    albedo: relief_core::shading::to_rgb8(s.albedo),
-                    normal: s.normal.normalize_or_zero(),
+                    albedo: s.albedo,
+                    normal: decode_normal(s.normal),
                 },
             );
         }
