@@ -100,6 +100,44 @@ fn axis_extent(n: f32, e: f32, s_min: f32) -> (i32, i32) {
     (lo.floor() as i32, hi.ceil() as i32)
 }
 
+/// A texel's albedo and encoded normal: six bytes in the low bytes of a `u64`, so one
+/// interpolation blends all six at once (two multiplies on 16-bit lanes).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Attributes(u64);
+
+/// The even bytes of a `u64`, each in its own 16-bit lane.
+const EVEN_BYTES: u64 = 0x00ff_00ff_00ff_00ff;
+
+impl Attributes {
+    #[inline(always)]
+    fn pack(albedo: [u8; 3], normal: [u8; 3]) -> Attributes {
+        let [r, g, b] = albedo;
+        let [x, y, z] = normal;
+        Attributes(u64::from_le_bytes([r, g, b, x, y, z, 0, 0]))
+    }
+
+    /// `self + (other − self)·t/256` per byte, `t ∈ [0, 256]`: every 16-bit lane holds
+    /// one byte, and `a·(256 − t) + b·t ≤ 255·256` fits it.
+    #[inline(always)]
+    fn lerp(self, other: Attributes, t: u64) -> Attributes {
+        let blend = |a: u64, b: u64| ((a * (256 - t) + b * t) >> 8) & EVEN_BYTES;
+        let (a, b) = (self.0, other.0);
+        let even = blend(a & EVEN_BYTES, b & EVEN_BYTES);
+        let odd = blend((a >> 8) & EVEN_BYTES, (b >> 8) & EVEN_BYTES);
+        Attributes(even | (odd << 8))
+    }
+
+    #[inline(always)]
+    fn texel(self, depth: f32) -> PTexel {
+        let [r, g, b, x, y, z, ..] = self.0.to_le_bytes();
+        PTexel {
+            depth,
+            albedo: [r, g, b],
+            normal: [x, y, z],
+        }
+    }
+}
+
 /// A sample travelling through the passes: its position along the current pass axis,
 /// its final v' (asymmetric and interleaved), source coordinate along the row (for
 /// compensation), displacement and attributes.
@@ -109,30 +147,22 @@ struct Sample {
     v_target: f32,
     source: f32,
     depth: f32,
-    albedo: [u8; 3],
-    normal: [u8; 3],
+    attributes: Attributes,
     /// Connected to the sample of the next source row (see [`Impostor`]).
     down: bool,
-}
-
-/// `a + (b - a)·t` on 8-bit channels, `t` in 1/256 steps.
-#[inline(always)]
-fn lerp8(a: [u8; 3], b: [u8; 3], t: i32) -> [u8; 3] {
-    let channel = |x: u8, y: u8| (x as i32 + (((y as i32 - x as i32) * t) >> 8)) as u8;
-    [channel(a[0], b[0]), channel(a[1], b[1]), channel(a[2], b[2])]
 }
 
 impl Sample {
     #[inline(always)]
     fn lerp(&self, other: &Sample, t: f32) -> Sample {
-        let ti = (t * 256.0) as i32;
         Sample {
             pos: self.pos + (other.pos - self.pos) * t,
             v_target: self.v_target + (other.v_target - self.v_target) * t,
             source: self.source + (other.source - self.source) * t,
             depth: self.depth + (other.depth - self.depth) * t,
-            albedo: lerp8(self.albedo, other.albedo, ti),
-            normal: lerp8(self.normal, other.normal, ti),
+            attributes: self
+                .attributes
+                .lerp(other.attributes, super::round_small(t * 256.0) as u64),
             down: self.down && other.down,
         }
     }
@@ -154,11 +184,8 @@ fn span(
     if let Some(a) = a
         && (b.pos - a.pos) * dir >= 0.0
     {
-        let inv = if b.pos == a.pos {
-            0.0
-        } else {
-            1.0 / (b.pos - a.pos)
-        };
+        // Infinite when they coincide, but then no pixel centre lies between them.
+        let inv = 1.0 / (b.pos - a.pos);
         if dir > 0.0 {
             let first = (a.pos - 0.5).floor() as i64 + 1;
             let last = (b.pos - 0.5).floor() as i64;
@@ -178,8 +205,7 @@ fn span(
     emit(b.pos.floor() as i64, *b);
 }
 
-/// The sample at pixel `x`'s centre between `a` and `b` (`inv = 1 / (b − a)`, 0 when
-/// they coincide).
+/// The sample at pixel `x`'s centre between `a` and `b` (`inv = 1 / (b − a)`).
 #[inline(always)]
 fn at(
     a: &Sample,
@@ -189,11 +215,7 @@ fn at(
     interpolate: &impl Fn(&Sample, &Sample, f32, f32) -> Sample,
 ) -> Sample {
     let centre = x as f32 + 0.5;
-    let t = if inv == 0.0 {
-        1.0
-    } else {
-        ((centre - a.pos) * inv).clamp(0.0, 1.0)
-    };
+    let t = ((centre - a.pos) * inv).clamp(0.0, 1.0);
     interpolate(a, b, centre, t)
 }
 
@@ -219,11 +241,26 @@ fn halves(n: usize, e: f32) -> [(impl Iterator<Item = usize> + Clone, f32); 2] {
     [half(0, split, 1.0), half(n.wrapping_sub(1), n - split, -1.0)]
 }
 
-/// Per-column state of the column pass: the last sample and which row (in visiting
-/// order) produced it.
+/// Per-column state of the column pass: the last sample, and one past the number (in
+/// visiting order) of the row that produced it — 0 before any.
 #[derive(Clone, Copy)]
 struct Column {
-    last: Option<(Sample, usize)>,
+    last: Sample,
+    next_row: u32,
+}
+
+impl Column {
+    const START: Column = Column {
+        last: Sample {
+            pos: 0.0,
+            v_target: 0.0,
+            source: 0.0,
+            depth: 0.0,
+            attributes: Attributes(0),
+            down: false,
+        },
+        next_row: 0,
+    };
 }
 
 /// The rows of the pre-warped image one half of the work writes, as plane coordinates
@@ -243,11 +280,7 @@ impl Output<'_> {
             return;
         }
         if let Some(t) = self.texels.get_mut(yy as usize * self.width + xx as usize) {
-            *t = PTexel {
-                depth: s.depth,
-                albedo: s.albedo,
-                normal: s.normal,
-            };
+            *t = s.attributes.texel(s.depth);
         }
     }
 }
@@ -259,12 +292,14 @@ impl Output<'_> {
 fn push_column(column: &mut Column, out: &mut Output, x: i64, s: Sample, seq: usize, dir: f32) {
     // Visiting downwards the previous row's sample carries the link to this row;
     // visiting upwards this row's sample does.
-    let previous = match column.last {
-        Some((p, last_seq)) if last_seq + 1 == seq && if dir > 0.0 { p.down } else { s.down } => Some(p),
-        _ => None,
+    let p = &column.last;
+    let linked =
+        column.next_row != 0 && column.next_row as usize == seq && if dir > 0.0 { p.down } else { s.down };
+    span(linked.then_some(p), &s, dir, linear, |y, t| out.put(x, y, &t));
+    *column = Column {
+        last: s,
+        next_row: seq as u32 + 1,
     };
-    span(previous.as_ref(), &s, dir, linear, |y, t| out.put(x, y, &t));
-    column.last = Some((s, seq));
 }
 
 /// What both halves of a pre-warp read.
@@ -292,8 +327,7 @@ impl Job<'_> {
             v_target: p.y,
             source: i as f32 + 0.5,
             depth: self.params.depth[q as usize],
-            albedo: texture.albedo[k],
-            normal: texture.normal[k],
+            attributes: Attributes::pack(texture.albedo[k], texture.normal[k]),
             down: self.impostor.down[k],
         })
     }
@@ -335,7 +369,7 @@ impl Job<'_> {
     /// Pre-warps the source rows `rows` (visited in that order, direction `dir`) into
     /// `out`.
     fn half(&self, rows: impl Iterator<Item = usize> + Clone, dir: f32, out: &mut Output) {
-        let mut columns = vec![Column { last: None }; self.columns];
+        let mut columns = vec![Column::START; self.columns];
         let column_of = |x: i64| {
             let xi = x - self.u0;
             (xi >= 0 && xi < self.columns as i64).then_some(xi as usize)

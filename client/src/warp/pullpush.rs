@@ -89,20 +89,12 @@ pub(crate) fn front_average(candidates: &[(f32, Splat)], tolerance: impl Fn(f32)
         }
     }
     let inv = 1.0 / weight;
-    let byte = |k: usize| round_byte(attributes[k] * inv);
+    let byte = |k: usize| super::round_small(attributes[k] * inv) as u8;
     Splat {
         depth: depth * inv,
         albedo: [byte(0), byte(1), byte(2)],
         normal: [byte(3), byte(4), byte(5)],
     }
-}
-
-/// `x ∈ [0, 255]` rounded to the nearest byte. Adding 2²³ leaves the rounded integer in
-/// the float's low mantissa bits: one add instead of a saturating conversion, which made
-/// up a quarter of the fill's time.
-#[inline(always)]
-fn round_byte(x: f32) -> u8 {
-    ((x + 8_388_608.0).to_bits() & 0xff) as u8
 }
 
 /// Fills the holes of `layer` using at most `levels` coarser levels. `tolerance(depth,
