@@ -71,9 +71,10 @@ impl Solo {
         bake(&self.object_tracer, eye, size, bits)
     }
 
-    /// The ray-traced reference frame.
-    pub fn reference(&self, camera: &Camera) -> Frame {
-        render_reference(&self.tracer, camera)
+    /// The ray-traced reference frame, `samples × samples` rays per pixel (see
+    /// [`render_reference`]).
+    pub fn reference(&self, camera: &Camera, samples: u32) -> Frame {
+        render_reference(&self.tracer, camera, samples)
     }
 
     /// Error of `frame` against `reference` on the object's pixels.

@@ -11,6 +11,7 @@ use relief_core::frame::Frame;
 use relief_core::relief::DepthBits;
 use relief_core::scene::Scene;
 
+use crate::composite::render_geometry;
 use crate::evaluate::Solo;
 use crate::gbuffer::GBuffer;
 use crate::impostor::Impostor;
@@ -35,26 +36,41 @@ pub struct Options {
     pub strip: (f32, u32),
 }
 
+/// Rays per pixel edge of the anti-aliased reference (`psnr_aa_db`).
+pub const ANTIALIASED_SAMPLES: u32 = 3;
+
+/// The method name of the rows that draw the object as exact geometry.
+pub const GEOMETRY: &str = "geometry";
+
 /// One measurement: a CSV row.
 #[derive(Debug, Clone, Serialize)]
 pub struct Row {
     pub object: String,
+    /// A display method, or [`GEOMETRY`]: the object rasterized, one sample per pixel
+    /// (the rows with `size` 0, since no texture is involved).
     pub method: String,
     pub size: u32,
     pub angle_deg: f32,
-    /// Median display time (warp + reconstruction into the frame's G-buffer), ms.
+    /// Median display time (warp + reconstruction into the frame's G-buffer; for
+    /// geometry, rasterization and shading), ms.
     pub ms: f64,
+    /// Against the point-sampled reference (one ray through each pixel centre).
     pub psnr_db: f64,
     pub ssim: f64,
     pub hole_frac: f64,
+    /// Against the anti-aliased reference ([`ANTIALIASED_SAMPLES`]² rays per pixel).
+    /// Exact geometry sampled once per pixel does not reach it either: its
+    /// `psnr_aa_db` is the floor that detail finer than a pixel sets for every
+    /// one-sample display.
+    pub psnr_aa_db: f64,
 }
 
 impl Row {
-    pub const CSV_HEADER: &'static str = "object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac";
+    pub const CSV_HEADER: &'static str = "object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac,psnr_aa_db";
 
     pub fn csv(&self) -> String {
         format!(
-            "{},{},{},{},{:.4},{:.3},{:.5},{:.5}",
+            "{},{},{},{},{:.4},{:.3},{:.5},{:.5},{:.3}",
             self.object,
             self.method,
             self.size,
@@ -62,7 +78,8 @@ impl Row {
             self.ms,
             self.psnr_db,
             self.ssim,
-            self.hole_frac
+            self.hole_frac,
+            self.psnr_aa_db
         )
     }
 }
@@ -144,7 +161,38 @@ pub fn error_vs_time(
             .iter()
             .map(|&a| solo.camera(solo.eye(a), options.frame_size))
             .collect();
-        let references: Vec<Frame> = cameras.iter().map(|c| solo.reference(c)).collect();
+        let references: Vec<Frame> = cameras.iter().map(|c| solo.reference(c, 1)).collect();
+        let antialiased: Vec<Frame> = cameras
+            .iter()
+            .map(|c| solo.reference(c, ANTIALIASED_SAMPLES))
+            .collect();
+        // The floor: the object as exact geometry, one sample per pixel.
+        for (k, &angle) in options.angles.iter().enumerate() {
+            let camera = &cameras[k];
+            let mut gbuffer = GBuffer::new(camera.width, camera.height);
+            let mut frame = Frame::new(1, 1, [0; 3]);
+            let times: Vec<f64> = (0..options.runs.max(1))
+                .map(|_| {
+                    let start = Instant::now();
+                    frame = render_geometry(&solo.scene, camera, &mut gbuffer);
+                    start.elapsed().as_secs_f64() * 1e3
+                })
+                .collect();
+            let error = solo.error(&frame, &references[k]);
+            let row = Row {
+                object: name.clone(),
+                method: GEOMETRY.into(),
+                size: 0,
+                angle_deg: angle,
+                ms: median(times),
+                psnr_db: error.psnr_db,
+                ssim: error.ssim,
+                hole_frac: error.hole_frac,
+                psnr_aa_db: solo.error(&frame, &antialiased[k]).psnr_db,
+            };
+            on_row(&row);
+            rows.push(row);
+        }
         let mut strip = Strip {
             object: name.clone(),
             reference: Frame::new(1, 1, [0; 3]),
@@ -197,6 +245,7 @@ pub fn error_vs_time(
                         psnr_db: error.psnr_db,
                         ssim: error.ssim,
                         hole_frac: error.hole_frac,
+                        psnr_aa_db: solo.error(&frame, &antialiased[k]).psnr_db,
                     };
                     on_row(&row);
                     if method == Method::Interleaved

@@ -6,11 +6,8 @@ use relief_core::scene::Scene;
 use relief_core::shading::to_rgb8;
 use relief_tests::{relief, scratch};
 
-/// A unit sphere seen straight on: the centre pixel shows the point nearest the eye,
-/// whose normal points back at the eye, lit by the scene's lights.
-#[test]
-fn sphere_centre_pixel_matches_the_lighting_model() {
-    let dir = scratch("reference");
+/// Writes the test scene (a lit unit sphere on blue) into `dir`.
+fn ball_scene(dir: &std::path::Path) -> std::path::PathBuf {
     let scene_path = dir.join("ball.toml");
     std::fs::write(
         &scene_path,
@@ -30,7 +27,14 @@ fn sphere_centre_pixel_matches_the_lighting_model() {
         "#,
     )
     .unwrap();
-    let png = dir.join("frame.png");
+    scene_path
+}
+
+/// `relief reference` of the ball from (0, 0, 4), 65×49 pixels, `samples` rays per pixel
+/// edge.
+fn ball_reference(dir: &std::path::Path, samples: u32) -> image::RgbImage {
+    let scene_path = ball_scene(dir);
+    let png = dir.join(format!("frame-{samples}.png"));
     let out = relief(&[
         "reference",
         "--scene",
@@ -43,12 +47,24 @@ fn sphere_centre_pixel_matches_the_lighting_model() {
         "40",
         "--size",
         "65x49",
+        "--samples",
+        &samples.to_string(),
         "--out",
         png.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let image = image::open(&png).unwrap().to_rgb8();
     assert_eq!(image.dimensions(), (65, 49));
+    image
+}
+
+/// A unit sphere seen straight on: the centre pixel shows the point nearest the eye,
+/// whose normal points back at the eye, lit by the scene's lights.
+#[test]
+fn sphere_centre_pixel_matches_the_lighting_model() {
+    let dir = scratch("reference");
+    let image = ball_reference(&dir, 1);
+    let scene_path = dir.join("ball.toml");
     let scene = Scene::load(scene_path.to_str().unwrap()).unwrap();
     let o = &scene.objects[0];
     let eye = Vec3::new(0.0, 0.0, 4.0);
@@ -74,5 +90,47 @@ fn sphere_centre_pixel_matches_the_lighting_model() {
     assert!(
         (covered - expected).abs() / expected < 0.05,
         "covered {covered}, expected {expected}"
+    );
+}
+
+/// With 3×3 rays per pixel, pixels inside the sphere's image keep their colour (smooth
+/// shading varies little within a pixel), while silhouette pixels blend sphere and
+/// background — and the blend keeps the image's total: the blue the sphere takes away
+/// is the same as point-sampled, within 3 %.
+#[test]
+fn antialiased_reference_blends_only_the_silhouette() {
+    let dir = scratch("reference-aa");
+    let (point, smooth) = (ball_reference(&dir, 1), ball_reference(&dir, 3));
+    let background = [0u8, 0, 255];
+    let is_ball = |x: u32, y: u32| point.get_pixel(x, y).0 != background;
+    let (mut interior, mut blended) = (0, 0);
+    for y in 1..48 {
+        for x in 1..64 {
+            let all_ball = (-1i32..=1)
+                .all(|dy| (-1i32..=1).all(|dx| is_ball((x as i32 + dx) as u32, (y as i32 + dy) as u32)));
+            let (p, s) = (point.get_pixel(x, y).0, smooth.get_pixel(x, y).0);
+            let differs = (0..3)
+                .map(|c| (p[c] as i32 - s[c] as i32).abs())
+                .max()
+                .unwrap_or(0);
+            if all_ball {
+                interior += 1;
+                assert!(differs <= 3, "interior pixel {x},{y}: {p:?} vs {s:?}");
+            } else if differs > 16 {
+                blended += 1;
+            }
+        }
+    }
+    assert!(
+        interior > 500 && blended > 20,
+        "interior {interior}, blended {blended}"
+    );
+    let radius_px = (0.25f32.asin().tan() / 20f32.to_radians().tan()) * 24.5;
+    let expected = std::f32::consts::PI * radius_px * radius_px;
+    let covered: f32 = smooth.pixels().map(|p| (255.0 - p.0[2] as f32) / 255.0).sum();
+    let point_covered: f32 = point.pixels().map(|p| (255.0 - p.0[2] as f32) / 255.0).sum();
+    assert!(
+        (covered - point_covered).abs() / point_covered < 0.03,
+        "blue deficit {covered} (antialiased) vs {point_covered} (point), sphere area {expected} px"
     );
 }

@@ -256,7 +256,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         if let Some(tracer) = &tracer
             && frame % args.reference_every == 0
         {
-            let reference = render_reference(tracer, &camera);
+            let reference = render_reference(tracer, &camera, 1);
             let p = compare(&image, &reference, None).psnr_db;
             psnr.push(p);
             psnr_log.push_str(&format!("{frame},{p:.3}\n"));

@@ -92,7 +92,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
     }
     let psnr_db = args.compare.then(|| {
         bar.set_message("ray-tracing the reference");
-        let reference = render_reference(&SceneTracer::new(&scene), &camera);
+        let reference = render_reference(&SceneTracer::new(&scene), &camera, 1);
         compare(&frame, &reference, None).psnr_db
     });
     bar.finish_and_clear();

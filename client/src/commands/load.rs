@@ -335,7 +335,7 @@ fn fly(
         let shows = manager.frame(scene, &camera, start.elapsed().as_secs_f64());
         if client == 0 && frame % every == 0 {
             let image = manager.render(scene, &shows, &camera, &mut gbuffer);
-            psnr.push(compare(&image, &render_reference(tracer, &camera), None).psnr_db);
+            psnr.push(compare(&image, &render_reference(tracer, &camera, 1), None).psnr_db);
         }
     }
     let received = (0..scene.objects.len()).map(|k| manager.received(k)).sum();

@@ -16,6 +16,10 @@ pub struct ReferenceArgs {
     /// Output PNG file.
     #[arg(long)]
     out: PathBuf,
+    /// Rays per pixel edge: N×N stratified rays averaged per pixel (anti-aliased); 1 is
+    /// one ray through the pixel centre, as every frame compared with it samples.
+    #[arg(long, default_value = "1", value_parser = clap::value_parser!(u32).range(1..=9))]
+    samples: u32,
 }
 
 pub fn run(args: ReferenceArgs) -> Result<()> {
@@ -25,7 +29,7 @@ pub fn run(args: ReferenceArgs) -> Result<()> {
     bar.set_message("building BVHs");
     let tracer = SceneTracer::new(&scene);
     bar.set_message("tracing");
-    let frame = render_reference(&tracer, &camera);
+    let frame = render_reference(&tracer, &camera, args.samples);
     bar.finish_and_clear();
     frame.save_png(&args.out)?;
     tracing::info!("reference {w}x{h} of `{}` -> {}", scene.name, args.out.display());

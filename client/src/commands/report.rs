@@ -109,7 +109,7 @@ fn error_vs_time(args: ErrorVsTimeArgs) -> Result<()> {
         strip: (args.strip_angle, args.strip_size),
     };
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    let total = objects.len() * options.sizes.len() * options.angles.len() * options.methods.len();
+    let total = objects.len() * options.angles.len() * (options.sizes.len() * options.methods.len() + 1);
     let bar = progress::bar(total as u64, "measuring");
     let measured = report::error_vs_time(&scene, &objects, &options, |row| {
         bar.set_message(format!(
