@@ -18,7 +18,7 @@ fn render_both(
     h: u32,
 ) -> (relief_core::frame::Frame, relief_core::frame::Frame) {
     let camera = Camera::look_at(eye, target, Vec3::Y, 60.0, w, h).unwrap();
-    let reference = render_reference(&SceneTracer::new(scene), &camera);
+    let reference = render_reference(&SceneTracer::new(scene), &camera, 1);
     let mut gbuffer = GBuffer::new(w, h);
     let objects: Vec<_> = scene
         .objects
