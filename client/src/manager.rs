@@ -15,7 +15,9 @@ use relief_core::frame::Frame;
 use relief_core::relief::{DepthBits, ReliefTexture};
 use relief_core::scene::{Scene, SceneObject};
 
-use crate::composite::{MAX_TEXTURE, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason, near_plane};
+use crate::composite::{
+    GeometryReason, MAX_TEXTURE, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason, near_plane,
+};
 use crate::gbuffer::GBuffer;
 use crate::metrics::critical::CriticalPoints;
 use crate::metrics::schaufler::{initial_resolution, needs_finer_texture, sprite_still_valid};
@@ -162,6 +164,10 @@ struct Grade {
 const MAX_TURN: f32 = 40.0 * std::f32::consts::PI / 180.0;
 const MAX_DISTANCE_RATIO: f32 = 1.6;
 
+/// Round trips remembered, and the percentile of them the predictor plans for.
+const LATENCY_WINDOW: usize = 16;
+const LATENCY_PERCENTILE: f64 = 0.9;
+
 /// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`.
 fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     let texture = &held.pyramid.levels[0].texture;
@@ -231,7 +237,8 @@ pub struct Manager {
     next_id: u64,
     commands: UnboundedSender<Command>,
     arrivals: UnboundedReceiver<Arrival>,
-    latency: f64,
+    /// The last [`LATENCY_WINDOW`] round trips (request to final texture), seconds.
+    recent_latencies: std::collections::VecDeque<f64>,
     sprites: Vec<Option<Kept>>,
     pub counters: Counters,
 }
@@ -271,7 +278,7 @@ impl Manager {
         arrivals: UnboundedReceiver<Arrival>,
     ) -> Self {
         Manager {
-            latency: config.initial_latency,
+            recent_latencies: std::collections::VecDeque::new(),
             config,
             objects: scene.objects.iter().map(|_| ObjectState::default()).collect(),
             predictor: Predictor::default(),
@@ -282,6 +289,18 @@ impl Manager {
             sprites: Vec::new(),
             counters: Counters::default(),
         }
+    }
+
+    /// The round trip to plan for: the [`LATENCY_PERCENTILE`] of the recent ones (the
+    /// configured estimate before any). Round trips vary several-fold with the
+    /// workers' queue; planning for a typical one would leave every slower one stalled.
+    fn latency(&self) -> f64 {
+        if self.recent_latencies.is_empty() {
+            return self.config.initial_latency;
+        }
+        let mut sorted: Vec<f64> = self.recent_latencies.iter().copied().collect();
+        sorted.sort_by(f64::total_cmp);
+        sorted[((sorted.len() - 1) as f64 * LATENCY_PERCENTILE).round() as usize]
     }
 
     /// Textures requested per object so far.
@@ -360,8 +379,11 @@ impl Manager {
                         self.pending.remove(&id);
                         let ms = p.sent.elapsed().as_secs_f64() * 1e3;
                         self.counters.latencies_ms.push(ms);
-                        // Follow the measured round trip (smoothed).
-                        self.latency = 0.8 * self.latency + 0.2 * ms / 1e3;
+                        tracing::debug!(object = p.object, ms, predicted = p.predicted, "round trip");
+                        self.recent_latencies.push_back(ms / 1e3);
+                        if self.recent_latencies.len() > LATENCY_WINDOW {
+                            self.recent_latencies.pop_front();
+                        }
                     }
                     let Prepared {
                         pyramid,
@@ -383,6 +405,11 @@ impl Manager {
                         let centre = scene.objects[p.object].bounds.center();
                         state.valid_angle =
                             Some(probe_valid_angle(&held, centre, camera, self.config.tolerance));
+                        tracing::debug!(
+                            object = p.object,
+                            valid_deg = state.valid_angle.unwrap_or(0.0).to_degrees(),
+                            "texture arrived; its valid angle probed"
+                        );
                     }
                     state.held.push(held);
                     // Keep the textures nearest the eye.
@@ -507,6 +534,9 @@ impl Manager {
         };
         self.predictor = Predictor::default();
         self.counters = Counters::default();
+        // The cold start's round trips (scene upload, every object at once) say
+        // little about the flight's.
+        self.recent_latencies.clear();
         for o in &mut self.objects {
             o.requested = 0;
             o.received = 0;
@@ -522,9 +552,21 @@ impl Manager {
         let mut stale = false;
         let mut shows = Vec::with_capacity(scene.objects.len());
         for (k, object) in scene.objects.iter().enumerate() {
-            if geometry_reason(object, camera.eye).is_some() {
-                shows.push(Show::Geometry);
-                continue;
+            match geometry_reason(object, camera.eye) {
+                Some(GeometryReason::Cheap) => {
+                    shows.push(Show::Geometry);
+                    continue;
+                }
+                Some(GeometryReason::TooNear) => {
+                    // Drawn as geometry while the eye is this near, but the eye will
+                    // leave: have its textures ready by then.
+                    if self.config.predict {
+                        self.predict_for(scene, k, camera);
+                    }
+                    shows.push(Show::Geometry);
+                    continue;
+                }
+                None => {}
             }
             let centre = object.bounds.center();
             let grades = self.grades(scene, k, camera.eye, camera);
@@ -540,7 +582,25 @@ impl Manager {
                 self.counters.prediction_hits += 1;
             }
             if !valid {
-                tracing::debug!(object = %object.name, best = ?best, held = self.objects[k].held.len(), "stale");
+                // What was asked for: (age ms, predicted, degrees from this eye).
+                let asked: Vec<(u128, bool, f32)> = self
+                    .pending
+                    .values()
+                    .filter(|p| p.object == k)
+                    .map(|p| {
+                        let degrees = angle_between(centre, p.eye, camera.eye).to_degrees();
+                        (p.sent.elapsed().as_millis(), p.predicted, degrees)
+                    })
+                    .collect();
+                tracing::debug!(
+                    object = %object.name,
+                    growth = best.map(|b| b.1.growth),
+                    held = self.objects[k].held.len(),
+                    valid_deg = self.valid_angle(k).to_degrees(),
+                    planned_latency_s = self.latency(),
+                    ?asked,
+                    "stale"
+                );
                 stale = true;
             }
             if (!valid || coarse) && !self.pending_covers(k, centre, camera.eye) {
@@ -568,7 +628,7 @@ impl Manager {
     fn predict_for(&mut self, scene: &Scene, k: usize, camera: &Camera) {
         let object = &scene.objects[k];
         let centre = object.bounds.center();
-        let horizon = (self.latency * 1.25 + 0.05).min(3.0);
+        let horizon = (self.latency() + 0.05).min(3.0);
         let Some(future) = self.predictor.predict(horizon) else {
             return;
         };

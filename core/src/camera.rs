@@ -242,11 +242,22 @@ impl CameraPath {
 
     /// The pose of frame `frame` (clamped to the last frame).
     pub fn pose(&self, frame: u32) -> Option<Pose> {
-        let mut rest = frame.min(self.frame_count().checked_sub(1)?);
+        self.pose_at(frame as f64)
+    }
+
+    /// The pose at a fractional frame position, for a camera that follows the clock
+    /// rather than the frame count (clamped to `0..=` the last frame; NaN counts as 0).
+    pub fn pose_at(&self, frame: f64) -> Option<Pose> {
+        let last = self.frame_count().checked_sub(1)? as f64;
+        let mut rest = if frame.is_nan() {
+            0.0
+        } else {
+            frame.clamp(0.0, last)
+        };
         for segment in &self.segments {
-            let n = segment.frames();
+            let n = segment.frames() as f64;
             if rest < n {
-                return Some(segment.pose(rest as f32 / n as f32));
+                return Some(segment.pose((rest / n) as f32));
             }
             rest -= n;
         }

@@ -40,7 +40,10 @@ fn the_demo_flies_and_summarises() {
     ] {
         assert!(!summary[key].is_null(), "{key} missing from {summary}");
     }
-    assert_eq!(summary["frames"], 45);
+    // The eye follows the clock: a slow frame skips path frames, so up to 45 are drawn.
+    assert_eq!(summary["path_frames"], 45);
+    let frames = summary["frames"].as_u64().unwrap();
+    assert!((10..=45).contains(&frames), "{summary}");
     assert!(
         summary["source"].as_str().unwrap().starts_with("server"),
         "{summary}"
@@ -48,9 +51,14 @@ fn the_demo_flies_and_summarises() {
     assert!(summary["requests_now"].as_u64().unwrap() + summary["requests_predicted"].as_u64().unwrap() > 0);
     // Textures arrived and were used: the impostor frames look like the reference.
     assert!(summary["psnr_db_mean"].as_f64().unwrap() > 25.0, "{summary}");
-    for frame in ["frame_00000.png", "frame_00015.png", "frame_00030.png"] {
-        assert!(out.join(frame).is_file(), "{frame} not written");
-    }
+    // Every 15th frame drawn is written, named by its path frame.
+    let written = std::fs::read_dir(&out)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("frame_"))
+        .count() as u64;
+    assert_eq!(written, frames.div_ceil(15), "{summary}");
+    assert!(out.join("frame_00000.png").is_file(), "the first frame not written");
     // The JSON printed is the summary written.
     let printed: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
     assert_eq!(printed, summary);

@@ -32,7 +32,8 @@ pub struct DemoArgs {
     /// Built-in scene name, .toml scene file, or .obj file.
     #[arg(long, default_value = "default")]
     scene: String,
-    /// Frames to fly (default: the scene's whole camera path).
+    /// Path frames to fly, at --fps (default: the scene's whole camera path). The eye
+    /// follows the clock, so a slow frame skips path frames rather than slowing it.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     frames: Option<u32>,
     /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, worst_frame*.png.
@@ -83,7 +84,10 @@ pub struct DemoArgs {
 /// What `summary.json` holds.
 #[derive(Serialize)]
 struct Summary {
+    /// Frames rendered (path frames a slow frame skipped are not rendered).
     frames: u32,
+    /// Path frames flown.
+    path_frames: u32,
     frame_ms_p50: f64,
     frame_ms_p95: f64,
     geometry_frame_ms_p50: f64,
@@ -109,6 +113,19 @@ struct Summary {
     tolerance: f32,
     workers: u32,
     source: String,
+}
+
+/// An orbit segment of the path, and what it has cost so far.
+struct Orbit {
+    frames: std::ops::Range<u32>,
+    object: usize,
+    turns: f32,
+    /// Textures of the object received before the orbit's first frame, and by its
+    /// last one shown.
+    received_before: Option<u64>,
+    received: u64,
+    /// The last path frame shown on the orbit.
+    last_frame: u32,
 }
 
 /// The index of the object an orbit segment circles, if any.
@@ -223,38 +240,56 @@ pub fn run(args: DemoArgs) -> Result<()> {
             PathSegment::Orbit { frames, .. } | PathSegment::Fly { frames, .. } => *frames,
         };
         if let (Some(object), PathSegment::Orbit { turns, .. }) = (orbited(&scene, segment), segment) {
-            orbits.push((first, first + n, object, *turns, 0u64));
+            orbits.push(Orbit {
+                frames: first..first + n,
+                object,
+                turns: *turns,
+                received_before: None,
+                received: 0,
+                last_frame: first,
+            });
         }
         first += n;
     }
     let start = Instant::now();
     let period = Duration::from_secs_f64(1.0 / args.fps as f64);
-    for frame in 0..frames {
-        // Pace the camera to real time: latency is real.
-        let due = period * frame;
-        if let Some(wait) = due.checked_sub(start.elapsed()) {
+    let mut rendered = 0u32;
+    // The camera follows the clock: the eye is where the path is `t·fps` frames in. A
+    // frame that takes longer (the timed all-geometry frame, a reference) does not slow
+    // the eye down — the next frame shows it further on, as in any real-time viewer —
+    // so the predictor sees the true motion, and latency is real.
+    loop {
+        if let Some(wait) = (period * rendered).checked_sub(start.elapsed()) {
             std::thread::sleep(wait);
         }
+        let t = start.elapsed().as_secs_f64();
+        let position = t * args.fps as f64;
+        if position >= frames as f64 {
+            break;
+        }
+        let frame = position as u32;
         for orbit in &mut orbits {
-            if frame == orbit.0 {
-                orbit.4 = manager.received(orbit.2);
-            }
-            if frame + 1 == orbit.1 || (frame + 1 == frames && frame < orbit.1 && frame >= orbit.0) {
-                orbit.4 = manager.received(orbit.2) - orbit.4;
+            if orbit.frames.contains(&frame) {
+                let received = manager.received(orbit.object);
+                orbit.received_before.get_or_insert(received);
+                orbit.received = received;
+                orbit.last_frame = frame;
             }
         }
-        let Some(pose) = scene.path.pose(frame) else { break };
+        let Some(pose) = scene.path.pose_at(position) else {
+            break;
+        };
         let camera = Camera::look_at(pose.eye, pose.target, Vec3::Y, scene.fov_y_degrees, w, h)
             .map_err(|e| anyhow!(e))?;
         let began = Instant::now();
-        let shows = manager.frame(&scene, &camera, start.elapsed().as_secs_f64());
+        let shows = manager.frame(&scene, &camera, t);
         let image = manager.render(&scene, &shows, &camera, &mut gbuffer);
         frame_ms.push(began.elapsed().as_secs_f64() * 1e3);
-        if args.write_every > 0 && frame % args.write_every == 0 {
+        if args.write_every > 0 && rendered % args.write_every == 0 {
             image.save_png(&args.out.join(format!("frame_{frame:05}.png")))?;
         }
         if let Some(tracer) = &tracer
-            && frame % args.reference_every == 0
+            && rendered % args.reference_every == 0
         {
             let reference = render_reference(tracer, &camera, 1);
             let p = compare(&image, &reference, None).psnr_db;
@@ -266,13 +301,14 @@ pub fn run(args: DemoArgs) -> Result<()> {
                 reference.save_png(&args.out.join("worst_frame_reference.png"))?;
             }
         }
-        if frame % args.geometry_every == 0 {
+        if rendered % args.geometry_every == 0 {
             let mut all = GBuffer::new(w, h);
             let began = Instant::now();
             drop(render_geometry(&scene, &camera, &mut all));
             geometry_ms.push(began.elapsed().as_secs_f64() * 1e3);
         }
-        bar.inc(1);
+        rendered += 1;
+        bar.set_position(frame as u64 + 1);
     }
     bar.finish_and_clear();
     let counters = &manager.counters;
@@ -287,7 +323,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
     };
     let finite: Vec<f64> = psnr.iter().copied().filter(|p| p.is_finite()).collect();
     let summary = Summary {
-        frames,
+        frames: rendered,
+        path_frames: frames,
         frame_ms_p50: median(frame_ms.clone()),
         frame_ms_p95: percentile(&frame_ms, 0.95),
         geometry_frame_ms_p50: median(geometry_ms),
@@ -303,11 +340,15 @@ pub fn run(args: DemoArgs) -> Result<()> {
         warps: counters.warps,
         regenerations_per_orbit: orbits
             .iter()
-            .map(|&(_, _, object, turns, count)| {
-                (
-                    scene.objects[object].name.clone(),
-                    count as f64 / turns.max(1e-3) as f64,
-                )
+            .filter_map(|orbit| {
+                let before = orbit.received_before?;
+                // Per full turn, over the part of the orbit flown.
+                let flown = (orbit.last_frame + 1 - orbit.frames.start) as f64 / orbit.frames.len() as f64;
+                let count = orbit.received - before;
+                Some((
+                    scene.objects[orbit.object].name.clone(),
+                    count as f64 / (orbit.turns.max(1e-3) as f64 * flown),
+                ))
             })
             .collect(),
         psnr_db_mean: (!finite.is_empty()).then(|| finite.iter().sum::<f64>() / finite.len() as f64),
