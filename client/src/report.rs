@@ -11,6 +11,8 @@ use relief_core::frame::Frame;
 use relief_core::relief::DepthBits;
 use relief_core::scene::Scene;
 
+use relief_worker::ANTIALIASED_SAMPLES;
+
 use crate::composite::render_geometry;
 use crate::evaluate::Solo;
 use crate::gbuffer::GBuffer;
@@ -35,9 +37,6 @@ pub struct Options {
     /// The angle and size whose frames are kept for the side-by-side strip.
     pub strip: (f32, u32),
 }
-
-/// Rays per pixel edge of the anti-aliased reference (`psnr_aa_db`).
-pub const ANTIALIASED_SAMPLES: u32 = 3;
 
 /// The method name of the rows that draw the object as exact geometry.
 pub const GEOMETRY: &str = "geometry";

@@ -37,6 +37,8 @@ fn the_demo_flies_and_summarises() {
         "regenerations_per_orbit",
         "psnr_db_mean",
         "psnr_db_min",
+        "psnr_aa_db_min",
+        "geometry_psnr_aa_db_min",
     ] {
         assert!(!summary[key].is_null(), "{key} missing from {summary}");
     }
@@ -58,7 +60,10 @@ fn the_demo_flies_and_summarises() {
         .filter(|e| e.file_name().to_string_lossy().starts_with("frame_"))
         .count() as u64;
     assert_eq!(written, frames.div_ceil(15), "{summary}");
-    assert!(out.join("frame_00000.png").is_file(), "the first frame not written");
+    assert!(
+        out.join("frame_00000.png").is_file(),
+        "the first frame not written"
+    );
     // The JSON printed is the summary written.
     let printed: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
     assert_eq!(printed, summary);

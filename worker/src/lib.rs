@@ -17,5 +17,5 @@ pub mod tiles;
 pub mod tracer;
 
 pub use bake::{BakeError, bake};
-pub use reference::render_reference;
+pub use reference::{ANTIALIASED_SAMPLES, render_reference};
 pub use tracer::SceneTracer;

@@ -18,6 +18,10 @@ use crate::bvh::Ray;
 use crate::tiles::par_fill_blocks;
 use crate::tracer::SceneTracer;
 
+/// Rays per pixel edge of the anti-aliased reference the reports and the demo compare
+/// with, beside the point-sampled one.
+pub const ANTIALIASED_SAMPLES: u32 = 3;
+
 /// Renders `camera`'s view of the scene with `samples × samples` rays per pixel (box
 /// filtered). An even count is taken as the next odd one: the middle ray then passes
 /// through the pixel centre, and the object it hits is the pixel's object, so the

@@ -2,7 +2,7 @@
 //! processes, and this client flying the scene's camera path with impostors,
 //! asking for the textures it will need. Writes frames and `summary.json`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -20,9 +20,10 @@ use relief_client::remote::Remote;
 use relief_client::report::median;
 use relief_client::source::{spawn_local, spawn_remote};
 use relief_core::camera::{Camera, PathSegment};
+use relief_core::frame::Frame;
 use relief_core::scene::Scene;
 use relief_proto::bundle::bundle_for;
-use relief_worker::{SceneTracer, render_reference};
+use relief_worker::{ANTIALIASED_SAMPLES, SceneTracer, render_reference};
 
 use super::processes::{Children, sibling, start_server, start_workers};
 use crate::{args, progress};
@@ -105,14 +106,77 @@ struct Summary {
     warps: u64,
     /// New textures received per full turn for each object orbited by the path.
     regenerations_per_orbit: std::collections::BTreeMap<String, f64>,
+    /// Against the point-sampled reference (one ray through each pixel centre);
     /// `null` when no frame was compared (`--reference-every 0`).
     psnr_db_mean: Option<f64>,
     psnr_db_min: Option<f64>,
+    /// Against the anti-aliased reference (3×3 rays per pixel) …
+    psnr_aa_db_mean: Option<f64>,
+    psnr_aa_db_min: Option<f64>,
+    /// … which the same frames drawn all as exact geometry, one sample per pixel, do
+    /// not reach either: the floor that detail finer than a pixel sets.
+    geometry_psnr_aa_db_min: Option<f64>,
     rtt_ms: u64,
     predict: bool,
     tolerance: f32,
     workers: u32,
     source: String,
+}
+
+/// The image error of the compared frames, each as drawn and as all geometry.
+struct Judged {
+    psnr: Vec<f64>,
+    psnr_aa: Vec<f64>,
+    geometry_psnr_aa: Vec<f64>,
+}
+
+/// Compares each kept `(path frame, camera, frame)` with the ray-traced references;
+/// writes `psnr.csv` and the worst frame with its reference into `out`.
+fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result<Judged> {
+    let mut judged = Judged {
+        psnr: Vec::new(),
+        psnr_aa: Vec::new(),
+        geometry_psnr_aa: Vec::new(),
+    };
+    if compared.is_empty() {
+        return Ok(judged);
+    }
+    let bar = progress::bar(compared.len() as u64, "comparing with the reference");
+    let tracer = SceneTracer::new(scene);
+    let mut log = String::from("frame,psnr_db,psnr_aa_db,geometry_psnr_aa_db\n");
+    let mut worst = f64::INFINITY;
+    for (frame, camera, image) in compared {
+        let reference = render_reference(&tracer, camera, 1);
+        let antialiased = render_reference(&tracer, camera, ANTIALIASED_SAMPLES);
+        let geometry = render_geometry(scene, camera, &mut GBuffer::new(camera.width, camera.height));
+        let p = compare(image, &reference, None).psnr_db;
+        let p_aa = compare(image, &antialiased, None).psnr_db;
+        let floor = compare(&geometry, &antialiased, None).psnr_db;
+        log.push_str(&format!("{frame},{p:.3},{p_aa:.3},{floor:.3}\n"));
+        if p < worst {
+            worst = p;
+            image.save_png(&out.join("worst_frame.png"))?;
+            reference.save_png(&out.join("worst_frame_reference.png"))?;
+        }
+        judged.psnr.push(p);
+        judged.psnr_aa.push(p_aa);
+        judged.geometry_psnr_aa.push(floor);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    std::fs::write(out.join("psnr.csv"), log).context("writing psnr.csv")?;
+    Ok(judged)
+}
+
+/// The mean of the finite values; `None` without any.
+fn mean(values: &[f64]) -> Option<f64> {
+    let finite: Vec<f64> = values.iter().copied().filter(|p| p.is_finite()).collect();
+    (!finite.is_empty()).then(|| finite.iter().sum::<f64>() / finite.len() as f64)
+}
+
+/// The least of the finite values; `None` without any.
+fn minimum(values: &[f64]) -> Option<f64> {
+    values.iter().copied().filter(|p| p.is_finite()).reduce(f64::min)
 }
 
 /// An orbit segment of the path, and what it has cost so far.
@@ -215,7 +279,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
     let frames = args.frames.unwrap_or(scene.path.frame_count().max(1));
     let (w, h) = args.size;
-    let tracer = (args.reference_every > 0).then(|| SceneTracer::new(&scene));
     if let Some(pose) = scene.path.pose(0) {
         bar.set_message("waiting for the first textures");
         let camera = Camera::look_at(pose.eye, pose.target, Vec3::Y, scene.fov_y_degrees, w, h)
@@ -229,9 +292,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let mut gbuffer = GBuffer::new(w, h);
     let mut frame_ms = Vec::new();
     let mut geometry_ms = Vec::new();
-    let mut psnr = Vec::new();
-    let mut psnr_log = String::from("frame,psnr_db\n");
-    let mut worst = (f64::INFINITY, 0u32);
+    let mut compared = Vec::new();
     // Orbit segments: their frame range, object and turns.
     let mut orbits = Vec::new();
     let mut first = 0u32;
@@ -288,18 +349,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
         if args.write_every > 0 && rendered % args.write_every == 0 {
             image.save_png(&args.out.join(format!("frame_{frame:05}.png")))?;
         }
-        if let Some(tracer) = &tracer
-            && rendered % args.reference_every == 0
-        {
-            let reference = render_reference(tracer, &camera, 1);
-            let p = compare(&image, &reference, None).psnr_db;
-            psnr.push(p);
-            psnr_log.push_str(&format!("{frame},{p:.3}\n"));
-            if p < worst.0 {
-                worst = (p, frame);
-                image.save_png(&args.out.join("worst_frame.png"))?;
-                reference.save_png(&args.out.join("worst_frame_reference.png"))?;
-            }
+        if args.reference_every > 0 && rendered % args.reference_every == 0 {
+            // Judged after the flight: tracing references here would stall it.
+            compared.push((frame, camera, image));
         }
         if rendered % args.geometry_every == 0 {
             let mut all = GBuffer::new(w, h);
@@ -311,6 +363,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         bar.set_position(frame as u64 + 1);
     }
     bar.finish_and_clear();
+    let judged = judge(&scene, &compared, &args.out)?;
     let counters = &manager.counters;
     let percentile = |values: &[f64], p: f64| {
         let mut v = values.to_vec();
@@ -321,7 +374,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
             v[((v.len() - 1) as f64 * p).round() as usize]
         }
     };
-    let finite: Vec<f64> = psnr.iter().copied().filter(|p| p.is_finite()).collect();
     let summary = Summary {
         frames: rendered,
         path_frames: frames,
@@ -351,15 +403,17 @@ pub fn run(args: DemoArgs) -> Result<()> {
                 ))
             })
             .collect(),
-        psnr_db_mean: (!finite.is_empty()).then(|| finite.iter().sum::<f64>() / finite.len() as f64),
-        psnr_db_min: finite.iter().copied().reduce(f64::min),
+        psnr_db_mean: mean(&judged.psnr),
+        psnr_db_min: minimum(&judged.psnr),
+        psnr_aa_db_mean: mean(&judged.psnr_aa),
+        psnr_aa_db_min: minimum(&judged.psnr_aa),
+        geometry_psnr_aa_db_min: minimum(&judged.geometry_psnr_aa),
         rtt_ms: args.rtt_ms,
         predict: !args.no_predict,
         tolerance: args.tolerance,
         workers: args.workers,
         source,
     };
-    std::fs::write(args.out.join("psnr.csv"), psnr_log).context("writing psnr.csv")?;
     let json = serde_json::to_string_pretty(&summary)?;
     std::fs::write(args.out.join("summary.json"), &json).context("writing summary.json")?;
     if args.json {
