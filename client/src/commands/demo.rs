@@ -26,6 +26,7 @@ use relief_proto::bundle::bundle_for;
 use relief_worker::{ANTIALIASED_SAMPLES, SceneTracer, render_reference};
 
 use super::processes::{Children, sibling, start_server, start_workers};
+use super::window::Viewer;
 use crate::{args, progress};
 
 #[derive(Args)]
@@ -80,6 +81,10 @@ pub struct DemoArgs {
     /// Print the summary as JSON.
     #[arg(long)]
     json: bool,
+    /// Show the frames in a window as they are drawn (Escape or closing it ends the
+    /// flight early). Needs a build with the `window` feature and a display.
+    #[arg(long)]
+    window: bool,
 }
 
 /// What `summary.json` holds.
@@ -209,6 +214,12 @@ pub fn run(args: DemoArgs) -> Result<()> {
         bail!("--tolerance must be a positive number of pixels");
     }
     let scene = Arc::new(Scene::load(&args.scene)?);
+    let (w, h) = args.size;
+    // First, so that a missing display fails before any process starts.
+    let mut viewer = match args.window {
+        true => Some(Viewer::open("relief demo — Escape ends the flight", w, h)?),
+        false => None,
+    };
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
@@ -278,7 +289,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
     };
     let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
     let frames = args.frames.unwrap_or(scene.path.frame_count().max(1));
-    let (w, h) = args.size;
     if let Some(pose) = scene.path.pose(0) {
         bar.set_message("waiting for the first textures");
         let camera = Camera::look_at(pose.eye, pose.target, Vec3::Y, scene.fov_y_degrees, w, h)
@@ -346,6 +356,11 @@ pub fn run(args: DemoArgs) -> Result<()> {
         let shows = manager.frame(&scene, &camera, t);
         let image = manager.render(&scene, &shows, &camera, &mut gbuffer);
         frame_ms.push(began.elapsed().as_secs_f64() * 1e3);
+        if let Some(viewer) = &mut viewer
+            && !viewer.show(&image)?
+        {
+            break;
+        }
         if args.write_every > 0 && rendered % args.write_every == 0 {
             image.save_png(&args.out.join(format!("frame_{frame:05}.png")))?;
         }

@@ -8,3 +8,4 @@ pub mod load;
 pub mod processes;
 pub mod reference;
 pub mod report;
+pub mod window;
