@@ -241,26 +241,40 @@ fn halves(n: usize, e: f32) -> [(impl Iterator<Item = usize> + Clone, f32); 2] {
     [half(0, split, 1.0), half(n.wrapping_sub(1), n - split, -1.0)]
 }
 
-/// Per-column state of the column pass: the last sample, and one past the number (in
-/// visiting order) of the row that produced it — 0 before any.
+/// Per-column state of the column pass: what the column's last sample carries on (its
+/// v', displacement, attributes and link downwards), and one past the number (in
+/// visiting order) of the row that produced it — 0 before any. Only what the column
+/// pass reads is kept, so the row pass's other fields are never computed for it.
 #[derive(Clone, Copy)]
 struct Column {
-    last: Sample,
+    v: f32,
+    depth: f32,
+    attributes: Attributes,
+    down: bool,
     next_row: u32,
 }
 
 impl Column {
     const START: Column = Column {
-        last: Sample {
-            pos: 0.0,
-            v_target: 0.0,
-            source: 0.0,
-            depth: 0.0,
-            attributes: Attributes(0),
-            down: false,
-        },
+        v: 0.0,
+        depth: 0.0,
+        attributes: Attributes(0),
+        down: false,
         next_row: 0,
     };
+
+    /// The last sample, as the column pass's span reads it.
+    #[inline(always)]
+    fn last(&self) -> Sample {
+        Sample {
+            pos: self.v,
+            v_target: self.v,
+            source: 0.0,
+            depth: self.depth,
+            attributes: self.attributes,
+            down: self.down,
+        }
+    }
 }
 
 /// The rows of the pre-warped image one half of the work writes, as plane coordinates
@@ -292,12 +306,15 @@ impl Output<'_> {
 fn push_column(column: &mut Column, out: &mut Output, x: i64, s: Sample, seq: usize, dir: f32) {
     // Visiting downwards the previous row's sample carries the link to this row;
     // visiting upwards this row's sample does.
-    let p = &column.last;
+    let p = column.last();
     let linked =
         column.next_row != 0 && column.next_row as usize == seq && if dir > 0.0 { p.down } else { s.down };
-    span(linked.then_some(p), &s, dir, linear, |y, t| out.put(x, y, &t));
+    span(linked.then_some(&p), &s, dir, linear, |y, t| out.put(x, y, &t));
     *column = Column {
-        last: s,
+        v: s.pos,
+        depth: s.depth,
+        attributes: s.attributes,
+        down: s.down,
         next_row: seq as u32 + 1,
     };
 }
