@@ -13,6 +13,7 @@
 //! - [`evaluate`] — the orbit set-up of the error reports: bake, reference, show, compare.
 //! - [`remote`] — the client side of the protocol: scenes up, textures down, withdrawals.
 //! - [`report`] — the error-against-run-time measurement.
+//! - [`stats`] — median, percentiles and means of measured samples.
 //! - [`manager`] — the impostor manager: geometry / warp / regenerate per object, texture cache, predicted requests.
 //! - [`source`] — where textures come from: a server over gRPC, or the in-process generator.
 //! - [`metrics`] — image error against the reference; warp-error predictions.
@@ -29,4 +30,5 @@ pub mod raster;
 pub mod remote;
 pub mod report;
 pub mod source;
+pub mod stats;
 pub mod warp;

@@ -298,9 +298,8 @@ impl Manager {
         if self.recent_latencies.is_empty() {
             return self.config.initial_latency;
         }
-        let mut sorted: Vec<f64> = self.recent_latencies.iter().copied().collect();
-        sorted.sort_by(f64::total_cmp);
-        sorted[((sorted.len() - 1) as f64 * LATENCY_PERCENTILE).round() as usize]
+        let recent: Vec<f64> = self.recent_latencies.iter().copied().collect();
+        crate::stats::percentile(&recent, LATENCY_PERCENTILE)
     }
 
     /// Textures requested per object so far.
@@ -582,25 +581,27 @@ impl Manager {
                 self.counters.prediction_hits += 1;
             }
             if !valid {
-                // What was asked for: (age ms, predicted, degrees from this eye).
-                let asked: Vec<(u128, bool, f32)> = self
-                    .pending
-                    .values()
-                    .filter(|p| p.object == k)
-                    .map(|p| {
-                        let degrees = angle_between(centre, p.eye, camera.eye).to_degrees();
-                        (p.sent.elapsed().as_millis(), p.predicted, degrees)
-                    })
-                    .collect();
-                tracing::debug!(
-                    object = %object.name,
-                    growth = best.map(|b| b.1.growth),
-                    held = self.objects[k].held.len(),
-                    valid_deg = self.valid_angle(k).to_degrees(),
-                    planned_latency_s = self.latency(),
-                    ?asked,
-                    "stale"
-                );
+                if tracing::enabled!(tracing::Level::DEBUG) {
+                    // What was asked for: (age ms, predicted, degrees from this eye).
+                    let asked: Vec<(u128, bool, f32)> = self
+                        .pending
+                        .values()
+                        .filter(|p| p.object == k)
+                        .map(|p| {
+                            let degrees = angle_between(centre, p.eye, camera.eye).to_degrees();
+                            (p.sent.elapsed().as_millis(), p.predicted, degrees)
+                        })
+                        .collect();
+                    tracing::debug!(
+                        object = %object.name,
+                        growth = best.map(|b| b.1.growth),
+                        held = self.objects[k].held.len(),
+                        valid_deg = self.valid_angle(k).to_degrees(),
+                        planned_latency_s = self.latency(),
+                        ?asked,
+                        "stale"
+                    );
+                }
                 stale = true;
             }
             if (!valid || coarse) && !self.pending_covers(k, centre, camera.eye) {

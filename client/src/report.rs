@@ -18,6 +18,7 @@ use crate::evaluate::Solo;
 use crate::gbuffer::GBuffer;
 use crate::impostor::Impostor;
 use crate::metrics::critical::{CriticalPoints, measured_gap};
+use crate::stats::median;
 use crate::warp::params::WarpParams;
 use crate::warp::sprite::Sprite;
 use crate::warp::{Method, display};
@@ -133,12 +134,6 @@ pub struct Strip {
     pub object: String,
     pub reference: Frame,
     pub frames: Vec<(Method, Frame)>,
-}
-
-/// The median (the upper one for an even count); NaN for no values.
-pub fn median(mut values: Vec<f64>) -> f64 {
-    values.sort_by(f64::total_cmp);
-    values.get(values.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
 /// Measures `objects` of `scene`; `on_row` sees each row as it is made (progress).

@@ -163,7 +163,7 @@ fn median_ms_after<S>(
             start.elapsed().as_secs_f64() * 1e3
         })
         .collect();
-    relief_client::report::median(times)
+    relief_client::stats::median(times)
 }
 
 /// One method's line of `relief bench warp --json`.
@@ -620,11 +620,7 @@ fn rpc(args: RpcArgs) -> Result<()> {
                 bake.push(bake_ms as f64);
             }
         }
-        let percentile = |v: &[f64], p: f64| {
-            let mut v = v.to_vec();
-            v.sort_by(f64::total_cmp);
-            v[((v.len() - 1) as f64 * p).round() as usize]
-        };
+        use relief_client::stats::percentile;
         let overhead: Vec<f64> = latency.iter().zip(&bake).map(|(l, b)| l - b).collect();
         let server = remote
             .stats()

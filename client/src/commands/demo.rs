@@ -17,8 +17,8 @@ use relief_client::gbuffer::GBuffer;
 use relief_client::manager::{Config, Manager};
 use relief_client::metrics::image::compare;
 use relief_client::remote::Remote;
-use relief_client::report::median;
 use relief_client::source::{spawn_local, spawn_remote};
+use relief_client::stats::{finite_mean, finite_min, median, percentile};
 use relief_core::camera::{Camera, PathSegment};
 use relief_core::frame::Frame;
 use relief_core::scene::Scene;
@@ -128,6 +128,9 @@ struct Summary {
     source: String,
 }
 
+/// Memory the frames kept for comparison after the flight may take.
+const MAX_COMPARED_BYTES: usize = 256 << 20;
+
 /// The image error of the compared frames, each as drawn and as all geometry.
 struct Judged {
     psnr: Vec<f64>,
@@ -171,17 +174,6 @@ fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result
     bar.finish_and_clear();
     std::fs::write(out.join("psnr.csv"), log).context("writing psnr.csv")?;
     Ok(judged)
-}
-
-/// The mean of the finite values; `None` without any.
-fn mean(values: &[f64]) -> Option<f64> {
-    let finite: Vec<f64> = values.iter().copied().filter(|p| p.is_finite()).collect();
-    (!finite.is_empty()).then(|| finite.iter().sum::<f64>() / finite.len() as f64)
-}
-
-/// The least of the finite values; `None` without any.
-fn minimum(values: &[f64]) -> Option<f64> {
-    values.iter().copied().filter(|p| p.is_finite()).reduce(f64::min)
 }
 
 /// An orbit segment of the path, and what it has cost so far.
@@ -303,6 +295,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let mut frame_ms = Vec::new();
     let mut geometry_ms = Vec::new();
     let mut compared = Vec::new();
+    let mut compare_every = args.reference_every;
+    // A kept frame: colour and object id per pixel.
+    let frame_bytes = (w as usize * h as usize * 7).max(1);
     // Orbit segments: their frame range, object and turns.
     let mut orbits = Vec::new();
     let mut first = 0u32;
@@ -325,12 +320,14 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let start = Instant::now();
     let period = Duration::from_secs_f64(1.0 / args.fps as f64);
     let mut rendered = 0u32;
+    let mut next_frame = 0u32;
     // The camera follows the clock: the eye is where the path is `t·fps` frames in. A
-    // frame that takes longer (the timed all-geometry frame, a reference) does not slow
-    // the eye down — the next frame shows it further on, as in any real-time viewer —
-    // so the predictor sees the true motion, and latency is real.
+    // frame that takes longer (the timed all-geometry frame) does not slow the eye
+    // down — the next frame, drawn at once, shows it further on and the path frames in
+    // between are skipped, as in any real-time viewer — so the predictor sees the
+    // true motion, and latency is real.
     loop {
-        if let Some(wait) = (period * rendered).checked_sub(start.elapsed()) {
+        if let Some(wait) = (period * next_frame).checked_sub(start.elapsed()) {
             std::thread::sleep(wait);
         }
         let t = start.elapsed().as_secs_f64();
@@ -339,6 +336,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
             break;
         }
         let frame = position as u32;
+        next_frame = frame + 1;
         for orbit in &mut orbits {
             if orbit.frames.contains(&frame) {
                 let received = manager.received(orbit.object);
@@ -364,9 +362,19 @@ pub fn run(args: DemoArgs) -> Result<()> {
         if args.write_every > 0 && rendered % args.write_every == 0 {
             image.save_png(&args.out.join(format!("frame_{frame:05}.png")))?;
         }
-        if args.reference_every > 0 && rendered % args.reference_every == 0 {
-            // Judged after the flight: tracing references here would stall it.
+        if compare_every > 0 && rendered % compare_every == 0 {
+            // Judged after the flight: tracing references here would stall it. A long
+            // flight keeps every other one, comparing half as often, to stay within
+            // the memory budget.
             compared.push((frame, camera, image));
+            if compared.len() * frame_bytes > MAX_COMPARED_BYTES {
+                let mut k = 0;
+                compared.retain(|_| {
+                    k += 1;
+                    k % 2 == 1
+                });
+                compare_every *= 2;
+            }
         }
         if rendered % args.geometry_every == 0 {
             let mut all = GBuffer::new(w, h);
@@ -380,15 +388,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
     bar.finish_and_clear();
     let judged = judge(&scene, &compared, &args.out)?;
     let counters = &manager.counters;
-    let percentile = |values: &[f64], p: f64| {
-        let mut v = values.to_vec();
-        v.sort_by(f64::total_cmp);
-        if v.is_empty() {
-            f64::NAN
-        } else {
-            v[((v.len() - 1) as f64 * p).round() as usize]
-        }
-    };
     let summary = Summary {
         frames: rendered,
         path_frames: frames,
@@ -418,11 +417,11 @@ pub fn run(args: DemoArgs) -> Result<()> {
                 ))
             })
             .collect(),
-        psnr_db_mean: mean(&judged.psnr),
-        psnr_db_min: minimum(&judged.psnr),
-        psnr_aa_db_mean: mean(&judged.psnr_aa),
-        psnr_aa_db_min: minimum(&judged.psnr_aa),
-        geometry_psnr_aa_db_min: minimum(&judged.geometry_psnr_aa),
+        psnr_db_mean: finite_mean(&judged.psnr),
+        psnr_db_min: finite_min(&judged.psnr),
+        psnr_aa_db_mean: finite_mean(&judged.psnr_aa),
+        psnr_aa_db_min: finite_min(&judged.psnr_aa),
+        geometry_psnr_aa_db_min: finite_min(&judged.geometry_psnr_aa),
         rtt_ms: args.rtt_ms,
         predict: !args.no_predict,
         tolerance: args.tolerance,

@@ -11,7 +11,7 @@ use serde::Serialize;
 use relief_client::composite::{FramePlan, FrameStats, render_geometry};
 use relief_client::gbuffer::GBuffer;
 use relief_client::metrics::image::compare;
-use relief_client::report::median;
+use relief_client::stats::median;
 use relief_client::warp::Method;
 use relief_core::relief::DepthBits;
 use relief_worker::{SceneTracer, render_reference};

@@ -18,6 +18,7 @@ use relief_client::manager::{Config, Counters, Manager};
 use relief_client::metrics::image::compare;
 use relief_client::remote::Remote;
 use relief_client::source::spawn_remote;
+use relief_client::stats::{finite_mean, finite_min, percentile};
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
 use relief_proto::bundle::bundle_for;
@@ -102,16 +103,6 @@ impl Row {
             self.psnr_db_mean,
             self.psnr_db_min
         )
-    }
-}
-
-fn percentile(values: &[f64], p: f64) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v[((v.len() - 1) as f64 * p).round() as usize]
     }
 }
 
@@ -201,11 +192,7 @@ pub fn run(args: LoadArgs) -> Result<()> {
             .iter()
             .flat_map(|r| r.counters.latencies_ms.clone())
             .collect();
-        let psnr: Vec<f64> = results
-            .iter()
-            .flat_map(|r| r.psnr.clone())
-            .filter(|p| p.is_finite())
-            .collect();
+        let psnr: Vec<f64> = results.iter().flat_map(|r| r.psnr.clone()).collect();
         let sum = |f: &dyn Fn(&ClientResult) -> u64| results.iter().map(f).sum::<u64>();
         let (now, predicted) = (
             sum(&|r| r.counters.requests_now),
@@ -224,12 +211,8 @@ pub fn run(args: LoadArgs) -> Result<()> {
             stall_frac: sum(&|r| r.counters.stale_frames) as f64 / frames as f64,
             textures_per_client_s: sum(&|r| r.received) as f64 / args.clients as f64 / seconds,
             // NaN (null in JSON) when no frame was compared.
-            psnr_db_mean: if psnr.is_empty() {
-                f64::NAN
-            } else {
-                psnr.iter().sum::<f64>() / psnr.len() as f64
-            },
-            psnr_db_min: psnr.iter().copied().reduce(f64::min).unwrap_or(f64::NAN),
+            psnr_db_mean: finite_mean(&psnr).unwrap_or(f64::NAN),
+            psnr_db_min: finite_min(&psnr).unwrap_or(f64::NAN),
         });
         bar.inc(1);
     }

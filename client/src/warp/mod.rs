@@ -27,9 +27,11 @@ use relief_core::camera::Camera;
 use crate::gbuffer::GBuffer;
 use crate::impostor::Impostor;
 
-/// `x ∈ [0, 2²³)` rounded to the nearest integer. Adding 2²³ leaves the rounded value
-/// in the float's mantissa bits: one add, where a saturating `as` conversion costs a
-/// quarter of the time of the inner loops that use this.
+/// `x ∈ [0, 2²³ − 0.5)` rounded to the nearest integer (ties to even); anything else
+/// (negative, NaN) gives an arbitrary value below 2²³, so callers bound the result.
+/// Adding 2²³ leaves the rounded value in the float's mantissa bits: one add, where a
+/// saturating `as` conversion costs a quarter of the time of the inner loops that use
+/// this.
 #[inline(always)]
 pub(crate) fn round_small(x: f32) -> u32 {
     (x + 8_388_608.0).to_bits() & 0x7f_ffff

@@ -162,7 +162,8 @@ impl Sample {
             depth: self.depth + (other.depth - self.depth) * t,
             attributes: self
                 .attributes
-                .lerp(other.attributes, super::round_small(t * 256.0) as u64),
+                // (`min`: a NaN `t`, from NaN input, must not underflow the lanes.)
+                .lerp(other.attributes, super::round_small(t * 256.0).min(256) as u64),
             down: self.down && other.down,
         }
     }
