@@ -30,7 +30,9 @@ fn load_runs_write_a_row_per_tolerance_and_plots() {
     };
     for row in rows {
         assert_eq!(row["clients"], 2);
-        assert_eq!(row["frames"], 40);
+        // Frames drawn by both clients: a slow frame skips path frames.
+        let frames = row["frames"].as_u64().unwrap();
+        assert!((20..=40).contains(&frames), "{row}");
     }
     // The tight tolerance needs new textures on this path; the loose one lives longer,
     // so it needs no more (on so short a path, often none: then no latency either).

@@ -39,7 +39,8 @@ pub struct LoadArgs {
     /// Tolerances (pixels of predicted gap growth) to run, comma-separated.
     #[arg(long, default_value = "4,8,16,32,64", value_delimiter = ',')]
     tolerances: Vec<f32>,
-    /// Frames each client flies per tolerance.
+    /// Path frames each client flies per tolerance (the eye follows the clock, so a slow
+    /// frame skips some).
     #[arg(long, default_value = "150", value_parser = clap::value_parser!(u32).range(1..=100_000))]
     frames: u32,
     /// Camera pace.
@@ -108,6 +109,8 @@ impl Row {
 
 /// What one simulated client brings back.
 struct ClientResult {
+    /// Frames drawn (path frames a slow frame skipped are not).
+    frames: u32,
     counters: Counters,
     received: u64,
     psnr: Vec<f64>,
@@ -198,7 +201,7 @@ pub fn run(args: LoadArgs) -> Result<()> {
             sum(&|r| r.counters.requests_now),
             sum(&|r| r.counters.requests_predicted),
         );
-        let frames = args.frames as u64 * args.clients as u64;
+        let frames = sum(&|r| r.frames as u64);
         rows.push(Row {
             tolerance_px: tolerance,
             clients: args.clients,
@@ -297,32 +300,43 @@ fn fly(
     (w, h): (u32, u32),
     every: u32,
 ) -> Result<ClientResult> {
-    let total = scene.path.frame_count().max(1);
-    let camera_at = |frame: u32| -> Result<Camera> {
+    let total = scene.path.frame_count().max(1) as f64;
+    let camera_at = |position: f64| -> Result<Camera> {
         let pose = scene
             .path
-            .pose((frame + offset) % total)
+            .pose_at((position + offset as f64) % total)
             .context("the scene has no camera path")?;
         Camera::look_at(pose.eye, pose.target, Vec3::Y, scene.fov_y_degrees, w, h).map_err(|e| anyhow!(e))
     };
-    manager.warm_up(scene, &camera_at(0)?, Duration::from_secs(20));
+    manager.warm_up(scene, &camera_at(0.0)?, Duration::from_secs(20));
     let period = Duration::from_secs_f64(1.0 / fps as f64);
     let start = Instant::now();
     let mut psnr = Vec::new();
     let mut gbuffer = GBuffer::new(w, h);
-    for frame in 0..frames {
-        if let Some(wait) = (period * frame).checked_sub(start.elapsed()) {
+    let (mut drawn, mut next_frame) = (0u32, 0u32);
+    // As in the demo, the eye follows the clock: a slow frame (client 0's compared
+    // ones) skips path frames instead of slowing the eye.
+    loop {
+        if let Some(wait) = (period * next_frame).checked_sub(start.elapsed()) {
             std::thread::sleep(wait);
         }
-        let camera = camera_at(frame)?;
-        let shows = manager.frame(scene, &camera, start.elapsed().as_secs_f64());
-        if client == 0 && frame % every == 0 {
+        let t = start.elapsed().as_secs_f64();
+        let position = t * fps as f64;
+        if position >= frames as f64 {
+            break;
+        }
+        next_frame = position as u32 + 1;
+        let camera = camera_at(position)?;
+        let shows = manager.frame(scene, &camera, t);
+        drawn += 1;
+        if client == 0 && (drawn - 1) % every == 0 {
             let image = manager.render(scene, &shows, &camera, &mut gbuffer);
             psnr.push(compare(&image, &render_reference(tracer, &camera, 1), None).psnr_db);
         }
     }
     let received = (0..scene.objects.len()).map(|k| manager.received(k)).sum();
     Ok(ClientResult {
+        frames: drawn,
         counters: manager.counters.clone(),
         received,
         psnr,
