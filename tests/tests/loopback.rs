@@ -281,6 +281,25 @@ async fn tls_with_a_self_signed_certificate() {
     .await
     .unwrap();
     assert!(results.last().unwrap().r#final);
+    // `relief render` against it, trusting the certificate with --tls-ca.
+    let out = dir.join("render");
+    let run = relief_tests::relief(&[
+        "render",
+        "--server",
+        &url,
+        "--tls-ca",
+        cert.to_str().unwrap(),
+        "--frames",
+        "6",
+        "--size",
+        "64x36",
+        "--reference-every",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    assert!(out.join("summary.json").is_file());
     // Without trusting the certificate the connection is refused.
     let mut untrusting = match Remote::connect(&url, None, "test").await {
         Err(e) => {

@@ -241,9 +241,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let (arrivals_tx, arrivals_rx) = unbounded_channel();
     let source = match &url {
         Some(url) => runtime.block_on(async {
-            let mut remote = Remote::connect(
+            let mut remote = Remote::connect_with(
                 url,
                 args.token.as_deref(),
+                args.tls_ca.as_deref(),
                 &format!("demo-{}", std::process::id()),
             )
             .await
