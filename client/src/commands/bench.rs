@@ -531,8 +531,7 @@ fn raytrace(args: RaytraceArgs) -> Result<()> {
 }
 
 fn rpc(args: RpcArgs) -> Result<()> {
-    use super::processes::{Children, start_server, start_workers};
-    use relief_client::remote::Remote;
+    use super::processes::{Children, connect_and_upload, start_server, start_workers};
     use relief_proto::convert::vec3_to_pb;
     use relief_proto::pb;
 
@@ -546,23 +545,14 @@ fn rpc(args: RpcArgs) -> Result<()> {
         .enable_all()
         .build()?;
     let report = runtime.block_on(async {
-        let mut remote = Remote::connect(&url, None, "bench")
-            .await
-            .map_err(|e| anyhow::anyhow!(e))?;
+        let bundle = relief_proto::bundle::bundle_for("default")?;
+        let (mut remote, hash) =
+            connect_and_upload(&url, None, None, "bench", &bundle, Some(args.workers)).await?;
         let channel = tonic::transport::Endpoint::from_shared(url.clone())?
             .tcp_nodelay(true)
             .connect()
             .await?;
         let mut health = tonic_health::pb::health_client::HealthClient::new(channel);
-        let bundle = relief_proto::bundle::bundle_for("default")?;
-        let hash = remote
-            .put_scene(&bundle)
-            .await
-            .map_err(|e| anyhow::anyhow!(e.message().to_string()))?;
-        remote
-            .wait_for_workers(args.workers, std::time::Duration::from_secs(20))
-            .await
-            .map_err(|e| anyhow::anyhow!(e))?;
         bar.set_message("control-plane calls");
         let mut echo = Vec::new();
         let mut stats = Vec::new();

@@ -16,7 +16,6 @@ use relief_client::composite::render_geometry;
 use relief_client::gbuffer::GBuffer;
 use relief_client::manager::{Config, Manager};
 use relief_client::metrics::image::compare;
-use relief_client::remote::Remote;
 use relief_client::source::{spawn_local, spawn_remote};
 use relief_client::stats::{finite_mean, finite_min, median, percentile};
 use relief_core::camera::{Camera, PathSegment};
@@ -25,7 +24,7 @@ use relief_core::scene::Scene;
 use relief_proto::bundle::bundle_for;
 use relief_worker::{ANTIALIASED_SAMPLES, SceneTracer, render_reference};
 
-use super::processes::{Children, sibling, start_server, start_workers};
+use super::processes::{Children, connect_and_upload, sibling, start_server, start_workers};
 use super::window::Viewer;
 use crate::{args, progress};
 
@@ -241,25 +240,16 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let (arrivals_tx, arrivals_rx) = unbounded_channel();
     let source = match &url {
         Some(url) => runtime.block_on(async {
-            let mut remote = Remote::connect_with(
+            // Workers we started must have registered; a given server has its own.
+            let (remote, hash) = connect_and_upload(
                 url,
                 args.token.as_deref(),
                 args.tls_ca.as_deref(),
                 &format!("demo-{}", std::process::id()),
+                &bundle_for(&args.scene)?,
+                args.server.is_none().then_some(args.workers),
             )
-            .await
-            .map_err(|e| anyhow!(e))?;
-            let bundle = bundle_for(&args.scene)?;
-            let hash = remote
-                .put_scene(&bundle)
-                .await
-                .map_err(|e| anyhow!("uploading the scene: {}", e.message()))?;
-            if args.server.is_none() {
-                remote
-                    .wait_for_workers(args.workers, Duration::from_secs(20))
-                    .await
-                    .map_err(|e| anyhow!(e))?;
-            }
+            .await?;
             spawn_remote(
                 remote,
                 hash,

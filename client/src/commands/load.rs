@@ -16,7 +16,6 @@ use tokio::sync::mpsc::unbounded_channel;
 use relief_client::gbuffer::GBuffer;
 use relief_client::manager::{Config, Counters, Manager};
 use relief_client::metrics::image::compare;
-use relief_client::remote::Remote;
 use relief_client::source::spawn_remote;
 use relief_client::stats::{finite_mean, finite_min, percentile};
 use relief_core::camera::Camera;
@@ -24,7 +23,7 @@ use relief_core::scene::Scene;
 use relief_proto::bundle::bundle_for;
 use relief_worker::{SceneTracer, render_reference};
 
-use super::processes::{Children, start_server, start_workers};
+use super::processes::{Children, connect_and_upload, start_server, start_workers};
 use super::report::{draw_chart, register_font};
 use crate::{args, progress};
 
@@ -130,25 +129,20 @@ pub fn run(args: LoadArgs) -> Result<()> {
         .build()?;
     let bar = progress::bar(args.tolerances.len() as u64, "load runs");
     let mut rows = Vec::new();
+    let bundle = bundle_for(&args.scene)?;
     for &tolerance in &args.tolerances {
         bar.set_message(format!("tolerance {tolerance} px"));
         let mut children = Children(Vec::new());
         let url = start_server(&mut children, &args.out.join("server-scenes"))?;
         start_workers(&mut children, &url, args.workers, &args.out)?;
-        let (remote, hash) = runtime.block_on(async {
-            let mut remote = Remote::connect(&url, None, "load")
-                .await
-                .map_err(|e| anyhow!(e))?;
-            let hash = remote
-                .put_scene(&bundle_for(&args.scene)?)
-                .await
-                .map_err(|e| anyhow!("uploading the scene: {}", e.message()))?;
-            remote
-                .wait_for_workers(args.workers, Duration::from_secs(20))
-                .await
-                .map_err(|e| anyhow!(e))?;
-            Ok::<_, anyhow::Error>((remote, hash))
-        })?;
+        let (remote, hash) = runtime.block_on(connect_and_upload(
+            &url,
+            None,
+            None,
+            "load",
+            &bundle,
+            Some(args.workers),
+        ))?;
         let started = Instant::now();
         let handles: Vec<_> = (0..args.clients)
             .map(|c| {

@@ -6,6 +6,10 @@ use std::process::{Child, Command, Stdio};
 
 use anyhow::{Context, Result, anyhow, bail};
 
+use relief_client::remote::Remote;
+use relief_core::hash::ContentHash;
+use relief_proto::bundle::Bundle;
+
 /// Child processes, killed when dropped.
 pub struct Children(pub Vec<Child>);
 
@@ -75,4 +79,31 @@ pub fn start_workers(children: &mut Children, url: &str, count: u32, dir: &Path)
         children.0.push(child);
     }
     Ok(())
+}
+
+/// Connects to the server at `url` as `client_id` (trusting `ca` besides the system's
+/// roots), uploads `bundle`, and — given a count — waits (at most 20 s) until that many
+/// workers have registered. Returns the connection and the scene's hash.
+pub async fn connect_and_upload(
+    url: &str,
+    token: Option<&str>,
+    ca: Option<&Path>,
+    client_id: &str,
+    bundle: &Bundle,
+    workers: Option<u32>,
+) -> Result<(Remote, ContentHash)> {
+    let mut remote = Remote::connect_with(url, token, ca, client_id)
+        .await
+        .map_err(|e| anyhow!(e))?;
+    let hash = remote
+        .put_scene(bundle)
+        .await
+        .map_err(|e| anyhow!("uploading the scene: {}", e.message()))?;
+    if let Some(count) = workers {
+        remote
+            .wait_for_workers(count, std::time::Duration::from_secs(20))
+            .await
+            .map_err(|e| anyhow!(e))?;
+    }
+    Ok((remote, hash))
 }
