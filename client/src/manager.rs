@@ -238,7 +238,7 @@ pub struct Manager {
     commands: UnboundedSender<Command>,
     arrivals: UnboundedReceiver<Arrival>,
     /// The last [`LATENCY_WINDOW`] round trips (request to final texture), seconds.
-    recent_latencies: std::collections::VecDeque<f64>,
+    recent_latencies: Vec<f64>,
     sprites: Vec<Option<Kept>>,
     pub counters: Counters,
 }
@@ -278,7 +278,7 @@ impl Manager {
         arrivals: UnboundedReceiver<Arrival>,
     ) -> Self {
         Manager {
-            recent_latencies: std::collections::VecDeque::new(),
+            recent_latencies: Vec::new(),
             config,
             objects: scene.objects.iter().map(|_| ObjectState::default()).collect(),
             predictor: Predictor::default(),
@@ -298,8 +298,7 @@ impl Manager {
         if self.recent_latencies.is_empty() {
             return self.config.initial_latency;
         }
-        let recent: Vec<f64> = self.recent_latencies.iter().copied().collect();
-        crate::stats::percentile(&recent, LATENCY_PERCENTILE)
+        crate::stats::percentile(&self.recent_latencies, LATENCY_PERCENTILE)
     }
 
     /// Textures requested per object so far.
@@ -379,9 +378,9 @@ impl Manager {
                         let ms = p.sent.elapsed().as_secs_f64() * 1e3;
                         self.counters.latencies_ms.push(ms);
                         tracing::debug!(object = p.object, ms, predicted = p.predicted, "round trip");
-                        self.recent_latencies.push_back(ms / 1e3);
+                        self.recent_latencies.push(ms / 1e3);
                         if self.recent_latencies.len() > LATENCY_WINDOW {
-                            self.recent_latencies.pop_front();
+                            self.recent_latencies.remove(0);
                         }
                     }
                     let Prepared {
@@ -432,19 +431,23 @@ impl Manager {
     /// widest predicted gap over the gaps it has at its own eye, in screen pixels
     /// (`INFINITY` when it cannot be warped there), and whether it is too coarse for
     /// the screen while a finer one can be had (eq. 4-1).
-    fn grades(&self, scene: &Scene, object: usize, eye: Vec3, camera: &Camera) -> Vec<Grade> {
-        self.objects[object]
-            .held
-            .iter()
-            .map(|h| Grade {
-                growth: growth(h, eye, camera),
-                coarse: {
-                    let texture = &h.pyramid.levels[0].texture;
-                    needs_finer_texture(&texture.camera, &Camera { eye, ..*camera }, 2.0 * TEXEL_TOLERANCE)
-                        && texture.camera.width < Self::size_for(&scene.objects[object], eye, camera)
-                },
-            })
-            .collect()
+    fn grades<'a>(
+        &'a self,
+        scene: &Scene,
+        object: usize,
+        eye: Vec3,
+        camera: &'a Camera,
+    ) -> impl Iterator<Item = Grade> + 'a {
+        let wanted = Self::size_for(&scene.objects[object], eye, camera);
+        let at_eye = Camera { eye, ..*camera };
+        self.objects[object].held.iter().map(move |h| Grade {
+            growth: growth(h, eye, camera),
+            coarse: {
+                let texture = &h.pyramid.levels[0].texture;
+                needs_finer_texture(&texture.camera, &at_eye, 2.0 * TEXEL_TOLERANCE)
+                    && texture.camera.width < wanted
+            },
+        })
     }
 
     /// The angle around an object over which its newest texture stays within tolerance.
@@ -548,6 +551,14 @@ impl Manager {
     pub fn frame(&mut self, scene: &Scene, camera: &Camera, t: f64) -> Vec<Show> {
         self.drain(camera, scene);
         self.predictor.observe(t, camera.eye);
+        // Where the eye will be when a request made now comes back: one answer for
+        // every object this frame.
+        let ahead = if self.config.predict {
+            let horizon = (self.latency() + 0.05).min(3.0);
+            self.predictor.predict(horizon).map(|future| (horizon, future))
+        } else {
+            None
+        };
         let mut stale = false;
         let mut shows = Vec::with_capacity(scene.objects.len());
         for (k, object) in scene.objects.iter().enumerate() {
@@ -559,8 +570,8 @@ impl Manager {
                 Some(GeometryReason::TooNear) => {
                     // Drawn as geometry while the eye is this near, but the eye will
                     // leave: have its textures ready by then.
-                    if self.config.predict {
-                        self.predict_for(scene, k, camera);
+                    if let Some(ahead) = ahead {
+                        self.predict_for(scene, k, camera, ahead);
                     }
                     shows.push(Show::Geometry);
                     continue;
@@ -568,16 +579,15 @@ impl Manager {
                 None => {}
             }
             let centre = object.bounds.center();
-            let grades = self.grades(scene, k, camera.eye, camera);
-            let best = grades
-                .iter()
+            let best = self
+                .grades(scene, k, camera.eye, camera)
                 .enumerate()
-                .min_by(|a, b| a.1.growth.total_cmp(&b.1.growth))
-                .map(|(i, g)| (i, *g));
+                .min_by(|a, b| a.1.growth.total_cmp(&b.1.growth));
             self.counters.needs += 1;
             let valid = best.is_some_and(|(_, g)| g.growth <= self.config.tolerance);
             let coarse = best.is_some_and(|(_, g)| g.coarse);
-            if valid || self.pending_covers(k, centre, camera.eye) {
+            let asked_for = self.pending_covers(k, centre, camera.eye);
+            if valid || asked_for {
                 self.counters.prediction_hits += 1;
             }
             if !valid {
@@ -604,11 +614,11 @@ impl Manager {
                 }
                 stale = true;
             }
-            if (!valid || coarse) && !self.pending_covers(k, centre, camera.eye) {
+            if (!valid || coarse) && !asked_for {
                 self.request(scene, k, camera.eye, camera, None);
             }
-            if self.config.predict {
-                self.predict_for(scene, k, camera);
+            if let Some(ahead) = ahead {
+                self.predict_for(scene, k, camera, ahead);
             }
             shows.push(match best {
                 Some((i, g)) if g.growth.is_finite() => {
@@ -625,14 +635,11 @@ impl Manager {
     }
 
     /// Asks ahead for the texture the eye will need once a request made now comes
-    /// back, and withdraws predictions the motion has left behind.
-    fn predict_for(&mut self, scene: &Scene, k: usize, camera: &Camera) {
+    /// back — `(horizon, future)`: that round trip in seconds and the eye then — and
+    /// withdraws predictions the motion has left behind.
+    fn predict_for(&mut self, scene: &Scene, k: usize, camera: &Camera, (horizon, future): (f64, Vec3)) {
         let object = &scene.objects[k];
         let centre = object.bounds.center();
-        let horizon = (self.latency() + 0.05).min(3.0);
-        let Some(future) = self.predictor.predict(horizon) else {
-            return;
-        };
         if object
             .bounds
             .expanded(object.bounds.extent().length() * 0.05)
@@ -642,7 +649,6 @@ impl Manager {
         }
         let covered = self
             .grades(scene, k, future, camera)
-            .iter()
             .any(|g| g.growth <= self.config.tolerance && !g.coarse)
             || self.pending_covers(k, centre, future);
         if !covered {
