@@ -150,6 +150,13 @@ pub struct Pose {
     pub target: Vec3,
 }
 
+impl Pose {
+    /// The camera of this pose (world +y up). Errors name the bad argument.
+    pub fn camera(&self, fov_y_degrees: f32, width: u32, height: u32) -> Result<Camera, String> {
+        Camera::look_at(self.eye, self.target, Vec3::Y, fov_y_degrees, width, height)
+    }
+}
+
 /// A sequence of segments, sampled frame by frame.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct CameraPath {
@@ -157,7 +164,8 @@ pub struct CameraPath {
 }
 
 impl PathSegment {
-    fn frames(&self) -> u32 {
+    /// Frames the segment lasts.
+    pub fn frames(&self) -> u32 {
         match self {
             PathSegment::Orbit { frames, .. } | PathSegment::Fly { frames, .. } => *frames,
         }

@@ -24,6 +24,7 @@ use relief_core::scene::Scene;
 use relief_proto::bundle::bundle_for;
 use relief_worker::{ANTIALIASED_SAMPLES, SceneTracer, render_reference};
 
+use super::flight::FlightClock;
 use super::processes::{Children, connect_and_upload, sibling, start_server, start_workers};
 use super::window::Viewer;
 use crate::{args, progress};
@@ -274,8 +275,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let frames = args.frames.unwrap_or(scene.path.frame_count().max(1));
     if let Some(pose) = scene.path.pose(0) {
         bar.set_message("waiting for the first textures");
-        let camera = Camera::look_at(pose.eye, pose.target, Vec3::Y, scene.fov_y_degrees, w, h)
-            .map_err(|e| anyhow!(e))?;
+        let camera = pose.camera(scene.fov_y_degrees, w, h).map_err(|e| anyhow!(e))?;
         if !manager.warm_up(&scene, &camera, Duration::from_secs(20)) {
             eprintln!("warning: the first textures did not all arrive within 20 s");
         }
@@ -293,9 +293,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let mut orbits = Vec::new();
     let mut first = 0u32;
     for segment in &scene.path.segments {
-        let n = match segment {
-            PathSegment::Orbit { frames, .. } | PathSegment::Fly { frames, .. } => *frames,
-        };
+        let n = segment.frames();
         if let (Some(object), PathSegment::Orbit { turns, .. }) = (orbited(&scene, segment), segment) {
             orbits.push(Orbit {
                 frames: first..first + n,
@@ -308,26 +306,11 @@ pub fn run(args: DemoArgs) -> Result<()> {
         }
         first += n;
     }
-    let start = Instant::now();
-    let period = Duration::from_secs_f64(1.0 / args.fps as f64);
     let mut rendered = 0u32;
-    let mut next_frame = 0u32;
-    // The camera follows the clock: the eye is where the path is `t·fps` frames in. A
-    // frame that takes longer (the timed all-geometry frame) does not slow the eye
-    // down — the next frame, drawn at once, shows it further on and the path frames in
-    // between are skipped, as in any real-time viewer — so the predictor sees the
-    // true motion, and latency is real.
-    loop {
-        if let Some(wait) = (period * next_frame).checked_sub(start.elapsed()) {
-            std::thread::sleep(wait);
-        }
-        let t = start.elapsed().as_secs_f64();
-        let position = t * args.fps as f64;
-        if position >= frames as f64 {
-            break;
-        }
+    // The eye follows the clock (a slow frame, such as the timed all-geometry one,
+    // skips path frames).
+    for (t, position) in FlightClock::start(args.fps, frames) {
         let frame = position as u32;
-        next_frame = frame + 1;
         for orbit in &mut orbits {
             if orbit.frames.contains(&frame) {
                 let received = manager.received(orbit.object);
@@ -339,8 +322,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         let Some(pose) = scene.path.pose_at(position) else {
             break;
         };
-        let camera = Camera::look_at(pose.eye, pose.target, Vec3::Y, scene.fov_y_degrees, w, h)
-            .map_err(|e| anyhow!(e))?;
+        let camera = pose.camera(scene.fov_y_degrees, w, h).map_err(|e| anyhow!(e))?;
         let began = Instant::now();
         let shows = manager.frame(&scene, &camera, t);
         let image = manager.render(&scene, &shows, &camera, &mut gbuffer);

@@ -9,7 +9,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
-use glam::Vec3;
 use serde::Serialize;
 use tokio::sync::mpsc::unbounded_channel;
 
@@ -23,6 +22,7 @@ use relief_core::scene::Scene;
 use relief_proto::bundle::bundle_for;
 use relief_worker::{SceneTracer, render_reference};
 
+use super::flight::FlightClock;
 use super::processes::{Children, connect_and_upload, start_server, start_workers};
 use super::report::{draw_chart, register_font};
 use crate::{args, progress};
@@ -300,26 +300,15 @@ fn fly(
             .path
             .pose_at((position + offset as f64) % total)
             .context("the scene has no camera path")?;
-        Camera::look_at(pose.eye, pose.target, Vec3::Y, scene.fov_y_degrees, w, h).map_err(|e| anyhow!(e))
+        pose.camera(scene.fov_y_degrees, w, h).map_err(|e| anyhow!(e))
     };
     manager.warm_up(scene, &camera_at(0.0)?, Duration::from_secs(20));
-    let period = Duration::from_secs_f64(1.0 / fps as f64);
-    let start = Instant::now();
     let mut psnr = Vec::new();
     let mut gbuffer = GBuffer::new(w, h);
-    let (mut drawn, mut next_frame) = (0u32, 0u32);
+    let mut drawn = 0u32;
     // As in the demo, the eye follows the clock: a slow frame (client 0's compared
     // ones) skips path frames instead of slowing the eye.
-    loop {
-        if let Some(wait) = (period * next_frame).checked_sub(start.elapsed()) {
-            std::thread::sleep(wait);
-        }
-        let t = start.elapsed().as_secs_f64();
-        let position = t * fps as f64;
-        if position >= frames as f64 {
-            break;
-        }
-        next_frame = position as u32 + 1;
+    for (t, position) in FlightClock::start(fps, frames) {
         let camera = camera_at(position)?;
         let shows = manager.frame(scene, &camera, t);
         drawn += 1;

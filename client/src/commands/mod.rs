@@ -3,6 +3,7 @@
 pub mod bake;
 pub mod bench;
 pub mod demo;
+pub mod flight;
 pub mod frame;
 pub mod load;
 pub mod processes;
