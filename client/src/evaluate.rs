@@ -8,7 +8,7 @@ use relief_core::camera::Camera;
 use relief_core::frame::Frame;
 use relief_core::relief::{DepthBits, ReliefTexture};
 use relief_core::scene::Scene;
-use relief_worker::tracer::{ObjectTracer, SceneTracer};
+use relief_worker::tracer::SceneTracer;
 use relief_worker::{bake, render_reference};
 
 use crate::metrics::image::{ImageError, compare};
@@ -17,8 +17,8 @@ use crate::metrics::image::{ImageError, compare};
 pub struct Solo {
     /// A scene holding only the object (index 0), with the original lights.
     pub scene: Scene,
+    /// Traces the scene; its object 0 bakes the textures.
     pub tracer: SceneTracer,
-    pub object_tracer: ObjectTracer,
     /// Orbit radius: the distance of every eye from the object's centre.
     pub distance: f32,
 }
@@ -32,13 +32,11 @@ impl Solo {
             ..scene.clone()
         };
         let tracer = SceneTracer::new(&solo);
-        let object_tracer = tracer.objects[0].clone();
         let radius = solo.objects[0].bounds.extent().length() * 0.5;
         Ok(Solo {
             distance: radius * distance_factor,
             scene: solo,
             tracer,
-            object_tracer,
         })
     }
 
@@ -68,7 +66,7 @@ impl Solo {
         size: u32,
         bits: DepthBits,
     ) -> Result<ReliefTexture, relief_worker::BakeError> {
-        bake(&self.object_tracer, eye, size, bits)
+        bake(&self.tracer.objects[0], eye, size, bits)
     }
 
     /// The ray-traced reference frame, `samples × samples` rays per pixel (see

@@ -40,9 +40,7 @@ struct Projection {
 fn project(impostor: &Impostor, camera: &Camera) -> Result<Option<Projection>, WarpError> {
     let texture = &impostor.texture;
     let c = &texture.camera;
-    if !camera.eye.is_finite() || !c.origin.is_finite() || !c.a.is_finite() || !c.b.is_finite() {
-        return Err(WarpError::NonFinite);
-    }
+    super::ensure_finite(c, camera.eye)?;
     let far = c.depth_far;
     let (x0, y0, x1, y1) = volume_rect(camera, c);
     if x1 <= x0 || y1 <= y0 {

@@ -26,9 +26,7 @@ pub fn display(
 ) -> Result<(), WarpError> {
     let texture = &impostor.texture;
     let c = &texture.camera;
-    if !camera.eye.is_finite() || !c.origin.is_finite() || !c.a.is_finite() || !c.b.is_finite() {
-        return Err(WarpError::NonFinite);
-    }
+    super::ensure_finite(c, camera.eye)?;
     let (w, h) = (c.width as f32, c.height as f32);
     let far = c.depth_far;
     let (x0, y0, x1, y1) = volume_rect(camera, c);

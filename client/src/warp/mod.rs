@@ -23,6 +23,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use relief_core::camera::Camera;
+use relief_core::relief::SourceCamera;
 
 use crate::gbuffer::GBuffer;
 use crate::impostor::Impostor;
@@ -35,6 +36,14 @@ use crate::impostor::Impostor;
 #[inline(always)]
 pub(crate) fn round_small(x: f32) -> u32 {
     (x + 8_388_608.0).to_bits() & 0x7f_ffff
+}
+
+/// `Err(NonFinite)` when the eye or the texture's camera holds NaN or infinity: every
+/// method checks this before touching the texture.
+pub(crate) fn ensure_finite(texture: &SourceCamera, eye: glam::Vec3) -> Result<(), WarpError> {
+    let finite =
+        eye.is_finite() && texture.origin.is_finite() && texture.a.is_finite() && texture.b.is_finite();
+    if finite { Ok(()) } else { Err(WarpError::NonFinite) }
 }
 
 /// Why a texture cannot be shown from an eye.

@@ -47,15 +47,13 @@ impl WarpParams {
     /// behind the texture plane (or anything is non-finite), where no warp exists.
     pub fn new(texture: &ReliefTexture, eye: Vec3) -> Result<Self, WarpError> {
         let c = &texture.camera;
-        if !eye.is_finite() || !c.origin.is_finite() || !c.a.is_finite() || !c.b.is_finite() {
-            return Err(WarpError::NonFinite);
-        }
+        super::ensure_finite(c, eye)?;
         let to_eye = eye - c.origin;
         let h = -to_eye.dot(c.f);
         // Below this the table entries lose all precision (u' collapses onto the
         // epipole for every depth): treat as "in the plane".
         let h_min = (c.depth_far - c.depth_near).abs().max(c.a.length()) * 1e-5;
-        if h.is_nan() || h <= h_min || !h.is_finite() {
+        if h <= h_min || !h.is_finite() {
             return Err(WarpError::EyeInPlane(h));
         }
         let k3 = 1.0 / h;

@@ -82,11 +82,6 @@ impl PrewarpImage {
         }
         Some(&self.texels[y as usize * self.width as usize + x as usize])
     }
-
-    /// Number of non-empty texels.
-    pub fn covered(&self) -> usize {
-        self.texels.iter().filter(|t| !t.is_empty()).count()
-    }
 }
 
 /// How far past the source quad (in quad sizes) the pre-warped image may reach.

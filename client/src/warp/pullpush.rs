@@ -133,6 +133,18 @@ pub fn fill(layer: &mut Layer, levels: usize, tolerance: impl Fn(f32, usize) -> 
 /// it out), so every weight is positive.
 type Taps = [(usize, f32); 2];
 
+/// The 2×2 pixels at columns `x` of two `rows`, each weighted by its row's and its
+/// column's weight.
+#[inline(always)]
+fn gather([(r0, wy0), (r1, wy1)]: [(&[Splat], f32); 2], &[(x0, wx0), (x1, wx1)]: &Taps) -> [(f32, Splat); 4] {
+    [
+        (wy0 * wx0, r0[x0]),
+        (wy0 * wx1, r0[x1]),
+        (wy1 * wx0, r1[x0]),
+        (wy1 * wx1, r1[x1]),
+    ]
+}
+
 /// The coarse level: each pixel the front-most average of its 2×2 children.
 fn analyse(fine: &Layer, tolerance: impl Fn(f32) -> f32 + Sync) -> Layer {
     let (w, h) = (fine.width.div_ceil(2), fine.height.div_ceil(2));
@@ -148,15 +160,9 @@ fn analyse(fine: &Layer, tolerance: impl Fn(f32) -> f32 + Sync) -> Layer {
         .par_chunks_mut(w)
         .zip(&ys)
         .for_each(|(row, &[(y0, wy0), (y1, wy1)])| {
-            let (r0, r1) = (fine.row(y0), fine.row(y1));
-            for (out, &[(x0, wx0), (x1, wx1)]) in row.iter_mut().zip(&xs) {
-                let children = [
-                    (wy0 * wx0, r0[x0]),
-                    (wy0 * wx1, r0[x1]),
-                    (wy1 * wx0, r1[x0]),
-                    (wy1 * wx1, r1[x1]),
-                ];
-                *out = front_average(&children, &tolerance);
+            let rows = [(fine.row(y0), wy0), (fine.row(y1), wy1)];
+            for (out, x) in row.iter_mut().zip(&xs) {
+                *out = front_average(&gather(rows, x), &tolerance);
             }
         });
     coarse
@@ -189,14 +195,9 @@ fn synthesise(
         .par_chunks_mut(width)
         .zip(&ys)
         .for_each(|(row, &[(y0, wy0), (y1, wy1)])| {
-            let (r0, r1) = (coarse.row(y0), coarse.row(y1));
-            for (pixel, &[(x0, wx0), (x1, wx1)]) in row.iter_mut().zip(&xs) {
-                let candidates = [
-                    (wy0 * wx0, r0[x0]),
-                    (wy0 * wx1, r0[x1]),
-                    (wy1 * wx0, r1[x0]),
-                    (wy1 * wx1, r1[x1]),
-                ];
+            let rows = [(coarse.row(y0), wy0), (coarse.row(y1), wy1)];
+            for (pixel, x) in row.iter_mut().zip(&xs) {
+                let candidates = gather(rows, x);
                 // A valid pixel in front of every coarse candidate stays as it is: skip
                 // the blend.
                 if pixel.is_valid() {
