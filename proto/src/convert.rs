@@ -84,6 +84,32 @@ pub fn texture_to_pb(t: &ReliefTexture) -> pb::ReliefTexture {
 /// A relief texture from the wire, every field checked. `field` prefixes the names in
 /// errors (e.g. `texture`).
 pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTexture, Status> {
+    let (camera, depth_bits, eye) = check_texture_pb(field, t)?;
+    let depth: Vec<u16> = match depth_bits {
+        DepthBits::Eight => t.depth.iter().map(|&q| q as u16).collect(),
+        DepthBits::Sixteen => t
+            .depth
+            .chunks_exact(2)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]))
+            .collect(),
+    };
+    let triples = |bytes: &[u8]| bytes.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    Ok(ReliefTexture {
+        camera,
+        depth_bits,
+        eye,
+        albedo: triples(&t.albedo),
+        normal: triples(&t.normal),
+        depth,
+    })
+}
+
+/// Every check of [`texture_from_pb`] without building the texture (for whoever only
+/// passes it on): its camera, depth bits and eye, or the first bad field.
+pub fn check_texture_pb(
+    field: &str,
+    t: &pb::ReliefTexture,
+) -> Result<(SourceCamera, DepthBits, Vec3), Status> {
     let name = |f: &str| format!("{field}.{f}");
     let width = size_from_pb(&name("width"), t.width)?;
     let height = size_from_pb(&name("height"), t.height)?;
@@ -117,28 +143,13 @@ pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTextu
     };
     plane("albedo", &t.albedo, 3)?;
     plane("normal", &t.normal, 3)?;
-    let depth: Vec<u16> = match depth_bits {
-        DepthBits::Eight => {
-            plane("depth", &t.depth, 1)?;
-            t.depth.iter().map(|&q| q as u16).collect()
-        }
-        DepthBits::Sixteen => {
-            plane("depth", &t.depth, 2)?;
-            t.depth
-                .chunks_exact(2)
-                .map(|b| u16::from_le_bytes([b[0], b[1]]))
-                .collect()
-        }
+    let depth_bytes = match depth_bits {
+        DepthBits::Eight => 1,
+        DepthBits::Sixteen => 2,
     };
-    let triples = |bytes: &[u8]| bytes.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    Ok(ReliefTexture {
-        camera,
-        depth_bits,
-        eye: vec3_from_pb(&name("eye"), t.eye.as_ref())?,
-        albedo: triples(&t.albedo),
-        normal: triples(&t.normal),
-        depth,
-    })
+    plane("depth", &t.depth, depth_bytes)?;
+    let eye = vec3_from_pb(&name("eye"), t.eye.as_ref())?;
+    Ok((camera, depth_bits, eye))
 }
 
 /// How soon a request is needed.

@@ -10,7 +10,7 @@ use tokio_stream::wrappers::UnboundedReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
 use relief_proto::bundle::{Bundle, MAX_BUNDLE_BYTES};
-use relief_proto::convert::{hash_from_pb, request_from_pb, texture_from_pb};
+use relief_proto::convert::{check_texture_pb, hash_from_pb, request_from_pb};
 use relief_proto::pb;
 
 use crate::state::{Admission, State, StoredScene};
@@ -73,15 +73,16 @@ impl pb::scenes_server::Scenes for Service {
         let hash = bundle.hash;
         if self.0.state().scene(&hash).is_none() {
             let dir = self.0.scene_dir.clone();
-            let bundle = Arc::new(bundle);
-            let loading = bundle.clone();
-            let scene = tokio::task::spawn_blocking(move || loading.load(&dir))
-                .await
-                .map_err(|e| Status::internal(format!("loading the scene: {e}")))?
-                .map_err(|e| Status::invalid_argument(format!("the scene does not load: {e}")))?;
+            // The bundle moves to the loading thread and its bytes come back with the
+            // scene: no copy of a scene that may be hundreds of megabytes.
+            let (scene, encoded) =
+                tokio::task::spawn_blocking(move || bundle.load(&dir).map(|scene| (scene, bundle.encoded)))
+                    .await
+                    .map_err(|e| Status::internal(format!("loading the scene: {e}")))?
+                    .map_err(|e| Status::invalid_argument(format!("the scene does not load: {e}")))?;
             let objects = scene.objects.iter().map(|o| (o.name.clone(), o.bounds)).collect();
             let stored = StoredScene {
-                encoded: Arc::new(bundle.encoded.clone()),
+                encoded: Arc::new(encoded),
                 objects,
             };
             self.0.state().add_scene(hash, stored);
@@ -199,21 +200,27 @@ impl pb::workers_server::Workers for Service {
             while let Ok(Some(message)) = inbound.message().await {
                 let began = std::time::Instant::now();
                 let is_result = matches!(message.kind, Some(pb::worker_message::Kind::Result(_)));
+                // A result's texture is checked before the state's lock is taken: it is
+                // the costliest step here, and needs no state.
+                let rejected = match &message.kind {
+                    Some(pb::worker_message::Kind::Result(r)) => match &r.texture {
+                        Some(t) => check_texture_pb("texture", t)
+                            .err()
+                            .map(|e| format!("invalid texture: {}", e.message())),
+                        None => Some("result without a texture".to_string()),
+                    },
+                    _ => None,
+                };
                 let mut state = shared.state();
                 state.touch(id);
                 match message.kind {
-                    Some(pb::worker_message::Kind::Result(r)) => {
-                        match r.texture.as_ref().map(|t| texture_from_pb("texture", t)) {
-                            Some(Ok(_)) => {
-                                let texture = r.texture.unwrap_or_default();
-                                state.result(r.job_id, texture, r.r#final, r.bake_ms);
-                            }
-                            Some(Err(e)) => {
-                                state.failed(r.job_id, &format!("invalid texture: {}", e.message()))
-                            }
-                            None => state.failed(r.job_id, "result without a texture"),
+                    Some(pb::worker_message::Kind::Result(r)) => match rejected {
+                        Some(reason) => state.failed(r.job_id, &reason),
+                        None => {
+                            let texture = r.texture.unwrap_or_default();
+                            state.result(r.job_id, texture, r.r#final, r.bake_ms);
                         }
-                    }
+                    },
                     Some(pb::worker_message::Kind::Failed(f)) => state.failed(f.job_id, &f.reason),
                     Some(pb::worker_message::Kind::Heartbeat(_))
                     | Some(pb::worker_message::Kind::Register(_))
