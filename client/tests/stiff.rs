@@ -104,7 +104,7 @@ fn eye_in_near_and_behind_the_texture_plane() {
     let source = Vec3::new(0.0, 0.0, 5.0);
     let texture = baked(&scene, source, 64, DepthBits::Eight);
     let c = texture.camera;
-    let in_plane = c.origin + c.a * 32.0 + c.b * 32.0 + (c.a.normalize()) * 3.0;
+    let in_plane = c.plane_centre() + c.a.normalize() * 3.0;
     // In the plane: pre-warps refuse, others draw or not, nothing is non-finite.
     check_all(
         &scene,

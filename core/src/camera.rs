@@ -68,7 +68,7 @@ impl Camera {
     /// `+0.5`; y grows downwards).
     #[inline]
     pub fn ray_direction(&self, x: f32, y: f32) -> Vec3 {
-        let tan_half = (self.fov_y * 0.5).tan();
+        let tan_half = self.tan_half_fov();
         let aspect = self.width as f32 / self.height as f32;
         let sx = (2.0 * x / self.width as f32 - 1.0) * tan_half * aspect;
         let sy = (1.0 - 2.0 * y / self.height as f32) * tan_half;

@@ -3,7 +3,7 @@
 
 use std::collections::{HashMap, HashSet};
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, anyhow};
@@ -194,7 +194,7 @@ async fn session(
                         jobs.spawn(run_job(job, context.clone()));
                     }
                     Some(pb::server_message::Kind::Cancel(c)) => {
-                        context.cancelled.lock().unwrap_or_else(|p| p.into_inner()).insert(c.job_id);
+                        lock(&context.cancelled).insert(c.job_id);
                     }
                     None => {}
                 },
@@ -226,26 +226,18 @@ async fn run_job(job: pb::Job, context: JobContext) {
             })),
         });
     }
-    context
-        .cancelled
-        .lock()
-        .unwrap_or_else(|p| p.into_inner())
-        .remove(&id);
+    lock(&context.cancelled).remove(&id);
 }
 
 async fn bake_job(job: pb::Job, context: &JobContext) -> Result<(), String> {
-    let hash = hash_from_pb("scene_hash", &job.scene_hash).map_err(|e| e.message().to_string())?;
-    let eye = vec3_from_pb("eye", job.eye.as_ref()).map_err(|e| e.message().to_string())?;
-    let size = size_from_pb("size", job.size).map_err(|e| e.message().to_string())?;
-    let bits = depth_bits_from_pb("depth_bits", job.depth_bits).map_err(|e| e.message().to_string())?;
+    let message = |e: tonic::Status| e.message().to_string();
+    let hash = hash_from_pb("scene_hash", &job.scene_hash).map_err(message)?;
+    let eye = vec3_from_pb("eye", job.eye.as_ref()).map_err(message)?;
+    let size = size_from_pb("size", job.size).map_err(message)?;
+    let bits = depth_bits_from_pb("depth_bits", job.depth_bits).map_err(message)?;
     let loaded = scene(hash, context).await?;
     let tracer = {
-        let cached = loaded
-            .tracers
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .get(&job.object)
-            .cloned();
+        let cached = lock(&loaded.tracers).get(&job.object).cloned();
         match cached {
             Some(t) => t,
             None => {
@@ -260,11 +252,7 @@ async fn bake_job(job: pb::Job, context: &JobContext) -> Result<(), String> {
                 })
                 .await
                 .map_err(|e| e.to_string())??;
-                loaded
-                    .tracers
-                    .lock()
-                    .unwrap_or_else(|p| p.into_inner())
-                    .insert(job.object.clone(), tracer.clone());
+                lock(&loaded.tracers).insert(job.object.clone(), tracer.clone());
                 tracer
             }
         }
@@ -274,12 +262,7 @@ async fn bake_job(job: pb::Job, context: &JobContext) -> Result<(), String> {
         sizes.insert(0, size / 4);
     }
     for (k, edge) in sizes.iter().copied().enumerate() {
-        if context
-            .cancelled
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .contains(&job.job_id)
-        {
+        if lock(&context.cancelled).contains(&job.job_id) {
             return Ok(());
         }
         let tracer = tracer.clone();
@@ -335,4 +318,10 @@ async fn scene(hash: ContentHash, context: &JobContext) -> Result<Arc<Loaded>, S
     });
     loaded.insert(hash, entry.clone());
     Ok(entry)
+}
+
+/// Locks `mutex`, taking over its data if a job panicked while holding it (the sets it
+/// guards stay valid whatever a job did).
+fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(|p| p.into_inner())
 }

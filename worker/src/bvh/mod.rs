@@ -66,6 +66,13 @@ const COUNT_SHIFT: u32 = 27;
 const COUNT_MASK: u32 = 0xF;
 const FIRST_MASK: u32 = (1 << COUNT_SHIFT) - 1;
 
+/// The triangles of the leaf item `item`.
+#[inline(always)]
+fn leaf_range(item: u32) -> std::ops::Range<usize> {
+    let first = (item & FIRST_MASK) as usize;
+    first..first + (item >> COUNT_SHIFT & COUNT_MASK) as usize
+}
+
 /// Deepest binary tree the builder makes; the 4-wide traversal stack holds three
 /// entries per level.
 const MAX_DEPTH: usize = 64;
@@ -241,9 +248,9 @@ impl Traversal {
         };
         let mut next = None;
         if item & LEAF != 0 {
-            let first = (item & FIRST_MASK) as usize;
-            let count = (item >> COUNT_SHIFT & COUNT_MASK) as usize;
-            for (k, tri) in bvh.triangles[first..first + count].iter().enumerate() {
+            let leaf = leaf_range(item);
+            let first = leaf.start;
+            for (k, tri) in bvh.triangles[leaf].iter().enumerate() {
                 if let Some((t, u, v)) = intersect_triangle(
                     self.origin,
                     self.direction,
@@ -314,9 +321,7 @@ impl Traversal {
         // arrives.
         match self.item {
             Some(item) if item & LEAF != 0 => {
-                let first = (item & FIRST_MASK) as usize;
-                let count = (item >> COUNT_SHIFT & COUNT_MASK) as usize;
-                prefetch_lines(&bvh.triangles[first..first + count]);
+                prefetch_lines(&bvh.triangles[leaf_range(item)]);
                 true
             }
             Some(item) => {
