@@ -91,9 +91,9 @@ impl FramePlan {
                 None => wanted.push(k),
             }
         }
-        let impostors = wanted
+        let baked: Vec<(usize, Option<ImpostorObject>)> = wanted
             .into_par_iter()
-            .filter_map(|k| {
+            .map(|k| {
                 let object = &scene.objects[k];
                 let centre = object.bounds.center();
                 let turn = Quat::from_rotation_y(source_angle_deg.to_radians());
@@ -105,19 +105,21 @@ impl FramePlan {
                     camera.fov_y,
                 )
                 .clamp(MIN_TEXTURE, MAX_TEXTURE);
-                let texture = bake(&ObjectTracer::new(object), source_eye, size, bits).ok()?;
-                Some(ImpostorObject {
+                let texture = bake(&ObjectTracer::new(object), source_eye, size, bits).ok();
+                let impostor = texture.map(|texture| ImpostorObject {
                     index: k as u32,
                     pyramid: Pyramid::new(texture, MIN_TEXTURE),
                     source_eye,
-                })
+                });
+                (k, impostor)
             })
-            .collect::<Vec<_>>();
-        let baked: Vec<u32> = impostors.iter().map(|i| i.index).collect();
-        // Objects whose bake failed (eye inside after the turn) are drawn as geometry.
-        for k in 0..scene.objects.len() as u32 {
-            if !baked.contains(&k) && !geometry.iter().any(|(g, _)| *g == k) {
-                geometry.push((k, GeometryReason::TooNear));
+            .collect();
+        let mut impostors = Vec::new();
+        for (k, impostor) in baked {
+            match impostor {
+                Some(impostor) => impostors.push(impostor),
+                // The bake failed (the eye is inside after the turn): geometry.
+                None => geometry.push((k as u32, GeometryReason::TooNear)),
             }
         }
         FramePlan { impostors, geometry }

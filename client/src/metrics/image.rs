@@ -33,24 +33,19 @@ pub fn compare(frame: &Frame, reference: &Frame, object: Option<u32>) -> ImageEr
         None => id != NO_OBJECT,
     };
     let mut squared = 0f64;
-    let mut either = 0usize;
-    let mut mismatched = 0usize;
-    let region: Vec<bool> = frame
-        .object
-        .iter()
-        .zip(&reference.object)
-        .map(|(&a, &b)| shows(a) && shows(b))
-        .collect();
-    for (&a, &b) in frame.object.iter().zip(&reference.object) {
-        either += (shows(a) || shows(b)) as usize;
-        mismatched += (shows(a) != shows(b)) as usize;
-    }
-    let mut pixels = 0usize;
-    for (k, _) in region.iter().enumerate().filter(|(_, inside)| **inside) {
-        pixels += 1;
-        for c in 0..3 {
-            let d = frame.color[k][c] as f64 - reference.color[k][c] as f64;
-            squared += d * d;
+    let (mut either, mut mismatched, mut pixels) = (0usize, 0usize, 0usize);
+    let mut region = Vec::with_capacity(frame.object.len());
+    for (k, (&a, &b)) in frame.object.iter().zip(&reference.object).enumerate() {
+        let (a, b) = (shows(a), shows(b));
+        either += (a || b) as usize;
+        mismatched += (a != b) as usize;
+        region.push(a && b);
+        if a && b {
+            pixels += 1;
+            for c in 0..3 {
+                let d = frame.color[k][c] as f64 - reference.color[k][c] as f64;
+                squared += d * d;
+            }
         }
     }
     let mse = squared / (3 * pixels.max(1)) as f64;
