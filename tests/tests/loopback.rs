@@ -59,6 +59,17 @@ async fn wait_for(
 }
 
 /// Collects a request's stream: previews and the final texture.
+/// A client of the server at `url` that has uploaded the default scene, and its hash.
+async fn upload_default(url: &str) -> (Remote, String) {
+    let mut remote = Remote::connect(url, None, "test").await.unwrap();
+    let hash = remote
+        .put_scene(&bundle_for("default").unwrap())
+        .await
+        .unwrap()
+        .to_string();
+    (remote, hash)
+}
+
 async fn collect(
     mut stream: tonic::Streaming<pb::ImpostorResult>,
 ) -> Result<Vec<pb::ImpostorResult>, tonic::Status> {
@@ -106,12 +117,7 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_requests_are_refused_with_the_field_named() {
     let (_server, url) = start_server(&[]);
-    let mut remote = Remote::connect(&url, None, "test").await.unwrap();
-    let hash = remote
-        .put_scene(&bundle_for("default").unwrap())
-        .await
-        .unwrap()
-        .to_string();
+    let (mut remote, hash) = upload_default(&url).await;
     let eye = Vec3::new(6.0, 2.5, 4.0);
     let refused = |r: Result<tonic::Streaming<pb::ImpostorResult>, tonic::Status>| r.expect_err("refused");
     let mut nan = request(&hash, "knot", eye, 64, 1, pb::Urgency::Now);
@@ -154,12 +160,7 @@ async fn bad_requests_are_refused_with_the_field_named() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn withdrawn_predictions_are_cancelled() {
     let (_server, url) = start_server(&[]);
-    let mut remote = Remote::connect(&url, None, "test").await.unwrap();
-    let hash = remote
-        .put_scene(&bundle_for("default").unwrap())
-        .await
-        .unwrap()
-        .to_string();
+    let (mut remote, hash) = upload_default(&url).await;
     // No worker yet: three predictions wait in the queue.
     let mut streams = Vec::new();
     for id in 1..=3 {
@@ -189,12 +190,7 @@ async fn withdrawn_predictions_are_cancelled() {
 async fn a_killed_workers_job_is_answered_by_another() {
     let (_server, url) = start_server(&["--lease-ms", "400"]);
     let mut first = start_worker(&url, &[]);
-    let mut remote = Remote::connect(&url, None, "test").await.unwrap();
-    let hash = remote
-        .put_scene(&bundle_for("default").unwrap())
-        .await
-        .unwrap()
-        .to_string();
+    let (mut remote, hash) = upload_default(&url).await;
     wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
     // A big bake of the heavy object, so the worker is killed while holding it.
     let eye = Vec3::new(0.5, 2.0, 8.0);
