@@ -46,12 +46,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    let cli: Cli = match relief_core::cli::parse() {
-        Ok(cli) => cli,
-        Err(code) => return code,
-    };
-    relief_core::cli::init_logging();
-    let result = match cli.command {
+    relief_core::cli::run(|cli: Cli| match cli.command {
         Command::Demo(args) => commands::demo::run(args),
         Command::Render(args) if args.server.is_none() => Err(anyhow::anyhow!(
             "render needs --server URL (or RELIEF_SERVER); `relief demo` starts its own"
@@ -63,6 +58,5 @@ fn main() -> ExitCode {
         Command::Load(args) => commands::load::run(args),
         Command::Report(command) => commands::report::run(command),
         Command::Bench(command) => commands::bench::run(command),
-    };
-    relief_core::cli::finish(result)
+    })
 }

@@ -4,10 +4,21 @@
 use std::io::IsTerminal;
 use std::process::ExitCode;
 
+/// A binary's `main`: parses the arguments ([`parse`]), starts logging, runs `body` and
+/// ends with its outcome ([`finish`]).
+pub fn run<T: clap::Parser>(body: impl FnOnce(T) -> anyhow::Result<()>) -> ExitCode {
+    let args = match parse::<T>() {
+        Ok(args) => args,
+        Err(code) => return code,
+    };
+    init_logging();
+    finish(body(args))
+}
+
 /// Parses the command line. On bad arguments prints the first line of clap's message
 /// (it names the problem) and returns exit code 2; `--help`/`--version` print and
 /// return success.
-pub fn parse<T: clap::Parser>() -> Result<T, ExitCode> {
+fn parse<T: clap::Parser>() -> Result<T, ExitCode> {
     match T::try_parse() {
         Ok(args) => Ok(args),
         Err(e) if e.use_stderr() => {
@@ -24,7 +35,7 @@ pub fn parse<T: clap::Parser>() -> Result<T, ExitCode> {
 
 /// Logs to stderr: warnings by default, `RUST_LOG` for more; colours only on a
 /// terminal.
-pub fn init_logging() {
+fn init_logging() {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
@@ -36,7 +47,7 @@ pub fn init_logging() {
 }
 
 /// Ends a binary: success, or `error: …` on one line and exit code 1.
-pub fn finish(result: anyhow::Result<()>) -> ExitCode {
+fn finish(result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

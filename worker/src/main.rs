@@ -41,12 +41,9 @@ pub struct Args {
 }
 
 fn main() -> ExitCode {
-    let args: Args = match relief_core::cli::parse() {
-        Ok(args) => args,
-        Err(code) => return code,
-    };
-    relief_core::cli::init_logging();
-    let runtime =
-        tokio::runtime::Runtime::new().map_err(|e| anyhow::anyhow!("starting the async runtime: {e}"));
-    relief_core::cli::finish(runtime.and_then(|r| r.block_on(daemon::run(args))))
+    relief_core::cli::run(|args: Args| {
+        let runtime =
+            tokio::runtime::Runtime::new().map_err(|e| anyhow::anyhow!("starting the async runtime: {e}"))?;
+        runtime.block_on(daemon::run(args))
+    })
 }
