@@ -5,6 +5,7 @@
 
 use glam::Vec3;
 
+use relief_core::bounds::Aabb;
 use relief_core::camera::Camera;
 use relief_core::relief::decode_normal;
 
@@ -44,21 +45,23 @@ pub fn display(
         let q = texture.depth[k];
         (q != empty).then(|| (k, c.depth_of_level(q, texture.depth_bits)))
     };
+    // The texture's volume in texture space: [0, w] × [0, h] × [0, far].
+    let volume = Aabb {
+        min: Vec3::ZERO,
+        max: Vec3::new(w, h, far),
+    };
     for y in y0..y1 {
         for x in x0..x1 {
             // Direction with D·forward = 1, so the ray parameter is the view depth.
             let d = camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5);
             let d = d / d.dot(camera.forward);
             let dir = Vec3::new(d.dot(a_scale), d.dot(b_scale), d.dot(c.f));
-            // Slab test against the box [0, w] × [0, h] × [0, far] in texture space.
-            let inv = dir.recip();
-            let ta = (Vec3::ZERO - eye_t) * inv;
-            let tb = (Vec3::new(w, h, far) - eye_t) * inv;
-            let t0 = ta.min(tb).max_element().max(0.0);
-            let t1 = ta.max(tb).min_element();
-            if t0.is_nan() || t1.is_nan() || t0 >= t1 {
+            let Some((t0, t1)) = volume
+                .ray_interval(eye_t, dir.recip(), 0.0, f32::INFINITY)
+                .filter(|(t0, t1)| t0 < t1)
+            else {
                 continue;
-            }
+            };
             let below = |t: f32| {
                 let p = eye_t + dir * t;
                 depth_at(p.x, p.y).is_some_and(|(_, surface)| p.z >= surface)
