@@ -141,7 +141,7 @@ struct Pending {
 #[derive(Default)]
 struct ObjectState {
     held: Vec<Held>,
-    /// Angle (radians) over which textures of this object have stayed valid, learnt.
+    /// Angle (radians) over which the newest texture of this object stays valid.
     valid_angle: Option<f32>,
     /// Textures of this object requested.
     requested: u64,
@@ -156,6 +156,8 @@ struct Grade {
     growth: f32,
     /// Too coarse for the screen while a finer texture can be had.
     coarse: bool,
+    /// So coarse that geometry is drawn instead ([`COARSEST_SHOWN`]).
+    too_coarse: bool,
 }
 
 /// Beyond this turn around the object, or this change of distance, a texture is not
@@ -163,6 +165,19 @@ struct Grade {
 /// the stretching of a view seen from far off its axis.
 const MAX_TURN: f32 = 40.0 * std::f32::consts::PI / 180.0;
 const MAX_DISTANCE_RATIO: f32 = 1.6;
+
+/// How far past the predicted eye (a fraction of the valid angle) predicted textures
+/// are made for: see [`Manager::lead`].
+const LEAD: f32 = 0.5;
+
+/// Predicted textures are asked for once the eye's future leaves this fraction of the
+/// tolerance, so that a late answer or a wrong guess still finds the texture in use
+/// within the tolerance itself.
+const PLANNING_MARGIN: f32 = 0.75;
+
+/// A texture whose texels would cover more than this many pixels' angle is not shown:
+/// near an object even the largest texture is that coarse, and geometry is drawn.
+const COARSEST_SHOWN: f32 = 2.0;
 
 /// Round trips remembered, and the percentile of them the predictor plans for.
 const LATENCY_WINDOW: usize = 16;
@@ -401,11 +416,11 @@ impl Manager {
                     };
                     if is_final {
                         let centre = scene.objects[p.object].bounds.center();
-                        state.valid_angle =
-                            Some(probe_valid_angle(&held, centre, camera, self.config.tolerance));
+                        let angle = probe_valid_angle(&held, centre, camera, self.config.tolerance);
+                        state.valid_angle = Some(angle);
                         tracing::debug!(
                             object = p.object,
-                            valid_deg = state.valid_angle.unwrap_or(0.0).to_degrees(),
+                            valid_deg = angle.to_degrees(),
                             "texture arrived; its valid angle probed"
                         );
                     }
@@ -447,6 +462,7 @@ impl Manager {
                 needs_finer_texture(&texture.camera, &at_eye, 2.0 * TEXEL_TOLERANCE)
                     && texture.camera.width < wanted
             },
+            too_coarse: needs_finer_texture(&h.pyramid.levels[0].texture.camera, &at_eye, COARSEST_SHOWN),
         })
     }
 
@@ -526,7 +542,10 @@ impl Manager {
         let ready = loop {
             let before = self.counters.stale_frames;
             self.frame(scene, camera, 0.0);
-            if self.counters.stale_frames == before {
+            // Previews make a frame valid before the final textures are in; a final
+            // arriving after the flight started would count its cold-start round trip
+            // as the flight's and make the predictor plan for it.
+            if self.counters.stale_frames == before && self.pending.is_empty() {
                 break true;
             }
             if start.elapsed() > limit {
@@ -621,7 +640,7 @@ impl Manager {
                 self.predict_for(scene, k, camera, ahead);
             }
             shows.push(match best {
-                Some((i, g)) if g.growth.is_finite() => {
+                Some((i, g)) if g.growth.is_finite() && !g.too_coarse => {
                     let level = self.objects[k].held[i].pyramid.level_for(camera, TEXEL_TOLERANCE);
                     Show::Impostor { texture: i, level }
                 }
@@ -632,6 +651,22 @@ impl Manager {
             self.counters.stale_frames += 1;
         }
         shows
+    }
+
+    /// The eye to make a predicted texture for: `future` turned further about `centre`,
+    /// the way the eye turns from `now`, by [`LEAD`] of the object's valid angle (at
+    /// most the turn from `now` to `future` again). The texture is then first used
+    /// [`LEAD`]·valid behind its own eye and stays in use as far ahead: it serves
+    /// (1 + [`LEAD`]) valid angles of the motion instead of one.
+    fn lead(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Vec3 {
+        let (from, to) = (now - centre, future - centre);
+        let axis = from.cross(to);
+        let turn = from.angle_between(to);
+        let lead = (LEAD * self.valid_angle(k)).min(turn);
+        if lead.is_nan() || lead <= 1e-4 || axis.length_squared() <= f32::MIN_POSITIVE {
+            return future;
+        }
+        centre + glam::Quat::from_axis_angle(axis.normalize(), lead) * to
     }
 
     /// Asks ahead for the texture the eye will need once a request made now comes
@@ -649,10 +684,11 @@ impl Manager {
         }
         let covered = self
             .grades(scene, k, future, camera)
-            .any(|g| g.growth <= self.config.tolerance && !g.coarse)
+            .any(|g| g.growth <= PLANNING_MARGIN * self.config.tolerance && !g.coarse)
             || self.pending_covers(k, centre, future);
         if !covered {
-            self.request(scene, k, future, camera, Some((horizon * 1e3) as u64));
+            let eye = self.lead(k, centre, camera.eye, future);
+            self.request(scene, k, eye, camera, Some((horizon * 1e3) as u64));
         }
         // Predictions neither the eye nor its future will meet any more.
         let reach = 2.0 * self.valid_angle(k);

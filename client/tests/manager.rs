@@ -1,5 +1,6 @@
 //! The impostor manager with the in-process generator: textures arrive without the
-//! frame loop waiting, and a still eye redraws sprites instead of warping.
+//! frame loop waiting, a still eye redraws sprites instead of warping, predictions lead
+//! the motion, and textures far too coarse for the screen give way to geometry.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -8,7 +9,7 @@ use glam::Vec3;
 use tokio::sync::mpsc::unbounded_channel;
 
 use relief_client::gbuffer::GBuffer;
-use relief_client::manager::{Config, Manager, Show};
+use relief_client::manager::{Command, Config, Manager, Show};
 use relief_client::source::spawn_local;
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
@@ -60,4 +61,73 @@ fn still_eyes_draw_sprites_and_moving_eyes_warp() {
     let shows = manager.frame(&scene, &moved, 0.2);
     manager.render(&scene, &shows, &moved, &mut gbuffer);
     assert!(manager.counters.warps > impostors);
+}
+
+/// The index of `name` in `scene`.
+fn index(scene: &Scene, name: &str) -> usize {
+    scene.objects.iter().position(|o| o.name == name).unwrap()
+}
+
+#[test]
+fn predicted_textures_are_made_for_eyes_past_the_predicted_one() {
+    let scene = Scene::load("default").unwrap();
+    let sphere = index(&scene, "sphere");
+    let centre = scene.objects[sphere].bounds.center();
+    let (commands_tx, mut commands_rx) = unbounded_channel();
+    let (_arrivals_tx, arrivals_rx) = unbounded_channel();
+    let config = Config::default();
+    let horizon = config.initial_latency + 0.05;
+    let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
+    // Orbit the sphere at 6 m, 30°/s, 30 frames a second.
+    let rate = 30f32.to_radians();
+    let eye_at = |t: f32| centre + Vec3::new(6.0 * (rate * t).cos(), 0.5, 6.0 * (rate * t).sin());
+    let mut predicted = Vec::new();
+    for frame in 0..10 {
+        let t = frame as f32 / 30.0;
+        let camera = Camera::look_at(eye_at(t), centre, Vec3::Y, 60.0, 320, 180).unwrap();
+        manager.frame(&scene, &camera, t as f64);
+        while let Ok(command) = commands_rx.try_recv() {
+            if let Command::Request(r) = command
+                && r.object == "sphere"
+                && r.needed_in_ms.is_some()
+            {
+                predicted.push((t, r.eye));
+            }
+        }
+    }
+    let (t, eye) = *predicted.last().expect("no predicted request for the sphere");
+    // The angle from the sphere's centre between the eye at `t` and `eye`, against the
+    // turn to the eye predicted for the round trip: the texture is made further on.
+    let turn = |a: Vec3| (eye_at(t) - centre).angle_between(a - centre);
+    let future = eye_at(t + horizon as f32);
+    assert!(
+        turn(eye) > turn(future) + 0.5f32.to_radians(),
+        "asked for {:.2}° ahead, the eye will be {:.2}° ahead",
+        turn(eye).to_degrees(),
+        turn(future).to_degrees()
+    );
+    // … but not beyond the orbit: the same distance from the centre.
+    assert!((eye.distance(centre) - future.distance(centre)).abs() < 0.05);
+}
+
+#[test]
+fn a_texture_far_too_coarse_for_the_screen_gives_way_to_geometry() {
+    let scene = Arc::new(Scene::load("default").unwrap());
+    let sphere = index(&scene, "sphere");
+    let centre = scene.objects[sphere].bounds.center();
+    let (commands_tx, commands_rx) = unbounded_channel();
+    let (arrivals_tx, arrivals_rx) = unbounded_channel();
+    spawn_local(scene.clone(), commands_rx, arrivals_tx);
+    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let eye = centre + Vec3::new(0.0, 0.5, 8.0);
+    // Textures sized for a small screen …
+    let small = Camera::look_at(eye, centre, Vec3::Y, 60.0, 64, 36).unwrap();
+    assert!(manager.warm_up(&scene, &small, Duration::from_secs(60)));
+    assert!(matches!(
+        manager.frame(&scene, &small, 0.0)[sphere],
+        Show::Impostor { .. }
+    ));
+    // … are not stretched over a screen twenty times larger from the same eye.
+    let large = Camera::look_at(eye, centre, Vec3::Y, 60.0, 1280, 720).unwrap();
+    assert_eq!(manager.frame(&scene, &large, 0.1)[sphere], Show::Geometry);
 }
