@@ -143,6 +143,8 @@ struct ObjectState {
     held: Vec<Held>,
     /// Angle (radians) over which the newest texture of this object stays valid.
     valid_angle: Option<f32>,
+    /// The last [`LATENCY_WINDOW`] round trips of this object's textures, seconds.
+    recent_latencies: Vec<f64>,
     /// Textures of this object requested.
     requested: u64,
     /// Final textures of this object received.
@@ -179,8 +181,14 @@ const PLANNING_MARGIN: f32 = 0.75;
 /// near an object even the largest texture is that coarse, and geometry is drawn.
 const COARSEST_SHOWN: f32 = 2.0;
 
+/// A texture this many times over the tolerance is not shown: geometry is drawn
+/// until a better one arrives (the frame still counts as stale).
+const SHOWN_STALE: f32 = 4.0;
+
 /// Round trips remembered, and the percentile of them the predictor plans for.
 const LATENCY_WINDOW: usize = 16;
+/// Round trips of its own an object needs before it plans for them.
+const OWN_LATENCIES: usize = 4;
 const LATENCY_PERCENTILE: f64 = 0.9;
 
 /// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`.
@@ -309,11 +317,19 @@ impl Manager {
     /// The round trip to plan for: the [`LATENCY_PERCENTILE`] of the recent ones (the
     /// configured estimate before any). Round trips vary several-fold with the
     /// workers' queue; planning for a typical one would leave every slower one stalled.
-    fn latency(&self) -> f64 {
-        if self.recent_latencies.is_empty() {
+    /// An object with [`OWN_LATENCIES`] round trips of its own plans for those: a heavy
+    /// object takes longer to trace than the rest.
+    fn latency(&self, object: usize) -> f64 {
+        let own = &self.objects[object].recent_latencies;
+        let recent = if own.len() >= OWN_LATENCIES {
+            own
+        } else {
+            &self.recent_latencies
+        };
+        if recent.is_empty() {
             return self.config.initial_latency;
         }
-        crate::stats::percentile(&self.recent_latencies, LATENCY_PERCENTILE)
+        crate::stats::percentile(recent, LATENCY_PERCENTILE)
     }
 
     /// Textures requested per object so far.
@@ -393,9 +409,14 @@ impl Manager {
                         let ms = p.sent.elapsed().as_secs_f64() * 1e3;
                         self.counters.latencies_ms.push(ms);
                         tracing::debug!(object = p.object, ms, predicted = p.predicted, "round trip");
-                        self.recent_latencies.push(ms / 1e3);
-                        if self.recent_latencies.len() > LATENCY_WINDOW {
-                            self.recent_latencies.remove(0);
+                        for recent in [
+                            &mut self.recent_latencies,
+                            &mut self.objects[p.object].recent_latencies,
+                        ] {
+                            recent.push(ms / 1e3);
+                            if recent.len() > LATENCY_WINDOW {
+                                recent.remove(0);
+                            }
                         }
                     }
                     let Prepared {
@@ -559,6 +580,7 @@ impl Manager {
         // little about the flight's.
         self.recent_latencies.clear();
         for o in &mut self.objects {
+            o.recent_latencies.clear();
             o.requested = 0;
             o.received = 0;
         }
@@ -570,14 +592,6 @@ impl Manager {
     pub fn frame(&mut self, scene: &Scene, camera: &Camera, t: f64) -> Vec<Show> {
         self.drain(camera, scene);
         self.predictor.observe(t, camera.eye);
-        // Where the eye will be when a request made now comes back: one answer for
-        // every object this frame.
-        let ahead = if self.config.predict {
-            let horizon = (self.latency() + 0.05).min(3.0);
-            self.predictor.predict(horizon).map(|future| (horizon, future))
-        } else {
-            None
-        };
         let mut stale = false;
         let mut shows = Vec::with_capacity(scene.objects.len());
         for (k, object) in scene.objects.iter().enumerate() {
@@ -589,9 +603,7 @@ impl Manager {
                 Some(GeometryReason::TooNear) => {
                     // Drawn as geometry while the eye is this near, but the eye will
                     // leave: have its textures ready by then.
-                    if let Some(ahead) = ahead {
-                        self.predict_for(scene, k, camera, ahead);
-                    }
+                    self.predict_for(scene, k, camera);
                     shows.push(Show::Geometry);
                     continue;
                 }
@@ -626,21 +638,23 @@ impl Manager {
                         growth = best.map(|b| b.1.growth),
                         held = self.objects[k].held.len(),
                         valid_deg = self.valid_angle(k).to_degrees(),
-                        planned_latency_s = self.latency(),
+                        planned_latency_s = self.latency(k),
                         ?asked,
                         "stale"
                     );
                 }
                 stale = true;
             }
-            if (!valid || coarse) && !asked_for {
+            // One request for now in flight per object: when textures stay valid for
+            // less than the eye takes to leave them, a request each frame would only
+            // queue textures that are stale on arrival.
+            let asking_now = self.pending.values().any(|p| p.object == k && !p.predicted);
+            if (!valid || coarse) && !asked_for && !asking_now {
                 self.request(scene, k, camera.eye, camera, None);
             }
-            if let Some(ahead) = ahead {
-                self.predict_for(scene, k, camera, ahead);
-            }
+            self.predict_for(scene, k, camera);
             shows.push(match best {
-                Some((i, g)) if g.growth.is_finite() && !g.too_coarse => {
+                Some((i, g)) if g.growth <= SHOWN_STALE * self.config.tolerance && !g.too_coarse => {
                     let level = self.objects[k].held[i].pyramid.level_for(camera, TEXEL_TOLERANCE);
                     Show::Impostor { texture: i, level }
                 }
@@ -669,10 +683,18 @@ impl Manager {
         centre + glam::Quat::from_axis_angle(axis.normalize(), lead) * to
     }
 
-    /// Asks ahead for the texture the eye will need once a request made now comes
-    /// back — `(horizon, future)`: that round trip in seconds and the eye then — and
-    /// withdraws predictions the motion has left behind.
-    fn predict_for(&mut self, scene: &Scene, k: usize, camera: &Camera, (horizon, future): (f64, Vec3)) {
+    /// Asks ahead (when predicting) for the texture the eye will need once a request
+    /// for object `k` made now comes back, and withdraws predictions the motion has
+    /// left behind.
+    fn predict_for(&mut self, scene: &Scene, k: usize, camera: &Camera) {
+        if !self.config.predict {
+            return;
+        }
+        // The round trip to plan for, a little more, and the eye then.
+        let horizon = (self.latency(k) + 0.05).min(3.0);
+        let Some(future) = self.predictor.predict(horizon) else {
+            return;
+        };
         let object = &scene.objects[k];
         let centre = object.bounds.center();
         if object

@@ -12,6 +12,11 @@ use glam::Vec3;
 /// How many recent samples the fit uses.
 const WINDOW: usize = 8;
 
+/// A step this many times longer than the last one's speed allows (plus
+/// [`CUT_MIN_STEP`] metres, so an eye starting from rest is not a cut) is a camera cut.
+const CUT_SPEED_RATIO: f64 = 4.0;
+const CUT_MIN_STEP: f64 = 0.5;
+
 /// Recent eye positions with their times (seconds).
 #[derive(Debug, Clone, Default)]
 pub struct Predictor {
@@ -19,10 +24,23 @@ pub struct Predictor {
 }
 
 impl Predictor {
-    /// Records the eye at time `t` (seconds, increasing).
+    /// Records the eye at time `t` (seconds, increasing). A jump far faster than the
+    /// eye has been moving (a camera cut) starts the history afresh: a fit across it
+    /// would extrapolate the jump.
     pub fn observe(&mut self, t: f64, eye: Vec3) {
-        if self.samples.back().is_some_and(|&(last, _)| t <= last) {
+        let Some(&(last_t, last)) = self.samples.back() else {
+            self.samples.push_back((t, eye));
             return;
+        };
+        if t <= last_t {
+            return;
+        }
+        if let Some(&(before_t, before)) = self.samples.iter().rev().nth(1) {
+            let speed = last.distance(before) as f64 / (last_t - before_t);
+            let step = eye.distance(last) as f64;
+            if step > CUT_SPEED_RATIO * speed * (t - last_t) + CUT_MIN_STEP {
+                self.samples.clear();
+            }
         }
         if self.samples.len() == WINDOW {
             self.samples.pop_front();
@@ -129,5 +147,25 @@ mod tests {
         // One metre travelled in 0.2 s: within 5 cm.
         assert!(error < 0.05, "orbit prediction off by {error} m");
         assert!(Predictor::default().predict(1.0).is_none());
+    }
+
+    #[test]
+    fn a_camera_cut_starts_the_fit_afresh() {
+        let mut p = Predictor::default();
+        for k in 0..8 {
+            p.observe(k as f64 * 0.03, Vec3::new(k as f32 * 0.1, 0.0, 0.0));
+        }
+        // A cut 9 m away, then the eye still there a frame later.
+        p.observe(0.24, Vec3::new(0.0, 0.0, 9.0));
+        p.observe(0.27, Vec3::new(0.0, 0.0, 9.0));
+        let ahead = p.predict(0.3).unwrap();
+        assert!(ahead.distance(Vec3::new(0.0, 0.0, 9.0)) < 1e-3, "{ahead}");
+        // Speeding up smoothly is not a cut.
+        let mut p = Predictor::default();
+        for k in 0..8 {
+            let t = k as f64 * 0.03;
+            p.observe(t, Vec3::new((20.0 * t * t) as f32, 0.0, 0.0));
+        }
+        assert_eq!(p.samples.len(), WINDOW);
     }
 }
