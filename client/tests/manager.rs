@@ -131,3 +131,31 @@ fn a_texture_far_too_coarse_for_the_screen_gives_way_to_geometry() {
     let large = Camera::look_at(eye, centre, Vec3::Y, 60.0, 1280, 720).unwrap();
     assert_eq!(manager.frame(&scene, &large, 0.1)[sphere], Show::Geometry);
 }
+
+#[test]
+fn one_request_for_now_is_in_flight_per_object() {
+    let scene = Scene::load("default").unwrap();
+    let sphere = index(&scene, "sphere");
+    let centre = scene.objects[sphere].bounds.center();
+    // Nobody answers: every frame finds the sphere without a texture.
+    let (commands_tx, mut commands_rx) = unbounded_channel();
+    let (_arrivals_tx, arrivals_rx) = unbounded_channel();
+    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let mut now_requests = 0;
+    // Eyes 90° apart around the sphere: no request for one serves another.
+    for (frame, angle) in [0f32, 90.0, 180.0, 270.0].into_iter().enumerate() {
+        let a = angle.to_radians();
+        let eye = centre + Vec3::new(6.0 * a.cos(), 0.5, 6.0 * a.sin());
+        let camera = Camera::look_at(eye, centre, Vec3::Y, 60.0, 320, 180).unwrap();
+        manager.frame(&scene, &camera, frame as f64);
+        while let Ok(command) = commands_rx.try_recv() {
+            if let Command::Request(r) = command
+                && r.object == "sphere"
+                && r.needed_in_ms.is_none()
+            {
+                now_requests += 1;
+            }
+        }
+    }
+    assert_eq!(now_requests, 1);
+}
