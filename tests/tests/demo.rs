@@ -53,6 +53,17 @@ fn the_demo_flies_and_summarises() {
     assert!(summary["requests_now"].as_u64().unwrap() + summary["requests_predicted"].as_u64().unwrap() > 0);
     // Textures arrived and were used: the impostor frames look like the reference.
     assert!(summary["psnr_db_mean"].as_f64().unwrap() > 25.0, "{summary}");
+    // Each object that may be an impostor and is in view has its own figures; the
+    // ground (two triangles, always geometry) has none.
+    for key in ["psnr_db_min_by_object", "geometry_psnr_aa_db_min_by_object"] {
+        let by_object = summary[key].as_object().unwrap();
+        assert!(by_object.contains_key("knot"), "{key}: {summary}");
+        assert!(!by_object.contains_key("ground"), "{key}: {summary}");
+        assert!(
+            by_object.values().all(|v| v.as_f64().unwrap() > 0.0),
+            "{key}: {summary}"
+        );
+    }
     // Every 15th frame drawn is written, named by its path frame.
     let written = std::fs::read_dir(&out)
         .unwrap()

@@ -2,6 +2,7 @@
 //! processes, and this client flying the scene's camera path with impostors,
 //! asking for the textures it will need. Writes frames and `summary.json`.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -12,10 +13,11 @@ use glam::Vec3;
 use serde::Serialize;
 use tokio::sync::mpsc::unbounded_channel;
 
+use relief_client::composite::CHEAP_TRIANGLES;
 use relief_client::composite::render_geometry;
 use relief_client::gbuffer::GBuffer;
 use relief_client::manager::{Config, Manager};
-use relief_client::metrics::image::compare;
+use relief_client::metrics::image::{compare, object_psnr};
 use relief_client::source::{spawn_local, spawn_remote};
 use relief_client::stats::{finite_mean, finite_min, median, percentile};
 use relief_core::camera::{Camera, PathSegment};
@@ -110,7 +112,7 @@ struct Summary {
     sprites: u64,
     warps: u64,
     /// New textures received per full turn for each object orbited by the path.
-    regenerations_per_orbit: std::collections::BTreeMap<String, f64>,
+    regenerations_per_orbit: BTreeMap<String, f64>,
     /// Against the point-sampled reference (one ray through each pixel centre);
     /// `null` when no frame was compared (`--reference-every 0`).
     psnr_db_mean: Option<f64>,
@@ -121,6 +123,12 @@ struct Summary {
     /// … which the same frames drawn all as exact geometry, one sample per pixel, do
     /// not reach either: the floor that detail finer than a pixel sets.
     geometry_psnr_aa_db_min: Option<f64>,
+    /// Per object that may be an impostor, the lowest PSNR (point reference) of its own
+    /// pixels — wherever either frame shows it, so silhouette errors count.
+    psnr_db_min_by_object: BTreeMap<String, f64>,
+    /// … and the floor for it: the object drawn as exact geometry, one sample per
+    /// pixel, against the anti-aliased reference.
+    geometry_psnr_aa_db_min_by_object: BTreeMap<String, f64>,
     rtt_ms: u64,
     predict: bool,
     tolerance: f32,
@@ -136,6 +144,11 @@ struct Judged {
     psnr: Vec<f64>,
     psnr_aa: Vec<f64>,
     geometry_psnr_aa: Vec<f64>,
+    /// Per object that may be an impostor: its own PSNR in each frame showing it
+    /// ([`object_psnr`]), against the point reference, and as exact geometry against
+    /// the anti-aliased one.
+    by_object: BTreeMap<String, Vec<f64>>,
+    geometry_by_object: BTreeMap<String, Vec<f64>>,
 }
 
 /// Compares each kept `(path frame, camera, frame)` with the ray-traced references;
@@ -145,13 +158,27 @@ fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result
         psnr: Vec::new(),
         psnr_aa: Vec::new(),
         geometry_psnr_aa: Vec::new(),
+        by_object: BTreeMap::new(),
+        geometry_by_object: BTreeMap::new(),
     };
     if compared.is_empty() {
         return Ok(judged);
     }
     let bar = progress::bar(compared.len() as u64, "comparing with the reference");
     let tracer = SceneTracer::new(scene);
-    let mut log = String::from("frame,psnr_db,psnr_aa_db,geometry_psnr_aa_db\n");
+    // Objects that may be impostors: each gets its own columns.
+    let candidates: Vec<(u32, &str)> = scene
+        .objects
+        .iter()
+        .enumerate()
+        .filter(|(_, o)| o.mesh.triangle_count() >= CHEAP_TRIANGLES)
+        .map(|(k, o)| (k as u32, o.name.as_str()))
+        .collect();
+    let mut log = String::from("frame,psnr_db,psnr_aa_db,geometry_psnr_aa_db");
+    for (_, name) in &candidates {
+        log.push_str(&format!(",psnr_db_{name},geometry_psnr_aa_db_{name}"));
+    }
+    log.push('\n');
     let mut worst = f64::INFINITY;
     for (frame, camera, image) in compared {
         let reference = render_reference(&tracer, camera, 1);
@@ -160,7 +187,22 @@ fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result
         let p = compare(image, &reference, None).psnr_db;
         let p_aa = compare(image, &antialiased, None).psnr_db;
         let floor = compare(&geometry, &antialiased, None).psnr_db;
-        log.push_str(&format!("{frame},{p:.3},{p_aa:.3},{floor:.3}\n"));
+        log.push_str(&format!("{frame},{p:.3},{p_aa:.3},{floor:.3}"));
+        for &(k, name) in &candidates {
+            let own = object_psnr(image, &reference, k);
+            let own_floor = object_psnr(&geometry, &antialiased, k);
+            for (value, into) in [
+                (own, &mut judged.by_object),
+                (own_floor, &mut judged.geometry_by_object),
+            ] {
+                log.push(',');
+                if let Some(v) = value {
+                    log.push_str(&format!("{v:.3}"));
+                    into.entry(name.to_string()).or_default().push(v);
+                }
+            }
+        }
+        log.push('\n');
         if p < worst {
             worst = p;
             image.save_png(&out.join("worst_frame.png"))?;
@@ -174,6 +216,14 @@ fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result
     bar.finish_and_clear();
     std::fs::write(out.join("psnr.csv"), log).context("writing psnr.csv")?;
     Ok(judged)
+}
+
+/// The finite minimum of each object's values.
+fn min_by_object(values: &BTreeMap<String, Vec<f64>>) -> BTreeMap<String, f64> {
+    values
+        .iter()
+        .filter_map(|(name, values)| Some((name.clone(), finite_min(values)?)))
+        .collect()
 }
 
 /// An orbit segment of the path, and what it has cost so far.
@@ -395,6 +445,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         psnr_aa_db_mean: finite_mean(&judged.psnr_aa),
         psnr_aa_db_min: finite_min(&judged.psnr_aa),
         geometry_psnr_aa_db_min: finite_min(&judged.geometry_psnr_aa),
+        psnr_db_min_by_object: min_by_object(&judged.by_object),
+        geometry_psnr_aa_db_min_by_object: min_by_object(&judged.geometry_by_object),
         rtt_ms: args.rtt_ms,
         predict: !args.no_predict,
         tolerance: args.tolerance,

@@ -48,17 +48,46 @@ pub fn compare(frame: &Frame, reference: &Frame, object: Option<u32>) -> ImageEr
             }
         }
     }
-    let mse = squared / (3 * pixels.max(1)) as f64;
     ImageError {
-        psnr_db: if mse == 0.0 {
-            f64::INFINITY
-        } else {
-            10.0 * (255.0f64 * 255.0 / mse).log10()
-        },
+        psnr_db: psnr(squared, pixels),
         ssim: ssim(frame, reference, &region),
         hole_frac: mismatched as f64 / either.max(1) as f64,
         pixels,
     }
+}
+
+/// PSNR over RGB from the summed squared error of `pixels` pixels (`INFINITY` when
+/// there is no error).
+fn psnr(squared: f64, pixels: usize) -> f64 {
+    let mse = squared / (3 * pixels.max(1)) as f64;
+    if mse == 0.0 {
+        f64::INFINITY
+    } else {
+        10.0 * (255.0f64 * 255.0 / mse).log10()
+    }
+}
+
+/// PSNR of `object`'s image: over every pixel where either frame shows it, so that
+/// what its silhouette gets wrong counts along with its shading (unlike
+/// [`compare`], which keeps the two apart). `None` when neither frame shows it.
+pub fn object_psnr(frame: &Frame, reference: &Frame, object: u32) -> Option<f64> {
+    assert_eq!(
+        (frame.width, frame.height),
+        (reference.width, reference.height),
+        "frames to compare differ in size"
+    );
+    let mut squared = 0f64;
+    let mut pixels = 0usize;
+    for (k, (&a, &b)) in frame.object.iter().zip(&reference.object).enumerate() {
+        if a == object || b == object {
+            pixels += 1;
+            for c in 0..3 {
+                let d = frame.color[k][c] as f64 - reference.color[k][c] as f64;
+                squared += d * d;
+            }
+        }
+    }
+    (pixels > 0).then(|| psnr(squared, pixels))
 }
 
 /// Mean SSIM (Wang et al. 2004, constants K1 = 0.01, K2 = 0.03) of Rec. 601 luma over
@@ -133,5 +162,24 @@ mod tests {
         assert!((e.psnr_db - 28.1308).abs() < 1e-3, "{}", e.psnr_db);
         let missing = frame([0, 0, 0], NO_OBJECT);
         assert_eq!(compare(&missing, &a, Some(0)).hole_frac, 1.0);
+    }
+
+    #[test]
+    fn object_psnr_counts_the_silhouette() {
+        let a = frame([100, 150, 200], 0);
+        assert_eq!(object_psnr(&a, &a, 0), Some(f64::INFINITY));
+        assert_eq!(object_psnr(&a, &a, 7), None);
+        // Half the object missing (background black): the 32 missing pixels count.
+        let mut b = a.clone();
+        for k in 32..64 {
+            b.color[k] = [0, 0, 0];
+            b.object[k] = NO_OBJECT;
+        }
+        let squared = 32.0 * (100f64.powi(2) + 150f64.powi(2) + 200f64.powi(2));
+        let expected = 10.0 * (255f64.powi(2) * 3.0 * 64.0 / squared).log10();
+        let got = object_psnr(&b, &a, 0).unwrap();
+        assert!((got - expected).abs() < 1e-9, "{got} vs {expected}");
+        // … which compare leaves to hole_frac.
+        assert_eq!(compare(&b, &a, Some(0)).psnr_db, f64::INFINITY);
     }
 }
