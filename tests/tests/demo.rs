@@ -55,7 +55,7 @@ fn the_demo_flies_and_summarises() {
     assert!(summary["psnr_db_mean"].as_f64().unwrap() > 25.0, "{summary}");
     // Each object that may be an impostor and is in view has its own figures; the
     // ground (two triangles, always geometry) has none.
-    for key in ["psnr_db_min_by_object", "geometry_psnr_aa_db_min_by_object"] {
+    for key in ["psnr_aa_db_min_by_object", "geometry_psnr_aa_db_min_by_object"] {
         let by_object = summary[key].as_object().unwrap();
         assert!(by_object.contains_key("knot"), "{key}: {summary}");
         assert!(!by_object.contains_key("ground"), "{key}: {summary}");

@@ -123,9 +123,10 @@ struct Summary {
     /// … which the same frames drawn all as exact geometry, one sample per pixel, do
     /// not reach either: the floor that detail finer than a pixel sets.
     geometry_psnr_aa_db_min: Option<f64>,
-    /// Per object that may be an impostor, the lowest PSNR (point reference) of its own
-    /// pixels — wherever either frame shows it, so silhouette errors count.
-    psnr_db_min_by_object: BTreeMap<String, f64>,
+    /// Per object that may be an impostor, the lowest PSNR of its own pixels against
+    /// the anti-aliased reference — wherever either frame shows it, so silhouette
+    /// errors count.
+    psnr_aa_db_min_by_object: BTreeMap<String, f64>,
     /// … and the floor for it: the object drawn as exact geometry, one sample per
     /// pixel, against the anti-aliased reference.
     geometry_psnr_aa_db_min_by_object: BTreeMap<String, f64>,
@@ -145,8 +146,8 @@ struct Judged {
     psnr_aa: Vec<f64>,
     geometry_psnr_aa: Vec<f64>,
     /// Per object that may be an impostor: its own PSNR in each frame showing it
-    /// ([`object_psnr`]), against the point reference, and as exact geometry against
-    /// the anti-aliased one.
+    /// ([`object_psnr`]) against the anti-aliased reference, as drawn and as exact
+    /// geometry.
     by_object: BTreeMap<String, Vec<f64>>,
     geometry_by_object: BTreeMap<String, Vec<f64>>,
 }
@@ -176,7 +177,7 @@ fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result
         .collect();
     let mut log = String::from("frame,psnr_db,psnr_aa_db,geometry_psnr_aa_db");
     for (_, name) in &candidates {
-        log.push_str(&format!(",psnr_db_{name},geometry_psnr_aa_db_{name}"));
+        log.push_str(&format!(",psnr_aa_db_{name},geometry_psnr_aa_db_{name}"));
     }
     log.push('\n');
     let mut worst = f64::INFINITY;
@@ -189,7 +190,7 @@ fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result
         let floor = compare(&geometry, &antialiased, None).psnr_db;
         log.push_str(&format!("{frame},{p:.3},{p_aa:.3},{floor:.3}"));
         for &(k, name) in &candidates {
-            let own = object_psnr(image, &reference, k);
+            let own = object_psnr(image, &antialiased, k);
             let own_floor = object_psnr(&geometry, &antialiased, k);
             for (value, into) in [
                 (own, &mut judged.by_object),
@@ -445,7 +446,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         psnr_aa_db_mean: finite_mean(&judged.psnr_aa),
         psnr_aa_db_min: finite_min(&judged.psnr_aa),
         geometry_psnr_aa_db_min: finite_min(&judged.geometry_psnr_aa),
-        psnr_db_min_by_object: min_by_object(&judged.by_object),
+        psnr_aa_db_min_by_object: min_by_object(&judged.by_object),
         geometry_psnr_aa_db_min_by_object: min_by_object(&judged.geometry_by_object),
         rtt_ms: args.rtt_ms,
         predict: !args.no_predict,
