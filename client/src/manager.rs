@@ -183,7 +183,7 @@ const COARSEST_SHOWN: f32 = 2.0;
 
 /// A texture this many times over the tolerance is not shown: geometry is drawn
 /// until a better one arrives (the frame still counts as stale).
-const SHOWN_STALE: f32 = 4.0;
+const SHOWN_STALE: f32 = 2.0;
 
 /// Round trips remembered, and the percentile of them the predictor plans for.
 const LATENCY_WINDOW: usize = 16;
