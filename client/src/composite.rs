@@ -34,9 +34,14 @@ pub enum GeometryReason {
     TooNear,
 }
 
+/// Whether `object` has too few triangles to be worth an impostor from any eye.
+pub fn is_cheap(object: &SceneObject) -> bool {
+    object.mesh.triangle_count() < CHEAP_TRIANGLES
+}
+
 /// How `object` should be drawn from `eye`.
 pub fn geometry_reason(object: &SceneObject, eye: Vec3) -> Option<GeometryReason> {
-    if object.mesh.triangle_count() < CHEAP_TRIANGLES {
+    if is_cheap(object) {
         return Some(GeometryReason::Cheap);
     }
     let margin = object.bounds.extent().length() * 0.05;

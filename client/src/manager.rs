@@ -141,7 +141,7 @@ struct Pending {
 #[derive(Default)]
 struct ObjectState {
     held: Vec<Held>,
-    /// Angle (radians) over which the newest texture of this object stays valid.
+    /// Angle (radians) over which the newest final texture of this object stays valid.
     valid_angle: Option<f32>,
     /// The last [`LATENCY_WINDOW`] round trips of this object's textures, seconds.
     recent_latencies: Vec<f64>,
@@ -156,10 +156,11 @@ struct ObjectState {
 struct Grade {
     /// Growth of the widest predicted gap, screen pixels.
     growth: f32,
-    /// Too coarse for the screen while a finer texture can be had.
-    coarse: bool,
-    /// So coarse that geometry is drawn instead ([`COARSEST_SHOWN`]).
+    /// Too coarse to be shown: its texels would cover more than [`COARSEST_SHOWN`]
+    /// pixels (eq. 4-1).
     too_coarse: bool,
+    /// … and a finer texture can be had (the largest asked for is 512²).
+    coarse: bool,
 }
 
 /// Beyond this turn around the object, or this change of distance, a texture is not
@@ -178,8 +179,9 @@ const LEAD: f32 = 0.5;
 const PLANNING_MARGIN: f32 = 0.75;
 
 /// A texture whose texels would cover more than this many pixels' angle is not shown:
-/// near an object even the largest texture is that coarse, and geometry is drawn.
-const COARSEST_SHOWN: f32 = 2.0;
+/// geometry is drawn instead while a finer texture is on its way — or, near an object
+/// where even the largest texture is that coarse, while the eye stays that near.
+const COARSEST_SHOWN: f32 = 2.0 * TEXEL_TOLERANCE;
 
 /// A texture this many times over the tolerance is not shown: geometry is drawn
 /// until a better one arrives (the frame still counts as stale).
@@ -456,8 +458,10 @@ impl Manager {
                     }
                 }
                 Arrival::Failed { id, reason } => {
-                    tracing::warn!("texture request {id} failed: {reason}");
-                    self.pending.remove(&id);
+                    // (A withdrawn request's end is no news.)
+                    if self.pending.remove(&id).is_some() {
+                        tracing::warn!("texture request {id} failed: {reason}");
+                    }
                 }
             }
         }
@@ -476,14 +480,14 @@ impl Manager {
     ) -> impl Iterator<Item = Grade> + 'a {
         let wanted = Self::size_for(&scene.objects[object], eye, camera);
         let at_eye = Camera { eye, ..*camera };
-        self.objects[object].held.iter().map(move |h| Grade {
-            growth: growth(h, eye, camera),
-            coarse: {
-                let texture = &h.pyramid.levels[0].texture;
-                needs_finer_texture(&texture.camera, &at_eye, 2.0 * TEXEL_TOLERANCE)
-                    && texture.camera.width < wanted
-            },
-            too_coarse: needs_finer_texture(&h.pyramid.levels[0].texture.camera, &at_eye, COARSEST_SHOWN),
+        self.objects[object].held.iter().map(move |h| {
+            let texture = &h.pyramid.levels[0].texture.camera;
+            let too_coarse = needs_finer_texture(texture, &at_eye, COARSEST_SHOWN);
+            Grade {
+                growth: growth(h, eye, camera),
+                too_coarse,
+                coarse: too_coarse && texture.width < wanted,
+            }
         })
     }
 
@@ -610,13 +614,27 @@ impl Manager {
                 None => {}
             }
             let centre = object.bounds.center();
-            let best = self
-                .grades(scene, k, camera.eye, camera)
-                .enumerate()
-                .min_by(|a, b| a.1.growth.total_cmp(&b.1.growth));
-            self.counters.needs += 1;
-            let valid = best.is_some_and(|(_, g)| g.growth <= self.config.tolerance);
-            let coarse = best.is_some_and(|(_, g)| g.coarse);
+            let grades: Vec<Grade> = self.grades(scene, k, camera.eye, camera).collect();
+            let least_growth = |fine_only: bool| {
+                grades
+                    .iter()
+                    .copied()
+                    .enumerate()
+                    .filter(|(_, g)| !(fine_only && g.too_coarse))
+                    .min_by(|a, b| a.1.growth.total_cmp(&b.1.growth))
+            };
+            // What is shown: the best texture fine enough for the screen.
+            let best = least_growth(true);
+            let within =
+                |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= self.config.tolerance);
+            // Some texture is within tolerance — if none fine enough is, geometry is
+            // drawn by choice (not a stale frame), and a finer one asked for if it can
+            // be had.
+            let valid = within(least_growth(false));
+            let coarse = !within(best)
+                && grades
+                    .iter()
+                    .any(|g| g.growth <= self.config.tolerance && g.coarse);
             let asked_for = self.pending_covers(k, centre, camera.eye);
             if valid || asked_for {
                 self.counters.prediction_hits += 1;
@@ -654,7 +672,7 @@ impl Manager {
             }
             self.predict_for(scene, k, camera);
             shows.push(match best {
-                Some((i, g)) if g.growth <= SHOWN_STALE * self.config.tolerance && !g.too_coarse => {
+                Some((i, g)) if g.growth <= SHOWN_STALE * self.config.tolerance => {
                     let level = self.objects[k].held[i].pyramid.level_for(camera, TEXEL_TOLERANCE);
                     Show::Impostor { texture: i, level }
                 }
@@ -677,7 +695,7 @@ impl Manager {
         let axis = from.cross(to);
         let turn = from.angle_between(to);
         let lead = (LEAD * self.valid_angle(k)).min(turn);
-        if lead.is_nan() || lead <= 1e-4 || axis.length_squared() <= f32::MIN_POSITIVE {
+        if turn.is_nan() || lead <= 1e-4 || axis.length_squared() <= f32::MIN_POSITIVE {
             return future;
         }
         centre + glam::Quat::from_axis_angle(axis.normalize(), lead) * to

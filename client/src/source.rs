@@ -79,9 +79,11 @@ pub fn spawn_remote(
                                 return;
                             }
                         };
+                        let mut finished = false;
                         loop {
                             match stream.message().await {
                                 Ok(Some(result)) => {
+                                    finished |= result.r#final;
                                     tokio::time::sleep(half).await;
                                     let texture =
                                         result.texture.as_ref().map(|t| texture_from_pb("texture", t));
@@ -102,8 +104,16 @@ pub fn spawn_remote(
                                     };
                                     let _ = arrivals.send(arrival);
                                 }
-                                Ok(None) => return,
-                                Err(e) if e.code() == tonic::Code::Cancelled => return,
+                                // Withdrawn, or cut off: the manager must hear of the
+                                // latter (it ignores ids it no longer waits for).
+                                Ok(None) | Err(_) if finished => return,
+                                Ok(None) => {
+                                    let _ = arrivals.send(Arrival::Failed {
+                                        id: request.id,
+                                        reason: "the result stream ended without a final texture".into(),
+                                    });
+                                    return;
+                                }
                                 Err(e) => {
                                     let _ = arrivals.send(Arrival::Failed {
                                         id: request.id,
@@ -144,11 +154,16 @@ pub fn spawn_local(
                 };
                 match next {
                     Some(Command::Request(r)) => {
-                        if r.needed_in_ms.is_none() {
-                            queue.push_front(r);
-                        } else {
-                            queue.push_back(r);
-                        }
+                        // Needed-now requests before predicted ones, each kind in the
+                        // order asked (newest-first would starve an old one).
+                        let at = match r.needed_in_ms {
+                            None => queue
+                                .iter()
+                                .position(|q| q.needed_in_ms.is_some())
+                                .unwrap_or(queue.len()),
+                            Some(_) => queue.len(),
+                        };
+                        queue.insert(at, r);
                         continue;
                     }
                     Some(Command::Withdraw(ids)) => {

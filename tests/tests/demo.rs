@@ -54,15 +54,17 @@ fn the_demo_flies_and_summarises() {
     // Textures arrived and were used: the impostor frames look like the reference.
     assert!(summary["psnr_db_mean"].as_f64().unwrap() > 25.0, "{summary}");
     // Each object that may be an impostor and is in view has its own figures; the
-    // ground (two triangles, always geometry) has none.
-    for key in ["psnr_aa_db_min_by_object", "geometry_psnr_aa_db_min_by_object"] {
+    // ground (two triangles, always geometry) has none. The knot — smooth, seen from
+    // its orbit — as exact geometry stays near the one-sample floor of the whole frame,
+    // and its impostor (silhouettes a pixel off included) not far below.
+    for (key, floor) in [
+        ("psnr_aa_db_min_by_object", 17.0),
+        ("geometry_psnr_aa_db_min_by_object", 28.0),
+    ] {
         let by_object = summary[key].as_object().unwrap();
-        assert!(by_object.contains_key("knot"), "{key}: {summary}");
         assert!(!by_object.contains_key("ground"), "{key}: {summary}");
-        assert!(
-            by_object.values().all(|v| v.as_f64().unwrap() > 0.0),
-            "{key}: {summary}"
-        );
+        let knot = by_object["knot"].as_f64().unwrap();
+        assert!(knot > floor, "{key}: {summary}");
     }
     // Every 15th frame drawn is written, named by its path frame.
     let written = std::fs::read_dir(&out)

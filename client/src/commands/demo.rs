@@ -13,8 +13,7 @@ use glam::Vec3;
 use serde::Serialize;
 use tokio::sync::mpsc::unbounded_channel;
 
-use relief_client::composite::CHEAP_TRIANGLES;
-use relief_client::composite::render_geometry;
+use relief_client::composite::{is_cheap, render_geometry};
 use relief_client::gbuffer::GBuffer;
 use relief_client::manager::{Config, Manager};
 use relief_client::metrics::image::{compare, object_psnr};
@@ -172,11 +171,14 @@ fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result
         .objects
         .iter()
         .enumerate()
-        .filter(|(_, o)| o.mesh.triangle_count() >= CHEAP_TRIANGLES)
+        .filter(|(_, o)| !is_cheap(o))
         .map(|(k, o)| (k as u32, o.name.as_str()))
         .collect();
+    // Names become column names: keep the CSV's commas and quotes out of them.
+    let column = |name: &str| name.replace(|c: char| !(c.is_alphanumeric() || c == '_' || c == '-'), "_");
     let mut log = String::from("frame,psnr_db,psnr_aa_db,geometry_psnr_aa_db");
     for (_, name) in &candidates {
+        let name = column(name);
         log.push_str(&format!(",psnr_aa_db_{name},geometry_psnr_aa_db_{name}"));
     }
     log.push('\n');
