@@ -1,6 +1,7 @@
 //! The impostor manager with the in-process generator: textures arrive without the
 //! frame loop waiting, a still eye redraws sprites instead of warping, predictions lead
-//! the motion, and textures far too coarse for the screen give way to geometry.
+//! the motion, textures far too coarse for the screen give way to geometry, and the
+//! local generator serves requests for now in the order asked.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -158,4 +159,36 @@ fn one_request_for_now_is_in_flight_per_object() {
         }
     }
     assert_eq!(now_requests, 1);
+}
+
+#[test]
+fn the_local_generator_serves_requests_for_now_in_the_order_asked() {
+    use relief_client::manager::{Arrival, TextureRequest};
+    use relief_core::relief::DepthBits;
+    let scene = Arc::new(Scene::load("default").unwrap());
+    let (commands_tx, commands_rx) = unbounded_channel();
+    let (arrivals_tx, mut arrivals_rx) = unbounded_channel();
+    // All asked before the generator can have finished the first.
+    let objects = ["sphere", "knot", "tree", "sphere"];
+    for (id, object) in objects.iter().enumerate() {
+        let request = TextureRequest {
+            id: id as u64 + 1,
+            object: object.to_string(),
+            eye: Vec3::new(0.0, 2.0, 12.0),
+            size: 32,
+            depth_bits: DepthBits::Eight,
+            needed_in_ms: None,
+        };
+        commands_tx.send(Command::Request(request)).unwrap();
+    }
+    spawn_local(scene, commands_rx, arrivals_tx);
+    let order: Vec<u64> = (0..objects.len())
+        .map(
+            |_| match arrivals_rx.blocking_recv().expect("the generator stopped") {
+                Arrival::Texture { id, .. } => id,
+                Arrival::Failed { id, reason } => panic!("request {id} failed: {reason}"),
+            },
+        )
+        .collect();
+    assert_eq!(order, [1, 2, 3, 4]);
 }
