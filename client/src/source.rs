@@ -64,70 +64,64 @@ pub fn spawn_remote(
                         let _ = local.send(Command::Withdraw(ids));
                     }
                     Command::Request(request) => {
-                        let wire = to_pb(&request, scene_hash, &remote.client_id);
-                        let mut stream = match remote.request(wire).await {
-                            Ok(s) => s,
-                            Err(e) if e.code() == tonic::Code::Unavailable => {
-                                let _ = local.send(Command::Request(request));
-                                return;
-                            }
-                            Err(e) => {
-                                let _ = arrivals.send(Arrival::Failed {
-                                    id: request.id,
-                                    reason: e.message().to_string(),
-                                });
-                                return;
-                            }
-                        };
-                        let mut finished = false;
-                        loop {
-                            match stream.message().await {
-                                Ok(Some(result)) => {
-                                    finished |= result.r#final;
-                                    tokio::time::sleep(half).await;
-                                    let texture =
-                                        result.texture.as_ref().map(|t| texture_from_pb("texture", t));
-                                    let arrival = match texture {
-                                        Some(Ok(texture)) => Arrival::Texture {
-                                            id: request.id,
-                                            texture: Box::new(Prepared::new(texture)),
-                                            is_final: result.r#final,
-                                        },
-                                        Some(Err(e)) => Arrival::Failed {
-                                            id: request.id,
-                                            reason: e.message().to_string(),
-                                        },
-                                        None => Arrival::Failed {
-                                            id: request.id,
-                                            reason: "a result without a texture".into(),
-                                        },
-                                    };
-                                    let _ = arrivals.send(arrival);
-                                }
-                                // Withdrawn, or cut off: the manager must hear of the
-                                // latter (it ignores ids it no longer waits for).
-                                Ok(None) | Err(_) if finished => return,
-                                Ok(None) => {
-                                    let _ = arrivals.send(Arrival::Failed {
-                                        id: request.id,
-                                        reason: "the result stream ended without a final texture".into(),
-                                    });
-                                    return;
-                                }
-                                Err(e) => {
-                                    let _ = arrivals.send(Arrival::Failed {
-                                        id: request.id,
-                                        reason: e.message().to_string(),
-                                    });
-                                    return;
-                                }
-                            }
-                        }
+                        serve_request(&mut remote, request, scene_hash, &arrivals, &local, half).await;
                     }
                 }
             });
         }
     });
+}
+
+/// Asks `remote` for `request` and passes on what comes back (each result `half` late)
+/// — ending, whatever happens, in the final texture or a failure the manager hears of.
+/// A server that cannot be reached hands the request to the local generator.
+async fn serve_request(
+    remote: &mut Remote,
+    request: TextureRequest,
+    scene_hash: ContentHash,
+    arrivals: &UnboundedSender<Arrival>,
+    local: &UnboundedSender<Command>,
+    half: Duration,
+) {
+    let id = request.id;
+    let fail = |reason: String| {
+        let _ = arrivals.send(Arrival::Failed { id, reason });
+    };
+    let wire = to_pb(&request, scene_hash, &remote.client_id);
+    let mut stream = match remote.request(wire).await {
+        Ok(s) => s,
+        Err(e) if e.code() == tonic::Code::Unavailable => {
+            let _ = local.send(Command::Request(request));
+            return;
+        }
+        Err(e) => return fail(e.message().to_string()),
+    };
+    let mut finished = false;
+    loop {
+        match stream.message().await {
+            Ok(Some(result)) => {
+                finished |= result.r#final;
+                tokio::time::sleep(half).await;
+                match result.texture.as_ref().map(|t| texture_from_pb("texture", t)) {
+                    Some(Ok(texture)) => {
+                        let _ = arrivals.send(Arrival::Texture {
+                            id,
+                            texture: Box::new(Prepared::new(texture)),
+                            is_final: result.r#final,
+                        });
+                    }
+                    Some(Err(e)) => fail(e.message().to_string()),
+                    None => fail("a result without a texture".into()),
+                }
+            }
+            // After the final texture nothing more is owed. Before it, the end is a
+            // failure: the manager must hear of a stream cut off (and ignores the end
+            // of one it withdrew).
+            Ok(None) | Err(_) if finished => return,
+            Ok(None) => return fail("the result stream ended without a final texture".into()),
+            Err(e) => return fail(e.message().to_string()),
+        }
+    }
 }
 
 /// Serves `commands` in-process on one low-priority thread: needed-now requests first,
