@@ -25,12 +25,19 @@ pub const MAX_TEXTURE: u32 = 1024;
 /// A texel may subtend this many pixels before a finer pyramid level is used.
 pub const TEXEL_TOLERANCE: f32 = 1.0;
 
+/// An eye within this fraction of an object's bounds diagonal from its bounds draws
+/// it as geometry: so near, a relief texture stays valid for a degree or two of the
+/// eye's turn — a few frames, less than a round trip — and shows its flat texels
+/// large. (Against 5 %, the demo's stale frames fell from 3.2 % to 1.7 % with the
+/// median frame time unchanged.)
+pub const NEAR_MARGIN: f32 = 0.25;
+
 /// Why an object is drawn as geometry.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum GeometryReason {
     /// Too few triangles to be worth an impostor.
     Cheap,
-    /// The eye is inside, or within a few percent of, the object's bounds.
+    /// The eye is inside, or within [`NEAR_MARGIN`] of, the object's bounds.
     TooNear,
 }
 
@@ -44,7 +51,7 @@ pub fn geometry_reason(object: &SceneObject, eye: Vec3) -> Option<GeometryReason
     if is_cheap(object) {
         return Some(GeometryReason::Cheap);
     }
-    let margin = object.bounds.extent().length() * 0.05;
+    let margin = object.bounds.extent().length() * NEAR_MARGIN;
     object
         .bounds
         .expanded(margin)

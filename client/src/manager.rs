@@ -715,11 +715,8 @@ impl Manager {
         };
         let object = &scene.objects[k];
         let centre = object.bounds.center();
-        if object
-            .bounds
-            .expanded(object.bounds.extent().length() * 0.05)
-            .contains(future)
-        {
+        // Drawn as geometry from there: nothing to ask for.
+        if geometry_reason(object, future) == Some(GeometryReason::TooNear) {
             return;
         }
         let covered = self
