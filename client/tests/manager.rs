@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use glam::Vec3;
-use tokio::sync::mpsc::unbounded_channel;
+use tokio::sync::mpsc::{UnboundedReceiver, unbounded_channel};
 
 use relief_client::gbuffer::GBuffer;
 use relief_client::manager::{Command, Config, Manager, Show};
@@ -69,31 +69,58 @@ fn index(scene: &Scene, name: &str) -> usize {
     scene.objects.iter().position(|o| o.name == name).unwrap()
 }
 
+/// A manager whose requests nobody answers, and the channel they go out on.
+fn unanswered(scene: &Scene, config: Config) -> (Manager, UnboundedReceiver<Command>) {
+    let (commands_tx, commands_rx) = unbounded_channel();
+    let (_arrivals_tx, arrivals_rx) = unbounded_channel();
+    (Manager::new(scene, config, commands_tx, arrivals_rx), commands_rx)
+}
+
+/// The eye 6 m from `centre`, `angle` radians round it, 0.5 m above.
+fn around(centre: Vec3, angle: f32) -> Vec3 {
+    centre + Vec3::new(6.0 * angle.cos(), 0.5, 6.0 * angle.sin())
+}
+
+/// Draws a frame from `eye` (looking at `centre`) at `t`, and returns the eyes of the
+/// requests for `object` it sent — the predicted ones or those needed now.
+fn requests_from_frame(
+    manager: &mut Manager,
+    commands: &mut UnboundedReceiver<Command>,
+    scene: &Scene,
+    (eye, centre, t): (Vec3, Vec3, f64),
+    object: &str,
+    predicted: bool,
+) -> Vec<Vec3> {
+    let camera = Camera::look_at(eye, centre, Vec3::Y, 60.0, 320, 180).unwrap();
+    manager.frame(scene, &camera, t);
+    let mut eyes = Vec::new();
+    while let Ok(command) = commands.try_recv() {
+        if let Command::Request(r) = command
+            && r.object == object
+            && r.needed_in_ms.is_some() == predicted
+        {
+            eyes.push(r.eye);
+        }
+    }
+    eyes
+}
+
 #[test]
 fn predicted_textures_are_made_for_eyes_past_the_predicted_one() {
     let scene = Scene::load("default").unwrap();
-    let sphere = index(&scene, "sphere");
-    let centre = scene.objects[sphere].bounds.center();
-    let (commands_tx, mut commands_rx) = unbounded_channel();
-    let (_arrivals_tx, arrivals_rx) = unbounded_channel();
+    let centre = scene.objects[index(&scene, "sphere")].bounds.center();
     let config = Config::default();
     let horizon = config.initial_latency + 0.05;
-    let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
+    let (mut manager, mut commands) = unanswered(&scene, config);
     // Orbit the sphere at 6 m, 30°/s, 30 frames a second.
     let rate = 30f32.to_radians();
-    let eye_at = |t: f32| centre + Vec3::new(6.0 * (rate * t).cos(), 0.5, 6.0 * (rate * t).sin());
+    let eye_at = |t: f32| around(centre, rate * t);
     let mut predicted = Vec::new();
     for frame in 0..10 {
         let t = frame as f32 / 30.0;
-        let camera = Camera::look_at(eye_at(t), centre, Vec3::Y, 60.0, 320, 180).unwrap();
-        manager.frame(&scene, &camera, t as f64);
-        while let Ok(command) = commands_rx.try_recv() {
-            if let Command::Request(r) = command
-                && r.object == "sphere"
-                && r.needed_in_ms.is_some()
-            {
-                predicted.push((t, r.eye));
-            }
+        let sent = (eye_at(t), centre, t as f64);
+        for eye in requests_from_frame(&mut manager, &mut commands, &scene, sent, "sphere", true) {
+            predicted.push((t, eye));
         }
     }
     let (t, eye) = *predicted.last().expect("no predicted request for the sphere");
@@ -136,27 +163,15 @@ fn a_texture_far_too_coarse_for_the_screen_gives_way_to_geometry() {
 #[test]
 fn one_request_for_now_is_in_flight_per_object() {
     let scene = Scene::load("default").unwrap();
-    let sphere = index(&scene, "sphere");
-    let centre = scene.objects[sphere].bounds.center();
+    let centre = scene.objects[index(&scene, "sphere")].bounds.center();
     // Nobody answers: every frame finds the sphere without a texture.
-    let (commands_tx, mut commands_rx) = unbounded_channel();
-    let (_arrivals_tx, arrivals_rx) = unbounded_channel();
-    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let (mut manager, mut commands) = unanswered(&scene, Config::default());
     let mut now_requests = 0;
     // Eyes 90° apart around the sphere: no request for one serves another.
     for (frame, angle) in [0f32, 90.0, 180.0, 270.0].into_iter().enumerate() {
-        let a = angle.to_radians();
-        let eye = centre + Vec3::new(6.0 * a.cos(), 0.5, 6.0 * a.sin());
-        let camera = Camera::look_at(eye, centre, Vec3::Y, 60.0, 320, 180).unwrap();
-        manager.frame(&scene, &camera, frame as f64);
-        while let Ok(command) = commands_rx.try_recv() {
-            if let Command::Request(r) = command
-                && r.object == "sphere"
-                && r.needed_in_ms.is_none()
-            {
-                now_requests += 1;
-            }
-        }
+        let drawn = (around(centre, angle.to_radians()), centre, frame as f64);
+        now_requests +=
+            requests_from_frame(&mut manager, &mut commands, &scene, drawn, "sphere", false).len();
     }
     assert_eq!(now_requests, 1);
 }

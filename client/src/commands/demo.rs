@@ -140,6 +140,7 @@ struct Summary {
 const MAX_COMPARED_BYTES: usize = 256 << 20;
 
 /// The image error of the compared frames, each as drawn and as all geometry.
+#[derive(Default)]
 struct Judged {
     psnr: Vec<f64>,
     psnr_aa: Vec<f64>,
@@ -154,13 +155,7 @@ struct Judged {
 /// Compares each kept `(path frame, camera, frame)` with the ray-traced references;
 /// writes `psnr.csv` and the worst frame with its reference into `out`.
 fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result<Judged> {
-    let mut judged = Judged {
-        psnr: Vec::new(),
-        psnr_aa: Vec::new(),
-        geometry_psnr_aa: Vec::new(),
-        by_object: BTreeMap::new(),
-        geometry_by_object: BTreeMap::new(),
-    };
+    let mut judged = Judged::default();
     if compared.is_empty() {
         return Ok(judged);
     }

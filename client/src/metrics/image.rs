@@ -23,11 +23,7 @@ pub struct ImageError {
 /// Compares `frame` with `reference` for `object` (or, with `None`, any object). Both
 /// frames must be the same size.
 pub fn compare(frame: &Frame, reference: &Frame, object: Option<u32>) -> ImageError {
-    assert_eq!(
-        (frame.width, frame.height),
-        (reference.width, reference.height),
-        "frames to compare differ in size"
-    );
+    assert_same_size(frame, reference);
     let shows = |id: u32| match object {
         Some(k) => id == k,
         None => id != NO_OBJECT,
@@ -42,10 +38,7 @@ pub fn compare(frame: &Frame, reference: &Frame, object: Option<u32>) -> ImageEr
         region.push(a && b);
         if a && b {
             pixels += 1;
-            for c in 0..3 {
-                let d = frame.color[k][c] as f64 - reference.color[k][c] as f64;
-                squared += d * d;
-            }
+            squared += squared_error(frame, reference, k);
         }
     }
     ImageError {
@@ -71,23 +64,35 @@ fn psnr(squared: f64, pixels: usize) -> f64 {
 /// what its silhouette gets wrong counts along with its shading (unlike
 /// [`compare`], which keeps the two apart). `None` when neither frame shows it.
 pub fn object_psnr(frame: &Frame, reference: &Frame, object: u32) -> Option<f64> {
-    assert_eq!(
-        (frame.width, frame.height),
-        (reference.width, reference.height),
-        "frames to compare differ in size"
-    );
+    assert_same_size(frame, reference);
     let mut squared = 0f64;
     let mut pixels = 0usize;
     for (k, (&a, &b)) in frame.object.iter().zip(&reference.object).enumerate() {
         if a == object || b == object {
             pixels += 1;
-            for c in 0..3 {
-                let d = frame.color[k][c] as f64 - reference.color[k][c] as f64;
-                squared += d * d;
-            }
+            squared += squared_error(frame, reference, k);
         }
     }
     (pixels > 0).then(|| psnr(squared, pixels))
+}
+
+/// Both frames must be the same size: comparing others is a bug of the caller.
+fn assert_same_size(frame: &Frame, reference: &Frame) {
+    assert_eq!(
+        (frame.width, frame.height),
+        (reference.width, reference.height),
+        "frames to compare differ in size"
+    );
+}
+
+/// The squared RGB error of pixel `k`, summed over the channels.
+fn squared_error(frame: &Frame, reference: &Frame, k: usize) -> f64 {
+    (0..3)
+        .map(|c| {
+            let d = frame.color[k][c] as f64 - reference.color[k][c] as f64;
+            d * d
+        })
+        .sum()
 }
 
 /// Mean SSIM (Wang et al. 2004, constants K1 = 0.01, K2 = 0.03) of Rec. 601 luma over
