@@ -469,8 +469,8 @@ impl Manager {
 
     /// How each held texture of `object` would do warped to `eye`: the growth of its
     /// widest predicted gap over the gaps it has at its own eye, in screen pixels
-    /// (`INFINITY` when it cannot be warped there), and whether it is too coarse for
-    /// the screen while a finer one can be had (eq. 4-1).
+    /// (`INFINITY` when it cannot be warped there), whether it is too coarse to be
+    /// shown, and whether a finer one can be had (eq. 4-1).
     fn grades<'a>(
         &'a self,
         scene: &Scene,
