@@ -24,6 +24,27 @@ pub struct Camera {
     pub height: u32,
 }
 
+/// A camera's projection from view space to pixels (see [`Camera::projection`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Projection {
+    x_scale: f32,
+    y_scale: f32,
+    half_width: f32,
+    half_height: f32,
+}
+
+impl Projection {
+    /// As [`Camera::view_to_pixel`].
+    #[inline]
+    pub fn view_to_pixel(&self, v: Vec3) -> (f32, f32) {
+        let inv_z = 1.0 / v.z;
+        (
+            (v.x * self.x_scale * inv_z + 1.0) * self.half_width,
+            (1.0 - v.y * self.y_scale * inv_z) * self.half_height,
+        )
+    }
+}
+
 impl Camera {
     /// A camera at `eye` looking at `target`. Errors name the bad argument.
     pub fn look_at(
@@ -93,14 +114,20 @@ impl Camera {
     /// with positive depth. Inverse of [`Camera::ray_direction`].
     #[inline]
     pub fn view_to_pixel(&self, v: Vec3) -> (f32, f32) {
+        self.projection().view_to_pixel(v)
+    }
+
+    /// [`Camera::view_to_pixel`]'s constants, worked out once for projecting many
+    /// points (each call here costs a `tan`).
+    pub fn projection(&self) -> Projection {
         let tan_half = self.tan_half_fov();
         let aspect = self.width as f32 / self.height as f32;
-        let sx = v.x / (v.z * tan_half * aspect);
-        let sy = v.y / (v.z * tan_half);
-        (
-            (sx + 1.0) * 0.5 * self.width as f32,
-            (1.0 - sy) * 0.5 * self.height as f32,
-        )
+        Projection {
+            x_scale: 1.0 / (tan_half * aspect),
+            y_scale: 1.0 / tan_half,
+            half_width: 0.5 * self.width as f32,
+            half_height: 0.5 * self.height as f32,
+        }
     }
 
     /// The world point at view depth `depth` on the ray through pixel position `(x, y)`.

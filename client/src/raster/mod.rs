@@ -9,7 +9,7 @@
 
 mod clip;
 
-use glam::{Vec2, Vec3};
+use glam::Vec2;
 use rayon::prelude::*;
 
 use relief_core::camera::Camera;
@@ -43,12 +43,15 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
     let bands = h.div_ceil(BAND);
     // Set up and bin every triangle by the bands its bounding box touches.
     let mut triangles: Vec<ScreenTriangle> = Vec::new();
+    let projection = camera.projection();
     for (slot, &(_, object)) in objects.iter().enumerate() {
-        let view: Vec<Vec3> = object
+        // Each vertex projected once (a vertex is a corner of ~6 triangles); only the
+        // triangles crossing the near plane project again, their new corners.
+        let vertices: Vec<clip::Corner> = object
             .mesh
             .positions
             .par_iter()
-            .map(|&p| camera.to_view(p))
+            .map(|&p| clip::Corner::new(&projection, camera.to_view(p)))
             .collect();
         let set_up: Vec<ScreenTriangle> = object
             .mesh
@@ -56,8 +59,8 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
             .par_iter()
             .enumerate()
             .flat_map_iter(|(t, corners)| {
-                let v = corners.map(|i| view[i as usize]);
-                clip::clip_and_project(camera, near, v)
+                let v = corners.map(|i| vertices[i as usize]);
+                clip::clip_and_project(&projection, near, v)
                     .into_iter()
                     .map(move |(xy, depth, bary)| ScreenTriangle {
                         slot: slot as u32,
@@ -67,7 +70,7 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
                         bary,
                     })
             })
-            .filter(|s| on_screen(s, w as f32, h as f32))
+            .filter(|s| covers_pixel_centres(s, w as f32, h as f32))
             .collect();
         triangles.extend(set_up);
     }
@@ -124,11 +127,20 @@ fn edge(p: Vec2, q: Vec2, r: Vec2) -> f32 {
     }
 }
 
-/// Rejects triangles whose bounding box misses the screen.
-fn on_screen(s: &ScreenTriangle, w: f32, h: f32) -> bool {
+/// Keeps the triangles whose bounding box holds a pixel centre of the screen: no other
+/// can cover one. (Most triangles of a million-triangle object seen whole are smaller
+/// than a pixel, and most of those fall between pixel centres.)
+fn covers_pixel_centres(s: &ScreenTriangle, w: f32, h: f32) -> bool {
+    // (`min`/`max` skip NaN: test the corners.)
+    if !s.xy.iter().all(|p| p.is_finite()) {
+        return false;
+    }
     let min = s.xy[0].min(s.xy[1]).min(s.xy[2]);
     let max = s.xy[0].max(s.xy[1]).max(s.xy[2]);
-    max.x >= 0.0 && max.y >= 0.0 && min.x <= w && min.y <= h && min.is_finite() && max.is_finite()
+    // The first and last pixel centre (`k + 0.5`) inside, as `draw` scans them.
+    let first = (min - 0.5).ceil().max(Vec2::ZERO);
+    let last = (max - 0.5).floor().min(Vec2::new(w - 1.0, h - 1.0));
+    first.x <= last.x && first.y <= last.y
 }
 
 /// Scan-converts one triangle into the band `rows` (which start at row `y0`).
@@ -192,5 +204,37 @@ fn draw(
                 normal: mesh.shading_normal(tri, bary.x, bary.y),
             };
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn triangle(xy: [(f32, f32); 3]) -> ScreenTriangle {
+        ScreenTriangle {
+            slot: 0,
+            triangle: 0,
+            xy: xy.map(|(x, y)| Vec2::new(x, y)),
+            depth: [1.0; 3],
+            bary: [Vec2::ZERO; 3],
+        }
+    }
+
+    /// The cull keeps exactly the triangles whose box holds a pixel centre on screen.
+    #[test]
+    fn triangles_between_pixel_centres_are_culled() {
+        let keep = |xy| covers_pixel_centres(&triangle(xy), 64.0, 48.0);
+        // A tenth of a pixel around the centre of pixel (10, 20), and beside it.
+        assert!(keep([(10.45, 20.45), (10.55, 20.45), (10.5, 20.55)]));
+        assert!(!keep([(10.1, 20.1), (10.4, 20.1), (10.2, 20.4)]));
+        // Thin in one axis only: between two rows of centres.
+        assert!(!keep([(3.0, 7.6), (30.0, 7.7), (12.0, 8.4)]));
+        // Reaching the first and the last centre of the screen, and just short of them.
+        assert!(keep([(-5.0, -5.0), (0.5, -5.0), (-5.0, 0.5)]));
+        assert!(!keep([(-5.0, -5.0), (0.49, -5.0), (-5.0, 0.49)]));
+        assert!(keep([(63.5, 47.5), (70.0, 47.5), (63.5, 50.0)]));
+        assert!(!keep([(63.51, 47.0), (70.0, 47.0), (63.6, 50.0)]));
+        assert!(!keep([(f32::NAN, 1.0), (5.0, 5.0), (1.0, 5.0)]));
     }
 }
