@@ -171,6 +171,29 @@ impl Mesh {
         self.face_normal(tri)
     }
 
+    /// The normal [`Mesh::shading_normal`] gives everywhere on triangle `tri`, when it
+    /// is one: no vertex normals, or three equal ones.
+    pub fn uniform_normal(&self, tri: usize) -> Option<Vec3> {
+        let Some(normals) = &self.normals else {
+            return Some(self.face_normal(tri));
+        };
+        let [a, b, c] = self.triangles[tri].map(|k| normals[k as usize]);
+        (a == b && b == c).then(|| {
+            let n = a.normalize_or_zero();
+            if n == Vec3::ZERO { self.face_normal(tri) } else { n }
+        })
+    }
+
+    /// The albedo [`Mesh::albedo`] gives everywhere on triangle `tri`, when it is one
+    /// (no texture).
+    pub fn uniform_albedo(&self, tri: usize) -> Option<Vec3> {
+        let material = self.material(tri);
+        match (&material.diffuse_texture, &self.texcoords) {
+            (Some(_), Some(_)) => None,
+            _ => Some(material.diffuse),
+        }
+    }
+
     /// The material of triangle `tri`.
     #[inline]
     pub fn material(&self, tri: usize) -> &Material {

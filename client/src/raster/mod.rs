@@ -127,6 +127,39 @@ fn edge(p: Vec2, q: Vec2, r: Vec2) -> f32 {
     }
 }
 
+/// The pixels `x` of row centre `py` in `bounds` whose centres the triangle `corners`
+/// (oriented by `sign`) can cover: each edge bounds the row on one side where it
+/// crosses it. Widened against rounding (2 pixels, more for coordinates far off screen)
+/// — the per-pixel tests inside stay exact, so the shared-edge rule holds — it spares
+/// the tests of the bounding box's pixels outside the triangle (half of them for a
+/// large one). `None` when empty.
+#[inline]
+fn row_span(corners: [Vec2; 3], sign: f32, py: f32, bounds: (usize, usize)) -> Option<(usize, usize)> {
+    let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
+    let mut largest = 0f32;
+    for k in 0..3 {
+        let (p, q) = (corners[(k + 1) % 3], corners[(k + 2) % 3]);
+        largest = largest.max(p.x.abs()).max(p.y.abs());
+        let dy = q.y - p.y;
+        if dy == 0.0 {
+            // Parallel to the row: all of it or none, which the exact tests decide.
+            continue;
+        }
+        let crossing = p.x + (py - p.y) * ((q.x - p.x) / dy);
+        // The inside of the edge p → q is where sign·E ≥ 0, E growing with x as −dy.
+        if sign * dy < 0.0 {
+            lo = lo.max(crossing);
+        } else {
+            hi = hi.min(crossing);
+        }
+    }
+    let slack = 2.0 + 1e-6 * largest;
+    // (NaN bounds leave `max`/`min` unchanged: the whole box is tested.)
+    let first = ((lo - slack - 0.5).ceil().max(bounds.0 as f32) as usize).max(bounds.0);
+    let last = ((hi + slack - 0.5).floor().min(bounds.1 as f32) as usize).min(bounds.1);
+    (first <= last).then_some((first, last))
+}
+
 /// Keeps the triangles whose bounding box holds a pixel centre of the screen: no other
 /// can cover one. (Most triangles of a million-triangle object seen whole are smaller
 /// than a pixel, and most of those fall between pixel centres.)
@@ -174,9 +207,17 @@ fn draw(
     }
     let inv_depth = s.depth.map(|d| 1.0 / d);
     let mesh = &object.mesh;
+    let tri = s.triangle as usize;
+    // A triangle of one colour and one normal (the ground; flat-shaded meshes) needs no
+    // interpolation of them per pixel.
+    let uniform_albedo = mesh.uniform_albedo(tri).map(to_rgb8);
+    let uniform_normal = mesh.uniform_normal(tri);
     for y in y_start..=y_end as usize {
         let py = y as f32 + 0.5;
-        for x in x_start..=x_end as usize {
+        let Some((x_first, x_last)) = row_span([a, b, c], sign, py, (x_start, x_end as usize)) else {
+            continue;
+        };
+        for x in x_first..=x_last {
             let p = Vec2::new(x as f32 + 0.5, py);
             // Screen-space barycentric weights of corners a, b, c.
             let ea = sign * edge(b, c, p);
@@ -195,13 +236,18 @@ fn draw(
             if depth >= slot.depth {
                 continue;
             }
-            let bary = (s.bary[0] * pa + s.bary[1] * pb + s.bary[2] * pc) / sum;
-            let tri = s.triangle as usize;
+            let bary = || (s.bary[0] * pa + s.bary[1] * pb + s.bary[2] * pc) / sum;
             *slot = GPixel {
                 depth,
                 object: index,
-                albedo: to_rgb8(mesh.albedo(tri, bary.x, bary.y)),
-                normal: mesh.shading_normal(tri, bary.x, bary.y),
+                albedo: uniform_albedo.unwrap_or_else(|| {
+                    let bary = bary();
+                    to_rgb8(mesh.albedo(tri, bary.x, bary.y))
+                }),
+                normal: uniform_normal.unwrap_or_else(|| {
+                    let bary = bary();
+                    mesh.shading_normal(tri, bary.x, bary.y)
+                }),
             };
         }
     }
@@ -219,6 +265,46 @@ mod tests {
             depth: [1.0; 3],
             bary: [Vec2::ZERO; 3],
         }
+    }
+
+    /// Every pixel the exact edge tests accept lies in its row's span, for triangles
+    /// of every size and orientation, on and far off screen.
+    #[test]
+    fn row_spans_hold_every_covered_pixel() {
+        let (w, h) = (64usize, 48usize);
+        let mut seed = 0x2545_f491_u32;
+        let mut next = |scale: f32| {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            (seed as f32 / u32::MAX as f32 - 0.3) * scale
+        };
+        let (mut covered, mut spared) = (0usize, 0usize);
+        for n in 0..3000 {
+            let scale = [80.0, 400.0, 1e5, 3e7][n % 4];
+            let [a, b, c] = [(); 3].map(|_| Vec2::new(next(scale), next(scale)));
+            let area = edge(b, c, a);
+            if area == 0.0 {
+                continue;
+            }
+            let sign = area.signum();
+            for y in 0..h {
+                let py = y as f32 + 0.5;
+                let span = row_span([a, b, c], sign, py, (0, w - 1));
+                for x in 0..w {
+                    let p = Vec2::new(x as f32 + 0.5, py);
+                    let inside = sign * edge(b, c, p) >= 0.0
+                        && sign * edge(c, a, p) >= 0.0
+                        && sign * edge(a, b, p) >= 0.0;
+                    let in_span = span.is_some_and(|(first, last)| (first..=last).contains(&x));
+                    assert!(!inside || in_span, "{a} {b} {c}: ({x}, {y}) outside {span:?}");
+                    covered += inside as usize;
+                    spared += !in_span as usize;
+                }
+            }
+        }
+        // Not vacuous: many pixels covered, many spared.
+        assert!(covered > 100_000 && spared > 100_000, "{covered} {spared}");
     }
 
     /// The cull keeps exactly the triangles whose box holds a pixel centre on screen.

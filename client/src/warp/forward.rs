@@ -57,6 +57,7 @@ fn project(impostor: &Impostor, camera: &Camera) -> Result<Option<Projection>, W
     let near = 1e-6 * (base.length() + far);
     let (tw, th) = (c.width as usize, c.height as usize);
     let mut projected: Vec<Option<(glam::Vec2, f32)>> = vec![None; tw * th];
+    let projection = camera.projection();
     for j in 0..th {
         let row = base + vb * (j as f32 + 0.5);
         for i in 0..tw {
@@ -69,7 +70,7 @@ fn project(impostor: &Impostor, camera: &Camera) -> Result<Option<Projection>, W
             if p.z.is_nan() || p.z <= near {
                 continue;
             }
-            let (px, py) = camera.view_to_pixel(p);
+            let (px, py) = projection.view_to_pixel(p);
             let at = glam::Vec2::new(px - x0 as f32, py - y0 as f32);
             if at.is_finite() {
                 projected[k] = Some((at, p.z));
