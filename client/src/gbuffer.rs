@@ -35,6 +35,22 @@ impl GPixel {
         normal: Vec3::ZERO,
     };
 
+    /// Replaces this pixel with `pixel` if that is nearer; returns whether it did.
+    /// Non-finite or non-positive depths and non-finite normals are ignored, so no
+    /// writer can poison the buffer with NaN.
+    #[inline]
+    pub fn keep_nearer(&mut self, pixel: GPixel) -> bool {
+        if !(pixel.depth > 0.0 && pixel.depth.is_finite() && pixel.normal.is_finite()) {
+            return false;
+        }
+        if pixel.depth < self.depth {
+            *self = pixel;
+            true
+        } else {
+            false
+        }
+    }
+
     /// True when a surface has been written.
     #[inline]
     pub fn is_covered(&self) -> bool {
@@ -73,16 +89,22 @@ impl GBuffer {
         if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
             return false;
         }
-        if !(pixel.depth > 0.0 && pixel.depth.is_finite() && pixel.normal.is_finite()) {
-            return false;
-        }
-        let slot = &mut self.pixels[y as usize * self.width as usize + x as usize];
-        if pixel.depth < slot.depth {
-            *slot = pixel;
-            true
-        } else {
-            false
-        }
+        self.pixels[y as usize * self.width as usize + x as usize].keep_nearer(pixel)
+    }
+
+    /// The buffer's rows `y0..y1`, each with its row number, for writers that split
+    /// the work by rows across threads ([`GPixel::keep_nearer`] on each pixel).
+    pub fn par_rows(
+        &mut self,
+        y0: u32,
+        y1: u32,
+    ) -> impl IndexedParallelIterator<Item = (u32, &mut [GPixel])> {
+        let w = self.width as usize;
+        let (y0, y1) = (y0.min(self.height) as usize, y1.min(self.height) as usize);
+        let rows = &mut self.pixels[y0 * w..y1.max(y0) * w];
+        rows.par_chunks_mut(w.max(1))
+            .enumerate()
+            .map(move |(k, row)| ((y0 + k) as u32, row))
     }
 
     /// Lights every covered pixel with the scene's lighting and objects' specular

@@ -173,7 +173,9 @@ pub fn display(
                 Method::TwoPassComp => prewarp::Variant::Compensated,
                 _ => prewarp::Variant::Interleaved,
             };
-            let image = prewarp::prewarp(impostor, &params, variant);
+            // The halves above and below the epipole on two threads: 1.5–1.8× faster
+            // at 512² here (`relief bench warp`, "split ms").
+            let image = prewarp::prewarp_split(impostor, &params, variant);
             texmap::map(&image, texture, &params, object, camera, gbuffer);
             Ok(())
         }

@@ -4,6 +4,7 @@
 //! view depth `(h + d) / (D·f)` for the ray direction `D` with `D·forward = 1`.
 
 use glam::Vec3;
+use rayon::prelude::*;
 
 use relief_core::camera::Camera;
 use relief_core::relief::{ReliefTexture, SourceCamera, decode_normal};
@@ -79,11 +80,13 @@ pub fn map(
     let dots = |d: Vec3| Vec3::new(d.dot(c.f), d.dot(a_scale), d.dot(b_scale));
     let sx_step = 2.0 / camera.width as f32 * tan_half * aspect;
     let x_step = dots(camera.right * sx_step);
-    for y in y0..y1 {
+    // Rows are independent (each pixel samples the image and depth-tests its own slot):
+    // split across cores.
+    gbuffer.par_rows(y0, y1).for_each(|(y, pixels)| {
         let sy = (1.0 - 2.0 * (y as f32 + 0.5) / camera.height as f32) * tan_half;
         let sx0 = (2.0 * (x0 as f32 + 0.5) / camera.width as f32 - 1.0) * tan_half * aspect;
         let mut row = dots(camera.forward + camera.right * sx0 + camera.up * sy);
-        for x in x0..x1 {
+        for slot in &mut pixels[x0 as usize..x1 as usize] {
             let along = row;
             row += x_step;
             let towards_plane = along.x;
@@ -96,18 +99,14 @@ pub fn map(
             let Some((depth, albedo, normal)) = sample(image, u, v) else {
                 continue;
             };
-            gbuffer.write(
-                x as i64,
-                y as i64,
-                GPixel {
-                    depth: (params.h + depth) / towards_plane,
-                    object,
-                    albedo,
-                    normal,
-                },
-            );
+            slot.keep_nearer(GPixel {
+                depth: (params.h + depth) / towards_plane,
+                object,
+                albedo,
+                normal,
+            });
         }
-    }
+    });
 }
 
 /// The pre-warped image at plane coordinates `(u, v)`: bilinear where the four nearest
