@@ -137,7 +137,7 @@ impl GBuffer {
                     };
                     let position = camera.eye + (row + x_step * x as f32) * p.depth;
                     let albedo =
-                        Vec3::new(p.albedo[0] as f32, p.albedo[1] as f32, p.albedo[2] as f32) / 255.0;
+                        Vec3::new(p.albedo[0] as f32, p.albedo[1] as f32, p.albedo[2] as f32) * (1.0 / 255.0);
                     color[x] = to_rgb8(
                         scene
                             .lighting
