@@ -60,8 +60,18 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
             .enumerate()
             .flat_map_iter(|(t, corners)| {
                 let v = corners.map(|i| vertices[i as usize]);
-                clip::clip_and_project(&projection, near, v)
+                // Most triangles of a detailed object fall between pixel centres: cull
+                // those in front of the near plane before any more set-up.
+                let culled = v.iter().all(|c| c.view.z >= near)
+                    && !covers_pixel_centres(v.map(|c| c.pixel), w as f32, h as f32);
+                let clipped = if culled {
+                    clip::Clipped::NONE
+                } else {
+                    clip::clip_and_project(&projection, near, v)
+                };
+                clipped
                     .into_iter()
+                    .filter(|(xy, ..)| covers_pixel_centres(*xy, w as f32, h as f32))
                     .map(move |(xy, depth, bary)| ScreenTriangle {
                         slot: slot as u32,
                         triangle: t as u32,
@@ -70,7 +80,6 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
                         bary,
                     })
             })
-            .filter(|s| covers_pixel_centres(s, w as f32, h as f32))
             .collect();
         triangles.extend(set_up);
     }
@@ -163,13 +172,13 @@ fn row_span(corners: [Vec2; 3], sign: f32, py: f32, bounds: (usize, usize)) -> O
 /// Keeps the triangles whose bounding box holds a pixel centre of the screen: no other
 /// can cover one. (Most triangles of a million-triangle object seen whole are smaller
 /// than a pixel, and most of those fall between pixel centres.)
-fn covers_pixel_centres(s: &ScreenTriangle, w: f32, h: f32) -> bool {
+fn covers_pixel_centres(xy: [Vec2; 3], w: f32, h: f32) -> bool {
     // (`min`/`max` skip NaN: test the corners.)
-    if !s.xy.iter().all(|p| p.is_finite()) {
+    if !xy.iter().all(|p| p.is_finite()) {
         return false;
     }
-    let min = s.xy[0].min(s.xy[1]).min(s.xy[2]);
-    let max = s.xy[0].max(s.xy[1]).max(s.xy[2]);
+    let min = xy[0].min(xy[1]).min(xy[2]);
+    let max = xy[0].max(xy[1]).max(xy[2]);
     // The first and last pixel centre (`k + 0.5`) inside, as `draw` scans them.
     let first = (min - 0.5).ceil().max(Vec2::ZERO);
     let last = (max - 0.5).floor().min(Vec2::new(w - 1.0, h - 1.0));
@@ -257,16 +266,6 @@ fn draw(
 mod tests {
     use super::*;
 
-    fn triangle(xy: [(f32, f32); 3]) -> ScreenTriangle {
-        ScreenTriangle {
-            slot: 0,
-            triangle: 0,
-            xy: xy.map(|(x, y)| Vec2::new(x, y)),
-            depth: [1.0; 3],
-            bary: [Vec2::ZERO; 3],
-        }
-    }
-
     /// Every pixel the exact edge tests accept lies in its row's span, for triangles
     /// of every size and orientation, on and far off screen.
     #[test]
@@ -310,7 +309,7 @@ mod tests {
     /// The cull keeps exactly the triangles whose box holds a pixel centre on screen.
     #[test]
     fn triangles_between_pixel_centres_are_culled() {
-        let keep = |xy| covers_pixel_centres(&triangle(xy), 64.0, 48.0);
+        let keep = |xy: [(f32, f32); 3]| covers_pixel_centres(xy.map(|(x, y)| Vec2::new(x, y)), 64.0, 48.0);
         // A tenth of a pixel around the centre of pixel (10, 20), and beside it.
         assert!(keep([(10.45, 20.45), (10.55, 20.45), (10.5, 20.55)]));
         assert!(!keep([(10.1, 20.1), (10.4, 20.1), (10.2, 20.4)]));
