@@ -254,6 +254,46 @@ impl Output<'_> {
     }
 }
 
+/// Where the row pass's pixels go.
+trait RowSink {
+    /// The row pass made `cell` for pre-warped column `x`.
+    fn emit(&mut self, x: i64, cell: Cell);
+}
+
+/// [`Variant::Interleaved`]: each row sample straight into its column, row number
+/// `seq` of a half visited downwards when `DOWN`.
+struct IntoColumns<'a, 'b, 'o, const DOWN: bool> {
+    job: &'a Job<'a>,
+    columns: &'b mut [Column],
+    out: &'b mut Output<'o>,
+    seq: u32,
+}
+
+impl<const DOWN: bool> RowSink for IntoColumns<'_, '_, '_, DOWN> {
+    #[inline(always)]
+    fn emit(&mut self, x: i64, cell: Cell) {
+        self.job
+            .push_column::<DOWN>(self.columns, self.out, x, cell, self.seq);
+    }
+}
+
+/// The two-pass variants: into one row of the intermediate image (a column's last
+/// sample wins), whose column `k` is pre-warped column `u0 + k`.
+struct IntoRow<'a> {
+    row: &'a mut [Option<Cell>],
+    u0: i64,
+}
+
+impl RowSink for IntoRow<'_> {
+    #[inline(always)]
+    fn emit(&mut self, x: i64, cell: Cell) {
+        let k = x - self.u0;
+        if let Some(slot) = (k >= 0).then(|| self.row.get_mut(k as usize)).flatten() {
+            *slot = Some(cell);
+        }
+    }
+}
+
 /// What both halves of a pre-warp read.
 struct Job<'a> {
     impostor: &'a Impostor,
@@ -264,19 +304,20 @@ struct Job<'a> {
 }
 
 impl Job<'_> {
-    /// The row pass over source row `j`: `emit(x, cell)` for each pre-warped pixel,
-    /// the texels before the epipole visited rightwards, then the others leftwards.
+    /// The row pass over source row `j`: `sink.emit(x, cell)` for each pre-warped
+    /// pixel, the texels before the epipole visited rightwards, then the others
+    /// leftwards.
     #[inline(always)]
     fn row(
         &self,
         j: usize,
         interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell + Copy,
-        mut emit: impl FnMut(i64, Cell),
+        sink: &mut impl RowSink,
     ) {
         let w = self.impostor.texture.camera.width as usize;
         let split = split_at(w, self.params.epipole.x);
-        self.row_half::<true>(j, 0..split, interpolate, &mut emit);
-        self.row_half::<false>(j, split..w, interpolate, &mut emit);
+        self.row_half::<true>(j, 0..split, interpolate, sink);
+        self.row_half::<false>(j, split..w, interpolate, sink);
     }
 
     /// The texels `texels` of source row `j`, visited rightwards when `RIGHT`:
@@ -289,7 +330,7 @@ impl Job<'_> {
         j: usize,
         texels: std::ops::Range<usize>,
         interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell,
-        mut emit: impl FnMut(i64, Cell),
+        sink: &mut impl RowSink,
     ) {
         let (impostor, p) = (self.impostor, self.params);
         let texture = &impostor.texture;
@@ -335,70 +376,12 @@ impl Job<'_> {
             let spanned = previous_linked
                 && (RIGHT || right[i])
                 && between::<RIGHT>(previous.u, sample.u, |x, t| {
-                    emit(x, interpolate(&previous, &sample, x as f32 + 0.5, t))
+                    sink.emit(x, interpolate(&previous, &sample, x as f32 + 0.5, t))
                 });
             if !spanned {
-                emit(sample.u.floor() as i64, sample.cell);
+                sink.emit(sample.u.floor() as i64, sample.cell);
             }
             previous = sample;
-            previous_linked = !RIGHT || right[i];
-        }
-    }
-
-    /// [`Job::row_half`] for [`Variant::Interleaved`], each sample going straight into
-    /// its column. The same steps, written apart for the variant every frame uses:
-    /// carrying only what the column pass reads makes it ~25 % faster.
-    #[inline(always)]
-    fn interleaved_row<const RIGHT: bool, const DOWN: bool>(
-        &self,
-        j: usize,
-        seq: u32,
-        texels: std::ops::Range<usize>,
-        columns: &mut [Column],
-        out: &mut Output,
-    ) {
-        let (impostor, p) = (self.impostor, self.params);
-        let texture = &impostor.texture;
-        let w = texture.camera.width as usize;
-        let row = j * w..(j + 1) * w;
-        let packed = &impostor.packed[row.clone()];
-        let (right, down) = (&impostor.right[row.clone()], &impostor.down[row]);
-        let empty = texture.depth_bits.empty();
-        let v = j as f32 + 0.5;
-        // The previous texel visited: its u' and sample, and whether it is there and
-        // connected to the next.
-        let (mut previous_u, mut previous) = (0.0, Cell::START);
-        let mut previous_linked = false;
-        for step in 0..texels.len() {
-            let i = if RIGHT {
-                texels.start + step
-            } else {
-                texels.end - 1 - step
-            };
-            let texel = packed[i];
-            let q = level_of(texel);
-            if q == empty {
-                previous_linked = false;
-                continue;
-            }
-            let q = q as usize;
-            let scale = p.scale[q];
-            let u = (i as f32 + 0.5 + p.add_u[q]) * scale;
-            let cell = Cell {
-                v: (v + p.add_v[q]) * scale,
-                depth: p.depth[q],
-                attributes: Attributes(texel),
-                down: down[i],
-            };
-            let spanned = previous_linked
-                && (RIGHT || right[i])
-                && between::<RIGHT>(previous_u, u, |x, t| {
-                    self.push_column::<DOWN>(columns, out, x, previous.lerp(&cell, t), seq)
-                });
-            if !spanned {
-                self.push_column::<DOWN>(columns, out, u.floor() as i64, cell, seq);
-            }
-            (previous_u, previous) = (u, cell);
             previous_linked = !RIGHT || right[i];
         }
     }
@@ -447,12 +430,14 @@ impl Job<'_> {
         let linear = |a: &RowSample, b: &RowSample, _, t| a.cell.lerp(&b.cell, t);
         match self.variant {
             Variant::Interleaved => {
-                let w = self.impostor.texture.camera.width as usize;
-                let split = split_at(w, self.params.epipole.x);
                 for seq in 0..rows.len() {
-                    let (j, seq) = (row(seq), seq as u32);
-                    self.interleaved_row::<true, DOWN>(j, seq, 0..split, &mut columns, out);
-                    self.interleaved_row::<false, DOWN>(j, seq, split..w, &mut columns, out);
+                    let mut sink = IntoColumns::<DOWN> {
+                        job: self,
+                        columns: &mut columns,
+                        out,
+                        seq: seq as u32,
+                    };
+                    self.row(row(seq), linear, &mut sink);
                 }
             }
             Variant::Compensated => self.two_pass::<DOWN>(rows, &mut columns, out, |a, b, centre, _| {
@@ -480,12 +465,11 @@ impl Job<'_> {
         };
         let mut intermediate: Vec<Option<Cell>> = vec![None; self.columns * rows.len()];
         for seq in 0..rows.len() {
-            self.row(row(seq), interpolate, |x, cell| {
-                let xi = x - self.u0;
-                if xi >= 0 && (xi as usize) < self.columns {
-                    intermediate[seq * self.columns + xi as usize] = Some(cell);
-                }
-            });
+            let mut sink = IntoRow {
+                row: &mut intermediate[seq * self.columns..(seq + 1) * self.columns],
+                u0: self.u0,
+            };
+            self.row(row(seq), interpolate, &mut sink);
         }
         for seq in 0..rows.len() {
             let j = row(seq);
