@@ -41,15 +41,15 @@ pub(crate) fn screen_rect(camera: &Camera, corners: &[Vec3]) -> (u32, u32, u32, 
     )
 }
 
-/// The screen rectangle `(x0, y0, x1, y1)` the texture's whole volume (its quad, from
-/// depth 0 to `depth_far`) can cover.
+/// The screen rectangle `(x0, y0, x1, y1)` the texture's whole volume (its quad swept
+/// from `depth_near` to `depth_far`) can cover.
 pub fn volume_rect(camera: &Camera, c: &SourceCamera) -> (u32, u32, u32, u32) {
     let (w, h) = (c.width as f32, c.height as f32);
     let corners: Vec<Vec3> = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
         .into_iter()
         .flat_map(|(u, v)| {
             let p = c.origin + c.a * u + c.b * v;
-            [p, p + c.f * c.depth_far]
+            [p + c.f * c.depth_near, p + c.f * c.depth_far]
         })
         .collect();
     screen_rect(camera, &corners)
@@ -68,10 +68,18 @@ pub fn map(
     let plane = |u: f32, v: f32| c.origin + c.a * u + c.b * v;
     let (u0, v0) = (image.u0 as f32, image.v0 as f32);
     let (u1, v1) = (u0 + image.width as f32, v0 + image.height as f32);
-    let (x0, y0, x1, y1) = screen_rect(
+    // Pixels the pre-warped image covers that the texture's volume can show: the image
+    // reaches past the quad towards the epipole, and its corners' projection can be
+    // far larger than the object's.
+    let (ix0, iy0, ix1, iy1) = screen_rect(
         camera,
         &[plane(u0, v0), plane(u1, v0), plane(u0, v1), plane(u1, v1)],
     );
+    let (vx0, vy0, vx1, vy1) = volume_rect(camera, c);
+    let (x0, y0, x1, y1) = (ix0.max(vx0), iy0.max(vy0), ix1.min(vx1), iy1.min(vy1));
+    if x0 >= x1 || y0 >= y1 {
+        return;
+    }
     let tan_half = camera.tan_half_fov();
     let aspect = camera.width as f32 / camera.height as f32;
     let (a_scale, b_scale) = (c.a / c.a.length_squared(), c.b / c.b.length_squared());
