@@ -46,7 +46,7 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
     let projection = camera.projection();
     for (slot, &(_, object)) in objects.iter().enumerate() {
         // Each vertex projected once (a vertex is a corner of ~6 triangles); only the
-        // triangles crossing the near plane project again, their new corners.
+        // triangles crossing the near plane are projected again, corner by corner.
         let vertices: Vec<clip::Corner> = object
             .mesh
             .positions

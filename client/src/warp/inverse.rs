@@ -45,9 +45,10 @@ pub fn display(
         let q = texture.depth[k];
         (q != empty).then(|| (k, c.depth_of_level(q, texture.depth_bits)))
     };
-    // The texture's volume in texture space: [0, w] × [0, h] × [0, far].
+    // The texture's volume in texture space: [0, w] × [0, h] × [min(near, 0), far] (a
+    // texture may start in front of its plane).
     let volume = Aabb {
-        min: Vec3::ZERO,
+        min: Vec3::new(0.0, 0.0, c.depth_near.min(0.0)),
         max: Vec3::new(w, h, far),
     };
     for y in y0..y1 {

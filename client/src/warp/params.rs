@@ -69,7 +69,7 @@ impl WarpParams {
             .map(|q| c.depth_of_level(q as u16, texture.depth_bits))
             .collect();
         let scale: Vec<f32> = depth.iter().map(|&d| 1.0 / (1.0 + k3 * d)).collect();
-        Ok(WarpParams {
+        let params = WarpParams {
             eye,
             h,
             k3,
@@ -78,7 +78,14 @@ impl WarpParams {
             add_v: depth.iter().map(|&d| epipole.y * k3 * d).collect(),
             scale,
             depth,
-        })
+        };
+        // Finite tables keep every pre-warped position finite: the warps' loops over
+        // the pixels between two positions rely on it.
+        let tables = [&params.depth, &params.add_u, &params.add_v, &params.scale];
+        if !tables.iter().all(|t| t.iter().all(|x| x.is_finite())) {
+            return Err(WarpError::NonFinite);
+        }
+        Ok(params)
     }
 
     /// Pre-warped position of the texel centred at `(u, v)` with level `q`.
@@ -166,6 +173,12 @@ mod tests {
             Err(WarpError::EyeInPlane(_))
         ));
         assert_eq!(WarpParams::new(&t, Vec3::NAN), Err(WarpError::NonFinite));
+        // Finite inputs whose tables overflow (a depth range near f32::MAX): refused,
+        // so pre-warped positions are always finite.
+        let mut deep = texture();
+        deep.camera.depth_far = f32::MAX;
+        let eye = deep.camera.origin - deep.camera.f * 1e34 + deep.camera.a * 1e35;
+        assert_eq!(WarpParams::new(&deep, eye), Err(WarpError::NonFinite));
         // Barely in front: finite tables, no NaN.
         let near = in_plane - c.f * 1e-3;
         let p = WarpParams::new(&t, near).unwrap();

@@ -180,33 +180,47 @@ impl Cell {
 }
 
 /// Along an axis visited forwards (`FORWARDS`: increasing coordinates) or backwards:
-/// when `b` is not behind `a`, calls `each(pixel, t)` for every pixel whose centre lies
-/// in `(a, b]`, in visiting order, `t` being the centre's linear position from `a` to
-/// `b`, and returns true; returns false when `b` folds back behind `a` (or either is
-/// NaN).
+/// when `b` is not behind `a`, calls `each(pixel, t)` for every pixel up to `end` whose
+/// centre lies in `(a, b]`, in visiting order, `t` being the centre's linear position
+/// from `a` to `b`, and returns true; returns false when `b` folds back behind `a` (or
+/// either is NaN). `end` is the image's last pixel along the axis in the
+/// visiting direction, in the signed coordinates below ([`signed_end`]).
 ///
 /// A backwards visit runs on negated coordinates, where pixel `x` is pixel `−x − 1`:
 /// one test and one loop serve both directions, and the direction, a const, costs no
 /// branch per sample.
 #[inline(always)]
-fn between<const FORWARDS: bool>(a: f32, b: f32, mut each: impl FnMut(i64, f32)) -> bool {
+fn between<const FORWARDS: bool>(a: f32, b: f32, end: i64, mut each: impl FnMut(i64, f32)) -> bool {
     let sign = if FORWARDS { 1.0 } else { -1.0 };
     let (a, b) = (a * sign, b * sign);
-    // (False for NaN too.)
+    // (False for NaN too; positions are finite, `WarpParams` sees to that.)
     let ahead = b >= a;
     if !ahead {
         return false;
     }
     // Infinite when they coincide, but then no pixel centre lies between them.
     let inv = 1.0 / (b - a);
-    let first = (a - 0.5).floor() as i64 + 1;
-    let last = (b - 0.5).floor() as i64;
+    // Samples move towards the epipole, which is ahead in the visit: a far one makes
+    // spans run far past the image on that side (never before it), cut at its end.
+    let first = ((a - 0.5).floor() as i64).saturating_add(1);
+    let last = ((b - 0.5).floor() as i64).min(end);
     // (Half-open ranges: `..=` iterates measurably slower here.)
     for x in first..last + 1 {
         let t = ((x as f32 + 0.5 - a) * inv).clamp(0.0, 1.0);
         each(if FORWARDS { x } else { -x - 1 }, t);
     }
     true
+}
+
+/// The last pixel of `pixels` met visiting forwards (`FORWARDS`) or backwards, in
+/// [`between`]'s signed coordinates (pixel `x` is `−x − 1` backwards).
+#[inline(always)]
+fn signed_end<const FORWARDS: bool>(pixels: std::ops::Range<i64>) -> i64 {
+    if FORWARDS {
+        pixels.end - 1
+    } else {
+        -pixels.start - 1
+    }
 }
 
 /// The number of cells of `0..n` (centres at `k + 0.5`) before the epipole `e`: the
@@ -237,7 +251,9 @@ impl Column {
 struct Output<'a> {
     texels: &'a mut [PTexel],
     u0: i64,
+    /// The plane rows `v0..v1` held.
     v0: i64,
+    v1: i64,
     width: usize,
 }
 
@@ -347,6 +363,7 @@ impl Job<'_> {
             cell: Cell::START,
         };
         let mut previous_linked = false;
+        let end = signed_end::<RIGHT>(self.u0..self.u0 + self.columns as i64);
         for step in 0..texels.len() {
             let i = if RIGHT {
                 texels.start + step
@@ -375,7 +392,7 @@ impl Job<'_> {
             // Visiting rightwards the left texel carries the link; leftwards this one.
             let spanned = previous_linked
                 && (RIGHT || right[i])
-                && between::<RIGHT>(previous.u, sample.u, |x, t| {
+                && between::<RIGHT>(previous.u, sample.u, end, |x, t| {
                     sink.emit(x, interpolate(&previous, &sample, x as f32 + 0.5, t))
                 });
             if !spanned {
@@ -406,7 +423,9 @@ impl Job<'_> {
         // Visiting downwards the previous row's sample carries the link; upwards this one.
         let last = column.last;
         let linked = seq != 0 && column.next_row == seq && if DOWN { last.down } else { cell.down };
-        let spanned = linked && between::<DOWN>(last.v, cell.v, |y, t| out.put(x, y, &last.lerp(&cell, t)));
+        let end = signed_end::<DOWN>(out.v0..out.v1);
+        let spanned =
+            linked && between::<DOWN>(last.v, cell.v, end, |y, t| out.put(x, y, &last.lerp(&cell, t)));
         if !spanned {
             out.put(x, cell.v.floor() as i64, &cell);
         }
@@ -523,12 +542,14 @@ fn prewarp_with(impostor: &Impostor, params: &WarpParams, variant: Variant, para
         texels: upper,
         u0: u0 as i64,
         v0: v0 as i64,
+        v1: v0 as i64 + split as i64,
         width,
     };
     let mut lower = Output {
         texels: lower,
         u0: u0 as i64,
         v0: v0 as i64 + split as i64,
+        v1: v0 as i64 + height as i64,
         width,
     };
     if parallel {
@@ -565,4 +586,38 @@ fn compensated(a: &RowSample, b: &RowSample, centre: f32, p: &WarpParams) -> Cel
         0.5
     };
     a.cell.lerp(&b.cell, t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn visits<const FORWARDS: bool>(a: f32, b: f32, end: i64) -> (bool, Vec<i64>) {
+        let mut pixels = Vec::new();
+        let spanned = between::<FORWARDS>(a, b, end, |x, t| {
+            assert!((0.0..=1.0).contains(&t), "t = {t}");
+            pixels.push(x);
+        });
+        (spanned, pixels)
+    }
+
+    /// The pixels whose centres lie in `(a, b]`, in visiting order, cut at the image's
+    /// end, for both directions; folds and NaN span nothing.
+    #[test]
+    fn spans_visit_the_centres_between_two_samples() {
+        assert_eq!(visits::<true>(2.2, 5.5, 100), (true, vec![2, 3, 4, 5]));
+        assert_eq!(visits::<true>(2.6, 2.9, 100), (true, vec![]));
+        // Backwards: from u = 5.5 down to 2.2, pixel 5's centre (5.5) excluded.
+        let end = signed_end::<false>(0..100);
+        assert_eq!(visits::<false>(5.5, 2.2, end), (true, vec![4, 3, 2]));
+        assert_eq!(visits::<true>(5.0, 4.0, 100), (false, vec![]));
+        assert_eq!(visits::<true>(f32::NAN, 4.0, 100), (false, vec![]));
+        // A sample a billion pixels away (an epipole far off): cut at the end, 0..=9.
+        assert_eq!(visits::<true>(0.2, 1e9, 9).1, (0..10).collect::<Vec<_>>());
+        let end = signed_end::<false>(-10..50);
+        assert_eq!(
+            visits::<false>(3.7, -1e9, end).1,
+            (-10..4).rev().collect::<Vec<_>>()
+        );
+    }
 }

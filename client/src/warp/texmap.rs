@@ -76,7 +76,9 @@ pub fn map(
         &[plane(u0, v0), plane(u1, v0), plane(u0, v1), plane(u1, v1)],
     );
     let (vx0, vy0, vx1, vy1) = volume_rect(camera, c);
-    let (x0, y0, x1, y1) = (ix0.max(vx0), iy0.max(vy0), ix1.min(vx1), iy1.min(vy1));
+    // (Capped by the buffer too: `display` takes the camera and the buffer apart.)
+    let (x0, y0) = (ix0.max(vx0), iy0.max(vy0));
+    let (x1, y1) = (ix1.min(vx1).min(gbuffer.width), iy1.min(vy1).min(gbuffer.height));
     if x0 >= x1 || y0 >= y1 {
         return;
     }
