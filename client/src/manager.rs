@@ -251,6 +251,19 @@ pub struct Counters {
     pub prediction_hits: u64,
     /// Frames where some impostor was shown above tolerance or missing.
     pub stale_frames: u64,
+    /// Where each [`Manager::render`] spent its time.
+    pub render_stages: Vec<RenderStages>,
+}
+
+/// Where one [`Manager::render`] spent its time, milliseconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct RenderStages {
+    /// Impostors warped, or redrawn as sprites.
+    pub impostors_ms: f64,
+    /// Objects drawn as geometry (cheap ones, too-near ones, failed warps).
+    pub geometry_ms: f64,
+    /// Lighting the G-buffer into the frame.
+    pub shade_ms: f64,
 }
 
 /// The manager of one client.
@@ -354,6 +367,7 @@ impl Manager {
     /// (falling back to geometry where a warp is refused); geometry rasterized; one
     /// shading pass.
     pub fn render(&mut self, scene: &Scene, shows: &[Show], camera: &Camera, gbuffer: &mut GBuffer) -> Frame {
+        let start = Instant::now();
         gbuffer.clear();
         self.sprites.resize_with(scene.objects.len(), || None);
         let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
@@ -389,8 +403,17 @@ impl Manager {
                 }
             }
         }
+        let impostors_done = Instant::now();
         rasterize(&geometry, camera, near_plane(scene), gbuffer);
-        gbuffer.shade(scene, camera)
+        let geometry_done = Instant::now();
+        let frame = gbuffer.shade(scene, camera);
+        let ms = |from: Instant, to: Instant| (to - from).as_secs_f64() * 1e3;
+        self.counters.render_stages.push(RenderStages {
+            impostors_ms: ms(start, impostors_done),
+            geometry_ms: ms(impostors_done, geometry_done),
+            shade_ms: ms(geometry_done, Instant::now()),
+        });
+        frame
     }
 
     /// Takes in what has arrived (never waits).

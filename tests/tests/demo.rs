@@ -42,6 +42,15 @@ fn the_demo_flies_and_summarises() {
     ] {
         assert!(!summary[key].is_null(), "{key} missing from {summary}");
     }
+    // Where the frame time goes: each stage measured, none above the slowest frame;
+    // the ground is drawn as geometry in every frame.
+    let stages = summary["frame_stages_ms_p50"].as_object().unwrap();
+    let slowest = summary["frame_ms_p95"].as_f64().unwrap();
+    for stage in ["plan", "impostors", "geometry", "shade"] {
+        let ms = stages[stage].as_f64().unwrap();
+        assert!((0.0..=slowest).contains(&ms), "{stage}: {summary}");
+    }
+    assert!(stages["geometry"].as_f64().unwrap() > 0.0, "{summary}");
     // The eye follows the clock: a slow frame skips path frames, so up to 45 are drawn.
     assert_eq!(summary["path_frames"], 45);
     let frames = summary["frames"].as_u64().unwrap();

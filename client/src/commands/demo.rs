@@ -15,7 +15,7 @@ use tokio::sync::mpsc::unbounded_channel;
 
 use relief_client::composite::{is_cheap, render_geometry};
 use relief_client::gbuffer::GBuffer;
-use relief_client::manager::{Config, Manager};
+use relief_client::manager::{Config, Manager, RenderStages};
 use relief_client::metrics::image::{compare, object_psnr};
 use relief_client::source::{spawn_local, spawn_remote};
 use relief_client::stats::{finite_mean, finite_min, median, percentile};
@@ -88,6 +88,31 @@ pub struct DemoArgs {
     window: bool,
 }
 
+/// The stages of the demo's frames, milliseconds.
+#[derive(Serialize)]
+struct FrameStages {
+    /// The impostor manager's decisions and requests.
+    plan: f64,
+    /// Impostors warped or redrawn as sprites.
+    impostors: f64,
+    /// Objects drawn as geometry.
+    geometry: f64,
+    /// Lighting.
+    shade: f64,
+}
+
+impl FrameStages {
+    fn median(plan_ms: &[f64], render: &[RenderStages]) -> FrameStages {
+        let of = |stage: fn(&RenderStages) -> f64| median(render.iter().map(stage).collect());
+        FrameStages {
+            plan: median(plan_ms.to_vec()),
+            impostors: of(|r| r.impostors_ms),
+            geometry: of(|r| r.geometry_ms),
+            shade: of(|r| r.shade_ms),
+        }
+    }
+}
+
 /// What `summary.json` holds.
 #[derive(Serialize)]
 struct Summary {
@@ -98,6 +123,8 @@ struct Summary {
     frame_ms_p50: f64,
     frame_ms_p95: f64,
     geometry_frame_ms_p50: f64,
+    /// Where the frame time goes, each stage's median on its own.
+    frame_stages_ms_p50: FrameStages,
     requests_now: u64,
     requests_predicted: u64,
     withdrawn: u64,
@@ -332,6 +359,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let bar = progress::bar(frames as u64, "flying");
     let mut gbuffer = GBuffer::new(w, h);
     let mut frame_ms = Vec::new();
+    let mut plan_ms = Vec::new();
     let mut geometry_ms = Vec::new();
     let mut compared = Vec::new();
     let mut compare_every = args.reference_every;
@@ -373,6 +401,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         let camera = pose.camera(scene.fov_y_degrees, w, h).map_err(|e| anyhow!(e))?;
         let began = Instant::now();
         let shows = manager.frame(&scene, &camera, t);
+        plan_ms.push(began.elapsed().as_secs_f64() * 1e3);
         let image = manager.render(&scene, &shows, &camera, &mut gbuffer);
         frame_ms.push(began.elapsed().as_secs_f64() * 1e3);
         if let Some(viewer) = &mut viewer
@@ -415,6 +444,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         frame_ms_p50: median(frame_ms.clone()),
         frame_ms_p95: percentile(&frame_ms, 0.95),
         geometry_frame_ms_p50: median(geometry_ms),
+        frame_stages_ms_p50: FrameStages::median(&plan_ms, &counters.render_stages),
         requests_now: counters.requests_now,
         requests_predicted: counters.requests_predicted,
         withdrawn: counters.withdrawn,
