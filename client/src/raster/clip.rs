@@ -33,7 +33,7 @@ pub(super) struct Clipped {
 }
 
 impl Clipped {
-    pub const NONE: Clipped = Clipped {
+    const NONE: Clipped = Clipped {
         pieces: [([Vec2::ZERO; 3], [0.0; 3], [Vec2::ZERO; 3]); 2],
         count: 0,
     };

@@ -58,18 +58,16 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
             .triangles
             .par_iter()
             .enumerate()
-            .flat_map_iter(|(t, corners)| {
+            .filter_map(|(t, corners)| {
                 let v = corners.map(|i| vertices[i as usize]);
                 // Most triangles of a detailed object fall between pixel centres: cull
                 // those in front of the near plane before any more set-up.
                 let culled = v.iter().all(|c| c.view.z >= near)
                     && !covers_pixel_centres(v.map(|c| c.pixel), w as f32, h as f32);
-                let clipped = if culled {
-                    clip::Clipped::NONE
-                } else {
-                    clip::clip_and_project(&projection, near, v)
-                };
-                clipped
+                (!culled).then_some((t, v))
+            })
+            .flat_map_iter(|(t, v)| {
+                clip::clip_and_project(&projection, near, v)
                     .into_iter()
                     .filter(|(xy, ..)| covers_pixel_centres(*xy, w as f32, h as f32))
                     .map(move |(xy, depth, bary)| ScreenTriangle {
