@@ -223,6 +223,16 @@ fn signed_end<const FORWARDS: bool>(pixels: std::ops::Range<i64>) -> i64 {
     }
 }
 
+/// The `k`-th of `cells` visited forwards (`FORWARDS`) or backwards.
+#[inline(always)]
+fn visited<const FORWARDS: bool>(cells: &std::ops::Range<usize>, k: usize) -> usize {
+    if FORWARDS {
+        cells.start + k
+    } else {
+        cells.end - 1 - k
+    }
+}
+
 /// The number of cells of `0..n` (centres at `k + 0.5`) before the epipole `e`: the
 /// pre-warp visits those forwards and the others backwards, each half towards the
 /// epipole.
@@ -365,11 +375,7 @@ impl Job<'_> {
         let mut previous_linked = false;
         let end = signed_end::<RIGHT>(self.u0..self.u0 + self.columns as i64);
         for step in 0..texels.len() {
-            let i = if RIGHT {
-                texels.start + step
-            } else {
-                texels.end - 1 - step
-            };
+            let i = visited::<RIGHT>(&texels, step);
             let texel = packed[i];
             let q = level_of(texel);
             if q == empty {
@@ -439,13 +445,6 @@ impl Job<'_> {
     /// into `out`.
     fn half<const DOWN: bool>(&self, rows: std::ops::Range<usize>, out: &mut Output) {
         let mut columns = vec![Column::START; self.columns];
-        let row = |seq: usize| {
-            if DOWN {
-                rows.start + seq
-            } else {
-                rows.end - 1 - seq
-            }
-        };
         let linear = |a: &RowSample, b: &RowSample, _, t| a.cell.lerp(&b.cell, t);
         match self.variant {
             Variant::Interleaved => {
@@ -456,7 +455,7 @@ impl Job<'_> {
                         out,
                         seq: seq as u32,
                     };
-                    self.row(row(seq), linear, &mut sink);
+                    self.row(visited::<DOWN>(&rows, seq), linear, &mut sink);
                 }
             }
             Variant::Compensated => self.two_pass::<DOWN>(rows, &mut columns, out, |a, b, centre, _| {
@@ -475,23 +474,16 @@ impl Job<'_> {
         out: &mut Output,
         interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell + Copy,
     ) {
-        let row = |seq: usize| {
-            if DOWN {
-                rows.start + seq
-            } else {
-                rows.end - 1 - seq
-            }
-        };
         let mut intermediate: Vec<Option<Cell>> = vec![None; self.columns * rows.len()];
         for seq in 0..rows.len() {
             let mut sink = IntoRow {
                 row: &mut intermediate[seq * self.columns..(seq + 1) * self.columns],
                 u0: self.u0,
             };
-            self.row(row(seq), interpolate, &mut sink);
+            self.row(visited::<DOWN>(&rows, seq), interpolate, &mut sink);
         }
         for seq in 0..rows.len() {
-            let j = row(seq);
+            let j = visited::<DOWN>(&rows, seq);
             for xi in 0..self.columns {
                 let Some(cell) = intermediate[seq * self.columns + xi] else {
                     continue;
