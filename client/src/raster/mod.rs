@@ -62,14 +62,14 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
                 let v = corners.map(|i| vertices[i as usize]);
                 // Most triangles of a detailed object fall between pixel centres: cull
                 // those in front of the near plane before any more set-up.
-                let culled = v.iter().all(|c| c.view.z >= near)
-                    && !covers_pixel_centres(v.map(|c| c.pixel), w as f32, h as f32);
+                let culled =
+                    v.iter().all(|c| c.view.z >= near) && pixel_box(v.map(|c| c.pixel), w, h).is_none();
                 (!culled).then_some((t, v))
             })
             .flat_map_iter(|(t, v)| {
                 clip::clip_and_project(&projection, near, v)
                     .into_iter()
-                    .filter(|(xy, ..)| covers_pixel_centres(*xy, w as f32, h as f32))
+                    .filter(|(xy, ..)| pixel_box(*xy, w, h).is_some())
                     .map(move |(xy, depth, bary)| ScreenTriangle {
                         slot: slot as u32,
                         triangle: t as u32,
@@ -87,12 +87,11 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
         .fold(
             || vec![Vec::new(); bands],
             |mut bins: Vec<Vec<u32>>, (k, s)| {
-                let y0 = s.xy.iter().map(|p| p.y).fold(f32::INFINITY, f32::min);
-                let y1 = s.xy.iter().map(|p| p.y).fold(f32::NEG_INFINITY, f32::max);
-                let first = ((y0 - 0.5).max(0.0) as usize / BAND).min(bands - 1);
-                let last = ((y1 + 0.5).max(0.0) as usize / BAND).min(bands - 1);
-                for bin in &mut bins[first..=last] {
-                    bin.push(k as u32);
+                // (Every triangle kept has pixels: the set-up culled the others.)
+                if let Some((_, first, _, last)) = pixel_box(s.xy, w, h) {
+                    for bin in &mut bins[first / BAND..=last / BAND] {
+                        bin.push(k as u32);
+                    }
                 }
                 bins
             },
@@ -117,7 +116,7 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
             for &k in bin {
                 let s = &triangles[k as usize];
                 let (index, object) = objects[s.slot as usize];
-                draw(s, index, object, rows, w, y0, rows_here);
+                draw(s, index, object, rows, (w, h), y0, rows_here);
             }
         });
 }
@@ -167,29 +166,37 @@ fn row_span(corners: [Vec2; 3], sign: f32, py: f32, bounds: (usize, usize)) -> O
     (first <= last).then_some((first, last))
 }
 
-/// Keeps the triangles whose bounding box holds a pixel centre of the screen: no other
-/// can cover one. (Most triangles of a million-triangle object seen whole are smaller
-/// than a pixel, and most of those fall between pixel centres.)
-fn covers_pixel_centres(xy: [Vec2; 3], w: f32, h: f32) -> bool {
+/// The pixels of the `w × h` screen whose centres (`k + 0.5`) the bounding box of the
+/// triangle `xy` holds, as `(x0, y0, x1, y1)` inclusive — the pixels [`draw`] tests —
+/// or `None` when there are none: then the triangle covers no pixel. (Most triangles
+/// of a million-triangle object seen whole are smaller than a pixel, and most of those
+/// fall between pixel centres.)
+#[inline]
+fn pixel_box(xy: [Vec2; 3], w: usize, h: usize) -> Option<(usize, usize, usize, usize)> {
     // (`min`/`max` skip NaN: test the corners.)
     if !xy.iter().all(|p| p.is_finite()) {
-        return false;
+        return None;
     }
     let min = xy[0].min(xy[1]).min(xy[2]);
     let max = xy[0].max(xy[1]).max(xy[2]);
-    // The first and last pixel centre (`k + 0.5`) inside, as `draw` scans them.
     let first = (min - 0.5).ceil().max(Vec2::ZERO);
-    let last = (max - 0.5).floor().min(Vec2::new(w - 1.0, h - 1.0));
-    first.x <= last.x && first.y <= last.y
+    let last = (max - 0.5).floor().min(Vec2::new(w as f32 - 1.0, h as f32 - 1.0));
+    (first.x <= last.x && first.y <= last.y).then_some((
+        first.x as usize,
+        first.y as usize,
+        last.x as usize,
+        last.y as usize,
+    ))
 }
 
-/// Scan-converts one triangle into the band `rows` (which start at row `y0`).
+/// Scan-converts one triangle into the band `rows` (which start at row `y0`) of the
+/// `w × h` screen.
 fn draw(
     s: &ScreenTriangle,
     index: u32,
     object: &SceneObject,
     rows: &mut [GPixel],
-    w: usize,
+    (w, h): (usize, usize),
     y0: usize,
     rows_here: usize,
 ) {
@@ -203,15 +210,11 @@ fn draw(
     }
     let sign = area.signum();
     let inv_area = 1.0 / area.abs();
-    let min = a.min(b).min(c);
-    let max = a.max(b).max(c);
-    let x_start = (min.x - 0.5).ceil().max(0.0) as usize;
-    let x_end = ((max.x - 0.5).floor() as i64).min(w as i64 - 1);
-    let y_start = ((min.y - 0.5).ceil().max(y0 as f32) as usize).max(y0);
-    let y_end = ((max.y - 0.5).floor() as i64).min((y0 + rows_here) as i64 - 1);
-    if x_end < x_start as i64 || y_end < y_start as i64 {
+    let Some((x_start, first_row, x_end, last_row)) = pixel_box(s.xy, w, h) else {
         return;
-    }
+    };
+    // Its rows in this band.
+    let (y_start, y_end) = (first_row.max(y0), last_row.min(y0 + rows_here - 1));
     let inv_depth = s.depth.map(|d| 1.0 / d);
     let mesh = &object.mesh;
     let tri = s.triangle as usize;
@@ -219,9 +222,9 @@ fn draw(
     // interpolation of them per pixel.
     let uniform_albedo = mesh.uniform_albedo(tri).map(to_rgb8);
     let uniform_normal = mesh.uniform_normal(tri);
-    for y in y_start..=y_end as usize {
+    for y in y_start..=y_end {
         let py = y as f32 + 0.5;
-        let Some((x_first, x_last)) = row_span([a, b, c], sign, py, (x_start, x_end as usize)) else {
+        let Some((x_first, x_last)) = row_span([a, b, c], sign, py, (x_start, x_end)) else {
             continue;
         };
         for x in x_first..=x_last {
@@ -307,7 +310,8 @@ mod tests {
     /// The cull keeps exactly the triangles whose box holds a pixel centre on screen.
     #[test]
     fn triangles_between_pixel_centres_are_culled() {
-        let keep = |xy: [(f32, f32); 3]| covers_pixel_centres(xy.map(|(x, y)| Vec2::new(x, y)), 64.0, 48.0);
+        let pixels = |xy: [(f32, f32); 3]| pixel_box(xy.map(|(x, y)| Vec2::new(x, y)), 64, 48);
+        let keep = |xy| pixels(xy).is_some();
         // A tenth of a pixel around the centre of pixel (10, 20), and beside it.
         assert!(keep([(10.45, 20.45), (10.55, 20.45), (10.5, 20.55)]));
         assert!(!keep([(10.1, 20.1), (10.4, 20.1), (10.2, 20.4)]));
@@ -319,5 +323,10 @@ mod tests {
         assert!(keep([(63.5, 47.5), (70.0, 47.5), (63.5, 50.0)]));
         assert!(!keep([(63.51, 47.0), (70.0, 47.0), (63.6, 50.0)]));
         assert!(!keep([(f32::NAN, 1.0), (5.0, 5.0), (1.0, 5.0)]));
+        // The box: the centres held, clipped to the screen.
+        assert_eq!(
+            pixels([(-9.0, 3.4), (80.0, 3.6), (20.0, 8.0)]),
+            Some((0, 3, 63, 7))
+        );
     }
 }
