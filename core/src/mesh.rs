@@ -160,15 +160,19 @@ impl Mesh {
     /// The shading normal at barycentric `(u, v)` (weights `1-u-v, u, v` of the corners):
     /// interpolated vertex normals when the mesh has them, else the face normal.
     pub fn shading_normal(&self, tri: usize, u: f32, v: f32) -> Vec3 {
-        if let Some(normals) = &self.normals {
-            let [a, b, c] = self.triangles[tri];
-            let n = normals[a as usize] * (1.0 - u - v) + normals[b as usize] * u + normals[c as usize] * v;
-            let n = n.normalize_or_zero();
-            if n != Vec3::ZERO {
-                return n;
-            }
-        }
-        self.face_normal(tri)
+        let Some(normals) = &self.normals else {
+            return self.face_normal(tri);
+        };
+        let [a, b, c] = self.triangles[tri];
+        let n = normals[a as usize] * (1.0 - u - v) + normals[b as usize] * u + normals[c as usize] * v;
+        self.unit_or_face(n, tri)
+    }
+
+    /// `n` made unit length, or triangle `tri`'s face normal where `n` has none (vertex
+    /// normals that cancel).
+    fn unit_or_face(&self, n: Vec3, tri: usize) -> Vec3 {
+        let n = n.normalize_or_zero();
+        if n == Vec3::ZERO { self.face_normal(tri) } else { n }
     }
 
     /// The normal [`Mesh::shading_normal`] gives everywhere on triangle `tri`, when it
@@ -178,20 +182,22 @@ impl Mesh {
             return Some(self.face_normal(tri));
         };
         let [a, b, c] = self.triangles[tri].map(|k| normals[k as usize]);
-        (a == b && b == c).then(|| {
-            let n = a.normalize_or_zero();
-            if n == Vec3::ZERO { self.face_normal(tri) } else { n }
-        })
+        (a == b && b == c).then(|| self.unit_or_face(a, tri))
     }
 
     /// The albedo [`Mesh::albedo`] gives everywhere on triangle `tri`, when it is one
     /// (no texture).
     pub fn uniform_albedo(&self, tri: usize) -> Option<Vec3> {
-        let material = self.material(tri);
-        match (&material.diffuse_texture, &self.texcoords) {
-            (Some(_), Some(_)) => None,
-            _ => Some(material.diffuse),
-        }
+        self.diffuse_map(tri)
+            .is_none()
+            .then(|| self.material(tri).diffuse)
+    }
+
+    /// The texture triangle `tri`'s albedo is read from, with the mesh's texture
+    /// coordinates, when it has both.
+    fn diffuse_map(&self, tri: usize) -> Option<(&TextureImage, &[Vec2])> {
+        let texture = self.material(tri).diffuse_texture.as_deref()?;
+        Some((texture, self.texcoords.as_deref()?))
     }
 
     /// The material of triangle `tri`.
@@ -203,15 +209,13 @@ impl Mesh {
 
     /// Linear albedo at barycentric `(u, v)` of triangle `tri`.
     pub fn albedo(&self, tri: usize, u: f32, v: f32) -> Vec3 {
-        let material = self.material(tri);
-        match (&material.diffuse_texture, &self.texcoords) {
-            (Some(texture), Some(uvs)) => {
-                let [a, b, c] = self.triangles[tri];
-                let uv = uvs[a as usize] * (1.0 - u - v) + uvs[b as usize] * u + uvs[c as usize] * v;
-                material.diffuse * texture.sample(uv)
-            }
-            _ => material.diffuse,
-        }
+        let diffuse = self.material(tri).diffuse;
+        let Some((texture, uvs)) = self.diffuse_map(tri) else {
+            return diffuse;
+        };
+        let [a, b, c] = self.triangles[tri];
+        let uv = uvs[a as usize] * (1.0 - u - v) + uvs[b as usize] * u + uvs[c as usize] * v;
+        diffuse * texture.sample(uv)
     }
 
     /// A copy placed in the world by `transform`; normals go through the inverse
