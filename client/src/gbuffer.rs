@@ -2,18 +2,23 @@
 //!
 //! Geometry (the rasterizer) and impostors (the warps) write surfaces here with a depth
 //! test, so they occlude each other correctly; [`GBuffer::shade`] then lights every
-//! covered pixel once with [`relief_core::shading::Lighting::shade`] — the same model as
-//! the ray-traced reference.
+//! covered pixel once with [`relief_core::shading::Lighting::shade_lanes`] — the same
+//! model as the ray-traced reference.
+//!
+//! The buffer is stored by plane (depth, object, albedo, the normal's three
+//! components), not by pixel: clearing writes only the depth plane (a quarter of the
+//! bytes), and shading loads eight pixels of each plane into one SIMD register.
 
 use glam::Vec3;
 use rayon::prelude::*;
+use wide::{f32x8, i32x8};
 
 use relief_core::camera::Camera;
 use relief_core::frame::{Frame, NO_OBJECT};
 use relief_core::scene::Scene;
-use relief_core::shading::to_rgb8;
+use relief_core::shading::{LANES, SurfaceLanes, Vec3x8, to_rgb8, to_rgb8_lanes};
 
-/// One pixel's nearest surface.
+/// One pixel's nearest surface, as writers give it and readers get it back.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GPixel {
     /// View-space depth (distance along the camera's forward axis); `f32::MAX` if empty
@@ -23,38 +28,146 @@ pub struct GPixel {
     pub object: u32,
     /// Linear albedo, 8 bits per channel.
     pub albedo: [u8; 3],
-    /// World-space unit normal.
+    /// World-space unit normal (stored to 16 bits per component: within 2e-5). A
+    /// writer may give a shorter one, in its direction: it is normalised when read.
     pub normal: Vec3,
 }
 
 impl GPixel {
     pub const EMPTY: GPixel = GPixel {
-        depth: f32::MAX,
+        depth: EMPTY_DEPTH,
         object: NO_OBJECT,
         albedo: [0; 3],
         normal: Vec3::ZERO,
     };
 
-    /// Replaces this pixel with `pixel` if that is nearer; returns whether it did.
-    /// Non-finite or non-positive depths and non-finite normals are ignored, so no
-    /// writer can poison the buffer with NaN.
-    #[inline]
-    pub fn keep_nearer(&mut self, pixel: GPixel) -> bool {
-        if !(pixel.depth > 0.0 && pixel.depth.is_finite() && pixel.normal.is_finite()) {
-            return false;
-        }
-        if pixel.depth < self.depth {
-            *self = pixel;
-            true
-        } else {
-            false
-        }
-    }
-
     /// True when a surface has been written.
     #[inline]
     pub fn is_covered(&self) -> bool {
-        self.object != NO_OBJECT
+        self.depth < EMPTY_DEPTH
+    }
+
+    /// Whether this can be written: a finite positive depth and a finite normal, so no
+    /// writer can poison the buffer with NaN.
+    #[inline]
+    fn is_writable(&self) -> bool {
+        self.depth > 0.0 && self.depth < EMPTY_DEPTH && self.normal.is_finite()
+    }
+}
+
+/// The depth of a pixel nothing has been written to.
+const EMPTY_DEPTH: f32 = f32::MAX;
+
+/// A normal component in `[-1, 1]` as a signed 16-bit fraction.
+const NORMAL_SCALE: f32 = 32767.0;
+
+#[inline(always)]
+fn encode_normal(n: Vec3) -> [i16; 3] {
+    (n.clamp(Vec3::NEG_ONE, Vec3::ONE) * NORMAL_SCALE)
+        .round()
+        .to_array()
+        .map(|c| c as i16)
+}
+
+#[inline(always)]
+fn pack_albedo([r, g, b]: [u8; 3]) -> u32 {
+    u32::from_le_bytes([r, g, b, 0])
+}
+
+/// A surface's object, albedo and normal as the buffer stores them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stored {
+    object: u32,
+    albedo: u32,
+    normal: [i16; 3],
+}
+
+impl Stored {
+    /// The scene object.
+    pub fn object(&self) -> u32 {
+        self.object
+    }
+
+    /// `normal` may be shorter than unit (a blend of unit normals): the shading
+    /// normalises it. It must be finite.
+    #[inline(always)]
+    pub fn new(object: u32, albedo: [u8; 3], normal: Vec3) -> Stored {
+        Stored {
+            object,
+            albedo: pack_albedo(albedo),
+            normal: encode_normal(normal),
+        }
+    }
+}
+
+/// Rows of a [`GBuffer`], mutable: the whole buffer or a band of it, so writers can
+/// split the work by rows across threads. Pixel `i` is `(i % width, y0 + i / width)`.
+pub struct Rows<'a> {
+    /// The first row held.
+    pub y0: u32,
+    width: usize,
+    depth: &'a mut [f32],
+    object: &'a mut [u32],
+    albedo: &'a mut [u32],
+    normal: [&'a mut [i16]; 3],
+}
+
+impl Rows<'_> {
+    /// Rows held.
+    pub fn rows(&self) -> usize {
+        self.depth.len() / self.width.max(1)
+    }
+
+    /// The depth at pixel `i` ([`EMPTY_DEPTH`](GPixel::EMPTY) where nothing is).
+    #[inline(always)]
+    pub fn depth(&self, i: usize) -> f32 {
+        self.depth[i]
+    }
+
+    /// Writes `pixel` at pixel `i` if it is nearer than what is there; returns whether
+    /// it did. Non-finite or non-positive depths and non-finite normals are ignored.
+    #[inline(always)]
+    pub fn keep_nearer(&mut self, i: usize, pixel: GPixel) -> bool {
+        if !pixel.is_writable() || pixel.depth >= self.depth[i] {
+            return false;
+        }
+        self.set(i, pixel);
+        true
+    }
+
+    /// [`Rows::keep_nearer`] with the attributes in stored form: `depth` must be finite,
+    /// positive and nearer.
+    #[inline(always)]
+    pub fn keep_nearer_stored(&mut self, i: usize, depth: f32, stored: &Stored) -> bool {
+        if !(depth > 0.0 && depth < self.depth[i]) {
+            return false;
+        }
+        self.set_stored(i, depth, stored);
+        true
+    }
+
+    /// Writes `pixel` at pixel `i` without a test: for a writer that has done the depth
+    /// test itself and knows the depth finite and positive and the normal finite.
+    #[inline(always)]
+    pub fn set(&mut self, i: usize, pixel: GPixel) {
+        self.set_stored(
+            i,
+            pixel.depth,
+            &Stored::new(pixel.object, pixel.albedo, pixel.normal),
+        );
+    }
+
+    /// [`Rows::set`] with the attributes already in stored form (a flat triangle's,
+    /// encoded once for all its pixels).
+    #[inline(always)]
+    pub fn set_stored(&mut self, i: usize, depth: f32, stored: &Stored) {
+        self.depth[i] = depth;
+        self.object[i] = stored.object;
+        self.albedo[i] = stored.albedo;
+        let [x, y, z] = stored.normal;
+        self.normal[0][i] = x;
+        self.normal[1][i] = y;
+        self.normal[2][i] = z;
     }
 }
 
@@ -63,22 +176,104 @@ impl GPixel {
 pub struct GBuffer {
     pub width: u32,
     pub height: u32,
-    pub pixels: Vec<GPixel>,
+    /// View depth; [`EMPTY_DEPTH`](GPixel::EMPTY) where nothing is. The other planes
+    /// mean something only where this is below it (clearing leaves them).
+    depth: Vec<f32>,
+    object: Vec<u32>,
+    /// RGB8 in the low three bytes.
+    albedo: Vec<u32>,
+    /// The normal's x, y, z, each `n · 32767` rounded.
+    normal: [Vec<i16>; 3],
 }
 
 impl GBuffer {
-    /// An empty buffer for `camera`'s resolution.
+    /// An empty buffer.
     pub fn new(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
         GBuffer {
             width,
             height,
-            pixels: vec![GPixel::EMPTY; width as usize * height as usize],
+            depth: vec![EMPTY_DEPTH; n],
+            object: vec![NO_OBJECT; n],
+            albedo: vec![0; n],
+            normal: [vec![0; n], vec![0; n], vec![0; n]],
         }
     }
 
-    /// Empties every pixel, keeping the allocation.
+    /// Empties every pixel, keeping the allocation: only the depth plane is written.
     pub fn clear(&mut self) {
-        self.pixels.fill(GPixel::EMPTY);
+        self.depth
+            .par_chunks_mut(CLEAR_CHUNK)
+            .for_each(|chunk| chunk.fill(EMPTY_DEPTH));
+    }
+
+    /// The pixel at `(x, y)` ([`GPixel::EMPTY`] where nothing is, or outside).
+    pub fn get(&self, x: u32, y: u32) -> GPixel {
+        if x >= self.width || y >= self.height {
+            return GPixel::EMPTY;
+        }
+        let i = y as usize * self.width as usize + x as usize;
+        if self.depth[i] >= EMPTY_DEPTH {
+            return GPixel::EMPTY;
+        }
+        let [r, g, b, _] = self.albedo[i].to_le_bytes();
+        let n = |k: usize| self.normal[k][i] as f32 / NORMAL_SCALE;
+        GPixel {
+            depth: self.depth[i],
+            object: self.object[i],
+            albedo: [r, g, b],
+            normal: Vec3::new(n(0), n(1), n(2)).normalize_or_zero(),
+        }
+    }
+
+    /// The pixel at `(x, y)` exactly as stored, to be written back unchanged with
+    /// [`GBuffer::write_stored`]; `None` where nothing is (or outside).
+    pub fn stored(&self, x: u32, y: u32) -> Option<(f32, Stored)> {
+        if x >= self.width || y >= self.height {
+            return None;
+        }
+        let i = y as usize * self.width as usize + x as usize;
+        (self.depth[i] < EMPTY_DEPTH).then(|| {
+            let stored = Stored {
+                object: self.object[i],
+                albedo: self.albedo[i],
+                normal: [0, 1, 2].map(|k| self.normal[k][i]),
+            };
+            (self.depth[i], stored)
+        })
+    }
+
+    /// [`GBuffer::write`] of a pixel in stored form.
+    pub fn write_stored(&mut self, x: i64, y: i64, depth: f32, stored: &Stored) -> bool {
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
+            return false;
+        }
+        let i = y as usize * self.width as usize + x as usize;
+        self.all_rows().keep_nearer_stored(i, depth, stored)
+    }
+
+    /// The object at `(x, y)`, or [`NO_OBJECT`] where nothing is (or outside).
+    #[inline]
+    pub fn object_at(&self, x: u32, y: u32) -> u32 {
+        if x >= self.width || y >= self.height {
+            return NO_OBJECT;
+        }
+        let i = y as usize * self.width as usize + x as usize;
+        if self.depth[i] < EMPTY_DEPTH {
+            self.object[i]
+        } else {
+            NO_OBJECT
+        }
+    }
+
+    /// Every pixel, row by row.
+    pub fn pixels(&self) -> impl Iterator<Item = GPixel> + '_ {
+        (0..self.height).flat_map(move |y| (0..self.width).map(move |x| self.get(x, y)))
+    }
+
+    /// Pixels with a surface.
+    pub fn covered(&self) -> usize {
+        self.depth.iter().filter(|&&d| d < EMPTY_DEPTH).count()
     }
 
     /// Writes `pixel` at `(x, y)` if it is nearer than what is there. Returns whether it
@@ -89,63 +284,262 @@ impl GBuffer {
         if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
             return false;
         }
-        self.pixels[y as usize * self.width as usize + x as usize].keep_nearer(pixel)
+        let i = y as usize * self.width as usize + x as usize;
+        self.all_rows().keep_nearer(i, pixel)
     }
 
-    /// The buffer's rows `y0..y1`, each with its row number, for writers that split
-    /// the work by rows across threads ([`GPixel::keep_nearer`] on each pixel).
-    pub fn par_rows(
-        &mut self,
-        y0: u32,
-        y1: u32,
-    ) -> impl IndexedParallelIterator<Item = (u32, &mut [GPixel])> {
+    /// The whole buffer as one [`Rows`].
+    fn all_rows(&mut self) -> Rows<'_> {
+        let [nx, ny, nz] = &mut self.normal;
+        Rows {
+            y0: 0,
+            width: self.width as usize,
+            depth: &mut self.depth,
+            object: &mut self.object,
+            albedo: &mut self.albedo,
+            normal: [nx, ny, nz],
+        }
+    }
+
+    /// The rows `y0..y1` (clamped to the buffer) in bands of `rows_per_band`, each
+    /// its own [`Rows`], in order: for writers that split the work by rows across
+    /// threads (`into_par_iter`).
+    pub fn bands(&mut self, y0: u32, y1: u32, rows_per_band: usize) -> Vec<Rows<'_>> {
         let w = self.width as usize;
         let (y0, y1) = (y0.min(self.height) as usize, y1.min(self.height) as usize);
-        let rows = &mut self.pixels[y0 * w..y1.max(y0) * w];
-        rows.par_chunks_mut(w.max(1))
-            .enumerate()
-            .map(move |(k, row)| ((y0 + k) as u32, row))
+        let mut rest = self.all_rows();
+        let mut bands = Vec::new();
+        if w == 0 || y1 <= y0 {
+            return bands;
+        }
+        // Drop the rows before `y0`, then cut a band at a time off the front.
+        rest = rest.split_off(y0 * w).1;
+        let mut y = y0;
+        while y < y1 {
+            let rows = rows_per_band.max(1).min(y1 - y);
+            let (band, tail) = rest.split_off(rows * w);
+            bands.push(Rows { y0: y as u32, ..band });
+            rest = tail;
+            y += rows;
+        }
+        bands
     }
 
     /// Lights every covered pixel with the scene's lighting and objects' specular
     /// terms; empty pixels get the background.
     pub fn shade(&self, scene: &Scene, camera: &Camera) -> Frame {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut frame = Frame {
+            width: self.width,
+            height: self.height,
+            color: vec![[0; 3]; w * h],
+            object: vec![0; w * h],
+        };
         let background = to_rgb8(scene.background);
-        let w = self.width as usize;
-        let mut frame = Frame::new(self.width, self.height, background);
+        let specular: Vec<(f32, f32)> = scene
+            .objects
+            .iter()
+            .map(|o| (o.specular.strength, o.specular.shininess))
+            .collect();
         // Ray directions with a unit forward component: a pixel's position is
         // `eye + direction · depth`. They are linear in x, so step them along rows.
         let tan_half = camera.tan_half_fov();
         let aspect = self.width as f32 / self.height as f32;
         let x_step = camera.right * (2.0 / self.width as f32 * tan_half * aspect);
+        let lane_offsets = f32x8::new(std::array::from_fn(|l| l as f32));
+        let eye = Vec3x8::splat(camera.eye);
         frame
             .color
-            .par_chunks_mut(w)
-            .zip(frame.object.par_chunks_mut(w))
-            .zip(self.pixels.par_chunks(w))
+            .par_chunks_mut(w.max(1))
+            .zip(frame.object.par_chunks_mut(w.max(1)))
             .enumerate()
-            .for_each(|(y, ((color, object), pixels))| {
+            .for_each(|(y, (color, object))| {
                 let sy = (1.0 - 2.0 * (y as f32 + 0.5) / self.height as f32) * tan_half;
                 let sx0 = (1.0 / self.width as f32 - 1.0) * tan_half * aspect;
-                let row = camera.forward + camera.right * sx0 + camera.up * sy;
-                for (x, p) in pixels.iter().enumerate() {
-                    if !p.is_covered() {
+                let row_start = camera.forward + camera.right * sx0 + camera.up * sy;
+                let row = y * w;
+                for x in (0..w).step_by(LANES) {
+                    let n = LANES.min(w - x);
+                    let at = row + x..row + x + n;
+                    let depth = f32x8::new(lanes(&self.depth[at.clone()], EMPTY_DEPTH));
+                    let covered = depth.simd_lt(f32x8::splat(EMPTY_DEPTH));
+                    if !covered.any() {
+                        color[x..x + n].fill(background);
+                        object[x..x + n].fill(NO_OBJECT);
                         continue;
                     }
-                    let Some(o) = scene.objects.get(p.object as usize) else {
-                        continue;
+                    let ids = lanes(&self.object[at.clone()], NO_OBJECT);
+                    let (mut strength, mut shininess) = ([0.0; LANES], [0.0; LANES]);
+                    for l in 0..n {
+                        (strength[l], shininess[l]) =
+                            specular.get(ids[l] as usize).copied().unwrap_or_default();
+                    }
+                    let albedo = i32x8::new(lanes(&self.albedo[at.clone()], 0).map(|a| a as i32));
+                    let channel = |shift: i32| {
+                        f32x8::from_i32x8((albedo >> shift) & i32x8::splat(0xff)) * f32x8::splat(1.0 / 255.0)
                     };
-                    let position = camera.eye + (row + x_step * x as f32) * p.depth;
-                    let albedo =
-                        Vec3::new(p.albedo[0] as f32, p.albedo[1] as f32, p.albedo[2] as f32) * (1.0 / 255.0);
-                    color[x] = to_rgb8(
-                        scene
-                            .lighting
-                            .shade(albedo, p.normal, position, camera.eye, o.specular),
-                    );
-                    object[x] = p.object;
+                    // (Normalised below: the scale does not matter.)
+                    let component = |k: usize| {
+                        let c = lanes(&self.normal[k][at.clone()], 0).map(i32::from);
+                        f32x8::from_i32x8(i32x8::new(c))
+                    };
+                    let xs = f32x8::splat(x as f32) + lane_offsets;
+                    let direction = Vec3x8 {
+                        x: f32x8::splat(row_start.x) + f32x8::splat(x_step.x) * xs,
+                        y: f32x8::splat(row_start.y) + f32x8::splat(x_step.y) * xs,
+                        z: f32x8::splat(row_start.z) + f32x8::splat(x_step.z) * xs,
+                    };
+                    // (Empty lanes hold a huge depth: keep their positions finite.)
+                    let depth = covered.select(depth, f32x8::ZERO);
+                    let surfaces = SurfaceLanes {
+                        albedo: Vec3x8 {
+                            x: channel(0),
+                            y: channel(8),
+                            z: channel(16),
+                        },
+                        normal: Vec3x8 {
+                            x: component(0),
+                            y: component(1),
+                            z: component(2),
+                        }
+                        .normalize_or_zero(),
+                        position: eye.zip(direction.scale(depth), |e, d| e + d),
+                        towards_eye: direction.map(|d| -d),
+                        strength: f32x8::new(strength),
+                        shininess: f32x8::new(shininess),
+                    };
+                    let lit = to_rgb8_lanes(scene.lighting.shade_lanes(&surfaces));
+                    let covered = covered.to_bitmask();
+                    for l in 0..n {
+                        let shown = covered & (1 << l) != 0;
+                        color[x + l] = if shown { lit[l] } else { background };
+                        object[x + l] = if shown { ids[l] } else { NO_OBJECT };
+                    }
                 }
             });
         frame
+    }
+}
+
+/// Pixels cleared per task.
+const CLEAR_CHUNK: usize = 1 << 16;
+
+/// `values` in the first lanes, `fill` in the rest.
+#[inline(always)]
+fn lanes<T: Copy>(values: &[T], fill: T) -> [T; LANES] {
+    match values.try_into() {
+        Ok(full) => full,
+        Err(_) => std::array::from_fn(|l| values.get(l).copied().unwrap_or(fill)),
+    }
+}
+
+impl<'a> Rows<'a> {
+    /// Splits after pixel `at`: the pixels before it and those from it on.
+    fn split_off(self, at: usize) -> (Rows<'a>, Rows<'a>) {
+        let (d0, d1) = self.depth.split_at_mut(at);
+        let (o0, o1) = self.object.split_at_mut(at);
+        let (a0, a1) = self.albedo.split_at_mut(at);
+        let [nx, ny, nz] = self.normal;
+        let (x0, x1) = nx.split_at_mut(at);
+        let (y0, y1) = ny.split_at_mut(at);
+        let (z0, z1) = nz.split_at_mut(at);
+        let w = self.width;
+        (
+            Rows {
+                y0: self.y0,
+                width: w,
+                depth: d0,
+                object: o0,
+                albedo: a0,
+                normal: [x0, y0, z0],
+            },
+            Rows {
+                y0: self.y0 + (at / w.max(1)) as u32,
+                width: w,
+                depth: d1,
+                object: o1,
+                albedo: a1,
+                normal: [x1, y1, z1],
+            },
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixels_round_trip_and_keep_the_nearer() {
+        let mut g = GBuffer::new(7, 5);
+        let p = GPixel {
+            depth: 2.0,
+            object: 3,
+            albedo: [10, 20, 30],
+            normal: Vec3::new(0.6, -0.8, 0.0),
+        };
+        assert!(g.write(6, 4, p));
+        let back = g.get(6, 4);
+        assert_eq!((back.depth, back.object, back.albedo), (2.0, 3, [10, 20, 30]));
+        assert!(back.normal.abs_diff_eq(p.normal, 2e-5), "{}", back.normal);
+        // Farther, NaN, zero depth, NaN normal, outside: not written.
+        assert!(!g.write(6, 4, GPixel { depth: 3.0, ..p }));
+        assert!(!g.write(6, 4, GPixel { depth: f32::NAN, ..p }));
+        assert!(!g.write(0, 0, GPixel { depth: 0.0, ..p }));
+        assert!(!g.write(
+            0,
+            0,
+            GPixel {
+                normal: Vec3::NAN,
+                ..p
+            }
+        ));
+        assert!(!g.write(7, 0, p) && !g.write(-1, 0, p));
+        assert_eq!(g.covered(), 1);
+        assert!(g.write(
+            6,
+            4,
+            GPixel {
+                depth: 1.0,
+                object: 1,
+                ..p
+            }
+        ));
+        assert_eq!(g.object_at(6, 4), 1);
+        g.clear();
+        assert_eq!(g.covered(), 0);
+        assert_eq!((g.get(6, 4), g.object_at(6, 4)), (GPixel::EMPTY, NO_OBJECT));
+    }
+
+    #[test]
+    fn bands_cover_the_rows_asked_once() {
+        let mut g = GBuffer::new(3, 10);
+        let bands = g.bands(2, 9, 3);
+        let spans: Vec<(u32, usize)> = bands.iter().map(|b| (b.y0, b.rows())).collect();
+        assert_eq!(spans, vec![(2, 3), (5, 3), (8, 1)]);
+        for mut band in bands {
+            let y0 = band.y0;
+            for i in 0..band.rows() * 3 {
+                band.keep_nearer(
+                    i,
+                    GPixel {
+                        depth: 1.0,
+                        object: y0,
+                        albedo: [0; 3],
+                        normal: Vec3::Z,
+                    },
+                );
+            }
+        }
+        for y in 0..10 {
+            let expected = match y {
+                2..=4 => 2,
+                5..=7 => 5,
+                8 => 8,
+                _ => NO_OBJECT,
+            };
+            assert_eq!(g.object_at(1, y), expected, "row {y}");
+        }
+        assert!(g.bands(12, 20, 4).is_empty());
     }
 }

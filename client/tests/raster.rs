@@ -104,7 +104,7 @@ fn shared_edges_leave_no_cracks() {
                     continue;
                 }
                 let hit = eye + d * (-eye.y / d.y);
-                if hit.x.abs() < 49.0 && hit.z.abs() < 49.0 && !gbuffer.pixels[y * 203 + x].is_covered() {
+                if hit.x.abs() < 49.0 && hit.z.abs() < 49.0 && !gbuffer.get(x, y).is_covered() {
                     holes += 1;
                 }
             }

@@ -78,7 +78,7 @@ fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, wha
             Err(WarpError::EyeInPlane(_) | WarpError::NeedsPreviousFrame) => {}
             Err(e) => panic!("{what}, {method}: unexpected error {e}"),
         }
-        for p in &gbuffer.pixels {
+        for p in gbuffer.pixels() {
             assert!(
                 p.depth.is_finite() && p.normal.is_finite(),
                 "{what}, {method}: non-finite pixel {p:?}"
@@ -87,7 +87,7 @@ fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, wha
                 assert!(p.depth > 0.0, "{what}, {method}: depth {}", p.depth);
             }
         }
-        drew += gbuffer.pixels.iter().any(|p| p.is_covered()) as usize;
+        drew += (gbuffer.covered() > 0) as usize;
         let frame = gbuffer.shade(scene, &camera);
         assert_eq!(frame.color.len(), 96 * 72);
     }

@@ -3,7 +3,7 @@
 use glam::Vec3;
 
 use relief_core::scene::Scene;
-use relief_core::shading::to_rgb8;
+use relief_core::shading::{SurfacePoint, to_rgb8};
 use relief_tests::{relief, scratch};
 
 /// Writes the test scene (a lit unit sphere on blue) into `dir`.
@@ -68,11 +68,13 @@ fn sphere_centre_pixel_matches_the_lighting_model() {
     let scene = Scene::load(scene_path.to_str().unwrap()).unwrap();
     let o = &scene.objects[0];
     let eye = Vec3::new(0.0, 0.0, 4.0);
-    let want = to_rgb8(
-        scene
-            .lighting
-            .shade(Vec3::new(0.5, 0.25, 0.75), Vec3::Z, Vec3::Z, eye, o.specular),
-    );
+    let want = to_rgb8(scene.lighting.shade(&SurfacePoint {
+        albedo: Vec3::new(0.5, 0.25, 0.75),
+        normal: Vec3::Z,
+        position: Vec3::Z,
+        towards_eye: eye - Vec3::Z,
+        specular: o.specular,
+    }));
     let got = image.get_pixel(32, 24).0;
     for c in 0..3 {
         assert!(

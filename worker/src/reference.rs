@@ -12,7 +12,7 @@ use glam::Vec3;
 
 use relief_core::camera::Camera;
 use relief_core::frame::{Frame, NO_OBJECT};
-use relief_core::shading::to_rgb8;
+use relief_core::shading::{SurfacePoint, to_rgb8};
 
 use crate::bvh::Ray;
 use crate::tiles::par_fill_blocks;
@@ -49,22 +49,33 @@ pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> 
             .collect();
         let mut hits = vec![None; rays.len()];
         tracer.closest_hits(&rays, &mut hits);
-        let shaded = rays.iter().zip(hits).map(|(ray, hit)| match hit {
-            None => (tracer.background, NO_OBJECT),
-            Some((k, hit)) => {
-                let o = &tracer.objects[k].object;
+        // Every hit lit at once (the model runs several points per instruction).
+        let points: Vec<SurfacePoint> = rays
+            .iter()
+            .zip(&hits)
+            .filter_map(|(ray, hit)| {
+                let (k, hit) = hit.as_ref()?;
+                let o = &tracer.objects[*k].object;
                 let tri = hit.triangle as usize;
-                let color = tracer.lighting.shade(
-                    o.mesh.albedo(tri, hit.u, hit.v),
-                    o.mesh.shading_normal(tri, hit.u, hit.v),
-                    ray.origin + ray.direction * hit.t,
-                    camera.eye,
-                    o.specular,
-                );
-                (color, k as u32)
-            }
-        });
-        let shaded: Vec<(Vec3, u32)> = shaded.collect();
+                Some(SurfacePoint {
+                    albedo: o.mesh.albedo(tri, hit.u, hit.v),
+                    normal: o.mesh.shading_normal(tri, hit.u, hit.v),
+                    position: ray.origin + ray.direction * hit.t,
+                    towards_eye: -ray.direction,
+                    specular: o.specular,
+                })
+            })
+            .collect();
+        let mut lit = vec![Vec3::ZERO; points.len()];
+        tracer.lighting.shade_all(&points, &mut lit);
+        let mut lit = lit.into_iter();
+        let shaded: Vec<(Vec3, u32)> = hits
+            .iter()
+            .map(|hit| match hit {
+                None => (tracer.background, NO_OBJECT),
+                Some((k, _)) => (lit.next().unwrap_or(tracer.background), *k as u32),
+            })
+            .collect();
         values.extend(shaded.chunks_exact(offsets.len()).map(|pixel| {
             let sum: Vec3 = pixel.iter().map(|(c, _)| *c).sum();
             (to_rgb8(sum / pixel.len() as f32), pixel[middle].1)

@@ -16,7 +16,7 @@ use relief_core::camera::Camera;
 use relief_core::scene::SceneObject;
 use relief_core::shading::to_rgb8;
 
-use crate::gbuffer::{GBuffer, GPixel};
+use crate::gbuffer::{GBuffer, GPixel, Rows, Stored};
 
 /// Rows per parallel band.
 pub const BAND: usize = 16;
@@ -105,18 +105,16 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
                 a
             },
         );
+    let height = gbuffer.height;
     gbuffer
-        .pixels
-        .par_chunks_mut(w * BAND)
+        .bands(0, height, BAND)
+        .into_par_iter()
         .zip(bins.par_iter())
-        .enumerate()
-        .for_each(|(band, (rows, bin))| {
-            let y0 = band * BAND;
-            let rows_here = rows.len() / w;
+        .for_each(|(mut rows, bin)| {
             for &k in bin {
                 let s = &triangles[k as usize];
                 let (index, object) = objects[s.slot as usize];
-                draw(s, index, object, rows, (w, h), y0, rows_here);
+                draw(s, index, object, &mut rows, (w, h));
             }
         });
 }
@@ -189,17 +187,9 @@ fn pixel_box(xy: [Vec2; 3], w: usize, h: usize) -> Option<(usize, usize, usize, 
     ))
 }
 
-/// Scan-converts one triangle into the band `rows` (which start at row `y0`) of the
-/// `w × h` screen.
-fn draw(
-    s: &ScreenTriangle,
-    index: u32,
-    object: &SceneObject,
-    rows: &mut [GPixel],
-    (w, h): (usize, usize),
-    y0: usize,
-    rows_here: usize,
-) {
+/// Scan-converts one triangle into the band `rows` of the `w × h` screen.
+fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (w, h): (usize, usize)) {
+    let (y0, rows_here) = (rows.y0 as usize, rows.rows());
     let [a, b, c] = s.xy;
     // Edge functions, each evaluated with its edge's endpoints in a fixed order so that
     // two triangles sharing an edge get exactly opposite values there: no pixel on a
@@ -222,6 +212,9 @@ fn draw(
     // interpolation of them per pixel.
     let uniform_albedo = mesh.uniform_albedo(tri).map(to_rgb8);
     let uniform_normal = mesh.uniform_normal(tri);
+    let uniform = uniform_albedo
+        .zip(uniform_normal)
+        .map(|(albedo, normal)| Stored::new(index, albedo, normal));
     for y in y_start..=y_end {
         let py = y as f32 + 0.5;
         let Some((x_first, x_last)) = row_span([a, b, c], sign, py, (x_start, x_end)) else {
@@ -241,24 +234,31 @@ fn draw(
             let (pa, pb, pc) = (wa * inv_depth[0], wb * inv_depth[1], wc * inv_depth[2]);
             let sum = pa + pb + pc;
             let depth = 1.0 / sum;
-            let slot = &mut rows[(y - y0) * w + x];
+            let i = (y - y0) * w + x;
             // (`depth` is finite and positive: clipping keeps depths at or beyond `near`.)
-            if depth >= slot.depth {
+            if depth >= rows.depth(i) {
+                continue;
+            }
+            if let Some(stored) = &uniform {
+                rows.set_stored(i, depth, stored);
                 continue;
             }
             let bary = || (s.bary[0] * pa + s.bary[1] * pb + s.bary[2] * pc) / sum;
-            *slot = GPixel {
-                depth,
-                object: index,
-                albedo: uniform_albedo.unwrap_or_else(|| {
-                    let bary = bary();
-                    to_rgb8(mesh.albedo(tri, bary.x, bary.y))
-                }),
-                normal: uniform_normal.unwrap_or_else(|| {
-                    let bary = bary();
-                    mesh.shading_normal(tri, bary.x, bary.y)
-                }),
-            };
+            rows.set(
+                i,
+                GPixel {
+                    depth,
+                    object: index,
+                    albedo: uniform_albedo.unwrap_or_else(|| {
+                        let bary = bary();
+                        to_rgb8(mesh.albedo(tri, bary.x, bary.y))
+                    }),
+                    normal: uniform_normal.unwrap_or_else(|| {
+                        let bary = bary();
+                        mesh.shading_normal(tri, bary.x, bary.y)
+                    }),
+                },
+            );
         }
     }
 }

@@ -1,7 +1,7 @@
 //! The sprite stage (Schaufler's stage 1): while the eye has moved less than a pixel's
 //! worth, the last displayed impostor is reused as it is.
 
-use crate::gbuffer::{GBuffer, GPixel};
+use crate::gbuffer::{GBuffer, Stored};
 
 /// A rectangle of displayed impostor pixels, kept to be drawn again.
 #[derive(Debug, Clone, PartialEq)]
@@ -10,7 +10,9 @@ pub struct Sprite {
     pub y0: u32,
     pub width: u32,
     pub height: u32,
-    pub pixels: Vec<GPixel>,
+    /// Row-major, exactly as the buffer held them (so a redraw is identical); `None`
+    /// where the object was not.
+    pixels: Vec<Option<(f32, Stored)>>,
 }
 
 impl Sprite {
@@ -31,7 +33,7 @@ impl Sprite {
         let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
         for y in ry0..ry1 {
             for x in rx0..rx1 {
-                if gbuffer.pixels[y * w + x].object == object {
+                if gbuffer.object_at(x as u32, y as u32) == object {
                     x0 = x0.min(x);
                     y0 = y0.min(y);
                     x1 = x1.max(x + 1);
@@ -45,8 +47,9 @@ impl Sprite {
         let pixels = (y0..y1)
             .flat_map(|y| (x0..x1).map(move |x| (x, y)))
             .map(|(x, y)| {
-                let p = gbuffer.pixels[y * w + x];
-                if p.object == object { p } else { GPixel::EMPTY }
+                gbuffer
+                    .stored(x as u32, y as u32)
+                    .filter(|(_, stored)| stored.object() == object)
             })
             .collect();
         Some(Sprite {
@@ -61,12 +64,12 @@ impl Sprite {
     /// Draws the sprite into `gbuffer` with the depth test.
     pub fn draw(&self, gbuffer: &mut GBuffer) {
         for (k, p) in self.pixels.iter().enumerate() {
-            if p.is_covered() {
+            if let Some((depth, stored)) = p {
                 let (x, y) = (
                     (k as u32 % self.width + self.x0) as i64,
                     (k as u32 / self.width + self.y0) as i64,
                 );
-                gbuffer.write(x, y, *p);
+                gbuffer.write_stored(x, y, *depth, stored);
             }
         }
     }

@@ -7,11 +7,11 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use relief_core::camera::Camera;
-use relief_core::relief::{ReliefTexture, SourceCamera, decode_normal};
+use relief_core::relief::{ReliefTexture, SourceCamera};
 
 use super::params::WarpParams;
 use super::prewarp::PrewarpImage;
-use crate::gbuffer::{GBuffer, GPixel};
+use crate::gbuffer::{GBuffer, Stored};
 
 /// The screen rectangle `[x0, x1) × [y0, y1)` that the plane region `corners` can
 /// cover; the whole screen when part of it is behind the eye.
@@ -92,11 +92,12 @@ pub fn map(
     let x_step = dots(camera.right * sx_step);
     // Rows are independent (each pixel samples the image and depth-tests its own slot):
     // split across cores.
-    gbuffer.par_rows(y0, y1).for_each(|(y, pixels)| {
+    gbuffer.bands(y0, y1, 1).into_par_iter().for_each(|mut pixels| {
+        let y = pixels.y0;
         let sy = (1.0 - 2.0 * (y as f32 + 0.5) / camera.height as f32) * tan_half;
         let sx0 = (2.0 * (x0 as f32 + 0.5) / camera.width as f32 - 1.0) * tan_half * aspect;
         let mut row = dots(camera.forward + camera.right * sx0 + camera.up * sy);
-        for slot in &mut pixels[x0 as usize..x1 as usize] {
+        for x in x0 as usize..x1 as usize {
             let along = row;
             row += x_step;
             let towards_plane = along.x;
@@ -109,19 +110,20 @@ pub fn map(
             let Some((depth, albedo, normal)) = sample(image, u, v) else {
                 continue;
             };
-            slot.keep_nearer(GPixel {
-                depth: (params.h + depth) / towards_plane,
-                object,
-                albedo,
-                normal,
-            });
+            pixels.keep_nearer_stored(
+                x,
+                (params.h + depth) / towards_plane,
+                &Stored::new(object, albedo, normal),
+            );
         }
     });
 }
 
 /// The pre-warped image at plane coordinates `(u, v)`: bilinear where the four nearest
 /// texels are all covered (inside a surface), nearest at silhouettes (blending with
-/// empty texels would invent colours). Returns `(depth, albedo, unit normal)`.
+/// empty texels would invent colours). Returns `(depth, albedo, normal)`, the normal
+/// of length 1 or less: a blend of unit normals, left for the shading to normalise
+/// (vectorised there, per pixel here).
 #[inline]
 fn sample(image: &PrewarpImage, u: f32, v: f32) -> Option<(f32, [u8; 3], Vec3)> {
     let fu = u - 0.5 - image.u0 as f32;
@@ -151,9 +153,10 @@ fn sample(image: &PrewarpImage, u: f32, v: f32) -> Option<(f32, [u8; 3], Vec3)> 
             let a = (albedo + Vec3::splat(0.5))
                 .to_array()
                 .map(|c| c.clamp(0.0, 255.0) as u8);
-            return Some((depth, a, (normal / 127.5 - Vec3::ONE).normalize_or_zero()));
+            return Some((depth, a, normal / 127.5 - Vec3::ONE));
         }
     }
     let texel = image.at(u, v)?;
-    (!texel.is_empty()).then(|| (texel.depth, texel.albedo, decode_normal(texel.normal)))
+    let rgb = Vec3::from(texel.normal.map(f32::from));
+    (!texel.is_empty()).then(|| (texel.depth, texel.albedo, rgb / 127.5 - Vec3::ONE))
 }
