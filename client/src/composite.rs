@@ -12,10 +12,11 @@ use relief_worker::bake;
 use relief_worker::tracer::ObjectTracer;
 
 use crate::gbuffer::GBuffer;
+use crate::impostor::Impostor;
 use crate::metrics::schaufler::initial_resolution;
 use crate::pyramid::Pyramid;
 use crate::raster::rasterize;
-use crate::warp::{Method, WarpError, display};
+use crate::warp::{Method, WarpError, draw, prepare};
 
 /// Objects with fewer triangles are cheaper to draw than to warp.
 pub const CHEAP_TRIANGLES: usize = 1000;
@@ -153,11 +154,16 @@ impl FramePlan {
             .iter()
             .map(|&(k, _)| (k, &scene.objects[k as usize]))
             .collect();
-        for imp in &self.impostors {
-            let level = imp.pyramid.level_for(camera, TEXEL_TOLERANCE);
-            let impostor = &imp.pyramid.levels[level];
+        let shown: Vec<&Impostor> = self
+            .impostors
+            .iter()
+            .map(|imp| &imp.pyramid.levels[imp.pyramid.level_for(camera, TEXEL_TOLERANCE)])
+            .collect();
+        // Every impostor's pre-warp at once, then each drawn.
+        let prepared: Vec<_> = shown.par_iter().map(|i| prepare(method, i, camera)).collect();
+        for ((imp, impostor), prepared) in self.impostors.iter().zip(shown).zip(prepared) {
             stats.texels_baked += imp.pyramid.levels[0].texture.depth.len();
-            match display(method, impostor, imp.index, camera, gbuffer) {
+            match prepared.and_then(|p| draw(p, impostor, imp.index, camera, gbuffer)) {
                 Ok(()) => stats.texels_warped += impostor.texture.depth.len(),
                 Err(WarpError::EyeInPlane(_) | WarpError::NonFinite | WarpError::NeedsPreviousFrame) => {
                     stats.fell_back += 1;

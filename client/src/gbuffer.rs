@@ -369,11 +369,18 @@ impl GBuffer {
                         continue;
                     }
                     let ids = lanes(&self.object[at.clone()], NO_OBJECT);
-                    let (mut strength, mut shininess) = ([0.0; LANES], [0.0; LANES]);
-                    for l in 0..n {
-                        (strength[l], shininess[l]) =
-                            specular.get(ids[l] as usize).copied().unwrap_or_default();
-                    }
+                    let specular_of = |id: u32| specular.get(id as usize).copied().unwrap_or_default();
+                    let (strength, shininess) = if ids.iter().all(|&id| id == ids[0]) {
+                        // (Mostly one object: one look-up.)
+                        let (s, k) = specular_of(ids[0]);
+                        (f32x8::splat(s), f32x8::splat(k))
+                    } else {
+                        let (mut s, mut k) = ([0.0; LANES], [0.0; LANES]);
+                        for l in 0..n {
+                            (s[l], k[l]) = specular_of(ids[l]);
+                        }
+                        (f32x8::new(s), f32x8::new(k))
+                    };
                     let albedo = i32x8::new(lanes(&self.albedo[at.clone()], 0).map(|a| a as i32));
                     let channel = |shift: i32| {
                         f32x8::from_i32x8((albedo >> shift) & i32x8::splat(0xff)) * f32x8::splat(1.0 / 255.0)
@@ -405,11 +412,16 @@ impl GBuffer {
                         .normalize_or_zero(),
                         position: eye.zip(direction.scale(depth), |e, d| e + d),
                         towards_eye: direction.map(|d| -d),
-                        strength: f32x8::new(strength),
-                        shininess: f32x8::new(shininess),
+                        strength,
+                        shininess,
                     };
                     let lit = to_rgb8_lanes(scene.lighting.shade_lanes(&surfaces));
                     let covered = covered.to_bitmask();
+                    if n == LANES && covered == (1 << LANES) - 1 {
+                        color[x..x + LANES].copy_from_slice(&lit);
+                        object[x..x + LANES].copy_from_slice(&ids);
+                        continue;
+                    }
                     for l in 0..n {
                         let shown = covered & (1 << l) != 0;
                         color[x + l] = if shown { lit[l] } else { background };

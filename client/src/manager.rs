@@ -8,6 +8,7 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use glam::Vec3;
+use rayon::prelude::*;
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender};
 
 use relief_core::camera::Camera;
@@ -27,7 +28,7 @@ use crate::raster::rasterize;
 use crate::warp::params::WarpParams;
 use crate::warp::sprite::Sprite;
 use crate::warp::texmap::volume_rect;
-use crate::warp::{Method, display};
+use crate::warp::{Method, draw, prepare};
 
 /// A texture the manager wants made.
 #[derive(Debug, Clone, PartialEq)]
@@ -370,6 +371,29 @@ impl Manager {
         let start = Instant::now();
         gbuffer.clear();
         self.sprites.resize_with(scene.objects.len(), || None);
+        // Which impostors are redrawn as sprites and which warped: the warps' pre-warps
+        // all run at once, then everything is drawn in order.
+        let sprite_holds: Vec<bool> = shows
+            .iter()
+            .enumerate()
+            .map(|(k, show)| match (show, &self.sprites[k]) {
+                (Show::Impostor { texture, level }, Some(kept)) => {
+                    kept.key == (self.objects[k].held[*texture].eye, *level)
+                        && sprite_still_valid(&scene.objects[k].bounds, kept.eye, camera)
+                }
+                _ => false,
+            })
+            .collect();
+        let shown = |k: usize| match shows[k] {
+            Show::Impostor { texture, level } if !sprite_holds[k] => {
+                Some(&self.objects[k].held[texture].pyramid.levels[level])
+            }
+            _ => None,
+        };
+        let mut prepared: Vec<Option<_>> = (0..shows.len())
+            .into_par_iter()
+            .map(|k| shown(k).map(|impostor| prepare(Method::Interleaved, impostor, camera)))
+            .collect();
         let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
         for (k, show) in shows.iter().enumerate() {
             match *show {
@@ -378,23 +402,26 @@ impl Manager {
                     geometry.push((k as u32, &scene.objects[k]));
                 }
                 Show::Impostor { texture, level } => {
-                    let key = (self.objects[k].held[texture].eye, level);
-                    if let Some(kept) = &self.sprites[k]
-                        && kept.key == key
-                        && sprite_still_valid(&scene.objects[k].bounds, kept.eye, camera)
+                    if sprite_holds[k]
+                        && let Some(kept) = &self.sprites[k]
                     {
                         kept.sprite.draw(gbuffer);
                         self.counters.sprites += 1;
                         continue;
                     }
                     let impostor = &self.objects[k].held[texture].pyramid.levels[level];
-                    if display(Method::Interleaved, impostor, k as u32, camera, gbuffer).is_err() {
+                    let drawn = prepared[k].take().is_some_and(|p| {
+                        p.and_then(|p| draw(p, impostor, k as u32, camera, gbuffer))
+                            .is_ok()
+                    });
+                    if !drawn {
                         self.sprites[k] = None;
                         geometry.push((k as u32, &scene.objects[k]));
                         continue;
                     }
                     self.counters.warps += 1;
                     let rect = volume_rect(camera, &impostor.texture.camera);
+                    let key = (self.objects[k].held[texture].eye, level);
                     self.sprites[k] = Sprite::capture_in(gbuffer, k as u32, rect).map(|sprite| Kept {
                         sprite,
                         eye: camera.eye,

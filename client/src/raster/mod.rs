@@ -11,6 +11,7 @@ mod clip;
 
 use glam::Vec2;
 use rayon::prelude::*;
+use wide::f32x8;
 
 use relief_core::camera::Camera;
 use relief_core::scene::SceneObject;
@@ -215,51 +216,114 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
     let uniform = uniform_albedo
         .zip(uniform_normal)
         .map(|(albedo, normal)| Stored::new(index, albedo, normal));
+    // The three edge functions, each with its endpoints in `edge`'s order, signed so
+    // that the inside is ≥ 0; evaluated as `edge` does, eight pixels at a time.
+    let edges = [(b, c), (c, a), (a, b)].map(|(p, q)| OrderedEdge::new(p, q, sign));
+    let inv_area = f32x8::splat(inv_area);
+    let inv_depth = inv_depth.map(f32x8::splat);
     for y in y_start..=y_end {
         let py = y as f32 + 0.5;
         let Some((x_first, x_last)) = row_span([a, b, c], sign, py, (x_start, x_end)) else {
             continue;
         };
-        for x in x_first..=x_last {
-            let p = Vec2::new(x as f32 + 0.5, py);
+        let row = edges.map(|e| e.row(py));
+        let row_start = (y - y0) * w;
+        for x in (x_first..=x_last).step_by(LANES) {
+            let n = LANES.min(x_last + 1 - x);
+            let px = f32x8::splat(x as f32) + PIXEL_CENTRES;
             // Screen-space barycentric weights of corners a, b, c.
-            let ea = sign * edge(b, c, p);
-            let eb = sign * edge(c, a, p);
-            let ec = sign * edge(a, b, p);
-            if ea < 0.0 || eb < 0.0 || ec < 0.0 {
+            let [ea, eb, ec] = [0, 1, 2].map(|k| edges[k].at(row[k], px));
+            let inside = ea.simd_ge(f32x8::ZERO) & eb.simd_ge(f32x8::ZERO) & ec.simd_ge(f32x8::ZERO);
+            let mut inside = inside.to_bitmask() & ((1 << n) - 1);
+            if inside == 0 {
                 continue;
             }
-            let (wa, wb, wc) = (ea * inv_area, eb * inv_area, ec * inv_area);
             // Perspective correction: interpolate 1/depth, weight attributes by it.
-            let (pa, pb, pc) = (wa * inv_depth[0], wb * inv_depth[1], wc * inv_depth[2]);
+            let pa = ea * inv_area * inv_depth[0];
+            let pb = eb * inv_area * inv_depth[1];
+            let pc = ec * inv_area * inv_depth[2];
             let sum = pa + pb + pc;
-            let depth = 1.0 / sum;
-            let i = (y - y0) * w + x;
-            // (`depth` is finite and positive: clipping keeps depths at or beyond `near`.)
-            if depth >= rows.depth(i) {
-                continue;
+            let depth = (f32x8::ONE / sum).to_array();
+            let (pa, pb, pc, sum) = (pa.to_array(), pb.to_array(), pc.to_array(), sum.to_array());
+            while inside != 0 {
+                let l = inside.trailing_zeros() as usize;
+                inside &= inside - 1;
+                let i = row_start + x + l;
+                // (`depth` is finite and positive: clipping keeps depths at or beyond
+                // `near`.)
+                if depth[l] >= rows.depth(i) {
+                    continue;
+                }
+                if let Some(stored) = &uniform {
+                    rows.set_stored(i, depth[l], stored);
+                    continue;
+                }
+                let bary = || (s.bary[0] * pa[l] + s.bary[1] * pb[l] + s.bary[2] * pc[l]) / sum[l];
+                rows.set(
+                    i,
+                    GPixel {
+                        depth: depth[l],
+                        object: index,
+                        albedo: uniform_albedo.unwrap_or_else(|| {
+                            let bary = bary();
+                            to_rgb8(mesh.albedo(tri, bary.x, bary.y))
+                        }),
+                        normal: uniform_normal.unwrap_or_else(|| {
+                            let bary = bary();
+                            mesh.shading_normal(tri, bary.x, bary.y)
+                        }),
+                    },
+                );
             }
-            if let Some(stored) = &uniform {
-                rows.set_stored(i, depth, stored);
-                continue;
-            }
-            let bary = || (s.bary[0] * pa + s.bary[1] * pb + s.bary[2] * pc) / sum;
-            rows.set(
-                i,
-                GPixel {
-                    depth,
-                    object: index,
-                    albedo: uniform_albedo.unwrap_or_else(|| {
-                        let bary = bary();
-                        to_rgb8(mesh.albedo(tri, bary.x, bary.y))
-                    }),
-                    normal: uniform_normal.unwrap_or_else(|| {
-                        let bary = bary();
-                        mesh.shading_normal(tri, bary.x, bary.y)
-                    }),
-                },
-            );
         }
+    }
+}
+
+/// Pixels tested at once.
+const LANES: usize = 8;
+
+/// `l + 0.5` in lane `l`: the centres of eight pixels from a row's `x`.
+const PIXEL_CENTRES: f32x8 = f32x8::new([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]);
+
+/// One edge function of a triangle, `sign · edge(p, q, r)`, set up once: [`edge`]'s
+/// endpoint order chosen, its sign and the triangle's orientation folded into one
+/// factor. Evaluated with exactly `edge`'s operations, so shared edges stay watertight.
+#[derive(Clone, Copy)]
+struct OrderedEdge {
+    from: Vec2,
+    step: Vec2,
+    sign: f32,
+}
+
+impl OrderedEdge {
+    fn new(p: Vec2, q: Vec2, sign: f32) -> OrderedEdge {
+        if (p.x, p.y) < (q.x, q.y) {
+            OrderedEdge {
+                from: p,
+                step: q - p,
+                sign,
+            }
+        } else {
+            OrderedEdge {
+                from: q,
+                step: p - q,
+                sign: -sign,
+            }
+        }
+    }
+
+    /// The part of the edge function fixed along the row of centre `py`.
+    #[inline(always)]
+    fn row(&self, py: f32) -> f32 {
+        self.step.x * (py - self.from.y)
+    }
+
+    /// The signed edge function at pixel centres `px` of the row whose [`row`] term is
+    /// `row`.
+    #[inline(always)]
+    fn at(&self, row: f32, px: f32x8) -> f32x8 {
+        f32x8::splat(self.sign)
+            * (f32x8::splat(row) - f32x8::splat(self.step.y) * (px - f32x8::splat(self.from.x)))
     }
 }
 

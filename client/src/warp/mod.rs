@@ -159,25 +159,64 @@ pub fn display(
     camera: &Camera,
     gbuffer: &mut GBuffer,
 ) -> Result<(), WarpError> {
-    let texture = &impostor.texture;
-    match method {
-        Method::ForwardPullPush => forward::display(impostor, object, camera, gbuffer),
-        Method::ForwardKernel(k) => forward::display_kernel(impostor, k as usize, object, camera, gbuffer),
-        Method::Inverse(steps) => inverse::display(impostor, steps as usize, object, camera, gbuffer),
-        Method::Sprite => Err(WarpError::NeedsPreviousFrame),
-        _ => {
-            let params = params::WarpParams::new(texture, camera.eye)?;
-            let variant = match method {
-                Method::TwoPass1d => prewarp::Variant::OneD,
-                Method::TwoPassAsym => prewarp::Variant::Asymmetric,
-                Method::TwoPassComp => prewarp::Variant::Compensated,
-                _ => prewarp::Variant::Interleaved,
-            };
-            // The halves above and below the epipole on two threads: 1.5–1.8× faster
-            // at 512² here (`relief bench warp`, "split ms").
-            let image = prewarp::prewarp_split(impostor, &params, variant);
-            texmap::map(&image, texture, &params, object, camera, gbuffer);
+    draw(
+        prepare(method, impostor, camera)?,
+        impostor,
+        object,
+        camera,
+        gbuffer,
+    )
+}
+
+/// The part of a display that does not touch the frame: the pre-warp of the pre-warp
+/// methods (nothing for the others). Several impostors' can run at once, one per
+/// core, before their [`draw`]s — a frame's impostors differ in size, and one warp
+/// split in two halves at its epipole leaves a core idle when the epipole is near an
+/// edge.
+pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<Prepared, WarpError> {
+    let variant = match method {
+        Method::TwoPass1d => prewarp::Variant::OneD,
+        Method::TwoPassAsym => prewarp::Variant::Asymmetric,
+        Method::TwoPassComp => prewarp::Variant::Compensated,
+        Method::Interleaved => prewarp::Variant::Interleaved,
+        Method::ForwardPullPush => return Ok(Prepared(Stage::PullPush)),
+        Method::ForwardKernel(k) => return Ok(Prepared(Stage::Kernel(k))),
+        Method::Inverse(steps) => return Ok(Prepared(Stage::Inverse(steps))),
+        Method::Sprite => return Err(WarpError::NeedsPreviousFrame),
+    };
+    let params = params::WarpParams::new(&impostor.texture, camera.eye)?;
+    // The halves above and below the epipole on two threads: 1.5–1.8× faster at 512²
+    // here when the epipole is inside (`relief bench warp`, "split ms").
+    let image = prewarp::prewarp_split(impostor, &params, variant);
+    Ok(Prepared(Stage::Prewarped(image, params)))
+}
+
+/// What [`prepare`] made, for [`draw`].
+pub struct Prepared(Stage);
+
+enum Stage {
+    Prewarped(prewarp::PrewarpImage, params::WarpParams),
+    PullPush,
+    Kernel(u8),
+    Inverse(u16),
+}
+
+/// Finishes, into `gbuffer`, the display [`prepare`] began for the same impostor and
+/// camera.
+pub fn draw(
+    prepared: Prepared,
+    impostor: &Impostor,
+    object: u32,
+    camera: &Camera,
+    gbuffer: &mut GBuffer,
+) -> Result<(), WarpError> {
+    match prepared.0 {
+        Stage::Prewarped(image, params) => {
+            texmap::map(&image, &impostor.texture, &params, object, camera, gbuffer);
             Ok(())
         }
+        Stage::PullPush => forward::display(impostor, object, camera, gbuffer),
+        Stage::Kernel(k) => forward::display_kernel(impostor, k as usize, object, camera, gbuffer),
+        Stage::Inverse(steps) => inverse::display(impostor, steps as usize, object, camera, gbuffer),
     }
 }
