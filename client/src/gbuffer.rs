@@ -98,6 +98,18 @@ impl Stored {
             normal: encode_normal(normal),
         }
     }
+
+    /// As [`Stored::new`] with the normal in the textures' 8-bit encoding
+    /// (`n·127.5 + 127.5` per component, possibly blended): kept as `(2e − 255)·128`,
+    /// the same direction at a scale the shading's normalisation removes.
+    #[inline(always)]
+    pub fn with_encoded_normal(object: u32, albedo: [u8; 3], normal: [u8; 3]) -> Stored {
+        Stored {
+            object,
+            albedo: pack_albedo(albedo),
+            normal: normal.map(|e| (2 * e as i16 - 255) * 128),
+        }
+    }
 }
 
 /// Rows of a [`GBuffer`], mutable: the whole buffer or a band of it, so writers can

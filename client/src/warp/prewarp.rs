@@ -38,22 +38,29 @@ pub enum Variant {
 pub struct PTexel {
     /// Displacement along `f` of the surface seen here.
     pub depth: f32,
-    /// Albedo, 8 bits per channel.
-    pub albedo: [u8; 3],
-    /// Normal, encoded `n·0.5 + 0.5` in 8 bits per channel.
-    pub normal: [u8; 3],
+    /// Albedo and encoded normal, packed for blending.
+    pub(crate) attributes: Attributes,
 }
 
 impl PTexel {
     pub const EMPTY: PTexel = PTexel {
         depth: -1.0,
-        albedo: [0; 3],
-        normal: [0; 3],
+        attributes: Attributes(0),
     };
 
     #[inline]
     pub fn is_empty(&self) -> bool {
         self.depth < 0.0
+    }
+
+    /// Albedo, 8 bits per channel.
+    pub fn albedo(&self) -> [u8; 3] {
+        self.attributes.albedo()
+    }
+
+    /// Normal, encoded `n·0.5 + 0.5` in 8 bits per channel.
+    pub fn normal(&self) -> [u8; 3] {
+        self.attributes.normal()
     }
 }
 
@@ -97,7 +104,7 @@ fn axis_extent(n: f32, e: f32, s_min: f32) -> (i32, i32) {
 /// interpolation blends all six at once (two multiplies on 16-bit lanes). The top two
 /// bytes are not read; a source texel keeps its depth level there (see [`pack_texel`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Attributes(u64);
+pub(crate) struct Attributes(u64);
 
 /// A texel as the pre-warp reads it ([`Impostor::packed`]): albedo and encoded normal in
 /// the low six bytes, as [`Attributes`], and the depth level in the top two.
@@ -115,12 +122,15 @@ fn level_of(texel: u64) -> u16 {
 /// The even bytes of a `u64`, each in its own 16-bit lane.
 const EVEN_BYTES: u64 = 0x00ff_00ff_00ff_00ff;
 
+/// One half in each 16-bit lane of a fraction of 256: rounds a lerp to nearest.
+const HALF_LANES: u64 = 0x0080_0080_0080_0080;
+
 impl Attributes {
-    /// `self + (other − self)·t/256` per byte, `t ∈ [0, 256]`: every 16-bit lane holds
-    /// one byte, and `a·(256 − t) + b·t ≤ 255·256` fits it.
+    /// `self + (other − self)·t/256` per byte, rounded, `t ∈ [0, 256]`: every 16-bit
+    /// lane holds one byte, and `a·(256 − t) + b·t + 128 ≤ 255·256 + 128` fits it.
     #[inline(always)]
-    fn lerp(self, other: Attributes, t: u64) -> Attributes {
-        let blend = |a: u64, b: u64| ((a * (256 - t) + b * t) >> 8) & EVEN_BYTES;
+    pub(crate) fn lerp(self, other: Attributes, t: u64) -> Attributes {
+        let blend = |a: u64, b: u64| ((a * (256 - t) + b * t + HALF_LANES) >> 8) & EVEN_BYTES;
         let (a, b) = (self.0, other.0);
         let even = blend(a & EVEN_BYTES, b & EVEN_BYTES);
         let odd = blend((a >> 8) & EVEN_BYTES, (b >> 8) & EVEN_BYTES);
@@ -129,12 +139,22 @@ impl Attributes {
 
     #[inline(always)]
     fn texel(self, depth: f32) -> PTexel {
-        let [r, g, b, x, y, z, ..] = self.0.to_le_bytes();
         PTexel {
             depth,
-            albedo: [r, g, b],
-            normal: [x, y, z],
+            attributes: self,
         }
+    }
+
+    #[inline(always)]
+    pub(crate) fn albedo(self) -> [u8; 3] {
+        let [r, g, b, ..] = self.0.to_le_bytes();
+        [r, g, b]
+    }
+
+    #[inline(always)]
+    pub(crate) fn normal(self) -> [u8; 3] {
+        let [_, _, _, x, y, z, ..] = self.0.to_le_bytes();
+        [x, y, z]
     }
 }
 

@@ -10,7 +10,8 @@ use relief_core::camera::Camera;
 use relief_core::relief::{ReliefTexture, SourceCamera};
 
 use super::params::WarpParams;
-use super::prewarp::PrewarpImage;
+use super::prewarp::{Attributes, PrewarpImage};
+use super::round_small;
 use crate::gbuffer::{GBuffer, Stored};
 
 /// The screen rectangle `[x0, x1) × [y0, y1)` that the plane region `corners` can
@@ -107,25 +108,22 @@ pub fn map(
             let s = params.h / towards_plane;
             let u = params.epipole.x + s * along.y;
             let v = params.epipole.y + s * along.z;
-            let Some((depth, albedo, normal)) = sample(image, u, v) else {
+            let Some((depth, attributes)) = sample(image, u, v) else {
                 continue;
             };
-            pixels.keep_nearer_stored(
-                x,
-                (params.h + depth) / towards_plane,
-                &Stored::new(object, albedo, normal),
-            );
+            let stored = Stored::with_encoded_normal(object, attributes.albedo(), attributes.normal());
+            pixels.keep_nearer_stored(x, (params.h + depth) / towards_plane, &stored);
         }
     });
 }
 
 /// The pre-warped image at plane coordinates `(u, v)`: bilinear where the four nearest
 /// texels are all covered (inside a surface), nearest at silhouettes (blending with
-/// empty texels would invent colours). Returns `(depth, albedo, normal)`, the normal
-/// of length 1 or less: a blend of unit normals, left for the shading to normalise
-/// (vectorised there, per pixel here).
+/// empty texels would invent colours). Returns the depth and the attributes (albedo and
+/// the encoded normal, blended: the normal may come out shorter than unit, and the
+/// shading normalises it).
 #[inline]
-fn sample(image: &PrewarpImage, u: f32, v: f32) -> Option<(f32, [u8; 3], Vec3)> {
+fn sample(image: &PrewarpImage, u: f32, v: f32) -> Option<(f32, Attributes)> {
     let fu = u - 0.5 - image.u0 as f32;
     let fv = v - 0.5 - image.v0 as f32;
     let (x, y) = (fu.floor(), fv.floor());
@@ -134,29 +132,21 @@ fn sample(image: &PrewarpImage, u: f32, v: f32) -> Option<(f32, [u8; 3], Vec3)> 
     let (w, h) = (image.width as i64, image.height as i64);
     if x >= 0 && y >= 0 && x + 1 < w && y + 1 < h {
         let k = y as usize * w as usize + x as usize;
-        let quad = [
-            &image.texels[k],
-            &image.texels[k + 1],
-            &image.texels[k + w as usize],
-            &image.texels[k + w as usize + 1],
-        ];
-        if quad.iter().all(|t| !t.is_empty()) {
-            let weights = [(1.0 - tx) * (1.0 - ty), tx * (1.0 - ty), (1.0 - tx) * ty, tx * ty];
-            let (mut depth, mut albedo, mut normal) = (0.0, Vec3::ZERO, Vec3::ZERO);
-            let rgb = |c: [u8; 3]| Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
-            for (t, wgt) in quad.iter().zip(weights) {
-                depth += wgt * t.depth;
-                albedo += wgt * rgb(t.albedo);
-                // Encoded normals blend linearly; one decode (normalisation) after.
-                normal += wgt * rgb(t.normal);
-            }
-            let a = (albedo + Vec3::splat(0.5))
-                .to_array()
-                .map(|c| c.clamp(0.0, 255.0) as u8);
-            return Some((depth, a, normal / 127.5 - Vec3::ONE));
+        let w = w as usize;
+        let [a, b, c, d] = [k, k + 1, k + w, k + w + 1].map(|k| image.texels[k]);
+        if !(a.is_empty() || b.is_empty() || c.is_empty() || d.is_empty()) {
+            let lerp = |p: f32, q: f32, t: f32| p + (q - p) * t;
+            let depth = lerp(lerp(a.depth, b.depth, tx), lerp(c.depth, d.depth, tx), ty);
+            // (`min`: a NaN fraction must not underflow the lanes.)
+            let (sx, sy) = (
+                round_small(tx * 256.0).min(256) as u64,
+                round_small(ty * 256.0).min(256) as u64,
+            );
+            let top = a.attributes.lerp(b.attributes, sx);
+            let bottom = c.attributes.lerp(d.attributes, sx);
+            return Some((depth, top.lerp(bottom, sy)));
         }
     }
     let texel = image.at(u, v)?;
-    let rgb = Vec3::from(texel.normal.map(f32::from));
-    (!texel.is_empty()).then(|| (texel.depth, texel.albedo, rgb / 127.5 - Vec3::ONE))
+    (!texel.is_empty()).then_some((texel.depth, texel.attributes))
 }
