@@ -10,7 +10,7 @@ use glam::Vec3;
 use tokio::sync::mpsc::{UnboundedReceiver, unbounded_channel};
 
 use relief_client::gbuffer::GBuffer;
-use relief_client::manager::{Command, Config, Manager, Show};
+use relief_client::manager::{Command, Config, Manager, Show, texture_ladder};
 use relief_client::source::spawn_local;
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
@@ -206,4 +206,25 @@ fn the_local_generator_serves_requests_for_now_in_the_order_asked() {
         )
         .collect();
     assert_eq!(order, [1, 2, 3, 4]);
+}
+
+/// Textures are asked for in half-octave steps: never more than twice the texels the
+/// screen can show, within 32…512.
+#[test]
+fn texture_edges_climb_in_half_octaves() {
+    let ladder: Vec<u32> = [1, 32, 33, 48, 49, 64, 65, 100, 130, 200, 257, 361, 512, 5000]
+        .into_iter()
+        .map(texture_ladder)
+        .collect();
+    assert_eq!(
+        ladder,
+        [32, 32, 48, 48, 64, 64, 88, 128, 184, 256, 360, 512, 512, 512]
+    );
+    for need in 32..=512 {
+        let edge = texture_ladder(need);
+        assert!(
+            edge >= need && edge as f32 <= 1.46 * need as f32,
+            "{need} → {edge}"
+        );
+    }
 }
