@@ -13,7 +13,7 @@ use relief_worker::tracer::ObjectTracer;
 
 use crate::gbuffer::GBuffer;
 use crate::impostor::Impostor;
-use crate::metrics::schaufler::initial_resolution;
+use crate::metrics::schaufler::resolution_for;
 use crate::pyramid::Pyramid;
 use crate::raster::rasterize;
 use crate::warp::{Method, WarpError, draw, prepare};
@@ -111,13 +111,9 @@ impl FramePlan {
                 let centre = object.bounds.center();
                 let turn = Quat::from_rotation_y(source_angle_deg.to_radians());
                 let source_eye = centre + turn * (camera.eye - centre);
-                let size = initial_resolution(
-                    camera.height,
-                    object.bounds.extent().length(),
-                    centre.distance(camera.eye),
-                    camera.fov_y,
-                )
-                .clamp(MIN_TEXTURE, MAX_TEXTURE);
+                let size = resolution_for(&object.bounds, camera.eye, camera, TEXEL_TOLERANCE)
+                    .unwrap_or(MAX_TEXTURE)
+                    .clamp(MIN_TEXTURE, MAX_TEXTURE);
                 let texture = bake(&ObjectTracer::new(object), source_eye, size, bits).ok();
                 let impostor = texture.map(|texture| ImpostorObject {
                     index: k as u32,

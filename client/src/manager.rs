@@ -21,7 +21,7 @@ use crate::composite::{
 };
 use crate::gbuffer::GBuffer;
 use crate::metrics::critical::CriticalPoints;
-use crate::metrics::schaufler::{initial_resolution, needs_finer_texture, sprite_still_valid};
+use crate::metrics::schaufler::{needs_finer_texture, resolution_for, sprite_still_valid};
 use crate::predict::Predictor;
 use crate::pyramid::Pyramid;
 use crate::raster::rasterize;
@@ -588,15 +588,9 @@ impl Manager {
     }
 
     /// The texture edge to ask for: what the screen can show of the object from `eye`
-    /// (eq. 5-1), rounded up to the [`texture_ladder`] within the limits.
+    /// ([`resolution_for`], eq. 5-1), rounded up to the [`texture_ladder`].
     fn size_for(object: &SceneObject, eye: Vec3, camera: &Camera) -> u32 {
-        let centre = object.bounds.center();
-        texture_ladder(initial_resolution(
-            camera.height,
-            object.bounds.extent().length(),
-            centre.distance(eye),
-            camera.fov_y,
-        ))
+        texture_ladder(resolution_for(&object.bounds, eye, camera, TEXEL_TOLERANCE).unwrap_or(u32::MAX))
     }
 
     fn request(
@@ -694,6 +688,7 @@ impl Manager {
             }
             let centre = object.bounds.center();
             let grades: Vec<Grade> = self.grades(scene, k, camera.eye, camera).collect();
+            self.counters.needs += 1;
             let least_growth = |fine_only: bool| {
                 grades
                     .iter()

@@ -60,6 +60,12 @@ fn the_demo_flies_and_summarises() {
         "{summary}"
     );
     assert!(summary["requests_now"].as_u64().unwrap() + summary["requests_predicted"].as_u64().unwrap() > 0);
+    // Every impostor-frame's need counted, and most met (textures there or asked for).
+    let (hits, needs) = (
+        summary["prediction_hits"].as_u64().unwrap(),
+        summary["needs"].as_u64().unwrap(),
+    );
+    assert!(needs >= frames && hits <= needs && hits * 2 > needs, "{summary}");
     // Textures arrived and were used: the impostor frames look like the reference.
     assert!(summary["psnr_db_mean"].as_f64().unwrap() > 25.0, "{summary}");
     // Each object that may be an impostor and is in view has its own figures; the

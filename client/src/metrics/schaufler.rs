@@ -31,12 +31,20 @@ pub fn sprite_still_valid(bounds: &Aabb, old_eye: Vec3, camera: &Camera) -> bool
     parallax_angle(bounds, old_eye, camera.eye) <= camera.pixel_angle()
 }
 
-/// β_impostor: the angle one texel subtends from `eye`, at the texture's nearest
-/// point (the centre of its image plane).
+/// β_impostor: the angle one texel subtends from `eye`, at the middle of the texture's
+/// volume — where the object's surface lies on average (at the image plane, the
+/// volume's nearest point, it asked for a third more texels per edge for an eye three
+/// radii from a sphere, texels that the surface, mostly deeper, shows smaller).
 pub fn texel_angle(texture: &SourceCamera, eye: Vec3) -> f32 {
-    let centre = texture.plane_centre();
+    let centre = volume_centre(texture);
     let distance = centre.distance(eye).max(f32::MIN_POSITIVE);
     2.0 * (0.5 * texture.a.length().max(texture.b.length()) / distance).atan()
+}
+
+/// The middle of the texture's volume: its image plane's centre, half-way down its
+/// depth range.
+fn volume_centre(texture: &SourceCamera) -> Vec3 {
+    texture.plane_centre() + texture.f * (0.5 * (texture.depth_near + texture.depth_far))
 }
 
 /// The resolution test (eq. 4-1): the texture is too coarse when a texel subtends more
@@ -45,15 +53,24 @@ pub fn needs_finer_texture(texture: &SourceCamera, camera: &Camera, k: f32) -> b
     texel_angle(texture, camera.eye) > k * camera.pixel_angle()
 }
 
-/// The initial resolution (eq. 5-1): texels enough for the object's projected size and
-/// no more, `res_screen · size / (2 · distance · tan(fov/2))`, at least 1.
-pub fn initial_resolution(screen_resolution: u32, object_size: f32, distance: f32, fov_y: f32) -> u32 {
-    let r = screen_resolution as f32 * object_size / (2.0 * distance * (fov_y * 0.5).tan());
-    if r.is_finite() {
-        r.ceil().max(1.0) as u32
+/// The texture edge for the object with `bounds` seen from `eye` through `camera`: the
+/// fewest texels whose texture facing `eye` ([`SourceCamera::facing`], the one a bake
+/// makes) passes the resolution test with `k` — eq. 5-1 with the texture's own span and
+/// the distance to its plane, so that no texel the screen cannot show is made (the
+/// bounds' diagonal and the distance to their centre, as eq. 5-1 reads literally, asked
+/// for 1.5–3× the texels of a box seen face on). `None` when the eye is inside the
+/// bounds.
+pub fn resolution_for(bounds: &Aabb, eye: Vec3, camera: &Camera, k: f32) -> Option<u32> {
+    let unit = SourceCamera::facing(eye, bounds, 1, 1).ok()?;
+    let span = unit.a.length().max(unit.b.length());
+    let distance = volume_centre(&unit).distance(eye);
+    // texel_angle(N) = 2·atan(span / (2·N·distance)) ≤ k · pixel angle.
+    let edge = 0.5 * span / (distance * (0.5 * k * camera.pixel_angle()).tan());
+    Some(if edge.is_finite() {
+        edge.ceil().clamp(1.0, u32::MAX as f32) as u32
     } else {
-        1
-    }
+        u32::MAX
+    })
 }
 
 #[cfg(test)]
@@ -85,12 +102,31 @@ mod tests {
     }
 
     #[test]
-    fn initial_resolution_matches_the_projected_size() {
-        // A 2 m object 10 m away under a 90° field of view on 1000 rows covers 100 rows.
-        assert_eq!(
-            initial_resolution(1000, 2.0, 10.0, std::f32::consts::FRAC_PI_2),
-            100
-        );
-        assert_eq!(initial_resolution(1000, 2.0, f32::INFINITY, 1.0), 1);
+    fn resolution_is_the_fewest_texels_the_resolution_test_accepts() {
+        let bounds = Aabb {
+            min: Vec3::new(-1.0, 0.0, -0.5),
+            max: Vec3::new(1.0, 3.0, 0.5),
+        };
+        for (eye, height) in [
+            (Vec3::new(0.0, 1.0, 10.0), 1000),
+            (Vec3::new(7.0, 6.0, -4.0), 360),
+            (Vec3::new(300.0, 2.0, 1.0), 720),
+            (Vec3::new(0.0, 1.5, 1.2), 300),
+        ] {
+            let camera =
+                Camera::look_at(eye, bounds.center(), Vec3::Y, 60.0, height * 16 / 9, height).unwrap();
+            for k in [1.0, 2.0] {
+                let n = resolution_for(&bounds, eye, &camera, k).unwrap();
+                let texture = |n| SourceCamera::facing(eye, &bounds, n, n).unwrap();
+                assert!(!needs_finer_texture(&texture(n), &camera, k), "{eye} {k}: {n}");
+                assert!(
+                    n == 1 || needs_finer_texture(&texture(n - 1), &camera, k),
+                    "{eye} {k}: {n}"
+                );
+            }
+        }
+        // Seen from inside, no texture faces the eye.
+        let inside = Camera::look_at(Vec3::new(0.0, 1.0, 0.0), Vec3::Z, Vec3::Y, 60.0, 64, 36).unwrap();
+        assert_eq!(resolution_for(&bounds, inside.eye, &inside, 1.0), None);
     }
 }
