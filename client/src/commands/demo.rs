@@ -488,7 +488,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     } else {
         println!(
             "{} frames ({}x{}) from {}: frame {:.1} ms p50 / {:.1} p95 (all geometry {:.1} ms); \
-             {} requests now, {} predicted, latency {:.0} ms p50 / {:.0} p99; {} stale frames; PSNR {} -> {}",
+             {} requests now, {} predicted, latency {}; {} stale frames; PSNR {} -> {}",
             summary.frames,
             w,
             h,
@@ -498,8 +498,14 @@ pub fn run(args: DemoArgs) -> Result<()> {
             summary.geometry_frame_ms_p50,
             summary.requests_now,
             summary.requests_predicted,
-            summary.latency_ms_p50,
-            summary.latency_ms_p99,
+            if summary.latency_ms_p50.is_finite() {
+                format!(
+                    "{:.0} ms p50 / {:.0} p99",
+                    summary.latency_ms_p50, summary.latency_ms_p99
+                )
+            } else {
+                "not measured (no texture arrived during the flight)".to_string()
+            },
             summary.stale_frames,
             match (summary.psnr_db_mean, summary.psnr_db_min) {
                 (Some(mean), Some(min)) => format!("{mean:.1} dB mean, {min:.1} min"),

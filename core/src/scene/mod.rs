@@ -19,7 +19,17 @@ use crate::mesh::Mesh;
 use crate::shading::{Light, Lighting, Specular};
 
 /// Built-in scenes, embedded so that they work from any directory.
-const BUILTINS: &[(&str, &str)] = &[("default", include_str!("../../../assets/scenes/default.toml"))];
+const BUILTINS: &[(&str, &str)] = &[
+    ("default", include_str!("../../../assets/scenes/default.toml")),
+    (
+        "orbit-knot",
+        include_str!("../../../assets/scenes/orbit-knot.toml"),
+    ),
+    (
+        "orbit-sphere",
+        include_str!("../../../assets/scenes/orbit-sphere.toml"),
+    ),
+];
 
 /// Names accepted by [`Scene::load`] without a file.
 pub fn builtin_names() -> Vec<&'static str> {
@@ -190,5 +200,27 @@ mod tests {
         assert!(err.contains("nonesuch") && err.contains("default"), "{err}");
         let err = Scene::load("/no/such/file.toml").unwrap_err().to_string();
         assert!(err.contains("/no/such/file.toml"), "{err}");
+    }
+
+    /// The orbit scenes are the default scene's objects alone: the same mesh (by
+    /// hash), lights and ground, and an orbit of the camera around the object.
+    #[test]
+    fn orbit_scenes_hold_one_default_object() {
+        let default = Scene::load("default").unwrap();
+        for (name, object) in [("orbit-knot", "knot"), ("orbit-sphere", "sphere")] {
+            let scene = Scene::load(name).unwrap();
+            let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+            assert_eq!(names, ["ground", object], "{name}");
+            let original = default.object(object).unwrap();
+            assert_eq!(scene.object(object).unwrap().hash, original.hash, "{name}");
+            assert_eq!(scene.lighting, default.lighting, "{name}");
+            let Some(PathSegment::Orbit { center, .. }) = scene.path.segments.first() else {
+                panic!("{name}: no orbit");
+            };
+            assert!(
+                Vec3::from(*center).distance(original.bounds.center()) < 0.5,
+                "{name}"
+            );
+        }
     }
 }
