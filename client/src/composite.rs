@@ -111,7 +111,8 @@ impl FramePlan {
                 let centre = object.bounds.center();
                 let turn = Quat::from_rotation_y(source_angle_deg.to_radians());
                 let source_eye = centre + turn * (camera.eye - centre);
-                let size = resolution_for(&object.bounds, camera.eye, camera, TEXEL_TOLERANCE)
+                // (Its volume centre is as far from the source eye as from the eye.)
+                let size = resolution_for(&object.bounds, source_eye, camera, TEXEL_TOLERANCE)
                     .unwrap_or(MAX_TEXTURE)
                     .clamp(MIN_TEXTURE, MAX_TEXTURE);
                 let texture = bake(&ObjectTracer::new(object), source_eye, size, bits).ok();

@@ -116,7 +116,7 @@ impl Stored {
 /// split the work by rows across threads. Pixel `i` is `(i % width, y0 + i / width)`.
 pub struct Rows<'a> {
     /// The first row held.
-    pub y0: u32,
+    y0: u32,
     width: usize,
     depth: &'a mut [f32],
     object: &'a mut [u32],
@@ -125,6 +125,11 @@ pub struct Rows<'a> {
 }
 
 impl Rows<'_> {
+    /// The first row held.
+    pub fn y0(&self) -> u32 {
+        self.y0
+    }
+
     /// Rows held.
     pub fn rows(&self) -> usize {
         self.depth.len() / self.width.max(1)
@@ -147,8 +152,8 @@ impl Rows<'_> {
         true
     }
 
-    /// [`Rows::keep_nearer`] with the attributes in stored form: `depth` must be finite,
-    /// positive and nearer.
+    /// [`Rows::keep_nearer`] with the attributes in stored form: written when `depth` is
+    /// positive and nearer (not NaN).
     #[inline(always)]
     pub fn keep_nearer_stored(&mut self, i: usize, depth: f32, stored: &Stored) -> bool {
         if !(depth > 0.0 && depth < self.depth[i]) {
@@ -184,7 +189,9 @@ impl Rows<'_> {
 }
 
 /// A `width × height` G-buffer, row-major, y down.
-#[derive(Debug, Clone, PartialEq)]
+/// (Not `PartialEq`: the planes other than depth keep stale values where a pixel is
+/// empty.)
+#[derive(Debug, Clone)]
 pub struct GBuffer {
     pub width: u32,
     pub height: u32,
@@ -219,15 +226,25 @@ impl GBuffer {
             .for_each(|chunk| chunk.fill(EMPTY_DEPTH));
     }
 
+    /// The index of the covered pixel `(x, y)`; `None` where nothing is, or outside.
+    #[inline]
+    fn covered_index(&self, x: u32, y: u32) -> Option<usize> {
+        let i = self.index(x as i64, y as i64)?;
+        (self.depth[i] < EMPTY_DEPTH).then_some(i)
+    }
+
+    /// The index of pixel `(x, y)`, if inside.
+    #[inline]
+    fn index(&self, x: i64, y: i64) -> Option<usize> {
+        let inside = x >= 0 && y >= 0 && x < self.width as i64 && y < self.height as i64;
+        inside.then(|| y as usize * self.width as usize + x as usize)
+    }
+
     /// The pixel at `(x, y)` ([`GPixel::EMPTY`] where nothing is, or outside).
     pub fn get(&self, x: u32, y: u32) -> GPixel {
-        if x >= self.width || y >= self.height {
+        let Some(i) = self.covered_index(x, y) else {
             return GPixel::EMPTY;
-        }
-        let i = y as usize * self.width as usize + x as usize;
-        if self.depth[i] >= EMPTY_DEPTH {
-            return GPixel::EMPTY;
-        }
+        };
         let [r, g, b, _] = self.albedo[i].to_le_bytes();
         let n = |k: usize| self.normal[k][i] as f32 / NORMAL_SCALE;
         GPixel {
@@ -241,46 +258,31 @@ impl GBuffer {
     /// The pixel at `(x, y)` exactly as stored, to be written back unchanged with
     /// [`GBuffer::write_stored`]; `None` where nothing is (or outside).
     pub fn stored(&self, x: u32, y: u32) -> Option<(f32, Stored)> {
-        if x >= self.width || y >= self.height {
-            return None;
-        }
-        let i = y as usize * self.width as usize + x as usize;
-        (self.depth[i] < EMPTY_DEPTH).then(|| {
-            let stored = Stored {
-                object: self.object[i],
-                albedo: self.albedo[i],
-                normal: [0, 1, 2].map(|k| self.normal[k][i]),
-            };
-            (self.depth[i], stored)
-        })
+        let i = self.covered_index(x, y)?;
+        let stored = Stored {
+            object: self.object[i],
+            albedo: self.albedo[i],
+            normal: [0, 1, 2].map(|k| self.normal[k][i]),
+        };
+        Some((self.depth[i], stored))
     }
 
     /// [`GBuffer::write`] of a pixel in stored form.
     pub fn write_stored(&mut self, x: i64, y: i64, depth: f32, stored: &Stored) -> bool {
-        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
-            return false;
-        }
-        let i = y as usize * self.width as usize + x as usize;
-        self.all_rows().keep_nearer_stored(i, depth, stored)
+        self.index(x, y)
+            .is_some_and(|i| self.all_rows().keep_nearer_stored(i, depth, stored))
     }
 
     /// The object at `(x, y)`, or [`NO_OBJECT`] where nothing is (or outside).
     #[inline]
     pub fn object_at(&self, x: u32, y: u32) -> u32 {
-        if x >= self.width || y >= self.height {
-            return NO_OBJECT;
-        }
-        let i = y as usize * self.width as usize + x as usize;
-        if self.depth[i] < EMPTY_DEPTH {
-            self.object[i]
-        } else {
-            NO_OBJECT
-        }
+        self.covered_index(x, y).map_or(NO_OBJECT, |i| self.object[i])
     }
 
-    /// Every pixel, row by row.
-    pub fn pixels(&self) -> impl Iterator<Item = GPixel> + '_ {
-        (0..self.height).flat_map(move |y| (0..self.width).map(move |x| self.get(x, y)))
+    /// The depth plane as it is: view depth, `f32::MAX` where empty. (For checks that
+    /// nothing non-finite got in.)
+    pub fn depths(&self) -> &[f32] {
+        &self.depth
     }
 
     /// Pixels with a surface.
@@ -293,11 +295,8 @@ impl GBuffer {
     /// ignored, so a caller can never write outside the buffer or poison it with NaN.
     #[inline]
     pub fn write(&mut self, x: i64, y: i64, pixel: GPixel) -> bool {
-        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
-            return false;
-        }
-        let i = y as usize * self.width as usize + x as usize;
-        self.all_rows().keep_nearer(i, pixel)
+        self.index(x, y)
+            .is_some_and(|i| self.all_rows().keep_nearer(i, pixel))
     }
 
     /// The whole buffer as one [`Rows`].
@@ -341,6 +340,7 @@ impl GBuffer {
     /// terms; empty pixels get the background.
     pub fn shade(&self, scene: &Scene, camera: &Camera) -> Frame {
         let (w, h) = (self.width as usize, self.height as usize);
+        // (Every pixel is written below: no background fill first.)
         let mut frame = Frame {
             width: self.width,
             height: self.height,
@@ -374,13 +374,17 @@ impl GBuffer {
                     let n = LANES.min(w - x);
                     let at = row + x..row + x + n;
                     let depth = f32x8::new(lanes(&self.depth[at.clone()], EMPTY_DEPTH));
-                    let covered = depth.simd_lt(f32x8::splat(EMPTY_DEPTH));
+                    let ids = lanes(&self.object[at.clone()], NO_OBJECT);
+                    // Covered by an object of the scene (a writer's unknown index shows
+                    // the background, as nothing).
+                    let known =
+                        f32x8::new(ids.map(|id| if (id as usize) < specular.len() { -1.0 } else { 0.0 }));
+                    let covered = depth.simd_lt(f32x8::splat(EMPTY_DEPTH)) & known.simd_lt(f32x8::ZERO);
                     if !covered.any() {
                         color[x..x + n].fill(background);
                         object[x..x + n].fill(NO_OBJECT);
                         continue;
                     }
-                    let ids = lanes(&self.object[at.clone()], NO_OBJECT);
                     let specular_of = |id: u32| specular.get(id as usize).copied().unwrap_or_default();
                     let (strength, shininess) = if ids.iter().all(|&id| id == ids[0]) {
                         // (Mostly one object: one look-up.)
@@ -539,10 +543,10 @@ mod tests {
     fn bands_cover_the_rows_asked_once() {
         let mut g = GBuffer::new(3, 10);
         let bands = g.bands(2, 9, 3);
-        let spans: Vec<(u32, usize)> = bands.iter().map(|b| (b.y0, b.rows())).collect();
+        let spans: Vec<(u32, usize)> = bands.iter().map(|b| (b.y0(), b.rows())).collect();
         assert_eq!(spans, vec![(2, 3), (5, 3), (8, 1)]);
         for mut band in bands {
-            let y0 = band.y0;
+            let y0 = band.y0();
             for i in 0..band.rows() * 3 {
                 band.keep_nearer(
                     i,
@@ -565,5 +569,101 @@ mod tests {
             assert_eq!(g.object_at(1, y), expected, "row {y}");
         }
         assert!(g.bands(12, 20, 4).is_empty());
+    }
+
+    /// Shading 8 pixels at a time gives what the model gives each pixel alone, on rows
+    /// that are not a multiple of 8 long, with empty pixels and unknown objects between.
+    #[test]
+    fn shading_lights_each_covered_pixel_as_the_model_does() {
+        let scene = relief_core::scene::Scene::load("default").unwrap();
+        let (w, h) = (13u32, 3u32);
+        let camera = Camera::look_at(Vec3::new(0.0, 2.0, 9.0), Vec3::ZERO, Vec3::Y, 60.0, w, h).unwrap();
+        let mut g = GBuffer::new(w, h);
+        let mut k = 0u32;
+        for y in 0..h {
+            for x in 0..w {
+                k += 1;
+                if k % 5 == 0 {
+                    continue; // empty
+                }
+                let a = k as f32 * 0.7;
+                let object = if k % 7 == 0 {
+                    99
+                } else {
+                    k % scene.objects.len() as u32
+                };
+                g.write(
+                    x as i64,
+                    y as i64,
+                    GPixel {
+                        depth: 2.0 + k as f32 * 0.1,
+                        object,
+                        albedo: [(k * 37 % 256) as u8, (k * 91 % 256) as u8, (k * 13 % 256) as u8],
+                        normal: Vec3::new(a.sin(), a.cos(), 0.4).normalize(),
+                    },
+                );
+            }
+        }
+        let frame = g.shade(&scene, &camera);
+        let background = to_rgb8(scene.background);
+        let (mut lit, mut unknown) = (0, 0);
+        for y in 0..h {
+            for x in 0..w {
+                let at = (y * w + x) as usize;
+                let p = g.get(x, y);
+                let Some(o) = scene.objects.get(p.object as usize).filter(|_| p.is_covered()) else {
+                    unknown += (p.is_covered()) as usize;
+                    assert_eq!(
+                        (frame.color[at], frame.object[at]),
+                        (background, NO_OBJECT),
+                        "({x}, {y})"
+                    );
+                    continue;
+                };
+                let unit = camera.ray_direction(x as f32 + 0.5, y as f32 + 0.5);
+                // (Depth is along the view axis.)
+                let direction = unit / unit.dot(camera.forward);
+                let point = relief_core::shading::SurfacePoint {
+                    albedo: Vec3::from(p.albedo.map(f32::from)) / 255.0,
+                    normal: p.normal,
+                    position: camera.eye + direction * p.depth,
+                    towards_eye: -direction,
+                    specular: o.specular,
+                };
+                let expected = to_rgb8(scene.lighting.shade(&point));
+                let close = frame.color[at]
+                    .iter()
+                    .zip(expected)
+                    .all(|(&a, b)| a.abs_diff(b) <= 1);
+                assert!(close, "({x}, {y}): {:?} vs {expected:?}", frame.color[at]);
+                assert_eq!(frame.object[at], p.object);
+                lit += 1;
+            }
+        }
+        assert!(lit > 20 && unknown > 2, "{lit} lit, {unknown} unknown");
+    }
+
+    /// A pixel read in stored form writes back unchanged; stored writes keep the depth
+    /// test and refuse NaN and non-positive depths.
+    #[test]
+    fn stored_pixels_write_back_unchanged() {
+        let mut g = GBuffer::new(4, 4);
+        let p = GPixel {
+            depth: 3.0,
+            object: 2,
+            albedo: [1, 2, 3],
+            normal: Vec3::new(0.0, 0.6, -0.8),
+        };
+        assert!(g.write(1, 2, p));
+        let (depth, stored) = g.stored(1, 2).unwrap();
+        assert_eq!((depth, stored.object()), (3.0, 2));
+        let mut h = GBuffer::new(4, 4);
+        assert!(h.write_stored(1, 2, depth, &stored));
+        assert_eq!(h.stored(1, 2), g.stored(1, 2));
+        for bad in [f32::NAN, 0.0, -1.0, 3.0, 4.0] {
+            assert!(!h.write_stored(1, 2, bad, &stored), "{bad}");
+        }
+        assert!(!h.write_stored(4, 0, 1.0, &stored) && !h.write_stored(0, -1, 1.0, &stored));
+        assert_eq!((g.stored(0, 0), g.stored(9, 9)), (None, None));
     }
 }

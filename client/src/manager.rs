@@ -21,7 +21,7 @@ use crate::composite::{
 };
 use crate::gbuffer::GBuffer;
 use crate::metrics::critical::CriticalPoints;
-use crate::metrics::schaufler::{needs_finer_texture, resolution_for, sprite_still_valid};
+use crate::metrics::schaufler::{needs_finer_texture, resolution_for, sprite_still_valid, volume_centre};
 use crate::predict::Predictor;
 use crate::pyramid::Pyramid;
 use crate::raster::rasterize;
@@ -199,7 +199,7 @@ fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     let texture = &held.pyramid.levels[0].texture;
     let c = &texture.camera;
     let centre = c.plane_centre();
-    let middle = centre + c.f * (c.depth_far * 0.5);
+    let middle = volume_centre(c);
     let ratio = (eye - middle).length() / (held.eye - middle).length();
     if angle_between(middle, held.eye, eye) > MAX_TURN
         || !(1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO).contains(&ratio)
@@ -210,6 +210,8 @@ fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
         return f32::INFINITY;
     };
     let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
+    // (At the image plane, the nearest the texture's surface comes: where a gap looks
+    // widest.)
     let pixels_per_texel =
         c.a.length().max(c.b.length()) * focal / centre.distance(eye).max(f32::MIN_POSITIVE);
     held.critical.worst_growth(&params, &held.baseline) * pixels_per_texel
@@ -319,7 +321,7 @@ pub fn texture_ladder(need: u32) -> u32 {
             ((edge / 8.0).round() * 8.0) as u32
         })
         .find(|&edge| edge >= need.min(largest))
-        .unwrap_or(largest)
+        .map_or(largest, |edge| edge.min(largest))
 }
 
 /// The angle at `centre` between two eyes.

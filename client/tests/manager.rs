@@ -61,7 +61,15 @@ fn still_eyes_draw_sprites_and_moving_eyes_warp() {
     .unwrap();
     let shows = manager.frame(&scene, &moved, 0.2);
     manager.render(&scene, &shows, &moved, &mut gbuffer);
-    assert!(manager.counters.warps > impostors);
+    assert_eq!(manager.counters.warps, 2 * impostors);
+    // After that step no image was kept (the eye was moving): the first still frame
+    // warps again, and keeps its images; the next one redraws them.
+    let shows = manager.frame(&scene, &moved, 0.3);
+    manager.render(&scene, &shows, &moved, &mut gbuffer);
+    assert_eq!(manager.counters.warps, 3 * impostors);
+    let shows = manager.frame(&scene, &moved, 0.4);
+    manager.render(&scene, &shows, &moved, &mut gbuffer);
+    assert_eq!(manager.counters.sprites, 2 * impostors);
 }
 
 /// The index of `name` in `scene`.
@@ -208,8 +216,8 @@ fn the_local_generator_serves_requests_for_now_in_the_order_asked() {
     assert_eq!(order, [1, 2, 3, 4]);
 }
 
-/// Textures are asked for in half-octave steps: never more than twice the texels the
-/// screen can show, within 32…512.
+/// Textures are asked for in half-octave steps: edges at most 1.46× (texels 2.1×) what
+/// the screen can show, within 32…512.
 #[test]
 fn texture_edges_climb_in_half_octaves() {
     let ladder: Vec<u32> = [1, 32, 33, 48, 49, 64, 65, 100, 130, 200, 257, 361, 512, 5000]

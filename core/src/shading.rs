@@ -71,12 +71,6 @@ pub struct Vec3x8 {
 }
 
 impl Vec3x8 {
-    pub const ZERO: Vec3x8 = Vec3x8 {
-        x: f32x8::ZERO,
-        y: f32x8::ZERO,
-        z: f32x8::ZERO,
-    };
-
     /// `v` in every lane.
     #[inline(always)]
     pub fn splat(v: Vec3) -> Vec3x8 {
@@ -87,7 +81,7 @@ impl Vec3x8 {
         }
     }
 
-    /// `vectors[l]` in lane `l`; lanes past the slice are zero.
+    /// The `l`-th vector in lane `l`; lanes past the vectors given are zero.
     #[inline(always)]
     pub fn gather(vectors: impl IntoIterator<Item = Vec3>) -> Vec3x8 {
         let mut v = [[0.0; LANES]; 3];
@@ -145,7 +139,8 @@ impl Vec3x8 {
     pub fn normalize_or_zero(self) -> Vec3x8 {
         let reciprocal = f32x8::ONE / self.dot(self).sqrt();
         let defined = reciprocal.is_finite() & reciprocal.simd_gt(f32x8::ZERO);
-        self.scale(defined.select(reciprocal, f32x8::ZERO))
+        // (Selected after scaling: an infinite component times zero would be NaN.)
+        self.map(|c| defined.select(c * reciprocal, f32x8::ZERO))
     }
 }
 
@@ -390,6 +385,7 @@ mod tests {
                 let t = k as f32 / 63.0;
                 Vec3::new(t * 1.2 - 0.1, (t * 255.0).fract(), 0.5 / 255.0 * k as f32)
             })
+            .chain([Vec3::new(f32::NAN, f32::INFINITY, f32::NEG_INFINITY)])
             .collect();
         for chunk in values.chunks(LANES) {
             let bytes = to_rgb8_lanes(Vec3x8::gather(chunk.iter().copied()));

@@ -1,5 +1,6 @@
 //! Schaufler's validity tests (thesis ch. 4.1.1, 5.2–5.3): when a sprite may be reused
-//! as it is, when a texture is too coarse for the screen, and the initial resolution.
+//! as it is, when a texture is too coarse for the screen, and the resolution to ask
+//! for.
 
 use glam::Vec3;
 
@@ -43,7 +44,7 @@ pub fn texel_angle(texture: &SourceCamera, eye: Vec3) -> f32 {
 
 /// The middle of the texture's volume: its image plane's centre, half-way down its
 /// depth range.
-fn volume_centre(texture: &SourceCamera) -> Vec3 {
+pub(crate) fn volume_centre(texture: &SourceCamera) -> Vec3 {
     texture.plane_centre() + texture.f * (0.5 * (texture.depth_near + texture.depth_far))
 }
 
@@ -55,11 +56,11 @@ pub fn needs_finer_texture(texture: &SourceCamera, camera: &Camera, k: f32) -> b
 
 /// The texture edge for the object with `bounds` seen from `eye` through `camera`: the
 /// fewest texels whose texture facing `eye` ([`SourceCamera::facing`], the one a bake
-/// makes) passes the resolution test with `k` — eq. 5-1 with the texture's own span and
-/// the distance to its plane, so that no texel the screen cannot show is made (the
-/// bounds' diagonal and the distance to their centre, as eq. 5-1 reads literally, asked
-/// for 1.5–3× the texels of a box seen face on). `None` when the eye is inside the
-/// bounds.
+/// makes) passes the resolution test with `k` — eq. 5-1 with the texture's own span,
+/// at the middle of its volume, so that no texel the screen cannot show is made (the
+/// bounds' diagonal, as eq. 5-1 reads literally, asked for up to 1.7× the texels per
+/// edge of a box seen face on). `None` when no texture faces the eye (inside the
+/// bounds, or a non-finite eye or bounds).
 pub fn resolution_for(bounds: &Aabb, eye: Vec3, camera: &Camera, k: f32) -> Option<u32> {
     let unit = SourceCamera::facing(eye, bounds, 1, 1).ok()?;
     let span = unit.a.length().max(unit.b.length());

@@ -15,7 +15,7 @@ use wide::f32x8;
 
 use relief_core::camera::Camera;
 use relief_core::scene::SceneObject;
-use relief_core::shading::to_rgb8;
+use relief_core::shading::{LANES, to_rgb8};
 
 use crate::gbuffer::{GBuffer, GPixel, Rows, Stored};
 
@@ -190,7 +190,7 @@ fn pixel_box(xy: [Vec2; 3], w: usize, h: usize) -> Option<(usize, usize, usize, 
 
 /// Scan-converts one triangle into the band `rows` of the `w × h` screen.
 fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (w, h): (usize, usize)) {
-    let (y0, rows_here) = (rows.y0 as usize, rows.rows());
+    let (y0, rows_here) = (rows.y0() as usize, rows.rows());
     let [a, b, c] = s.xy;
     // Edge functions, each evaluated with its edge's endpoints in a fixed order so that
     // two triangles sharing an edge get exactly opposite values there: no pixel on a
@@ -250,8 +250,9 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
                 inside &= inside - 1;
                 let i = row_start + x + l;
                 // (`depth` is finite and positive: clipping keeps depths at or beyond
-                // `near`.)
-                if depth[l] >= rows.depth(i) {
+                // `near`; tested as "nearer" all the same, so a NaN would not pass.)
+                let nearer = depth[l] < rows.depth(i);
+                if !nearer {
                     continue;
                 }
                 if let Some(stored) = &uniform {
@@ -278,9 +279,6 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
         }
     }
 }
-
-/// Pixels tested at once.
-const LANES: usize = 8;
 
 /// `l + 0.5` in lane `l`: the centres of eight pixels from a row's `x`.
 const PIXEL_CENTRES: f32x8 = f32x8::new([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]);

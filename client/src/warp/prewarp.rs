@@ -52,16 +52,6 @@ impl PTexel {
     pub fn is_empty(&self) -> bool {
         self.depth < 0.0
     }
-
-    /// Albedo, 8 bits per channel.
-    pub fn albedo(&self) -> [u8; 3] {
-        self.attributes.albedo()
-    }
-
-    /// Normal, encoded `n·0.5 + 0.5` in 8 bits per channel.
-    pub fn normal(&self) -> [u8; 3] {
-        self.attributes.normal()
-    }
 }
 
 /// The pre-warped image: texel `(x, y)` covers source-plane coordinates
@@ -80,8 +70,10 @@ impl PrewarpImage {
     /// The texel covering plane coordinates `(u, v)`, if inside.
     #[inline]
     pub fn at(&self, u: f32, v: f32) -> Option<&PTexel> {
-        let x = u.floor() as i64 - self.u0 as i64;
-        let y = v.floor() as i64 - self.v0 as i64;
+        // (Saturating: a coordinate may be infinite, from a ray nearly parallel to
+        // the plane.)
+        let x = (u.floor() as i64).saturating_sub(self.u0 as i64);
+        let y = (v.floor() as i64).saturating_sub(self.v0 as i64);
         if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
             return None;
         }
@@ -631,5 +623,22 @@ mod tests {
             visits::<false>(3.7, -1e9, end).1,
             (-10..4).rev().collect::<Vec<_>>()
         );
+    }
+
+    /// The packed lerp rounds each byte to nearest, ends exact, on all six lanes.
+    #[test]
+    fn attribute_lerp_rounds_each_byte() {
+        let (a, b) = ([0u8, 10, 255, 100, 3, 254], [255u8, 11, 0, 100, 4, 1]);
+        let pack = |v: [u8; 6]| Attributes(pack_texel([v[0], v[1], v[2]], [v[3], v[4], v[5]], 0));
+        for t in [0u64, 1, 77, 128, 200, 255, 256] {
+            let got = pack(a).lerp(pack(b), t);
+            let bytes: Vec<u8> = got.albedo().into_iter().chain(got.normal()).collect();
+            let expected: Vec<u8> = a
+                .iter()
+                .zip(b)
+                .map(|(&a, b)| ((a as f64 * (256 - t) as f64 + b as f64 * t as f64) / 256.0).round() as u8)
+                .collect();
+            assert_eq!(bytes, expected, "t = {t}");
+        }
     }
 }

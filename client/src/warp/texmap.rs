@@ -94,7 +94,7 @@ pub fn map(
     // Rows are independent (each pixel samples the image and depth-tests its own slot):
     // split across cores.
     gbuffer.bands(y0, y1, 1).into_par_iter().for_each(|mut pixels| {
-        let y = pixels.y0;
+        let y = pixels.y0();
         let sy = (1.0 - 2.0 * (y as f32 + 0.5) / camera.height as f32) * tan_half;
         let sx0 = (2.0 * (x0 as f32 + 0.5) / camera.width as f32 - 1.0) * tan_half * aspect;
         let mut row = dots(camera.forward + camera.right * sx0 + camera.up * sy);
@@ -130,7 +130,8 @@ fn sample(image: &PrewarpImage, u: f32, v: f32) -> Option<(f32, Attributes)> {
     let (tx, ty) = (fu - x, fv - y);
     let (x, y) = (x as i64, y as i64);
     let (w, h) = (image.width as i64, image.height as i64);
-    if x >= 0 && y >= 0 && x + 1 < w && y + 1 < h {
+    // (`x < w - 1`, not `x + 1 < w`: an infinite coordinate saturates to i64::MAX.)
+    if x >= 0 && y >= 0 && x < w - 1 && y < h - 1 {
         let k = y as usize * w as usize + x as usize;
         let w = w as usize;
         let [a, b, c, d] = [k, k + 1, k + w, k + w + 1].map(|k| image.texels[k]);
