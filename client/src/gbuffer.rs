@@ -46,13 +46,6 @@ impl GPixel {
     pub fn is_covered(&self) -> bool {
         self.depth < EMPTY_DEPTH
     }
-
-    /// Whether this can be written: a finite positive depth and a finite normal, so no
-    /// writer can poison the buffer with NaN.
-    #[inline]
-    fn is_writable(&self) -> bool {
-        self.depth > 0.0 && self.depth < EMPTY_DEPTH && self.normal.is_finite()
-    }
 }
 
 /// The depth of a pixel nothing has been written to.
@@ -145,22 +138,29 @@ impl Rows<'_> {
     /// it did. Non-finite or non-positive depths and non-finite normals are ignored.
     #[inline(always)]
     pub fn keep_nearer(&mut self, i: usize, pixel: GPixel) -> bool {
-        if !pixel.is_writable() || pixel.depth >= self.depth[i] {
-            return false;
+        let written = pixel.normal.is_finite() && self.nearer(i, pixel.depth);
+        if written {
+            self.set(i, pixel);
         }
-        self.set(i, pixel);
-        true
+        written
     }
 
     /// [`Rows::keep_nearer`] with the attributes in stored form: written when `depth` is
     /// positive and nearer (not NaN).
     #[inline(always)]
     pub fn keep_nearer_stored(&mut self, i: usize, depth: f32, stored: &Stored) -> bool {
-        if !(depth > 0.0 && depth < self.depth[i]) {
-            return false;
+        let written = self.nearer(i, depth);
+        if written {
+            self.set_stored(i, depth, stored);
         }
-        self.set_stored(i, depth, stored);
-        true
+        written
+    }
+
+    /// The one depth test: `depth` positive and nearer than pixel `i`'s (so finite,
+    /// and never NaN).
+    #[inline(always)]
+    fn nearer(&self, i: usize, depth: f32) -> bool {
+        depth > 0.0 && depth < self.depth[i]
     }
 
     /// Writes `pixel` at pixel `i` without a test: for a writer that has done the depth
@@ -329,7 +329,7 @@ impl GBuffer {
         while y < y1 {
             let rows = rows_per_band.max(1).min(y1 - y);
             let (band, tail) = rest.split_off(rows * w);
-            bands.push(Rows { y0: y as u32, ..band });
+            bands.push(band);
             rest = tail;
             y += rows;
         }
@@ -375,12 +375,14 @@ impl GBuffer {
                     let at = row + x..row + x + n;
                     let depth = f32x8::new(lanes(&self.depth[at.clone()], EMPTY_DEPTH));
                     let ids = lanes(&self.object[at.clone()], NO_OBJECT);
-                    // Covered by an object of the scene (a writer's unknown index shows
-                    // the background, as nothing).
-                    let known =
-                        f32x8::new(ids.map(|id| if (id as usize) < specular.len() { -1.0 } else { 0.0 }));
-                    let covered = depth.simd_lt(f32x8::splat(EMPTY_DEPTH)) & known.simd_lt(f32x8::ZERO);
-                    if !covered.any() {
+                    let filled = depth.simd_lt(f32x8::splat(EMPTY_DEPTH));
+                    // Shown: filled by an object of the scene (a writer's unknown index
+                    // shows the background, as nothing). Lane `l` is bit `l`.
+                    let known = ids.iter().enumerate().fold(0, |mask, (l, &id)| {
+                        mask | ((((id as usize) < specular.len()) as u32) << l)
+                    });
+                    let shown = filled.to_bitmask() & known;
+                    if shown == 0 {
                         color[x..x + n].fill(background);
                         object[x..x + n].fill(NO_OBJECT);
                         continue;
@@ -413,7 +415,7 @@ impl GBuffer {
                         z: f32x8::splat(row_start.z) + f32x8::splat(x_step.z) * xs,
                     };
                     // (Empty lanes hold a huge depth: keep their positions finite.)
-                    let depth = covered.select(depth, f32x8::ZERO);
+                    let depth = filled.select(depth, f32x8::ZERO);
                     let surfaces = SurfaceLanes {
                         albedo: Vec3x8 {
                             x: channel(0),
@@ -432,16 +434,15 @@ impl GBuffer {
                         shininess,
                     };
                     let lit = to_rgb8_lanes(scene.lighting.shade_lanes(&surfaces));
-                    let covered = covered.to_bitmask();
-                    if n == LANES && covered == (1 << LANES) - 1 {
+                    if shown == (1 << LANES) - 1 {
                         color[x..x + LANES].copy_from_slice(&lit);
                         object[x..x + LANES].copy_from_slice(&ids);
                         continue;
                     }
                     for l in 0..n {
-                        let shown = covered & (1 << l) != 0;
-                        color[x + l] = if shown { lit[l] } else { background };
-                        object[x + l] = if shown { ids[l] } else { NO_OBJECT };
+                        let lit_here = shown & (1 << l) != 0;
+                        color[x + l] = if lit_here { lit[l] } else { background };
+                        object[x + l] = if lit_here { ids[l] } else { NO_OBJECT };
                     }
                 }
             });

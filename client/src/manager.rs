@@ -16,9 +16,7 @@ use relief_core::frame::Frame;
 use relief_core::relief::{DepthBits, ReliefTexture};
 use relief_core::scene::{Scene, SceneObject};
 
-use crate::composite::{
-    GeometryReason, MAX_TEXTURE, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason, near_plane,
-};
+use crate::composite::{GeometryReason, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason, near_plane};
 use crate::gbuffer::GBuffer;
 use crate::metrics::critical::CriticalPoints;
 use crate::metrics::schaufler::{needs_finer_texture, resolution_for, sprite_still_valid, volume_centre};
@@ -308,20 +306,20 @@ fn probe_valid_angle(held: &Held, centre: Vec3, camera: &Camera, tolerance: f32)
     lo
 }
 
-/// The smallest texture edge of the ladder the manager asks for that holds `need`
-/// texels: half-octave steps from 32 to 512 (32, 48, 64, 88, 128, 184, 256, 360, 512;
-/// the odd steps rounded to multiples of 8), the largest when `need` is beyond. With
-/// power-of-two edges a texture had up to 4× the texels the screen can show, each
-/// warped every frame; here at most 2.1× (edges ≤ 1.46× what is needed).
+/// The texture edges the manager asks for: half-octave steps from 32 to 512 (the odd
+/// steps, 32·√2^k, rounded to multiples of 8). With power-of-two edges a texture had up
+/// to 4× the texels the screen can show, each warped every frame; here at most 2.1×
+/// (edges ≤ 1.46× what is needed).
+const TEXTURE_LADDER: [u32; 9] = [32, 48, 64, 88, 128, 184, 256, 360, 512];
+
+/// The smallest edge of the [`TEXTURE_LADDER`] that holds `need` texels, the largest
+/// when `need` is beyond.
 pub fn texture_ladder(need: u32) -> u32 {
-    let (smallest, largest) = (MIN_TEXTURE.max(32), MAX_TEXTURE.min(512));
-    (0..)
-        .map(|k: i32| {
-            let edge = 2f32.powf(k as f32 / 2.0) * smallest as f32;
-            ((edge / 8.0).round() * 8.0) as u32
-        })
-        .find(|&edge| edge >= need.min(largest))
-        .map_or(largest, |edge| edge.min(largest))
+    let largest = TEXTURE_LADDER[TEXTURE_LADDER.len() - 1];
+    TEXTURE_LADDER
+        .into_iter()
+        .find(|&edge| edge >= need)
+        .unwrap_or(largest)
 }
 
 /// The angle at `centre` between two eyes.

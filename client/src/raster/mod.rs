@@ -124,12 +124,7 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
 /// order so that the edge `q → p` gives exactly the negated value.
 #[inline(always)]
 fn edge(p: Vec2, q: Vec2, r: Vec2) -> f32 {
-    let orient = |p: Vec2, q: Vec2| (q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x);
-    if (p.x, p.y) < (q.x, q.y) {
-        orient(p, q)
-    } else {
-        -orient(q, p)
-    }
+    OrderedEdge::new(p, q, 1.0).value_at(r)
 }
 
 /// The pixels `x` of row centre `py` in `bounds` whose centres the triangle `corners`
@@ -283,9 +278,10 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
 /// `l + 0.5` in lane `l`: the centres of eight pixels from a row's `x`.
 const PIXEL_CENTRES: f32x8 = f32x8::new([0.5, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5]);
 
-/// One edge function of a triangle, `sign · edge(p, q, r)`, set up once: [`edge`]'s
-/// endpoint order chosen, its sign and the triangle's orientation folded into one
-/// factor. Evaluated with exactly `edge`'s operations, so shared edges stay watertight.
+/// One edge function of a triangle, `sign · edge(p, q, r)`, set up once: the endpoints
+/// in lexicographic order (so `q → p` gives exactly the negated values: shared edges
+/// stay watertight), that order's sign and the triangle's orientation folded into one
+/// factor. [`edge`] is one of these at one point.
 #[derive(Clone, Copy)]
 struct OrderedEdge {
     from: Vec2,
@@ -310,14 +306,20 @@ impl OrderedEdge {
         }
     }
 
+    /// The edge function at `r`.
+    #[inline(always)]
+    fn value_at(&self, r: Vec2) -> f32 {
+        self.sign * (self.row(r.y) - self.step.y * (r.x - self.from.x))
+    }
+
     /// The part of the edge function fixed along the row of centre `py`.
     #[inline(always)]
     fn row(&self, py: f32) -> f32 {
         self.step.x * (py - self.from.y)
     }
 
-    /// The signed edge function at pixel centres `px` of the row whose [`row`] term is
-    /// `row`.
+    /// [`OrderedEdge::value_at`] at pixel centres `px` of the row whose
+    /// [`OrderedEdge::row`] term is `row`, with the same operations.
     #[inline(always)]
     fn at(&self, row: f32, px: f32x8) -> f32x8 {
         f32x8::splat(self.sign)
