@@ -15,6 +15,35 @@ pub fn vec3(text: &str) -> Result<Vec3, String> {
     relief_core::vector::parse_vec3(text)
 }
 
+/// A `*.png` output path (the extension names the format written).
+pub fn png_path(text: &str) -> Result<std::path::PathBuf, String> {
+    let path = std::path::PathBuf::from(text);
+    match path.extension() {
+        Some(e) if e.eq_ignore_ascii_case("png") => Ok(path),
+        _ => Err(format!("`{text}`: the output is a PNG image; name it *.png")),
+    }
+}
+
+/// Checks, before any work, that a file can be written at `path` (creating its
+/// directory), so that a bad `--out` fails at once instead of after the work. Leaves
+/// no file behind that was not there.
+pub fn ensure_writable(flag: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    let context = || format!("{flag} {}", path.display());
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|e| anyhow!("{}: {e}", context()))?;
+    }
+    let existed = path.exists();
+    std::fs::OpenOptions::new()
+        .append(true)
+        .create(true)
+        .open(path)
+        .map_err(|e| anyhow!("{}: {e}", context()))?;
+    if !existed {
+        std::fs::remove_file(path).map_err(|e| anyhow!("{}: {e}", context()))?;
+    }
+    Ok(())
+}
+
 /// A relief-texture edge in texels: `1 ..= MAX_TEXTURE_SIZE`.
 pub fn texture_size(text: &str) -> Result<u32, String> {
     let n: u32 = text

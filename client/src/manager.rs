@@ -377,6 +377,11 @@ impl Manager {
         self.objects.get(object).map_or(0, |o| o.received)
     }
 
+    /// Textures held, over all objects: none after a whole run means none ever came.
+    pub fn textures_held(&self) -> usize {
+        self.objects.iter().map(|o| o.held.len()).sum()
+    }
+
     /// The held texture `texture` of `object`.
     pub fn pyramid(&self, object: usize, texture: usize) -> &Pyramid {
         &self.objects[object].held[texture].pyramid

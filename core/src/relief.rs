@@ -93,6 +93,9 @@ pub enum FacingError {
     NonFiniteEye(Vec3),
     #[error("the object's bounds are empty or not finite")]
     BadBounds,
+    /// Eye or object so large that the texture's camera overflows `f32`.
+    #[error("the eye {0} or the object's bounds are too large: the texture's camera overflows")]
+    Overflow(Vec3),
 }
 
 impl SourceCamera {
@@ -114,7 +117,14 @@ impl SourceCamera {
             return Err(FacingError::EyeInsideBounds);
         }
         let centre = bounds.center();
-        let f = (centre - eye).normalize();
+        // (A far eye's offset is scaled before normalising: its squared length
+        // overflows.)
+        let offset = centre - eye;
+        let f = if offset.length_squared().is_finite() {
+            offset.normalize()
+        } else {
+            (offset / offset.abs().max_element()).normalize()
+        };
         // Image "up" follows world +y unless the view is nearly vertical.
         let world_up = if f.y.abs() < 0.99 { Vec3::Y } else { Vec3::Z };
         let right = f.cross(world_up).normalize();
@@ -136,7 +146,7 @@ impl SourceCamera {
             }
         }
         let span = hi - lo;
-        Ok(SourceCamera {
+        let camera = SourceCamera {
             width,
             height,
             origin: centre + right * lo.x + down * lo.y + f * lo.z,
@@ -145,7 +155,17 @@ impl SourceCamera {
             f,
             depth_near: 0.0,
             depth_far: span.z,
-        })
+        };
+        let finite = camera.origin.is_finite()
+            && camera.f.is_finite()
+            && camera.a.cross(camera.b).length_squared() > 0.0
+            && camera.a.cross(camera.b).is_finite()
+            && camera.depth_far.is_normal();
+        if finite {
+            Ok(camera)
+        } else {
+            Err(FacingError::Overflow(eye))
+        }
     }
 
     /// The centre of the image plane (`t = 0`).
@@ -474,6 +494,21 @@ mod tests {
                 assert!((c.depth_of_level(q, bits) - t).abs() <= 0.5 * c.depth_quantum(bits) + 1e-6);
             }
         }
+    }
+
+    #[test]
+    fn far_eyes_and_huge_objects_face_or_fail_clearly() {
+        // An eye 1e20 away: its offset's squared length overflows f32, the direction
+        // must not.
+        let c = SourceCamera::facing(Vec3::new(-3.0, 1.0, 1e20), &unit_box(), 4, 4).unwrap();
+        assert!(c.f.abs_diff_eq(-Vec3::Z, 1e-6) && c.origin.is_finite(), "{c:?}");
+        // Bounds of 1e30: the camera's spans overflow — an error, never NaN.
+        let huge = Aabb {
+            min: Vec3::splat(-1e38),
+            max: Vec3::splat(1e38),
+        };
+        let err = SourceCamera::facing(Vec3::new(3e38, 3e38, 3e38), &huge, 4, 4).unwrap_err();
+        assert!(matches!(err, FacingError::Overflow(_)), "{err}");
     }
 
     #[test]

@@ -60,6 +60,7 @@ impl Bundle {
 
     /// Writes the files under `dir/<hash>/` and loads the scene from there.
     pub fn load(&self, dir: &Path) -> Result<Scene> {
+        self.check_references()?;
         let root = dir.join(self.hash.to_string());
         for f in &self.bundle.files {
             let relative = safe_relative(&f.path)
@@ -73,6 +74,78 @@ impl Bundle {
         let scene_path = root.join(&self.bundle.root);
         Scene::load(&scene_path.to_string_lossy())
     }
+}
+
+impl Bundle {
+    /// Every file the scene's loaders open must lie inside the bundle: the scene's
+    /// `obj` entries (which must also be files of the bundle), the OBJs' `mtllib`s
+    /// and the MTLs' `map_Kd` textures. The server loads bundles from anyone who can
+    /// reach it: an absolute or `..` reference would read its own disk.
+    fn check_references(&self) -> Result<()> {
+        let files: std::collections::HashSet<&str> =
+            self.bundle.files.iter().map(|f| f.path.as_str()).collect();
+        for file in &self.bundle.files {
+            let dir = Path::new(&file.path).parent().unwrap_or(Path::new(""));
+            let extension = Path::new(&file.path)
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase());
+            let (references, must_exist) = match extension.as_deref() {
+                Some("toml") => (obj_entries(&file.data), true),
+                Some("obj") => (referenced(&file.data, "mtllib "), false),
+                Some("mtl") => (referenced(&file.data, "map_Kd "), false),
+                _ => continue,
+            };
+            for reference in references {
+                let inside = dir.join(reference.replace('\\', "/"));
+                let inside = safe_relative(&inside.to_string_lossy());
+                let found = inside
+                    .as_ref()
+                    .is_some_and(|p| !must_exist || files.contains(p.to_string_lossy().as_ref()));
+                if !found {
+                    return Err(Error::Invalid(format!(
+                        "`{}` refers to `{reference}`, which is not a file of the bundle",
+                        file.path
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The `obj` entries of a scene file's objects (none when it is not valid TOML: the
+/// scene's loader then says what is wrong).
+fn obj_entries(text: &[u8]) -> Vec<String> {
+    let table: Option<toml::Table> = std::str::from_utf8(text)
+        .ok()
+        .and_then(|t| toml::from_str(t).ok());
+    let objects = table
+        .as_ref()
+        .and_then(|t| t.get("objects"))
+        .and_then(|o| o.as_array())
+        .into_iter()
+        .flatten();
+    objects
+        .filter_map(|o| o.get("obj").and_then(|v| v.as_str()).map(str::to_string))
+        .collect()
+}
+
+/// The arguments of every `keyword` line of an OBJ or MTL file (an `mtllib` line may
+/// name several files).
+fn referenced(text: &[u8], keyword: &str) -> Vec<String> {
+    let several = keyword == "mtllib ";
+    String::from_utf8_lossy(text)
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix(keyword).map(|rest| rest.trim().to_string()))
+        .filter(|r| !r.is_empty())
+        .flat_map(|r| {
+            if several {
+                r.split_whitespace().map(str::to_string).collect()
+            } else {
+                vec![r]
+            }
+        })
+        .collect()
 }
 
 /// `path` as a relative path without `..`, root or prefix components.
@@ -99,20 +172,17 @@ pub fn bundle_for(spec: &str) -> Result<Bundle> {
             let text = read(path)?;
             let name = file_name(path)?;
             let base = path.parent().unwrap_or(Path::new("."));
-            let table: toml::Table = std::str::from_utf8(&text)
+            let valid = std::str::from_utf8(&text)
                 .ok()
-                .and_then(|t| toml::from_str(t).ok())
-                .ok_or_else(|| Error::Scene {
+                .is_some_and(|t| toml::from_str::<toml::Table>(t).is_ok());
+            if !valid {
+                return Err(Error::Scene {
                     origin: spec.to_string(),
                     message: "not valid TOML".into(),
-                })?;
-            let objs = table
-                .get("objects")
-                .and_then(|o| o.as_array())
-                .into_iter()
-                .flatten();
-            for obj in objs.filter_map(|o| o.get("obj").and_then(|v| v.as_str())) {
-                add_obj(&base.join(obj), obj, &mut files)?;
+                });
+            }
+            for obj in obj_entries(&text) {
+                add_obj(&base.join(&obj), &obj, &mut files)?;
             }
             files.push(SceneFile {
                 path: name.clone(),
@@ -147,13 +217,6 @@ fn add_obj(path: &Path, name: &str, files: &mut Vec<SceneFile>) -> Result<()> {
         .parent()
         .map(Path::to_path_buf)
         .unwrap_or_default();
-    let referenced = |text: &[u8], keyword: &str| -> Vec<String> {
-        String::from_utf8_lossy(text)
-            .lines()
-            .filter_map(|l| l.trim().strip_prefix(keyword).map(|rest| rest.trim().to_string()))
-            .filter(|r| !r.is_empty())
-            .collect()
-    };
     for mtl in referenced(&data, "mtllib ") {
         let Ok(mtl_data) = std::fs::read(base.join(&mtl)) else {
             continue; // A missing MTL is a warning when loading, not an error.
@@ -191,6 +254,50 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("relief-bundle-{}", std::process::id()));
         let scene = again.load(&dir).unwrap();
         assert!(scene.object("knot").is_ok());
+    }
+
+    #[test]
+    fn references_outside_the_bundle_are_refused() {
+        let dir = std::env::temp_dir().join(format!("relief-bundle-refs-{}", std::process::id()));
+        let triangle = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".to_vec();
+        let scene = |obj: &str| format!("[[objects]]\nname = \"a\"\nobj = \"{obj}\"\n").into_bytes();
+        let file = |path: &str, data: Vec<u8>| SceneFile {
+            path: path.into(),
+            data,
+        };
+        let load = |files: Vec<SceneFile>| {
+            let bundle = SceneBundle {
+                root: "s.toml".into(),
+                files,
+            };
+            Bundle::decode(bundle.encode_to_vec()).unwrap().load(&dir)
+        };
+        // A scene whose OBJ is in the bundle loads.
+        assert!(
+            load(vec![
+                file("t.obj", triangle.clone()),
+                file("s.toml", scene("t.obj"))
+            ])
+            .is_ok()
+        );
+        // OBJ paths that leave the bundle, or name no file of it, are refused unread.
+        for outside in ["/etc/hostname", "../t.obj", "missing.obj"] {
+            let err = load(vec![
+                file("t.obj", triangle.clone()),
+                file("s.toml", scene(outside)),
+            ])
+            .unwrap_err()
+            .to_string();
+            assert!(err.contains("not a file of the bundle"), "{outside}: {err}");
+        }
+        // So are MTL files outside it.
+        let mut with_mtl = b"mtllib /etc/passwd\n".to_vec();
+        with_mtl.extend_from_slice(&triangle);
+        let err = load(vec![file("t.obj", with_mtl), file("s.toml", scene("t.obj"))])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("/etc/passwd"), "{err}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -10,14 +10,23 @@ use tonic::transport::{Certificate, ClientTlsConfig, Endpoint};
 /// The endpoint for `url`; `ca` is a PEM file of extra trusted certificates (for a
 /// server with a self-signed certificate). Errors name the problem.
 pub fn endpoint(url: &str, ca: Option<&Path>) -> Result<Endpoint, String> {
+    let https = url.starts_with("https://");
+    if !https && !url.starts_with("http://") {
+        return Err(format!("server URL `{url}` must start with http:// or https://"));
+    }
+    if ca.is_some() && !https {
+        return Err(format!(
+            "a CA certificate is for https:// servers, and `{url}` is not one"
+        ));
+    }
     let mut endpoint = Endpoint::from_shared(url.to_string())
-        .map_err(|e| format!("`{url}` is not a URL: {e}"))?
+        .map_err(|e| format!("server URL `{url}` is not a URL: {e}"))?
         .tcp_nodelay(true)
         .connect_timeout(Duration::from_secs(5));
-    if url.starts_with("https://") || ca.is_some() {
+    if https {
         let mut tls = ClientTlsConfig::new().with_native_roots();
         if let Some(ca) = ca {
-            let pem = std::fs::read(ca).map_err(|e| format!("{}: {e}", ca.display()))?;
+            let pem = std::fs::read(ca).map_err(|e| format!("CA certificate {}: {e}", ca.display()))?;
             tls = tls.ca_certificate(Certificate::from_pem(pem));
         }
         endpoint = endpoint

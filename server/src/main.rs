@@ -123,6 +123,18 @@ async fn serve(args: Args) -> Result<()> {
         .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
         .build_v1()
         .context("building the reflection service")?;
+    // TLS first: a certificate that does not load must fail before the server says
+    // it is listening.
+    let mut builder = Server::builder();
+    if let (Some(cert), Some(key)) = (&args.tls_cert, &args.tls_key) {
+        let read =
+            |flag: &str, p: &PathBuf| std::fs::read(p).with_context(|| format!("{flag} {}", p.display()));
+        let identity =
+            tonic::transport::Identity::from_pem(read("--tls-cert", cert)?, read("--tls-key", key)?);
+        builder = builder
+            .tls_config(tonic::transport::ServerTlsConfig::new().identity(identity))
+            .context("--tls-cert/--tls-key: the certificate or key is not usable")?;
+    }
     let listener = tokio::net::TcpListener::bind(args.listen)
         .await
         .with_context(|| format!("binding {}", args.listen))?;
@@ -130,14 +142,6 @@ async fn serve(args: Args) -> Result<()> {
     let scheme = if args.tls_cert.is_some() { "https" } else { "http" };
     println!("relief-server listening on {scheme}://{address}");
     let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
-    let mut builder = Server::builder();
-    if let (Some(cert), Some(key)) = (&args.tls_cert, &args.tls_key) {
-        let read = |p: &PathBuf| std::fs::read(p).with_context(|| format!("reading {}", p.display()));
-        let identity = tonic::transport::Identity::from_pem(read(cert)?, read(key)?);
-        builder = builder
-            .tls_config(tonic::transport::ServerTlsConfig::new().identity(identity))
-            .context("the TLS certificate or key is not usable")?;
-    }
     builder
         .add_service(health_service)
         .add_service(reflection)

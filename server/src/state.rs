@@ -11,6 +11,7 @@ use tonic::Status;
 
 use relief_core::bounds::Aabb;
 use relief_core::hash::ContentHash;
+use relief_core::relief::{FacingError, SourceCamera};
 use relief_proto::convert::{Request, Urgency, vec3_to_pb};
 use relief_proto::pb;
 
@@ -200,11 +201,17 @@ impl State {
         let bounds = scene.objects.get(&request.object).ok_or_else(|| {
             Status::not_found(format!("the scene has no object named `{}`", request.object))
         })?;
-        if bounds.contains(request.eye) {
-            return Err(Status::failed_precondition(format!(
-                "the eye is inside the bounds of `{}`: draw it as geometry",
-                request.object
-            )));
+        // The camera a worker would bake with: refused here, naming the field, rather
+        // than failing on a worker.
+        match SourceCamera::facing(request.eye, bounds, 1, 1) {
+            Ok(_) => {}
+            Err(FacingError::EyeInsideBounds) => {
+                return Err(Status::failed_precondition(format!(
+                    "the eye is inside the bounds of `{}`: draw it as geometry",
+                    request.object
+                )));
+            }
+            Err(e) => return Err(Status::invalid_argument(format!("field `eye`: {e}"))),
         }
         self.counters.requests += 1;
         let key = JobKey::of(request);

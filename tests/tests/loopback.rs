@@ -233,6 +233,30 @@ async fn health_and_authentication() {
     assert_eq!(wrong.stats().await.unwrap_err().code(), Code::Unauthenticated);
     let mut right = Remote::connect(&url, Some("s3cret"), "test").await.unwrap();
     assert!(right.stats().await.is_ok());
+    // A worker with the wrong token stops with an error naming it: retrying would not
+    // mend it.
+    let mut worker = relief_tests::command("relief-worker")
+        .args(["--server", &url, "--token", "guess"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let status = loop {
+        if let Some(status) = worker.try_wait().unwrap() {
+            break status;
+        }
+        if Instant::now() > deadline {
+            let _ = worker.kill();
+            panic!("a worker with a wrong token kept retrying");
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut worker.stderr.take().unwrap(), &mut stderr).unwrap();
+    assert!(
+        !status.success() && stderr.contains("--token"),
+        "{status}: {stderr}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

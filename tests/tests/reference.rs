@@ -136,3 +136,43 @@ fn antialiased_reference_blends_only_the_silhouette() {
         "blue deficit {covered} (antialiased) vs {point_covered} (point), sphere area {expected} px"
     );
 }
+
+#[test]
+fn a_bad_output_path_fails_before_the_work_and_leaves_nothing() {
+    let dir = scratch("reference-out");
+    let scene = ball_scene(&dir);
+    let scene = scene.to_str().unwrap();
+    let run = |out: &str| {
+        relief(&[
+            "reference",
+            "--scene",
+            scene,
+            "--eye",
+            "0,0,4",
+            "--target",
+            "0,0,0",
+            "--size",
+            "16x12",
+            "--out",
+            out,
+        ])
+    };
+    // Not a PNG name: a usage error (exit 2) naming the output.
+    let jpg = dir.join("r.jpg");
+    let wrong = run(jpg.to_str().unwrap());
+    assert_eq!(wrong.status.code(), Some(2), "{wrong:?}");
+    assert!(
+        String::from_utf8_lossy(&wrong.stderr).contains("png"),
+        "{wrong:?}"
+    );
+    assert!(!jpg.exists());
+    // A directory that cannot be made: an error naming --out, before any tracing.
+    let unwritable = run("/proc/relief-nope/r.png");
+    let stderr = String::from_utf8_lossy(&unwritable.stderr);
+    assert!(
+        !unwritable.status.success() && stderr.contains("--out"),
+        "{stderr}"
+    );
+    // The reason is said once.
+    assert_eq!(stderr.matches("os error").count(), 1, "{stderr}");
+}

@@ -48,16 +48,22 @@ enum End {
     Stopped,
     /// The connection was lost (or never made).
     Lost(anyhow::Error),
+    /// The server refused the worker (wrong token): retrying would not help.
+    Refused(anyhow::Error),
 }
 
 pub async fn run(args: Args) -> Result<()> {
     let endpoint = relief_proto::connect::endpoint(&args.server, args.tls_ca.as_deref())
-        .map_err(|e| anyhow!("--server: {e}"))?;
+        .map_err(|e| anyhow!("--server/--tls-ca: {e}"))?;
     let auth = BearerToken::new(args.token.as_deref()).map_err(|e| anyhow!("--token: {e}"))?;
     let scene_dir = args
         .scene_dir
         .clone()
         .unwrap_or_else(|| std::env::temp_dir().join(format!("relief-worker-{}", std::process::id())));
+    // A scene directory it cannot write would fail every job: refuse to start.
+    std::fs::create_dir_all(&scene_dir)
+        .and_then(|()| tempfile_probe(&scene_dir))
+        .map_err(|e| anyhow!("--scene-dir {}: {e}", scene_dir.display()))?;
     let name = args.name.clone().unwrap_or_else(|| {
         let host = std::fs::read_to_string("/etc/hostname").unwrap_or_default();
         format!("{}-{}", host.trim(), std::process::id())
@@ -86,6 +92,8 @@ pub async fn run(args: Args) -> Result<()> {
         .await
         {
             End::Stopped => return Ok(()),
+            // Retrying cannot mend a refused token.
+            End::Refused(e) => return Err(e),
             End::Lost(e) => {
                 if started.elapsed() > Duration::from_secs(10) {
                     backoff = Duration::from_millis(100);
@@ -103,6 +111,13 @@ pub async fn run(args: Args) -> Result<()> {
             }
         }
     }
+}
+
+/// Creates and removes a file in `dir`: whether the worker can store scenes there.
+fn tempfile_probe(dir: &std::path::Path) -> std::io::Result<()> {
+    let probe = dir.join(format!(".probe-{}", std::process::id()));
+    std::fs::write(&probe, b"")?;
+    std::fs::remove_file(&probe)
 }
 
 /// Resolves on SIGINT or SIGTERM.
@@ -159,6 +174,12 @@ async fn session(
     });
     let mut inbound = match workers.session(UnboundedReceiverStream::new(outbound)).await {
         Ok(r) => r.into_inner(),
+        Err(e) if e.code() == tonic::Code::Unauthenticated || e.code() == tonic::Code::PermissionDenied => {
+            return End::Refused(anyhow!(
+                "the server refused this worker: {} (check --token)",
+                e.message()
+            ));
+        }
         Err(e) => return End::Lost(anyhow!("opening the session: {}", e.message())),
     };
     tracing::info!("registered with {} as {name}", args.server);

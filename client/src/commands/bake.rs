@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use glam::Vec3;
 
@@ -36,6 +36,8 @@ pub struct BakeArgs {
 }
 
 pub fn run(args: BakeArgs) -> Result<()> {
+    // The directory first: a bad --out fails before the bake.
+    std::fs::create_dir_all(&args.out).with_context(|| format!("--out {}", args.out.display()))?;
     let scene = Scene::load(&args.scene)?;
     let object = scene.object_or_only(args.object.as_deref())?;
     let tracer = ObjectTracer::new(object);

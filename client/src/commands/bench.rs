@@ -331,7 +331,7 @@ fn warp(args: WarpArgs) -> Result<()> {
     }
     bar.set_message("pull-push 1280x720");
     let pullpush_1280x720_ms = {
-        use relief_client::warp::pullpush::{Layer, Splat, fill};
+        use relief_client::warp::pullpush::{Layer, Splat, Tolerance, fill};
         let mut sparse = Layer::new(1280, 720);
         for y in (0..720).step_by(2) {
             for x in (0..1280).step_by(2) {
@@ -346,7 +346,12 @@ fn warp(args: WarpArgs) -> Result<()> {
             args.runs,
             &mut sparse.clone(),
             |layer| layer.pixels.copy_from_slice(&sparse.pixels),
-            |layer| fill(layer, 2, |d, l| 0.01 * d * (1 << l) as f32),
+            |layer| {
+                fill(layer, 2, |l| Tolerance {
+                    per_depth: 0.01 * (1 << l) as f32,
+                    constant: 0.0,
+                })
+            },
         )
     };
     bar.set_message("multi-resolution");

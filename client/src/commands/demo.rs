@@ -42,8 +42,8 @@ pub struct DemoArgs {
     /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, worst_frame*.png.
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
-    /// Workers to start.
-    #[arg(long, default_value = "2", value_parser = clap::value_parser!(u32).range(0..=64))]
+    /// Workers to start (with --server, the server's own workers serve instead).
+    #[arg(long, default_value = "2", value_parser = clap::value_parser!(u32).range(1..=64))]
     workers: u32,
     /// Use this server instead of starting one (e.g. http://10.0.0.5:7411).
     #[arg(long, env = "RELIEF_SERVER")]
@@ -515,5 +515,13 @@ pub fn run(args: DemoArgs) -> Result<()> {
         );
     }
     drop(children);
+    // Every frame drawn as geometry is not a run of the service: say so, and fail.
+    if manager.textures_held() == 0 && summary.needs > 0 {
+        bail!(
+            "no relief texture arrived from {} in the whole run: is a worker connected to \
+             the server? Every frame was drawn as geometry",
+            summary.source
+        );
+    }
     Ok(())
 }

@@ -35,7 +35,7 @@ pub struct FrameArgs {
     #[arg(long)]
     compare: bool,
     /// Output PNG file.
-    #[arg(long)]
+    #[arg(long, value_parser = args::png_path)]
     out: PathBuf,
     /// Print the numbers as one JSON object.
     #[arg(long)]
@@ -64,6 +64,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
     if !args.source_angle.is_finite() {
         return Err(anyhow!("--source-angle must be finite"));
     }
+    args::ensure_writable("--out", &args.out)?;
     let bar = progress::spinner("loading scene");
     let (scene, camera) = args.view.load()?;
     let (w, h) = (camera.width, camera.height);

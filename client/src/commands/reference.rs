@@ -14,7 +14,7 @@ pub struct ReferenceArgs {
     #[command(flatten)]
     view: args::View,
     /// Output PNG file.
-    #[arg(long)]
+    #[arg(long, value_parser = args::png_path)]
     out: PathBuf,
     /// Rays per pixel edge: N×N stratified rays averaged per pixel (anti-aliased); 1 is
     /// one ray through the pixel centre, as every frame compared with it samples.
@@ -23,6 +23,7 @@ pub struct ReferenceArgs {
 }
 
 pub fn run(args: ReferenceArgs) -> Result<()> {
+    args::ensure_writable("--out", &args.out)?;
     let bar = progress::spinner("loading scene");
     let (scene, camera) = args.view.load()?;
     let (w, h) = (camera.width, camera.height);

@@ -52,12 +52,40 @@ pub struct ErrorVsTimeArgs {
     /// Frame edge in pixels (square frames).
     #[arg(long, default_value = "256", value_parser = crate::args::frame_edge)]
     frame_size: u32,
-    /// Angle of the side-by-side strip (one of --angles).
-    #[arg(long, default_value = "10", allow_hyphen_values = true, value_parser = angle)]
-    strip_angle: f32,
-    /// Texture size of the strip (one of --sizes).
-    #[arg(long, default_value = "256", value_parser = crate::args::texture_size)]
-    strip_size: u32,
+    /// Angle of the side-by-side strip, one of --angles [default: 10 if measured, else
+    /// the largest].
+    #[arg(long, allow_hyphen_values = true, value_parser = angle)]
+    strip_angle: Option<f32>,
+    /// Texture size of the strip, one of --sizes [default: 256 if measured, else the
+    /// largest].
+    #[arg(long, value_parser = crate::args::texture_size)]
+    strip_size: Option<u32>,
+}
+
+/// The strip's `chosen` value, which must be one of `measured`; by default `preferred`
+/// when measured, else the largest measured.
+fn strip_choice<T: PartialOrd + Copy + std::fmt::Display>(
+    flag: &str,
+    chosen: Option<T>,
+    preferred: T,
+    measured: &[T],
+) -> Result<T> {
+    match chosen {
+        Some(v) if measured.contains(&v) => Ok(v),
+        Some(v) => Err(anyhow!("{flag} {v} is not one of the values measured ({})", {
+            let list: Vec<String> = measured.iter().map(|m| m.to_string()).collect();
+            list.join(", ")
+        })),
+        None if measured.contains(&preferred) => Ok(preferred),
+        None => measured
+            .iter()
+            .copied()
+            .fold(None, |best: Option<T>, v| match best {
+                Some(b) if b >= v => Some(b),
+                _ => Some(v),
+            })
+            .ok_or_else(|| anyhow!("{flag}: nothing is measured")),
+    }
 }
 
 fn angle(text: &str) -> Result<f32, String> {
@@ -106,7 +134,10 @@ fn error_vs_time(args: ErrorVsTimeArgs) -> Result<()> {
         runs: args.runs as usize,
         frame_size: args.frame_size,
         distance: 3.0,
-        strip: (args.strip_angle, args.strip_size),
+        strip: (
+            strip_choice("--strip-angle", args.strip_angle, 10.0, &args.angles)?,
+            strip_choice("--strip-size", args.strip_size, 256, &args.sizes)?,
+        ),
     };
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let total = objects.len() * options.angles.len() * (options.sizes.len() * options.methods.len() + 1);

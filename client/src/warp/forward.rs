@@ -8,7 +8,7 @@ use relief_core::camera::Camera;
 use relief_core::relief::decode_normal;
 
 use super::WarpError;
-use super::pullpush::{Layer, Splat, fill};
+use super::pullpush::{Layer, Pixel, Splat, Tolerance, fill};
 use super::texmap::volume_rect;
 use crate::gbuffer::{GBuffer, GPixel};
 use crate::impostor::Impostor;
@@ -147,11 +147,14 @@ fn merge(layer: &Layer, keep: impl Fn(usize) -> bool, x0: u32, y0: u32, object: 
 
 /// One surface spans about its footprint in depth (more on slopes): three footprints of
 /// a level's pixel, plus two texels.
-fn surface_tolerance(impostor: &Impostor, camera: &Camera) -> impl Fn(f32, usize) -> f32 {
+fn surface_tolerance(impostor: &Impostor, camera: &Camera) -> impl Fn(usize) -> Tolerance {
     let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
     let c = &impostor.texture.camera;
     let texel = c.a.length().max(c.b.length());
-    move |depth, level| 3.0 * (1u32 << level) as f32 * depth / focal + 2.0 * texel
+    move |level| Tolerance {
+        per_depth: 3.0 * (1u32 << level) as f32 / focal,
+        constant: 2.0 * texel,
+    }
 }
 
 /// Forward-warps `impostor` to `camera`, fills holes by pull–push, writes into
@@ -279,7 +282,8 @@ pub fn display_kernel(
                 }
             }
             if !candidates.is_empty() {
-                layer.pixels[y * lw + x] = super::pullpush::front_average(&candidates, |d| tolerance(d, 0));
+                let average = super::pullpush::front_average(&candidates, tolerance(0));
+                layer.pixels[y * lw + x] = Splat::from_lanes(average);
             }
         }
     }

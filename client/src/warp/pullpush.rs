@@ -11,6 +11,7 @@
 //! about one sample spacing past its silhouette.
 
 use rayon::prelude::*;
+use wide::f32x8;
 
 /// One pixel of a layer being reconstructed. Attributes stay in the texture's 8-bit
 /// encoding: 12 bytes a pixel, so a 1280×720 layer is 11 MB — the fill is bound by
@@ -39,92 +40,179 @@ impl Splat {
     }
 }
 
-/// A `width × height` image of splats.
+/// A pixel as the fill averages it, in eight float lanes: depth, albedo (3), encoded
+/// normal (3), and 1 — so one weighted sum of lanes sums the weights as well. The coarse
+/// levels are kept this way (32 bytes a pixel, but a quarter of the pixels or fewer):
+/// they are read four times per finer pixel, and unpacking bytes each time cost more
+/// than the memory.
+pub type Lanes = f32x8;
+
+/// An empty pixel in lanes.
+const EMPTY_LANES: Lanes = f32x8::new([f32::INFINITY, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+
+/// What a layer can hold: the finest level's [`Splat`]s or a coarse level's [`Lanes`].
+pub trait Pixel: Copy + Send + Sync {
+    /// An empty pixel.
+    const EMPTY: Self;
+    /// View depth; `INFINITY` when empty.
+    fn depth(&self) -> f32;
+    /// The pixel in lanes.
+    fn lanes(&self) -> Lanes;
+    /// The pixel of an average in lanes.
+    fn from_lanes(lanes: Lanes) -> Self;
+}
+
+impl Pixel for Splat {
+    const EMPTY: Splat = Splat::EMPTY;
+
+    #[inline(always)]
+    fn depth(&self) -> f32 {
+        self.depth
+    }
+
+    #[inline(always)]
+    fn lanes(&self) -> Lanes {
+        let ([r, g, b], [x, y, z]) = (self.albedo, self.normal);
+        let f = |c: u8| c as f32;
+        f32x8::new([self.depth, f(r), f(g), f(b), f(x), f(y), f(z), 1.0])
+    }
+
+    /// Rounds the attributes to bytes (to nearest: `round_int`'s conversion).
+    #[inline(always)]
+    fn from_lanes(lanes: Lanes) -> Splat {
+        let depth = lanes.as_array()[0];
+        let q = lanes.round_int().to_array();
+        // (Bounded: a NaN lane converts to i32::MIN.)
+        let byte = |k: usize| q[k].clamp(0, 255) as u8;
+        Splat {
+            depth,
+            albedo: [byte(1), byte(2), byte(3)],
+            normal: [byte(4), byte(5), byte(6)],
+        }
+    }
+}
+
+impl Pixel for Lanes {
+    const EMPTY: Lanes = EMPTY_LANES;
+
+    #[inline(always)]
+    fn depth(&self) -> f32 {
+        self.as_array()[0]
+    }
+
+    #[inline(always)]
+    fn lanes(&self) -> Lanes {
+        *self
+    }
+
+    #[inline(always)]
+    fn from_lanes(lanes: Lanes) -> Lanes {
+        lanes
+    }
+}
+
+/// A `width × height` image of splats (or, inside the fill, of a coarse level's lanes).
 #[derive(Debug, Clone, PartialEq)]
-pub struct Layer {
+pub struct Layer<P = Splat> {
     pub width: usize,
     pub height: usize,
-    pub pixels: Vec<Splat>,
+    pub pixels: Vec<P>,
 }
 
 impl Layer {
     pub fn new(width: usize, height: usize) -> Layer {
+        Layer::empty(width, height)
+    }
+}
+
+impl<P: Pixel> Layer<P> {
+    fn empty(width: usize, height: usize) -> Layer<P> {
         Layer {
             width,
             height,
-            pixels: vec![Splat::EMPTY; width * height],
+            pixels: vec![P::EMPTY; width * height],
         }
+    }
+
+    #[inline]
+    fn row(&self, y: usize) -> &[P] {
+        &self.pixels[y * self.width..(y + 1) * self.width]
+    }
+}
+
+/// The depth range, at one level of the pyramid, that still counts as one surface:
+/// `per_depth · depth + constant` (a pixel's footprint grows with its depth).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tolerance {
+    pub per_depth: f32,
+    pub constant: f32,
+}
+
+impl Tolerance {
+    /// The range at `depth`.
+    #[inline(always)]
+    pub fn at(&self, depth: f32) -> f32 {
+        depth.mul_add(self.per_depth, self.constant)
     }
 }
 
 /// The nearest depth among `candidates` (`INFINITY` when all are empty).
 #[inline(always)]
-fn nearest(candidates: &[(f32, Splat)]) -> f32 {
+fn nearest<P: Pixel>(candidates: &[(f32, P)]) -> f32 {
     candidates
         .iter()
-        .map(|(_, s)| s.depth)
+        .map(|(_, p)| p.depth())
         .fold(f32::INFINITY, f32::min)
 }
 
-/// Averages the front-most group of `candidates` (positive weights, splats): those
-/// within `tolerance(depth)` of the nearest.
-#[inline]
-pub(crate) fn front_average(candidates: &[(f32, Splat)], tolerance: impl Fn(f32) -> f32) -> Splat {
+/// Averages the front-most group of `candidates` (positive weights, pixels): those
+/// within `tolerance` of the nearest. Empty lanes when all are empty.
+#[inline(always)]
+pub(crate) fn front_average<P: Pixel>(candidates: &[(f32, P)], tolerance: Tolerance) -> Lanes {
     let nearest = nearest(candidates);
     if nearest == f32::INFINITY {
-        return Splat::EMPTY;
+        return EMPTY_LANES;
     }
-    let limit = nearest + tolerance(nearest);
-    let (mut weight, mut depth) = (0.0, 0.0);
-    let mut attributes = [0f32; 6];
-    for (w, s) in candidates {
-        if s.depth <= limit {
-            weight += w;
-            depth += w * s.depth;
-            let [r, g, b] = s.albedo;
-            let [x, y, z] = s.normal;
-            for (sum, c) in attributes.iter_mut().zip([r, g, b, x, y, z]) {
-                *sum += w * c as f32;
-            }
+    let limit = nearest + tolerance.at(nearest);
+    let mut sum = f32x8::ZERO;
+    for (w, p) in candidates {
+        if p.depth() <= limit {
+            sum = p.lanes().mul_add(f32x8::splat(*w), sum);
         }
     }
-    let inv = 1.0 / weight;
-    let byte = |k: usize| super::round_small(attributes[k] * inv) as u8;
-    Splat {
-        depth: depth * inv,
-        albedo: [byte(0), byte(1), byte(2)],
-        normal: [byte(3), byte(4), byte(5)],
-    }
+    // The last lane summed the weights.
+    sum * f32x8::splat(1.0 / sum.as_array()[7])
 }
 
-/// Fills the holes of `layer` using at most `levels` coarser levels. `tolerance(depth,
-/// level)` is the depth range, at a level, that still counts as one surface.
-pub fn fill(layer: &mut Layer, levels: usize, tolerance: impl Fn(f32, usize) -> f32 + Sync) {
+/// Fills the holes of `layer` using at most `levels` coarser levels; `tolerance(level)`
+/// says what counts as one surface at a level.
+pub fn fill(layer: &mut Layer, levels: usize, tolerance: impl Fn(usize) -> Tolerance) {
     if layer.width == 0 || layer.height == 0 {
         return;
     }
     // Analysis.
-    let mut pyramid: Vec<Layer> = Vec::with_capacity(levels);
+    let mut pyramid: Vec<Layer<Lanes>> = Vec::with_capacity(levels);
     for level in 0..levels {
-        let fine = pyramid.last().unwrap_or(layer);
-        if fine.width <= 1 && fine.height <= 1 {
+        let (w, h) = pyramid
+            .last()
+            .map_or((layer.width, layer.height), |l| (l.width, l.height));
+        if w <= 1 && h <= 1 {
             break;
         }
-        pyramid.push(analyse(fine, |d| tolerance(d, level)));
+        let coarse = match pyramid.last() {
+            Some(fine) => analyse(fine, tolerance(level)),
+            None => analyse(layer, tolerance(level)),
+        };
+        pyramid.push(coarse);
     }
     // Synthesis, coarsest first.
     for level in (0..pyramid.len()).rev() {
         let (upper, lower) = pyramid.split_at_mut(level);
-        let fine: &mut Layer = match upper.last_mut() {
-            Some(l) => l,
-            None => &mut *layer,
-        };
-        synthesise(
-            fine,
-            &lower[0],
-            |d| tolerance(d, level),
-            |d| tolerance(d, level + 1),
-        );
+        let (here, above) = (tolerance(level), tolerance(level + 1));
+        match upper.last_mut() {
+            Some(fine) => synthesise(fine, &lower[0], here, above),
+            None => synthesise(layer, &lower[0], here, above),
+        }
     }
 }
 
@@ -136,7 +224,10 @@ type Taps = [(usize, f32); 2];
 /// The 2×2 pixels at columns `x` of two `rows`, each weighted by its row's and its
 /// column's weight.
 #[inline(always)]
-fn gather([(r0, wy0), (r1, wy1)]: [(&[Splat], f32); 2], &[(x0, wx0), (x1, wx1)]: &Taps) -> [(f32, Splat); 4] {
+fn gather<P: Pixel>(
+    [(r0, wy0), (r1, wy1)]: [(&[P], f32); 2],
+    &[(x0, wx0), (x1, wx1)]: &Taps,
+) -> [(f32, P); 4] {
     [
         (wy0 * wx0, r0[x0]),
         (wy0 * wx1, r0[x1]),
@@ -146,7 +237,7 @@ fn gather([(r0, wy0), (r1, wy1)]: [(&[Splat], f32); 2], &[(x0, wx0), (x1, wx1)]:
 }
 
 /// The coarse level: each pixel the front-most average of its 2×2 children.
-fn analyse(fine: &Layer, tolerance: impl Fn(f32) -> f32 + Sync) -> Layer {
+fn analyse<P: Pixel>(fine: &Layer<P>, tolerance: Tolerance) -> Layer<Lanes> {
     let (w, h) = (fine.width.div_ceil(2), fine.height.div_ceil(2));
     let children = |n: usize, fine: usize| -> Vec<Taps> {
         (0..n)
@@ -154,7 +245,7 @@ fn analyse(fine: &Layer, tolerance: impl Fn(f32) -> f32 + Sync) -> Layer {
             .collect()
     };
     let (xs, ys) = (children(w, fine.width), children(h, fine.height));
-    let mut coarse = Layer::new(w, h);
+    let mut coarse = Layer::empty(w, h);
     coarse
         .pixels
         .par_chunks_mut(w)
@@ -162,34 +253,55 @@ fn analyse(fine: &Layer, tolerance: impl Fn(f32) -> f32 + Sync) -> Layer {
         .for_each(|(row, &[(y0, wy0), (y1, wy1)])| {
             let rows = [(fine.row(y0), wy0), (fine.row(y1), wy1)];
             for (out, x) in row.iter_mut().zip(&xs) {
-                *out = front_average(&gather(rows, x), &tolerance);
+                *out = front_average(&gather(rows, x), tolerance);
             }
         });
     coarse
 }
 
-/// Fills `fine` from the coarse level above it: an empty pixel takes the bilinear blend
-/// of the four coarse pixels around its centre (front-most group), and a valid pixel
-/// well behind that blend is replaced by it. `here` is this level's surface tolerance,
-/// `above` the coarse level's.
-fn synthesise(
-    fine: &mut Layer,
-    coarse: &Layer,
-    here: impl Fn(f32) -> f32 + Sync,
-    above: impl Fn(f32) -> f32 + Sync,
+/// Fine pixel x's centre falls at coarse coordinate x/2 − 1/4: the taps of `n` fine
+/// pixels over `coarse` coarse ones, weights 3/4 and 1/4.
+fn upsampling_taps(n: usize, coarse: usize) -> Vec<Taps> {
+    (0..n)
+        .map(|x| {
+            let c = x as f32 * 0.5 - 0.25;
+            let (i, f) = (c.floor(), c - c.floor());
+            let tap = |j: f32, w: f32| ((j.max(0.0) as usize).min(coarse - 1), w);
+            [tap(i, 1.0 - f), tap(i + 1.0, f)]
+        })
+        .collect()
+}
+
+/// One fine pixel from the four coarse `candidates` around it: an empty pixel takes
+/// their front-most blend, and a valid pixel well behind that blend is replaced by it.
+/// `here` is the fine level's surface tolerance, `above` the coarse level's.
+#[inline(always)]
+fn synthesise_pixel<P: Pixel>(
+    pixel: &mut P,
+    candidates: &[(f32, Lanes); 4],
+    here: Tolerance,
+    above: Tolerance,
 ) {
-    // Fine pixel x's centre falls at coarse coordinate x/2 − 1/4: weights 3/4 and 1/4.
-    let taps = |n: usize, coarse: usize| -> Vec<Taps> {
-        (0..n)
-            .map(|x| {
-                let c = x as f32 * 0.5 - 0.25;
-                let (i, f) = (c.floor(), c - c.floor());
-                let tap = |j: f32, w: f32| ((j.max(0.0) as usize).min(coarse - 1), w);
-                [tap(i, 1.0 - f), tap(i + 1.0, f)]
-            })
-            .collect()
-    };
-    let (xs, ys) = (taps(fine.width, coarse.width), taps(fine.height, coarse.height));
+    let depth = pixel.depth();
+    let valid = depth < f32::INFINITY;
+    // A valid pixel in front of every coarse candidate stays as it is: skip the blend.
+    if valid {
+        let nearest = nearest(candidates);
+        if depth <= nearest + here.at(nearest.min(depth)) {
+            return;
+        }
+    }
+    let blend = front_average(candidates, above);
+    let blend_depth = blend.as_array()[0];
+    if blend_depth < f32::INFINITY && (!valid || depth > blend_depth + here.at(blend_depth)) {
+        *pixel = P::from_lanes(blend);
+    }
+}
+
+/// Fills a level from the one above it, pixel by pixel ([`synthesise_pixel`]).
+fn synthesise<P: Pixel>(fine: &mut Layer<P>, coarse: &Layer<Lanes>, here: Tolerance, above: Tolerance) {
+    let xs = upsampling_taps(fine.width, coarse.width);
+    let ys = upsampling_taps(fine.height, coarse.height);
     let width = fine.width;
     fine.pixels
         .par_chunks_mut(width)
@@ -197,28 +309,9 @@ fn synthesise(
         .for_each(|(row, &[(y0, wy0), (y1, wy1)])| {
             let rows = [(coarse.row(y0), wy0), (coarse.row(y1), wy1)];
             for (pixel, x) in row.iter_mut().zip(&xs) {
-                let candidates = gather(rows, x);
-                // A valid pixel in front of every coarse candidate stays as it is: skip
-                // the blend.
-                if pixel.is_valid() {
-                    let nearest = nearest(&candidates);
-                    if pixel.depth <= nearest + here(nearest.min(pixel.depth)) {
-                        continue;
-                    }
-                }
-                let blend = front_average(&candidates, &above);
-                if blend.is_valid() && (!pixel.is_valid() || pixel.depth > blend.depth + here(blend.depth)) {
-                    *pixel = blend;
-                }
+                synthesise_pixel(pixel, &gather(rows, x), here, above);
             }
         });
-}
-
-impl Layer {
-    #[inline]
-    fn row(&self, y: usize) -> &[Splat] {
-        &self.pixels[y * self.width..(y + 1) * self.width]
-    }
 }
 
 #[cfg(test)]
@@ -242,7 +335,10 @@ mod tests {
                 layer.pixels[y * 32 + x] = splat(5.0, 128);
             }
         }
-        fill(&mut layer, 1, |_, _| 0.1);
+        fill(&mut layer, 1, |_| Tolerance {
+            per_depth: 0.0,
+            constant: 0.1,
+        });
         for y in 8..23 {
             for x in 8..23 {
                 assert!(layer.pixels[y * 32 + x].is_valid(), "hole left at {x},{y}");
@@ -262,7 +358,10 @@ mod tests {
             layer.pixels[k] = splat(1.0, 51);
         }
         layer.pixels[3 * 8 + 3] = splat(9.0, 230);
-        fill(&mut layer, 2, |_, _| 0.5);
+        fill(&mut layer, 2, |_| Tolerance {
+            per_depth: 0.0,
+            constant: 0.5,
+        });
         let p = layer.pixels[3 * 8 + 3];
         assert!((p.depth - 1.0).abs() < 1e-5 && p.albedo == [51; 3], "{p:?}");
     }

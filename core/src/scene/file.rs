@@ -169,6 +169,7 @@ pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scene> {
         if o.name.trim().is_empty() {
             return Err(error(format!("object {} has an empty name", k + 1)));
         }
+        super::check_object_name(&o.name).map_err(|m| error(format!("object {}: {m}", k + 1)))?;
         if file.objects[..k].iter().any(|p| p.name == o.name) {
             return Err(error(format!("two objects are named `{}`", o.name)));
         }
@@ -328,5 +329,11 @@ mod tests {
         assert!(err(nan_scale).contains("scale"));
         assert!(err("[[objects]]\nname = \"a\"\nobj = \"missing.obj\"\n").contains("missing.obj"));
         assert!(err("name = ").contains("line 1"));
+        for bad in ["../../escaped", "a/b", ".hidden", "with space"] {
+            let text = format!(
+                "[[objects]]\nname = \"{bad}\"\ngenerator = {{ kind = \"sphere\", subdivisions = 0 }}\n"
+            );
+            assert!(err(&text).contains("object name"), "{bad}: {}", err(&text));
+        }
     }
 }

@@ -41,6 +41,23 @@ pub fn builtin_text(name: &str) -> Option<&'static str> {
     BUILTINS.iter().find(|(n, _)| *n == name).map(|(_, text)| *text)
 }
 
+/// The longest object name accepted.
+pub const MAX_OBJECT_NAME: usize = 64;
+
+/// Object names become file names (report images, texture directories), so they are
+/// ASCII letters, digits, `-`, `_` and `.`, not starting with `.`, at most
+/// [`MAX_OBJECT_NAME`] long: never a path.
+pub fn check_object_name(name: &str) -> Result<(), String> {
+    let allowed = |c: char| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.');
+    if name.is_empty() || name.len() > MAX_OBJECT_NAME || name.starts_with('.') || !name.chars().all(allowed)
+    {
+        return Err(format!(
+            "object name `{name}` must be 1 to {MAX_OBJECT_NAME} ASCII letters, digits, `-`, `_` or `.`, not starting with `.`"
+        ));
+    }
+    Ok(())
+}
+
 /// One object of a scene, its mesh already placed in world space.
 #[derive(Debug, Clone)]
 pub struct SceneObject {
@@ -97,9 +114,25 @@ impl Scene {
     /// A one-object scene from an OBJ file, with default lights and an orbit path.
     pub fn from_obj(path: &Path) -> Result<Scene> {
         let mesh = crate::obj::load_obj(path)?;
-        let name = path
-            .file_stem()
-            .map_or_else(|| "object".to_string(), |s| s.to_string_lossy().into_owned());
+        // The file's stem, made a valid object name (see [`check_object_name`]).
+        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+        let name: String = stem
+            .unwrap_or_default()
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .take(MAX_OBJECT_NAME)
+            .collect();
+        let name = if name.is_empty() {
+            "object".to_string()
+        } else {
+            name
+        };
         let object = SceneObject::new(name.clone(), mesh, Specular::default());
         let mut scene = Scene {
             name,
