@@ -12,6 +12,9 @@ impl BearerToken {
     pub fn new(token: Option<&str>) -> Result<BearerToken, String> {
         token
             .map(|t| {
+                if t.is_empty() {
+                    return Err("the token is empty".to_string());
+                }
                 format!("Bearer {t}")
                     .parse()
                     .map_err(|_| "the token holds characters not allowed in a header".to_string())

@@ -226,7 +226,7 @@ fn convert_light(light: LightFile) -> Result<Light, String> {
             }
             Light::Directional {
                 direction,
-                color: check("light color", color)? * finite_scalar("light intensity", intensity)?,
+                color: check_colour(color)? * non_negative("light intensity", intensity)?,
             }
         }
         LightFile::Point {
@@ -235,9 +235,30 @@ fn convert_light(light: LightFile) -> Result<Light, String> {
             intensity,
         } => Light::Point {
             position: check("light position", position)?,
-            color: check("light color", color)? * finite_scalar("light intensity", intensity)?,
+            color: check_colour(color)? * non_negative("light intensity", intensity)?,
         },
     })
+}
+
+/// The farthest a vertex may lie from the origin, metres: past it, squared distances
+/// overflow `f32`.
+const MAX_COORDINATE: f32 = 1e12;
+
+/// A light colour: finite and not negative.
+fn check_colour(v: [f32; 3]) -> Result<Vec3, String> {
+    let c = crate::vector::ensure_finite("light color", Vec3::from(v))?;
+    if c.min_element() < 0.0 {
+        return Err(format!("light color {c} must not be negative"));
+    }
+    Ok(c)
+}
+
+/// `v`, finite and not negative.
+fn non_negative(what: &str, v: f32) -> Result<f32, String> {
+    match finite_scalar(what, v)? {
+        v if v >= 0.0 => Ok(v),
+        v => Err(format!("{what} {v} must not be negative")),
+    }
 }
 
 fn finite_scalar(what: &str, v: f32) -> Result<f32, String> {
@@ -270,9 +291,9 @@ fn build_object(o: ObjectFile, base: &Path) -> Result<SceneObject> {
         }
     }
     let specular = Specular {
-        strength: finite_scalar("specular", o.specular.unwrap_or(Specular::default().strength))
+        strength: non_negative("specular", o.specular.unwrap_or(Specular::default().strength))
             .map_err(invalid)?,
-        shininess: finite_scalar("shininess", o.shininess.unwrap_or(Specular::default().shininess))
+        shininess: non_negative("shininess", o.shininess.unwrap_or(Specular::default().shininess))
             .map_err(invalid)?,
     };
     let rotation = Quat::from_euler(
@@ -284,6 +305,12 @@ fn build_object(o: ObjectFile, base: &Path) -> Result<SceneObject> {
     let transform = Affine3A::from_scale_rotation_translation(Vec3::splat(o.scale), rotation, translate);
     let world = mesh.transformed(transform);
     world.validate().map_err(invalid)?;
+    let bounds = world.bounds();
+    if bounds.min.abs().max(bounds.max.abs()).max_element() > MAX_COORDINATE {
+        return Err(invalid(format!(
+            "scale and translate place it beyond {MAX_COORDINATE:e} m, past what f32 rendering can hold"
+        )));
+    }
     Ok(SceneObject::new(o.name, world, specular))
 }
 
@@ -329,6 +356,11 @@ mod tests {
         assert!(err(nan_scale).contains("scale"));
         assert!(err("[[objects]]\nname = \"a\"\nobj = \"missing.obj\"\n").contains("missing.obj"));
         assert!(err("name = ").contains("line 1"));
+        let sphere = "generator = { kind = \"sphere\", subdivisions = 0 }";
+        assert!(err(&format!("[[objects]]\nname = \"a\"\nshininess = -1\n{sphere}\n")).contains("shininess"));
+        assert!(err(&format!("[[objects]]\nname = \"a\"\nscale = 1e30\n{sphere}\n")).contains("beyond"));
+        let light = "[[lights]]\nkind = \"directional\"\ndirection = [0, -1, 0]\nintensity = -5\n";
+        assert!(err(&format!("{light}[[objects]]\nname = \"a\"\n{sphere}\n")).contains("intensity"));
         for bad in ["../../escaped", "a/b", ".hidden", "with space"] {
             let text = format!(
                 "[[objects]]\nname = \"{bad}\"\ngenerator = {{ kind = \"sphere\", subdivisions = 0 }}\n"
