@@ -15,6 +15,34 @@ pub fn vec3(text: &str) -> Result<Vec3, String> {
     relief_core::vector::parse_vec3(text)
 }
 
+/// A finite number.
+pub fn finite(text: &str) -> Result<f32, String> {
+    let v: f32 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number"))?;
+    if !v.is_finite() {
+        return Err(format!("{v} is not finite"));
+    }
+    Ok(v)
+}
+
+/// A finite number above zero.
+pub fn positive(text: &str) -> Result<f32, String> {
+    match finite(text)? {
+        v if v > 0.0 => Ok(v),
+        v => Err(format!("{v} must be above zero")),
+    }
+}
+
+/// A vertical field of view in degrees, in (0, 180).
+pub fn fov(text: &str) -> Result<f32, String> {
+    match positive(text)? {
+        v if v < 180.0 => Ok(v),
+        v => Err(format!("{v} must be below 180 degrees")),
+    }
+}
+
 /// A `*.png` output path (the extension names the format written).
 pub fn png_path(text: &str) -> Result<std::path::PathBuf, String> {
     let path = std::path::PathBuf::from(text);
@@ -99,7 +127,7 @@ pub struct View {
     #[arg(long, default_value = "0,1,0", value_parser = vec3, allow_hyphen_values = true)]
     pub up: Vec3,
     /// Vertical field of view in degrees (default: the scene's).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true, value_parser = fov)]
     pub fov: Option<f32>,
     /// Frame size WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = frame_size)]

@@ -83,7 +83,7 @@ pub struct WarpArgs {
     #[arg(long, default_value = "256", value_parser = args::texture_size, allow_hyphen_values = true)]
     size: u32,
     /// Angle between the texture's eye and the displayed eye, degrees.
-    #[arg(long, default_value = "5")]
+    #[arg(long, default_value = "5", allow_hyphen_values = true, value_parser = crate::args::finite)]
     angle: f32,
     /// Frame edge in pixels.
     #[arg(long, default_value = "512", value_parser = args::frame_edge)]
@@ -227,9 +227,6 @@ fn warp(args: WarpArgs) -> Result<()> {
     use relief_client::warp::sprite::Sprite;
     use relief_client::warp::{Method, display};
 
-    if !args.angle.is_finite() {
-        anyhow::bail!("--angle must be finite");
-    }
     let bar = progress::spinner("baking");
     let scene = Scene::load(&args.scene)?;
     let solo = Solo::new(&scene, &args.object, 3.0)?;

@@ -62,7 +62,7 @@ pub struct DemoArgs {
     no_predict: bool,
     /// Largest growth of the predicted warp gap (screen pixels) before a texture is
     /// replaced: the impostor lifetime knob.
-    #[arg(long, default_value = "24")]
+    #[arg(long, default_value = "24", allow_hyphen_values = true, value_parser = args::positive)]
     tolerance: f32,
     /// Compare with the ray-traced reference every K-th frame (0: never).
     #[arg(long, default_value = "20")]
@@ -277,9 +277,6 @@ fn orbited(scene: &Scene, segment: &PathSegment) -> Option<usize> {
 }
 
 pub fn run(args: DemoArgs) -> Result<()> {
-    if !(args.tolerance.is_finite() && args.tolerance > 0.0) {
-        bail!("--tolerance must be a positive number of pixels");
-    }
     let scene = Arc::new(Scene::load(&args.scene)?);
     let (w, h) = args.size;
     // First, so that a missing display fails before any process starts.

@@ -26,7 +26,7 @@ pub struct FrameArgs {
     #[arg(long, default_value = "interleaved")]
     method: Method,
     /// Bake each impostor this many degrees around its object from the eye.
-    #[arg(long, default_value = "5", allow_hyphen_values = true)]
+    #[arg(long, default_value = "5", allow_hyphen_values = true, value_parser = args::finite)]
     source_angle: f32,
     /// Timed runs of each frame (the median is reported), after one warm-up.
     #[arg(long, default_value = "5", value_parser = clap::value_parser!(u32).range(1..=1000))]
@@ -60,9 +60,6 @@ pub fn run(args: FrameArgs) -> Result<()> {
         return Err(anyhow!(
             "--method sprite needs a previous frame; choose a warp method"
         ));
-    }
-    if !args.source_angle.is_finite() {
-        return Err(anyhow!("--source-angle must be finite"));
     }
     args::ensure_writable("--out", &args.out)?;
     let bar = progress::spinner("loading scene");
