@@ -37,9 +37,9 @@ pub fn positive(text: &str) -> Result<f32, String> {
 
 /// A vertical field of view in degrees, in (0, 180).
 pub fn fov(text: &str) -> Result<f32, String> {
-    match positive(text)? {
-        v if v < 180.0 => Ok(v),
-        v => Err(format!("{v} must be below 180 degrees")),
+    match finite(text)? {
+        v if v > 0.0 && v < 180.0 => Ok(v),
+        v => Err(format!("field of view {v} must be in (0, 180) degrees")),
     }
 }
 
@@ -52,24 +52,25 @@ pub fn png_path(text: &str) -> Result<std::path::PathBuf, String> {
     }
 }
 
-/// Checks, before any work, that a file can be written at `path` (creating its
-/// directory), so that a bad `--out` fails at once instead of after the work. Leaves
-/// no file behind that was not there.
+/// Checks, before any work, that an output file can be written at `path`, so that a
+/// bad `--out` fails at once instead of after the work: its directory is created and
+/// must take a new file (a probe of our own, created and removed — the user's path
+/// itself is not touched), and `path` must not be a directory.
 pub fn ensure_writable(flag: &str, path: &std::path::Path) -> anyhow::Result<()> {
     let context = || format!("{flag} {}", path.display());
-    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(parent).map_err(|e| anyhow!("{}: {e}", context()))?;
+    if path.is_dir() {
+        return Err(anyhow!("{}: is a directory", context()));
     }
-    let existed = path.exists();
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
+    let dir = parent.unwrap_or(std::path::Path::new("."));
+    std::fs::create_dir_all(dir).map_err(|e| anyhow!("{}: {e}", context()))?;
+    let probe = dir.join(format!(".relief-probe-{}", std::process::id()));
     std::fs::OpenOptions::new()
-        .append(true)
-        .create(true)
-        .open(path)
+        .write(true)
+        .create_new(true)
+        .open(&probe)
         .map_err(|e| anyhow!("{}: {e}", context()))?;
-    if !existed {
-        std::fs::remove_file(path).map_err(|e| anyhow!("{}: {e}", context()))?;
-    }
-    Ok(())
+    std::fs::remove_file(&probe).map_err(|e| anyhow!("{}: {e}", context()))
 }
 
 /// A relief-texture edge in texels: `1 ..= MAX_TEXTURE_SIZE`.

@@ -26,6 +26,7 @@ pub mod generators;
 pub mod hash;
 pub mod mesh;
 pub mod obj;
+pub mod reach;
 pub mod relief;
 pub mod scene;
 pub mod shading;

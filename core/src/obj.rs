@@ -8,17 +8,22 @@ use glam::{Vec2, Vec3};
 
 use crate::error::{Error, Result};
 use crate::mesh::{Material, Mesh, TextureImage};
+use crate::reach::Reach;
 
 /// Loads every group of an OBJ file into one mesh.
 ///
 /// A missing or unreadable MTL file or texture is reported with `tracing::warn!` and
 /// replaced by the default material; a malformed OBJ, or one with no triangles or with
-/// non-finite coordinates, is an error naming the file.
-pub fn load_obj(path: &Path) -> Result<Mesh> {
+/// non-finite coordinates, is an error naming the file. Every file opened (the OBJ, its
+/// MTLs, their textures) must be within `reach`: one outside it is an error for the OBJ,
+/// and a missing material or texture for the others.
+pub fn load_obj(path: &Path, reach: Reach) -> Result<Mesh> {
     let obj_error = |message: String| Error::Obj {
         path: path.to_path_buf(),
         message,
     };
+    // Reach first: outside it, whether the file exists is not the scene's business.
+    let opened = reach.check(path)?;
     if !path.is_file() {
         return Err(Error::io(
             path,
@@ -31,11 +36,22 @@ pub fn load_obj(path: &Path) -> Result<Mesh> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, materials) =
-        tobj::load_obj(path, &options).map_err(|e| obj_error(format!("malformed OBJ: {e}")))?;
+    let file = std::fs::File::open(opened).map_err(|e| Error::io(path, e))?;
     let base_dir = path.parent().unwrap_or(Path::new("."));
+    // MTL files resolve against the OBJ's directory, as `tobj::load_obj` does.
+    let load_mtl = |mtl: &Path| {
+        let mtl = reach
+            .check(&base_dir.join(mtl))
+            .map_err(|_| tobj::LoadError::OpenFileFailed)?;
+        tobj::load_mtl(mtl)
+    };
+    let (models, materials) = tobj::load_obj_buf(&mut std::io::BufReader::new(file), &options, load_mtl)
+        .map_err(|e| obj_error(format!("malformed OBJ: {e}")))?;
     let mut materials: Vec<Material> = match materials {
-        Ok(materials) => materials.iter().map(|m| convert_material(m, base_dir)).collect(),
+        Ok(materials) => materials
+            .iter()
+            .map(|m| convert_material(m, base_dir, reach))
+            .collect(),
         Err(e) => {
             tracing::warn!(
                 "{}: materials not loaded ({e}); using the default material",
@@ -106,7 +122,7 @@ pub fn load_obj(path: &Path) -> Result<Mesh> {
     Ok(mesh)
 }
 
-fn convert_material(m: &tobj::Material, base_dir: &Path) -> Material {
+fn convert_material(m: &tobj::Material, base_dir: &Path, reach: Reach) -> Material {
     let diffuse = m
         .diffuse
         .map(Vec3::from_array)
@@ -115,7 +131,7 @@ fn convert_material(m: &tobj::Material, base_dir: &Path) -> Material {
         .clamp(Vec3::ZERO, Vec3::ONE);
     let diffuse_texture = m.diffuse_texture.as_ref().and_then(|name| {
         let path = base_dir.join(name.replace('\\', "/"));
-        match load_texture(&path) {
+        match reach.check(&path).and_then(|path| load_texture(&path)) {
             Ok(t) => Some(Arc::new(t)),
             Err(e) => {
                 tracing::warn!("material `{}`: texture not loaded: {e}", m.name);
@@ -173,7 +189,7 @@ mod tests {
             "q.obj",
             "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nusemtl red\nf 1 2 3 4\n",
         );
-        let mesh = load_obj(&path).unwrap();
+        let mesh = load_obj(&path, Reach::Anywhere).unwrap();
         assert_eq!(mesh.triangle_count(), 2);
         assert!(mesh.normals.is_none());
         assert_eq!(mesh.material(0).diffuse, Vec3::new(1.0, 0.0, 0.0));
@@ -198,7 +214,7 @@ mod tests {
             "t.obj",
             "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0.25 0.5\nvt 0.75 0.5\nvt 0.25 0.5\nusemtl tex\nf 1/1 2/2 3/3\n",
         );
-        let mesh = load_obj(&path).unwrap();
+        let mesh = load_obj(&path, Reach::Anywhere).unwrap();
         assert!(mesh.texcoords.is_some());
         // Texel centres: corner 0 samples pure red, corner 1 pure blue (times Kd).
         assert!(
@@ -215,15 +231,25 @@ mod tests {
     fn errors_name_the_file_and_problem() {
         let dir = temp_dir("bad");
         let nan = write(&dir, "nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
-        let err = load_obj(&nan).unwrap_err().to_string();
+        let err = load_obj(&nan, Reach::Anywhere).unwrap_err().to_string();
         assert!(err.contains("nan.obj") && err.contains("vertex 2"), "{err}");
         let empty = write(&dir, "empty.obj", "v 0 0 0\n");
-        assert!(load_obj(&empty).unwrap_err().to_string().contains("no triangles"));
+        assert!(
+            load_obj(&empty, Reach::Anywhere)
+                .unwrap_err()
+                .to_string()
+                .contains("no triangles")
+        );
         let bad = write(&dir, "bad.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");
-        assert!(load_obj(&bad).unwrap_err().to_string().contains("bad.obj"));
+        assert!(
+            load_obj(&bad, Reach::Anywhere)
+                .unwrap_err()
+                .to_string()
+                .contains("bad.obj")
+        );
         let missing = dir.join("missing.obj");
         assert!(
-            load_obj(&missing)
+            load_obj(&missing, Reach::Anywhere)
                 .unwrap_err()
                 .to_string()
                 .contains("missing.obj")

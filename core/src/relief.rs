@@ -93,9 +93,10 @@ pub enum FacingError {
     NonFiniteEye(Vec3),
     #[error("the object's bounds are empty or not finite")]
     BadBounds,
-    /// Eye or object so large that the texture's camera overflows `f32`.
-    #[error("the eye {0} or the object's bounds are too large: the texture's camera overflows")]
-    Overflow(Vec3),
+    /// Eye or object so large (or the object so small) that the texture's camera is
+    /// out of `f32`'s range.
+    #[error("the eye {0} or the object's bounds are out of range: the texture's camera over- or underflows")]
+    OutOfRange(Vec3),
 }
 
 impl SourceCamera {
@@ -117,10 +118,10 @@ impl SourceCamera {
             return Err(FacingError::EyeInsideBounds);
         }
         let centre = bounds.center();
-        // (A far eye's offset is scaled before normalising: its squared length
-        // overflows.)
+        // (An offset whose squared length over- or underflows — a far eye, a tiny
+        // object — is scaled before normalising.)
         let offset = centre - eye;
-        let f = if offset.length_squared().is_finite() {
+        let f = if offset.length_squared().is_normal() {
             offset.normalize()
         } else {
             (offset / offset.abs().max_element()).normalize()
@@ -156,15 +157,15 @@ impl SourceCamera {
             depth_near: 0.0,
             depth_far: span.z,
         };
-        let finite = camera.origin.is_finite()
+        let usable = camera.origin.is_finite()
             && camera.f.is_finite()
-            && camera.a.cross(camera.b).length_squared() > 0.0
-            && camera.a.cross(camera.b).is_finite()
+            && camera.a.length_squared().is_normal()
+            && camera.b.length_squared().is_normal()
             && camera.depth_far.is_normal();
-        if finite {
+        if usable {
             Ok(camera)
         } else {
-            Err(FacingError::Overflow(eye))
+            Err(FacingError::OutOfRange(eye))
         }
     }
 
@@ -508,7 +509,14 @@ mod tests {
             max: Vec3::splat(1e38),
         };
         let err = SourceCamera::facing(Vec3::new(3e38, 3e38, 3e38), &huge, 4, 4).unwrap_err();
-        assert!(matches!(err, FacingError::Overflow(_)), "{err}");
+        assert!(matches!(err, FacingError::OutOfRange(_)), "{err}");
+        // A 10 nm object seen at 4096 texels still has a camera.
+        let tiny = Aabb {
+            min: Vec3::splat(-5e-9),
+            max: Vec3::splat(5e-9),
+        };
+        let c = SourceCamera::facing(Vec3::new(0.0, 0.0, 1e-7), &tiny, 4096, 4096).unwrap();
+        assert!(c.a.length() > 0.0 && c.depth_far > 0.0, "{c:?}");
     }
 
     #[test]

@@ -6,6 +6,7 @@ use std::path::{Component, Path, PathBuf};
 use prost::Message;
 
 use relief_core::hash::ContentHash;
+use relief_core::reach::Reach;
 use relief_core::scene::Scene;
 use relief_core::{Error, Result};
 
@@ -58,9 +59,10 @@ impl Bundle {
         })
     }
 
-    /// Writes the files under `dir/<hash>/` and loads the scene from there.
+    /// Writes the files under `dir/<hash>/` and loads the scene from there, reading
+    /// no file outside it: the server loads bundles from anyone who can reach it, and
+    /// an absolute or `..` path in a scene, OBJ or MTL must not read its own disk.
     pub fn load(&self, dir: &Path) -> Result<Scene> {
-        self.check_references()?;
         let root = dir.join(self.hash.to_string());
         for f in &self.bundle.files {
             let relative = safe_relative(&f.path)
@@ -72,44 +74,7 @@ impl Bundle {
             std::fs::write(&path, &f.data).map_err(|e| Error::io(&path, e))?;
         }
         let scene_path = root.join(&self.bundle.root);
-        Scene::load(&scene_path.to_string_lossy())
-    }
-}
-
-impl Bundle {
-    /// Every file the scene's loaders open must lie inside the bundle: the scene's
-    /// `obj` entries (which must also be files of the bundle), the OBJs' `mtllib`s
-    /// and the MTLs' `map_Kd` textures. The server loads bundles from anyone who can
-    /// reach it: an absolute or `..` reference would read its own disk.
-    fn check_references(&self) -> Result<()> {
-        let files: std::collections::HashSet<&str> =
-            self.bundle.files.iter().map(|f| f.path.as_str()).collect();
-        for file in &self.bundle.files {
-            let dir = Path::new(&file.path).parent().unwrap_or(Path::new(""));
-            let extension = Path::new(&file.path)
-                .extension()
-                .map(|e| e.to_string_lossy().to_ascii_lowercase());
-            let (references, must_exist) = match extension.as_deref() {
-                Some("toml") => (obj_entries(&file.data), true),
-                Some("obj") => (referenced(&file.data, "mtllib "), false),
-                Some("mtl") => (referenced(&file.data, "map_Kd "), false),
-                _ => continue,
-            };
-            for reference in references {
-                let inside = dir.join(reference.replace('\\', "/"));
-                let inside = safe_relative(&inside.to_string_lossy());
-                let found = inside
-                    .as_ref()
-                    .is_some_and(|p| !must_exist || files.contains(p.to_string_lossy().as_ref()));
-                if !found {
-                    return Err(Error::Invalid(format!(
-                        "`{}` refers to `{reference}`, which is not a file of the bundle",
-                        file.path
-                    )));
-                }
-            }
-        }
-        Ok(())
+        Scene::load_within(&scene_path.to_string_lossy(), Reach::Within(&root))
     }
 }
 
@@ -130,21 +95,12 @@ fn obj_entries(text: &[u8]) -> Vec<String> {
         .collect()
 }
 
-/// The arguments of every `keyword` line of an OBJ or MTL file (an `mtllib` line may
-/// name several files).
+/// The argument of every `keyword` line of an OBJ or MTL file.
 fn referenced(text: &[u8], keyword: &str) -> Vec<String> {
-    let several = keyword == "mtllib ";
     String::from_utf8_lossy(text)
         .lines()
         .filter_map(|l| l.trim().strip_prefix(keyword).map(|rest| rest.trim().to_string()))
         .filter(|r| !r.is_empty())
-        .flat_map(|r| {
-            if several {
-                r.split_whitespace().map(str::to_string).collect()
-            } else {
-                vec![r]
-            }
-        })
         .collect()
 }
 
@@ -257,9 +213,12 @@ mod tests {
     }
 
     #[test]
-    fn references_outside_the_bundle_are_refused() {
+    fn a_bundle_reads_no_file_outside_itself() {
         let dir = std::env::temp_dir().join(format!("relief-bundle-refs-{}", std::process::id()));
-        let triangle = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n".to_vec();
+        std::fs::create_dir_all(&dir).unwrap();
+        // Beside the bundles' directory: a material that would paint the object red.
+        std::fs::write(dir.join("outside.mtl"), "newmtl red\nKd 1 0 0\n").unwrap();
+        let triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
         let scene = |obj: &str| format!("[[objects]]\nname = \"a\"\nobj = \"{obj}\"\n").into_bytes();
         let file = |path: &str, data: Vec<u8>| SceneFile {
             path: path.into(),
@@ -270,33 +229,33 @@ mod tests {
                 root: "s.toml".into(),
                 files,
             };
-            Bundle::decode(bundle.encode_to_vec()).unwrap().load(&dir)
+            Bundle::decode(bundle.encode_to_vec())
+                .unwrap()
+                .load(&dir.join("bundles"))
         };
+        let obj = |text: String| file("t.obj", text.into_bytes());
         // A scene whose OBJ is in the bundle loads.
-        assert!(
-            load(vec![
-                file("t.obj", triangle.clone()),
-                file("s.toml", scene("t.obj"))
-            ])
-            .is_ok()
-        );
-        // OBJ paths that leave the bundle, or name no file of it, are refused unread.
-        for outside in ["/etc/hostname", "../t.obj", "missing.obj"] {
-            let err = load(vec![
-                file("t.obj", triangle.clone()),
-                file("s.toml", scene(outside)),
-            ])
-            .unwrap_err()
-            .to_string();
-            assert!(err.contains("not a file of the bundle"), "{outside}: {err}");
+        assert!(load(vec![obj(triangle.into()), file("s.toml", scene("t.obj"))]).is_ok());
+        // OBJ paths that leave the bundle, or name no file of it, are refused unread
+        // (whatever the file is called).
+        for outside in ["/etc/hostname", "../../outside.mtl", "missing.obj", "/dev/zero"] {
+            let err = load(vec![obj(triangle.into()), file("s.toml", scene(outside))])
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains("outside the scene's own files"), "{outside}: {err}");
         }
-        // So are MTL files outside it.
-        let mut with_mtl = b"mtllib /etc/passwd\n".to_vec();
-        with_mtl.extend_from_slice(&triangle);
-        let err = load(vec![file("t.obj", with_mtl), file("s.toml", scene("t.obj"))])
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("/etc/passwd"), "{err}");
+        // An MTL outside it is not read (however the line is spaced): the default
+        // material stays.
+        for line in [
+            "mtllib ../../outside.mtl",
+            "mtllib\t../../outside.mtl",
+            "mtllib /dev/zero",
+        ] {
+            let text = format!("{line}\nusemtl red\n{triangle}");
+            let scene = load(vec![obj(text), file("s.toml", scene("t.obj"))]).unwrap();
+            let materials = &scene.objects[0].mesh.materials;
+            assert!(materials.iter().all(|m| m.name != "red"), "{line}: {materials:?}");
+        }
         let _ = std::fs::remove_dir_all(&dir);
     }
 

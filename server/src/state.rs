@@ -211,7 +211,15 @@ impl State {
                     request.object
                 )));
             }
-            Err(e) => return Err(Status::invalid_argument(format!("field `eye`: {e}"))),
+            Err(e @ FacingError::NonFiniteEye(_)) => {
+                return Err(Status::invalid_argument(format!("field `eye`: {e}")));
+            }
+            Err(e) => {
+                return Err(Status::invalid_argument(format!(
+                    "field `eye` with object `{}`: {e}",
+                    request.object
+                )));
+            }
         }
         self.counters.requests += 1;
         let key = JobKey::of(request);
@@ -385,12 +393,17 @@ impl State {
                     .any(|id| self.waiters.get(id).is_some_and(|w| !w.tx.is_closed()))
             });
             if !listened {
-                if let Some(job) = self.jobs.remove(&first.id) {
-                    tracing::debug!(job = first.id, "dropped: every client waiting for it is gone");
-                    for id in job.waiters {
-                        self.waiters.remove(&id);
-                    }
+                tracing::debug!(job = first.id, "dropped: every client waiting for it is gone");
+                // Their waiters go first, so that `finish` records no latency for them.
+                let gone: Vec<_> = self
+                    .jobs
+                    .get(&first.id)
+                    .map(|job| job.waiters.iter().cloned().collect())
+                    .unwrap_or_default();
+                for id in gone {
+                    self.waiters.remove(&id);
                 }
+                self.finish(first.id);
                 continue;
             }
             let Some((&worker_id, worker)) = self
@@ -693,6 +706,14 @@ mod tests {
         assert_eq!(job.eye.map(|e| e.x), Some(1.0), "{job:?}");
         assert_eq!(s.stats().queue_now, 0);
         assert_eq!(s.stats().jobs_in_flight, 1);
+        // The dropped job is gone for good: the same texture asked for again is a new
+        // job that is baked, not merged into the dropped one.
+        let (tx, _rx) = unbounded_channel();
+        s.admit(&request(hash, 3, Vec3::new(0.0, 0.0, 5.0), Urgency::Now), tx)
+            .unwrap();
+        s.dispatch();
+        let again = next_job(&mut wrx).expect("the same texture asked for again is baked");
+        assert_eq!(again.eye.map(|e| e.x), Some(0.0), "{again:?}");
     }
 
     #[test]

@@ -36,7 +36,7 @@ pub struct LoadArgs {
     #[arg(long, default_value = "8", value_parser = clap::value_parser!(u32).range(1..=256))]
     clients: u32,
     /// Tolerances (pixels of predicted gap growth) to run, comma-separated.
-    #[arg(long, default_value = "4,8,16,32,64", value_delimiter = ',', value_parser = crate::args::positive)]
+    #[arg(long, default_value = "4,8,16,32,64", value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::args::positive)]
     tolerances: Vec<f32>,
     /// Path frames each client flies per tolerance (the eye follows the clock, so a slow
     /// frame skips some).

@@ -44,6 +44,7 @@ use crate::camera::{CameraPath, PathSegment};
 use crate::error::{Error, Result};
 use crate::generators::Generator;
 use crate::mesh::Mesh;
+use crate::reach::Reach;
 use crate::shading::{Light, Lighting, Specular};
 
 pub(super) const DEFAULT_BACKGROUND: [f32; 3] = [0.62, 0.74, 0.88];
@@ -114,11 +115,11 @@ struct ObjectFile {
     shininess: Option<f32>,
 }
 
-/// Loads a scene file from disk.
-pub fn load_file(path: &Path) -> Result<Scene> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+/// Loads a scene file from disk; its OBJ files must lie within `reach`.
+pub fn load_file(path: &Path, reach: Reach) -> Result<Scene> {
+    let text = std::fs::read_to_string(reach.check(path)?).map_err(|e| Error::io(path, e))?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let mut scene = parse(&text, &path.display().to_string(), base)?;
+    let mut scene = parse(&text, &path.display().to_string(), base, reach)?;
     if scene.name.is_empty() {
         scene.name = path
             .file_stem()
@@ -127,8 +128,9 @@ pub fn load_file(path: &Path) -> Result<Scene> {
     Ok(scene)
 }
 
-/// Parses scene-file text; `origin` names it in errors, `base` resolves relative paths.
-pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scene> {
+/// Parses scene-file text; `origin` names it in errors, `base` resolves relative paths,
+/// and the OBJ files named must lie within `reach`.
+pub fn parse(text: &str, origin: &str, base: &Path, reach: Reach) -> Result<Scene> {
     let error = |message: String| Error::Scene {
         origin: origin.to_string(),
         message,
@@ -179,7 +181,7 @@ pub fn parse(text: &str, origin: &str, base: &Path) -> Result<Scene> {
         .into_par_iter()
         .map(|o| {
             let name = o.name.clone();
-            build_object(o, base).map_err(|m| match m {
+            build_object(o, base, reach).map_err(|m| match m {
                 Error::Invalid(m) => error(format!("object `{name}`: {m}")),
                 other => other,
             })
@@ -244,6 +246,17 @@ fn convert_light(light: LightFile) -> Result<Light, String> {
 /// overflow `f32`.
 const MAX_COORDINATE: f32 = 1e12;
 
+/// Whether a world-space mesh lies within [`MAX_COORDINATE`] of the origin.
+pub(super) fn check_extent(mesh: &Mesh) -> Result<(), String> {
+    let bounds = mesh.bounds();
+    if bounds.min.abs().max(bounds.max.abs()).max_element() > MAX_COORDINATE {
+        return Err(format!(
+            "beyond {MAX_COORDINATE:e} m from the origin, past what f32 rendering can hold"
+        ));
+    }
+    Ok(())
+}
+
 /// A light colour: finite and not negative.
 fn check_colour(v: [f32; 3]) -> Result<Vec3, String> {
     let c = crate::vector::ensure_finite("light color", Vec3::from(v))?;
@@ -269,10 +282,10 @@ fn finite_scalar(what: &str, v: f32) -> Result<f32, String> {
     }
 }
 
-fn build_object(o: ObjectFile, base: &Path) -> Result<SceneObject> {
+fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<SceneObject> {
     let invalid = |m: String| Error::Invalid(m);
     let mut mesh: Mesh = match (&o.obj, &o.generator) {
-        (Some(path), None) => crate::obj::load_obj(&base.join(path))?,
+        (Some(path), None) => crate::obj::load_obj(&base.join(path), reach)?,
         (None, Some(generator)) => {
             generator.validate().map_err(invalid)?;
             generator.build()
@@ -305,12 +318,7 @@ fn build_object(o: ObjectFile, base: &Path) -> Result<SceneObject> {
     let transform = Affine3A::from_scale_rotation_translation(Vec3::splat(o.scale), rotation, translate);
     let world = mesh.transformed(transform);
     world.validate().map_err(invalid)?;
-    let bounds = world.bounds();
-    if bounds.min.abs().max(bounds.max.abs()).max_element() > MAX_COORDINATE {
-        return Err(invalid(format!(
-            "scale and translate place it beyond {MAX_COORDINATE:e} m, past what f32 rendering can hold"
-        )));
-    }
+    check_extent(&world).map_err(|m| invalid(format!("scale and translate place it {m}")))?;
     Ok(SceneObject::new(o.name, world, specular))
 }
 
@@ -319,7 +327,7 @@ mod tests {
     use super::*;
 
     fn parse_str(text: &str) -> Result<Scene> {
-        parse(text, "test", Path::new("."))
+        parse(text, "test", Path::new("."), Reach::Anywhere)
     }
 
     #[test]

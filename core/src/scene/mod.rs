@@ -16,6 +16,7 @@ use crate::camera::{CameraPath, PathSegment};
 use crate::error::{Error, Result};
 use crate::hash::{ContentHash, mesh_hash};
 use crate::mesh::Mesh;
+use crate::reach::Reach;
 use crate::shading::{Light, Lighting, Specular};
 
 /// Built-in scenes, embedded so that they work from any directory.
@@ -99,21 +100,32 @@ pub struct Scene {
 impl Scene {
     /// Loads a built-in scene by name, a `.toml` scene file or a bare `.obj` file.
     pub fn load(spec: &str) -> Result<Scene> {
+        Self::load_within(spec, Reach::Anywhere)
+    }
+
+    /// As [`Scene::load`], reading only files within `reach` (the built-in scenes
+    /// read none).
+    pub fn load_within(spec: &str, reach: Reach) -> Result<Scene> {
         let path = Path::new(spec);
         let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
         match extension.as_deref() {
-            Some("obj") => Self::from_obj(path),
-            Some("toml") => file::load_file(path),
+            Some("obj") => Self::from_obj(path, reach),
+            Some("toml") => file::load_file(path, reach),
             _ => match BUILTINS.iter().find(|(name, _)| *name == spec) {
-                Some((name, text)) => file::parse(text, &format!("built-in `{name}`"), Path::new(".")),
+                Some((name, text)) => file::parse(text, &format!("built-in `{name}`"), Path::new("."), reach),
                 None => Err(Error::UnknownScene(spec.to_string())),
             },
         }
     }
 
-    /// A one-object scene from an OBJ file, with default lights and an orbit path.
-    pub fn from_obj(path: &Path) -> Result<Scene> {
-        let mesh = crate::obj::load_obj(path)?;
+    /// A one-object scene from an OBJ file (and the MTL files and textures it names,
+    /// within `reach`), with default lights and an orbit path.
+    pub fn from_obj(path: &Path, reach: Reach) -> Result<Scene> {
+        let mesh = crate::obj::load_obj(path, reach)?;
+        file::check_extent(&mesh).map_err(|m| Error::Obj {
+            path: path.to_path_buf(),
+            message: format!("its vertices lie {m}"),
+        })?;
         // The file's stem, made a valid object name (see [`check_object_name`]).
         let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
         let name: String = stem
