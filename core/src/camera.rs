@@ -223,6 +223,14 @@ impl PathSegment {
                 if !points.iter().all(|p| finite(p)) || !look_at.is_none_or(|p| finite(&p)) {
                     return Err("fly: points and look_at must be finite".into());
                 }
+                // The eye looks along the path or at `look_at`: neither may be where
+                // it stands.
+                if let Some(k) = points.windows(2).position(|w| w[0] == w[1]) {
+                    return Err(format!("fly: points {} and {} coincide", k + 1, k + 2));
+                }
+                if let Some(k) = look_at.and_then(|at| points.iter().position(|p| *p == at)) {
+                    return Err(format!("fly: look_at is point {}, where the eye stands", k + 1));
+                }
             }
         }
         Ok(())
@@ -346,5 +354,23 @@ mod tests {
         assert!(p5.target.x > p5.eye.x);
         assert_eq!(path.pose(100), path.pose(7));
         assert_eq!(CameraPath::default().pose(0), None);
+    }
+
+    #[test]
+    fn fly_paths_that_would_look_at_the_eye_are_refused() {
+        let fly = |points: Vec<[f32; 3]>, look_at| PathSegment::Fly {
+            points,
+            look_at,
+            frames: 4,
+        };
+        let stay = fly(vec![[0.0; 3], [0.0; 3], [1.0, 0.0, 0.0]], None);
+        assert!(stay.validate().unwrap_err().contains("points 1 and 2"));
+        let at_self = fly(vec![[0.0; 3], [1.0, 0.0, 0.0]], Some([1.0, 0.0, 0.0]));
+        assert!(at_self.validate().unwrap_err().contains("look_at"));
+        assert!(
+            fly(vec![[0.0; 3], [1.0, 0.0, 0.0]], Some([0.0, 5.0, 0.0]))
+                .validate()
+                .is_ok()
+        );
     }
 }
