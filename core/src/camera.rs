@@ -184,6 +184,10 @@ impl Pose {
     }
 }
 
+/// The most frames one path segment may last (an hour at 30 fps; `--frames` is
+/// capped alike).
+pub const MAX_SEGMENT_FRAMES: u32 = 108_000;
+
 /// A sequence of segments, sampled frame by frame.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct CameraPath {
@@ -201,8 +205,8 @@ impl PathSegment {
     /// Checks the segment; the error names the field.
     pub fn validate(&self) -> Result<(), String> {
         let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
-        if self.frames() == 0 {
-            return Err("a path segment needs frames > 0".into());
+        if self.frames() == 0 || self.frames() > MAX_SEGMENT_FRAMES {
+            return Err(format!("a path segment needs 1 to {MAX_SEGMENT_FRAMES} frames"));
         }
         match self {
             PathSegment::Orbit {

@@ -41,14 +41,14 @@ struct Args {
     #[arg(long, env = "RELIEF_TLS_KEY", requires = "tls_cert")]
     tls_key: Option<PathBuf>,
     /// Result cache size, MiB.
-    #[arg(long, env = "RELIEF_CACHE_MB", default_value = "512")]
-    cache_mb: usize,
+    #[arg(long, env = "RELIEF_CACHE_MB", default_value = "512", value_parser = clap::value_parser!(u64).range(0..=1 << 20))]
+    cache_mb: u64,
     /// A worker silent for this long (ms) loses its jobs to other workers.
     #[arg(long, env = "RELIEF_LEASE_MS", default_value = "5000", value_parser = clap::value_parser!(u64).range(100..=3_600_000))]
     lease_ms: u64,
     /// Most requests waiting at once.
-    #[arg(long, env = "RELIEF_MAX_WAITING", default_value = "100000")]
-    max_waiting: usize,
+    #[arg(long, env = "RELIEF_MAX_WAITING", default_value = "100000", value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
+    max_waiting: u64,
     /// Where received scenes are unpacked (default: a directory under the system's temp dir).
     #[arg(long, env = "RELIEF_SCENE_DIR")]
     scene_dir: Option<PathBuf>,
@@ -70,9 +70,9 @@ async fn serve(args: Args) -> Result<()> {
     let lease = Duration::from_millis(args.lease_ms);
     let shared = Shared::new(
         State::new(Limits {
-            cache_bytes: args.cache_mb << 20,
+            cache_bytes: (args.cache_mb as usize) << 20,
             lease,
-            max_waiting: args.max_waiting,
+            max_waiting: args.max_waiting as usize,
         }),
         scene_dir,
     );
