@@ -52,6 +52,38 @@ fn small<T>(message: T) -> Response<T> {
 
 type BoxStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send>>;
 
+/// One request's results. Dropped before the request ended — the client cancelled the
+/// call or went away — it withdraws the request, which stops its job (on the worker
+/// too) when nobody else waits for it: no texture is baked for nobody.
+pub struct ResultStream {
+    results: UnboundedReceiverStream<Result<pb::ImpostorResult, Status>>,
+    shared: Arc<Shared>,
+    client_id: String,
+    request_id: u64,
+}
+
+impl Stream for ResultStream {
+    type Item = Result<pb::ImpostorResult, Status>;
+
+    fn poll_next(
+        mut self: Pin<&mut Self>,
+        cx: &mut std::task::Context<'_>,
+    ) -> std::task::Poll<Option<Self::Item>> {
+        Pin::new(&mut self.results).poll_next(cx)
+    }
+}
+
+impl Drop for ResultStream {
+    fn drop(&mut self) {
+        // (After the final result the request is no longer waiting: nothing to do.)
+        let mut state = self.shared.state();
+        if state.withdraw(&self.client_id, &[self.request_id]) > 0 {
+            tracing::debug!(client = %self.client_id, id = self.request_id, "the client went away: withdrawn");
+            state.dispatch();
+        }
+    }
+}
+
 #[tonic::async_trait]
 impl pb::scenes_server::Scenes for Service {
     async fn put_scene(
@@ -116,7 +148,7 @@ impl pb::scenes_server::Scenes for Service {
 
 #[tonic::async_trait]
 impl pb::impostors_server::Impostors for Service {
-    type RequestStream = UnboundedReceiverStream<Result<pb::ImpostorResult, Status>>;
+    type RequestStream = ResultStream;
 
     async fn request(
         &self,
@@ -148,7 +180,12 @@ impl pb::impostors_server::Impostors for Service {
         tracing::debug!(urgency = ?r.urgency, "admitted");
         // Only the state keeps a sender now: the stream ends when the request does.
         drop(tx);
-        Ok(Response::new(UnboundedReceiverStream::new(rx)))
+        Ok(Response::new(ResultStream {
+            results: UnboundedReceiverStream::new(rx),
+            shared: self.0.clone(),
+            client_id: r.client_id.clone(),
+            request_id: r.request_id,
+        }))
     }
 
     async fn withdraw(

@@ -187,6 +187,25 @@ async fn withdrawn_predictions_are_cancelled() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_that_goes_away_stops_its_job() {
+    let (_server, url) = start_server(&[]);
+    let _worker = start_worker(&url, &[]);
+    let (mut remote, hash) = upload_default(&url).await;
+    wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
+    // A long bake; the client cancels the call while it runs.
+    let eye = Vec3::new(0.5, 2.0, 8.0);
+    let stream = remote
+        .request(request(&hash, "rock", eye, 2048, 1, pb::Urgency::Now))
+        .await
+        .unwrap();
+    wait_for(&mut remote, "the job running", |s| s.jobs_in_flight == 1).await;
+    drop(stream);
+    // The server withdraws it and the worker stops: nothing is left running.
+    let stats = wait_for(&mut remote, "the job stopped", |s| s.jobs_in_flight == 0).await;
+    assert_eq!(stats.withdrawn, 1, "{stats:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_killed_workers_job_is_answered_by_another() {
     let (_server, url) = start_server(&["--lease-ms", "400"]);
     let mut first = start_worker(&url, &[]);
