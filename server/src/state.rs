@@ -375,37 +375,14 @@ impl State {
         }
     }
 
-    /// Hands queued jobs to workers with free slots, most urgent first. A job whose
-    /// clients have all gone (their result streams closed) is dropped unbaked.
+    /// Hands queued jobs to workers with free slots, most urgent first. (A job whose
+    /// clients have all gone is withdrawn before it gets here: see the service's
+    /// `ResultStream`.)
     pub fn dispatch(&mut self) {
         loop {
             let Some(&first) = self.queue.first() else {
                 return;
             };
-            let has_free_slot = self.workers.values().any(|w| w.running.len() < w.slots);
-            if !has_free_slot {
-                return;
-            }
-            self.queue.remove(&first);
-            let listened = self.jobs.get(&first.id).is_some_and(|job| {
-                job.waiters
-                    .iter()
-                    .any(|id| self.waiters.get(id).is_some_and(|w| !w.tx.is_closed()))
-            });
-            if !listened {
-                tracing::debug!(job = first.id, "dropped: every client waiting for it is gone");
-                // Their waiters go first, so that `finish` records no latency for them.
-                let gone: Vec<_> = self
-                    .jobs
-                    .get(&first.id)
-                    .map(|job| job.waiters.iter().cloned().collect())
-                    .unwrap_or_default();
-                for id in gone {
-                    self.waiters.remove(&id);
-                }
-                self.finish(first.id);
-                continue;
-            }
             let Some((&worker_id, worker)) = self
                 .workers
                 .iter_mut()
@@ -414,6 +391,7 @@ impl State {
             else {
                 return;
             };
+            self.queue.remove(&first);
             let Some(job) = self.jobs.get_mut(&first.id) else {
                 continue;
             };
@@ -685,35 +663,6 @@ mod tests {
             .map(|j| j.eye.unwrap().x)
             .collect();
         assert_eq!(order, vec![3.0, 2.0, 1.0]);
-    }
-
-    #[test]
-    fn jobs_nobody_listens_to_are_dropped_unbaked() {
-        let (mut s, hash) = state_with_scene();
-        let (gone, rx) = unbounded_channel();
-        drop(rx); // The client disconnected.
-        s.admit(&request(hash, 1, Vec3::new(0.0, 0.0, 5.0), Urgency::Now), gone)
-            .unwrap();
-        let (tx, _rx) = unbounded_channel();
-        s.admit(&request(hash, 2, Vec3::new(1.0, 0.0, 5.0), Urgency::Now), tx)
-            .unwrap();
-        let (wtx, mut wrx) = unbounded_channel();
-        s.add_worker("w".into(), 4, wtx);
-        s.dispatch();
-        // Only the request someone still waits for reaches the worker.
-        let job = next_job(&mut wrx).unwrap();
-        assert!(next_job(&mut wrx).is_none());
-        assert_eq!(job.eye.map(|e| e.x), Some(1.0), "{job:?}");
-        assert_eq!(s.stats().queue_now, 0);
-        assert_eq!(s.stats().jobs_in_flight, 1);
-        // The dropped job is gone for good: the same texture asked for again is a new
-        // job that is baked, not merged into the dropped one.
-        let (tx, _rx) = unbounded_channel();
-        s.admit(&request(hash, 3, Vec3::new(0.0, 0.0, 5.0), Urgency::Now), tx)
-            .unwrap();
-        s.dispatch();
-        let again = next_job(&mut wrx).expect("the same texture asked for again is baked");
-        assert_eq!(again.eye.map(|e| e.x), Some(0.0), "{again:?}");
     }
 
     #[test]
