@@ -232,7 +232,8 @@ fn warp(args: WarpArgs) -> Result<()> {
     let solo = Solo::new(&scene, &args.object, 3.0)?;
     let impostor = Impostor::new(solo.bake(solo.eye(0.0), args.size, DepthBits::Eight)?);
     let camera = solo.camera(solo.eye(args.angle), args.frame_size);
-    let params = WarpParams::new(&impostor.texture, camera.eye)?;
+    let params = WarpParams::new(&impostor.texture, camera.eye)
+        .map_err(|e| anyhow::anyhow!("--angle {}: {e}", args.angle))?;
     let texture = &impostor.texture;
     let texels = texture.depth.len();
     bar.set_message("baselines");
