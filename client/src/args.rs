@@ -53,18 +53,31 @@ pub fn png_path(text: &str) -> Result<std::path::PathBuf, String> {
 }
 
 /// Checks, before any work, that an output file can be written at `path`, so that a
-/// bad `--out` fails at once instead of after the work: its directory is created and
-/// must take a new file (a probe of our own, created and removed — the user's path
-/// itself is not touched), and `path` must not be a directory.
+/// bad `--out` fails at once instead of after the work: an existing file must take
+/// writes (it is opened, not truncated); else its directory is created and must take a
+/// new file (a probe of our own, created and removed — the user's path itself is not
+/// created). `path` must not be a directory.
 pub fn ensure_writable(flag: &str, path: &std::path::Path) -> anyhow::Result<()> {
     let context = || format!("{flag} {}", path.display());
-    if path.is_dir() {
-        return Err(anyhow!("{}: is a directory", context()));
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => return Err(anyhow!("{}: is a directory", context())),
+        // An existing file must take writes (opened without creating or truncating).
+        Ok(m) if m.is_file() => {
+            std::fs::OpenOptions::new()
+                .append(true)
+                .open(path)
+                .map_err(|e| anyhow!("{}: {e}", context()))?;
+            return Ok(());
+        }
+        _ => {}
     }
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
     let dir = parent.unwrap_or(std::path::Path::new("."));
     std::fs::create_dir_all(dir).map_err(|e| anyhow!("{}: {e}", context()))?;
-    let probe = dir.join(format!(".relief-probe-{}", std::process::id()));
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    let probe = dir.join(format!(".relief-probe-{}-{nanos}", std::process::id()));
     std::fs::OpenOptions::new()
         .write(true)
         .create_new(true)

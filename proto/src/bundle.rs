@@ -64,6 +64,11 @@ impl Bundle {
     /// an absolute or `..` path in a scene, OBJ or MTL must not read its own disk.
     pub fn load(&self, dir: &Path) -> Result<Scene> {
         let root = dir.join(self.hash.to_string());
+        // A root that is a link (planted by someone who can write `dir`) would move
+        // the confinement wherever it points.
+        if std::fs::symlink_metadata(&root).is_ok_and(|m| m.file_type().is_symlink()) {
+            return Err(Error::Invalid(format!("{} is a symbolic link", root.display())));
+        }
         for f in &self.bundle.files {
             let relative = safe_relative(&f.path)
                 .ok_or_else(|| Error::Invalid(format!("bundle path `{}` is not relative", f.path)))?;
@@ -76,6 +81,21 @@ impl Bundle {
         let scene_path = root.join(&self.bundle.root);
         Scene::load_within(&scene_path.to_string_lossy(), Reach::Within(&root))
     }
+}
+
+/// A fresh directory for scene bundles under the system's temp dir, readable by this
+/// user only (`prefix-PID-NANOS`): a name nobody could have prepared (or linked)
+/// beforehand, since creating it fails if it exists.
+pub fn private_scene_dir(prefix: &str) -> Result<PathBuf> {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    let dir = std::env::temp_dir().join(format!("{prefix}-{}-{nanos}", std::process::id()));
+    let mut builder = std::fs::DirBuilder::new();
+    #[cfg(unix)]
+    std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
+    builder.create(&dir).map_err(|e| Error::io(&dir, e))?;
+    Ok(dir)
 }
 
 /// The `obj` entries of a scene file's objects (none when it is not valid TOML: the

@@ -63,10 +63,13 @@ fn main() -> ExitCode {
 }
 
 async fn serve(args: Args) -> Result<()> {
-    let scene_dir = args
-        .scene_dir
-        .unwrap_or_else(|| std::env::temp_dir().join(format!("relief-server-{}", std::process::id())));
-    std::fs::create_dir_all(&scene_dir).with_context(|| format!("creating {}", scene_dir.display()))?;
+    let scene_dir = match args.scene_dir {
+        Some(dir) => {
+            std::fs::create_dir_all(&dir).with_context(|| format!("--scene-dir {}", dir.display()))?;
+            dir
+        }
+        None => relief_proto::bundle::private_scene_dir("relief-server")?,
+    };
     let lease = Duration::from_millis(args.lease_ms);
     let shared = Shared::new(
         State::new(Limits {

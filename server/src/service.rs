@@ -57,6 +57,9 @@ type BoxStream<T> = Pin<Box<dyn Stream<Item = Result<T, Status>> + Send>>;
 /// too) when nobody else waits for it: no texture is baked for nobody.
 pub struct ResultStream {
     results: UnboundedReceiverStream<Result<pb::ImpostorResult, Status>>,
+    /// The state's sender for this stream, while the request waits (it is dropped
+    /// when the request ends, so this stream does not keep itself open).
+    sender: tokio::sync::mpsc::WeakUnboundedSender<Result<pb::ImpostorResult, Status>>,
     shared: Arc<Shared>,
     client_id: String,
     request_id: u64,
@@ -75,9 +78,13 @@ impl Stream for ResultStream {
 
 impl Drop for ResultStream {
     fn drop(&mut self) {
-        // (After the final result the request is no longer waiting: nothing to do.)
+        // After the final result (or an answer from the cache) nothing holds the
+        // sender any more: nothing to withdraw.
+        let Some(results) = self.sender.upgrade() else {
+            return;
+        };
         let mut state = self.shared.state();
-        if state.withdraw(&self.client_id, &[self.request_id]) > 0 {
+        if state.withdraw_own(&self.client_id, self.request_id, &results) {
             tracing::debug!(client = %self.client_id, id = self.request_id, "the client went away: withdrawn");
             state.dispatch();
         }
@@ -179,9 +186,11 @@ impl pb::impostors_server::Impostors for Service {
         state.record_handling(began.elapsed().as_secs_f32() * 1e6);
         tracing::debug!(urgency = ?r.urgency, "admitted");
         // Only the state keeps a sender now: the stream ends when the request does.
+        let sender = tx.downgrade();
         drop(tx);
         Ok(Response::new(ResultStream {
             results: UnboundedReceiverStream::new(rx),
+            sender,
             shared: self.0.clone(),
             client_id: r.client_id.clone(),
             request_id: r.request_id,

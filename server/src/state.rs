@@ -203,7 +203,7 @@ impl State {
         })?;
         // The camera a worker would bake with: refused here, naming the field, rather
         // than failing on a worker.
-        match SourceCamera::facing(request.eye, bounds, 1, 1) {
+        match SourceCamera::facing(request.eye, bounds, request.size, request.size) {
             Ok(_) => {}
             Err(FacingError::EyeInsideBounds) => {
                 return Err(Status::failed_precondition(format!(
@@ -472,6 +472,17 @@ impl State {
         }
     }
 
+    /// Withdraws request `request_id` of `client_id` if its results still go to
+    /// `results`: a stream dropped early withdraws its own request, never another
+    /// that reuses the id. Returns whether it did.
+    pub fn withdraw_own(&mut self, client_id: &str, request_id: u64, results: &ResultSender) -> bool {
+        let own = self
+            .waiters
+            .get(&(client_id.to_string(), request_id))
+            .is_some_and(|w| w.tx.same_channel(results));
+        own && self.withdraw(client_id, &[request_id]) == 1
+    }
+
     /// Withdraws requests; a job nobody waits for any more is cancelled (on its worker
     /// too). Returns how many requests were withdrawn.
     pub fn withdraw(&mut self, client_id: &str, request_ids: &[u64]) -> u32 {
@@ -663,6 +674,23 @@ mod tests {
             .map(|j| j.eye.unwrap().x)
             .collect();
         assert_eq!(order, vec![3.0, 2.0, 1.0]);
+    }
+
+    #[test]
+    fn a_stream_withdraws_only_its_own_request() {
+        let (mut s, hash) = state_with_scene();
+        let (mine, _rx) = unbounded_channel();
+        s.admit(
+            &request(hash, 7, Vec3::new(0.0, 0.0, 5.0), Urgency::Now),
+            mine.clone(),
+        )
+        .unwrap();
+        // Another stream that used the same id (answered from the cache, say).
+        let (other, _other_rx) = unbounded_channel();
+        assert!(!s.withdraw_own("c", 7, &other));
+        assert_eq!(s.stats().queue_now, 1);
+        assert!(s.withdraw_own("c", 7, &mine));
+        assert_eq!(s.stats().queue_now, 0);
     }
 
     #[test]

@@ -56,10 +56,10 @@ pub async fn run(args: Args) -> Result<()> {
     let endpoint = relief_proto::connect::endpoint(&args.server, args.tls_ca.as_deref())
         .map_err(|e| anyhow!("--server/--tls-ca: {e}"))?;
     let auth = BearerToken::new(args.token.as_deref()).map_err(|e| anyhow!("--token: {e}"))?;
-    let scene_dir = args
-        .scene_dir
-        .clone()
-        .unwrap_or_else(|| std::env::temp_dir().join(format!("relief-worker-{}", std::process::id())));
+    let scene_dir = match args.scene_dir.clone() {
+        Some(dir) => dir,
+        None => relief_proto::bundle::private_scene_dir("relief-worker")?,
+    };
     // A scene directory it cannot write would fail every job: refuse to start.
     std::fs::create_dir_all(&scene_dir)
         .and_then(|()| tempfile_probe(&scene_dir))
