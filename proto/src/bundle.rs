@@ -115,11 +115,15 @@ fn obj_entries(text: &[u8]) -> Vec<String> {
         .collect()
 }
 
-/// The argument of every `keyword` line of an OBJ or MTL file.
+/// The argument of every `keyword` line of an OBJ or MTL file: the keyword, any
+/// whitespace (tobj splits on spaces and tabs alike), then the rest of the line.
 fn referenced(text: &[u8], keyword: &str) -> Vec<String> {
     String::from_utf8_lossy(text)
         .lines()
-        .filter_map(|l| l.trim().strip_prefix(keyword).map(|rest| rest.trim().to_string()))
+        .filter_map(|l| {
+            let (first, rest) = l.trim().split_once(char::is_whitespace)?;
+            (first == keyword).then(|| rest.trim().to_string())
+        })
         .filter(|r| !r.is_empty())
         .collect()
 }
@@ -193,11 +197,11 @@ fn add_obj(path: &Path, name: &str, files: &mut Vec<SceneFile>) -> Result<()> {
         .parent()
         .map(Path::to_path_buf)
         .unwrap_or_default();
-    for mtl in referenced(&data, "mtllib ") {
+    for mtl in referenced(&data, "mtllib") {
         let Ok(mtl_data) = std::fs::read(base.join(&mtl)) else {
             continue; // A missing MTL is a warning when loading, not an error.
         };
-        for texture in referenced(&mtl_data, "map_Kd ") {
+        for texture in referenced(&mtl_data, "map_Kd") {
             if let Ok(bytes) = std::fs::read(base.join(&texture)) {
                 files.push(SceneFile {
                     path: name_dir.join(&texture).to_string_lossy().into_owned(),
@@ -220,6 +224,13 @@ fn add_obj(path: &Path, name: &str, files: &mut Vec<SceneFile>) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn references_are_found_however_the_line_is_spaced() {
+        let text = b"mtllib a.mtl\nmtllib\tb c.mtl\n  map_Kd  t.png \nmtllibx no.mtl\nmtllib\n";
+        assert_eq!(referenced(text, "mtllib"), ["a.mtl", "b c.mtl"]);
+        assert_eq!(referenced(text, "map_Kd"), ["t.png"]);
+    }
 
     #[test]
     fn builtin_bundle_round_trips_and_loads() {
