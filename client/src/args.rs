@@ -73,17 +73,9 @@ pub fn ensure_writable(flag: &str, path: &std::path::Path) -> anyhow::Result<()>
     }
     let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
     let dir = parent.unwrap_or(std::path::Path::new("."));
-    std::fs::create_dir_all(dir).map_err(|e| anyhow!("{}: {e}", context()))?;
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.subsec_nanos());
-    let probe = dir.join(format!(".relief-probe-{}-{nanos}", std::process::id()));
-    std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&probe)
-        .map_err(|e| anyhow!("{}: {e}", context()))?;
-    std::fs::remove_file(&probe).map_err(|e| anyhow!("{}: {e}", context()))
+    std::fs::create_dir_all(dir)
+        .and_then(|()| relief_core::scratch::probe_writable(dir))
+        .map_err(|e| anyhow!("{}: {e}", context()))
 }
 
 /// A relief-texture edge in texels: `1 ..= MAX_TEXTURE_SIZE`.

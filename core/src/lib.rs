@@ -29,6 +29,7 @@ pub mod obj;
 pub mod reach;
 pub mod relief;
 pub mod scene;
+pub mod scratch;
 pub mod shading;
 pub mod vector;
 

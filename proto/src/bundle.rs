@@ -84,35 +84,15 @@ impl Bundle {
 }
 
 /// A fresh directory for scene bundles under the system's temp dir, readable by this
-/// user only (`prefix-PID-NANOS`): a name nobody could have prepared (or linked)
-/// beforehand, since creating it fails if it exists.
+/// user only ([`unique_name`](relief_core::scratch::unique_name)): a name nobody could
+/// have prepared (or linked) beforehand, since creating it fails if it exists.
 pub fn private_scene_dir(prefix: &str) -> Result<PathBuf> {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.subsec_nanos());
-    let dir = std::env::temp_dir().join(format!("{prefix}-{}-{nanos}", std::process::id()));
+    let dir = std::env::temp_dir().join(relief_core::scratch::unique_name(prefix));
     let mut builder = std::fs::DirBuilder::new();
     #[cfg(unix)]
     std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
     builder.create(&dir).map_err(|e| Error::io(&dir, e))?;
     Ok(dir)
-}
-
-/// The `obj` entries of a scene file's objects (none when it is not valid TOML: the
-/// scene's loader then says what is wrong).
-fn obj_entries(text: &[u8]) -> Vec<String> {
-    let table: Option<toml::Table> = std::str::from_utf8(text)
-        .ok()
-        .and_then(|t| toml::from_str(t).ok());
-    let objects = table
-        .as_ref()
-        .and_then(|t| t.get("objects"))
-        .and_then(|o| o.as_array())
-        .into_iter()
-        .flatten();
-    objects
-        .filter_map(|o| o.get("obj").and_then(|v| v.as_str()).map(str::to_string))
-        .collect()
 }
 
 /// The argument of every `keyword` line of an OBJ or MTL file: the keyword, any
@@ -152,17 +132,20 @@ pub fn bundle_for(spec: &str) -> Result<Bundle> {
             let text = read(path)?;
             let name = file_name(path)?;
             let base = path.parent().unwrap_or(Path::new("."));
-            let valid = std::str::from_utf8(&text)
+            let table: toml::Table = std::str::from_utf8(&text)
                 .ok()
-                .is_some_and(|t| toml::from_str::<toml::Table>(t).is_ok());
-            if !valid {
-                return Err(Error::Scene {
+                .and_then(|t| toml::from_str(t).ok())
+                .ok_or_else(|| Error::Scene {
                     origin: spec.to_string(),
                     message: "not valid TOML".into(),
-                });
-            }
-            for obj in obj_entries(&text) {
-                add_obj(&base.join(&obj), &obj, &mut files)?;
+                })?;
+            let objs = table
+                .get("objects")
+                .and_then(|o| o.as_array())
+                .into_iter()
+                .flatten();
+            for obj in objs.filter_map(|o| o.get("obj").and_then(|v| v.as_str())) {
+                add_obj(&base.join(obj), obj, &mut files)?;
             }
             files.push(SceneFile {
                 path: name.clone(),

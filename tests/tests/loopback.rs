@@ -186,6 +186,18 @@ async fn withdrawn_predictions_are_cancelled() {
     assert!(results.last().unwrap().r#final);
 }
 
+/// Asks for a bake that takes seconds (the 2048² rock, request 1) and waits until a
+/// worker runs it.
+async fn start_long_bake(remote: &mut Remote, hash: &str) -> tonic::Streaming<pb::ImpostorResult> {
+    let eye = Vec3::new(0.5, 2.0, 8.0);
+    let stream = remote
+        .request(request(hash, "rock", eye, 2048, 1, pb::Urgency::Now))
+        .await
+        .unwrap();
+    wait_for(remote, "the job running", |s| s.jobs_in_flight == 1).await;
+    stream
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_client_that_goes_away_stops_its_job() {
     let (_server, url) = start_server(&[]);
@@ -193,12 +205,7 @@ async fn a_client_that_goes_away_stops_its_job() {
     let (mut remote, hash) = upload_default(&url).await;
     wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
     // A long bake; the client cancels the call while it runs.
-    let eye = Vec3::new(0.5, 2.0, 8.0);
-    let stream = remote
-        .request(request(&hash, "rock", eye, 2048, 1, pb::Urgency::Now))
-        .await
-        .unwrap();
-    wait_for(&mut remote, "the job running", |s| s.jobs_in_flight == 1).await;
+    let stream = start_long_bake(&mut remote, &hash).await;
     drop(stream);
     // The server withdraws it and the worker stops: nothing is left running.
     let stats = wait_for(&mut remote, "the job stopped", |s| s.jobs_in_flight == 0).await;
@@ -212,12 +219,7 @@ async fn a_killed_workers_job_is_answered_by_another() {
     let (mut remote, hash) = upload_default(&url).await;
     wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
     // A big bake of the heavy object, so the worker is killed while holding it.
-    let eye = Vec3::new(0.5, 2.0, 8.0);
-    let stream = remote
-        .request(request(&hash, "rock", eye, 2048, 1, pb::Urgency::Now))
-        .await
-        .unwrap();
-    wait_for(&mut remote, "the job running", |s| s.jobs_in_flight == 1).await;
+    let stream = start_long_bake(&mut remote, &hash).await;
     first.0.kill().unwrap();
     let _second = start_worker(&url, &[]);
     let results = collect(stream).await.expect("the request is still answered");

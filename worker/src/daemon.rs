@@ -62,7 +62,7 @@ pub async fn run(args: Args) -> Result<()> {
     };
     // A scene directory it cannot write would fail every job: refuse to start.
     std::fs::create_dir_all(&scene_dir)
-        .and_then(|()| tempfile_probe(&scene_dir))
+        .and_then(|()| relief_core::scratch::probe_writable(&scene_dir))
         .map_err(|e| anyhow!("--scene-dir {}: {e}", scene_dir.display()))?;
     let name = args.name.clone().unwrap_or_else(|| {
         let host = std::fs::read_to_string("/etc/hostname").unwrap_or_default();
@@ -111,13 +111,6 @@ pub async fn run(args: Args) -> Result<()> {
             }
         }
     }
-}
-
-/// Creates and removes a file in `dir`: whether the worker can store scenes there.
-fn tempfile_probe(dir: &std::path::Path) -> std::io::Result<()> {
-    let probe = dir.join(format!(".probe-{}", std::process::id()));
-    std::fs::write(&probe, b"")?;
-    std::fs::remove_file(&probe)
 }
 
 /// Resolves on SIGINT or SIGTERM.

@@ -80,10 +80,7 @@ fn strip_choice<T: PartialOrd + Copy + std::fmt::Display>(
         None => measured
             .iter()
             .copied()
-            .fold(None, |best: Option<T>, v| match best {
-                Some(b) if b >= v => Some(b),
-                _ => Some(v),
-            })
+            .reduce(|best, v| if v > best { v } else { best })
             .ok_or_else(|| anyhow!("{flag}: nothing is measured")),
     }
 }

@@ -49,14 +49,21 @@ pub const MAX_OBJECT_NAME: usize = 64;
 /// ASCII letters, digits, `-`, `_` and `.`, not starting with `.`, at most
 /// [`MAX_OBJECT_NAME`] long: never a path.
 pub fn check_object_name(name: &str) -> Result<(), String> {
-    let allowed = |c: char| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.');
-    if name.is_empty() || name.len() > MAX_OBJECT_NAME || name.starts_with('.') || !name.chars().all(allowed)
+    if name.is_empty()
+        || name.len() > MAX_OBJECT_NAME
+        || name.starts_with('.')
+        || !name.chars().all(name_char)
     {
         return Err(format!(
             "object name `{name}` must be 1 to {MAX_OBJECT_NAME} ASCII letters, digits, `-`, `_` or `.`, not starting with `.`"
         ));
     }
     Ok(())
+}
+
+/// A character an object name may hold ([`check_object_name`]).
+fn name_char(c: char) -> bool {
+    c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.')
 }
 
 /// One object of a scene, its mesh already placed in world space.
@@ -126,18 +133,13 @@ impl Scene {
             path: path.to_path_buf(),
             message: format!("its vertices lie {m}"),
         })?;
-        // The file's stem, made a valid object name (see [`check_object_name`]).
+        // The file's stem, made a valid object name (see [`check_object_name`]; dots
+        // go too, so that it cannot start with one).
         let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
         let name: String = stem
             .unwrap_or_default()
             .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                    c
-                } else {
-                    '_'
-                }
-            })
+            .map(|c| if name_char(c) && c != '.' { c } else { '_' })
             .take(MAX_OBJECT_NAME)
             .collect();
         let name = if name.is_empty() {
