@@ -11,7 +11,7 @@
 
 use glam::Vec3;
 use rayon::prelude::*;
-use wide::{f32x8, i32x8};
+use wide::{f32x8, i16x8, i32x8, u32x8};
 
 use relief_core::camera::Camera;
 use relief_core::frame::{Frame, NO_OBJECT};
@@ -347,108 +347,149 @@ impl GBuffer {
             color: vec![[0; 3]; w * h],
             object: vec![0; w * h],
         };
-        let background = to_rgb8(scene.background);
-        let specular: Vec<(f32, f32)> = scene
-            .objects
-            .iter()
-            .map(|o| (o.specular.strength, o.specular.shininess))
-            .collect();
-        // Ray directions with a unit forward component: a pixel's position is
-        // `eye + direction · depth`. They are linear in x, so step them along rows.
-        let tan_half = camera.tan_half_fov();
-        let aspect = self.width as f32 / self.height as f32;
-        let x_step = camera.right * (2.0 / self.width as f32 * tan_half * aspect);
-        let lane_offsets = f32x8::new(std::array::from_fn(|l| l as f32));
-        let eye = Vec3x8::splat(camera.eye);
+        let shader = RowShader::new(self, scene, camera);
         frame
             .color
             .par_chunks_mut(w.max(1))
             .zip(frame.object.par_chunks_mut(w.max(1)))
             .enumerate()
-            .for_each(|(y, (color, object))| {
-                let sy = (1.0 - 2.0 * (y as f32 + 0.5) / self.height as f32) * tan_half;
-                let sx0 = (1.0 / self.width as f32 - 1.0) * tan_half * aspect;
-                let row_start = camera.forward + camera.right * sx0 + camera.up * sy;
-                let row = y * w;
-                for x in (0..w).step_by(LANES) {
-                    let n = LANES.min(w - x);
-                    let at = row + x..row + x + n;
-                    let depth = f32x8::new(lanes(&self.depth[at.clone()], EMPTY_DEPTH));
-                    let ids = lanes(&self.object[at.clone()], NO_OBJECT);
-                    let filled = depth.simd_lt(f32x8::splat(EMPTY_DEPTH));
-                    // Shown: filled by an object of the scene (a writer's unknown index
-                    // shows the background, as nothing). Lane `l` is bit `l`.
-                    let known = ids.iter().enumerate().fold(0, |mask, (l, &id)| {
-                        mask | ((((id as usize) < specular.len()) as u32) << l)
-                    });
-                    let shown = filled.to_bitmask() & known;
-                    if shown == 0 {
-                        color[x..x + n].fill(background);
-                        object[x..x + n].fill(NO_OBJECT);
-                        continue;
-                    }
-                    let specular_of = |id: u32| specular.get(id as usize).copied().unwrap_or_default();
-                    let (strength, shininess) = if ids.iter().all(|&id| id == ids[0]) {
-                        // (Mostly one object: one look-up.)
-                        let (s, k) = specular_of(ids[0]);
-                        (f32x8::splat(s), f32x8::splat(k))
-                    } else {
-                        let (mut s, mut k) = ([0.0; LANES], [0.0; LANES]);
-                        for l in 0..n {
-                            (s[l], k[l]) = specular_of(ids[l]);
-                        }
-                        (f32x8::new(s), f32x8::new(k))
-                    };
-                    let albedo = i32x8::new(lanes(&self.albedo[at.clone()], 0).map(|a| a as i32));
-                    let channel = |shift: i32| {
-                        f32x8::from_i32x8((albedo >> shift) & i32x8::splat(0xff)) * f32x8::splat(1.0 / 255.0)
-                    };
-                    // (Normalised below: the scale does not matter.)
-                    let component = |k: usize| {
-                        let c = lanes(&self.normal[k][at.clone()], 0).map(i32::from);
-                        f32x8::from_i32x8(i32x8::new(c))
-                    };
-                    let xs = f32x8::splat(x as f32) + lane_offsets;
-                    let direction = Vec3x8 {
-                        x: f32x8::splat(row_start.x) + f32x8::splat(x_step.x) * xs,
-                        y: f32x8::splat(row_start.y) + f32x8::splat(x_step.y) * xs,
-                        z: f32x8::splat(row_start.z) + f32x8::splat(x_step.z) * xs,
-                    };
-                    // (Empty lanes hold a huge depth: keep their positions finite.)
-                    let depth = filled.select(depth, f32x8::ZERO);
-                    let surfaces = SurfaceLanes {
-                        albedo: Vec3x8 {
-                            x: channel(0),
-                            y: channel(8),
-                            z: channel(16),
-                        },
-                        normal: Vec3x8 {
-                            x: component(0),
-                            y: component(1),
-                            z: component(2),
-                        }
-                        .normalize_or_zero(),
-                        position: eye.zip(direction.scale(depth), |e, d| e + d),
-                        towards_eye: direction.map(|d| -d),
-                        strength,
-                        shininess,
-                    };
-                    let lit = to_rgb8_lanes(scene.lighting.shade_lanes(&surfaces));
-                    if shown == (1 << LANES) - 1 {
-                        color[x..x + LANES].copy_from_slice(&lit);
-                        object[x..x + LANES].copy_from_slice(&ids);
-                        continue;
-                    }
-                    for l in 0..n {
-                        let lit_here = shown & (1 << l) != 0;
-                        color[x + l] = if lit_here { lit[l] } else { background };
-                        object[x + l] = if lit_here { ids[l] } else { NO_OBJECT };
-                    }
-                }
-            });
+            .for_each(|(y, (color, object))| shader.row(y, color, object));
         frame
     }
 }
+
+/// What lighting one row of a G-buffer needs: the planes, the scene's terms and the
+/// camera's ray directions.
+struct RowShader<'a> {
+    gbuffer: &'a GBuffer,
+    lighting: &'a relief_core::shading::Lighting,
+    /// Specular strength and exponent of each object, by index.
+    specular: Vec<(f32, f32)>,
+    background: [u8; 3],
+    camera: &'a Camera,
+    /// A ray direction's step from one pixel to the next in a row.
+    x_step: Vec3,
+}
+
+impl<'a> RowShader<'a> {
+    fn new(gbuffer: &'a GBuffer, scene: &'a Scene, camera: &'a Camera) -> Self {
+        let tan_half = camera.tan_half_fov();
+        let aspect = gbuffer.width as f32 / gbuffer.height as f32;
+        RowShader {
+            gbuffer,
+            lighting: &scene.lighting,
+            specular: scene
+                .objects
+                .iter()
+                .map(|o| (o.specular.strength, o.specular.shininess))
+                .collect(),
+            background: to_rgb8(scene.background),
+            camera,
+            x_step: camera.right * (2.0 / gbuffer.width as f32 * tan_half * aspect),
+        }
+    }
+
+    /// Lights row `y` into `color` and `object` (one row each), [`LANES`] pixels at once.
+    fn row(&self, y: usize, color: &mut [[u8; 3]], object: &mut [u32]) {
+        let g = self.gbuffer;
+        let (w, camera) = (g.width as usize, self.camera);
+        // Ray directions with a unit forward component: a pixel's position is
+        // `eye + direction · depth`. They are linear in x, so step them along rows.
+        let tan_half = camera.tan_half_fov();
+        let aspect = g.width as f32 / g.height as f32;
+        let sy = (1.0 - 2.0 * (y as f32 + 0.5) / g.height as f32) * tan_half;
+        let sx0 = (1.0 / g.width as f32 - 1.0) * tan_half * aspect;
+        let row_start = camera.forward + camera.right * sx0 + camera.up * sy;
+        let lane_offsets = f32x8::new(std::array::from_fn(|l| l as f32));
+        let eye = Vec3x8::splat(camera.eye);
+        // (A scene's object count fits its `u32` ids.)
+        let objects = u32x8::splat(u32::try_from(self.specular.len()).unwrap_or(u32::MAX));
+        let row = y * w;
+        for x in (0..w).step_by(LANES) {
+            let n = LANES.min(w - x);
+            let at = row + x..row + x + n;
+            let (color, object) = (&mut color[x..x + n], &mut object[x..x + n]);
+            let depth = f32x8::new(lanes(&g.depth[at.clone()], EMPTY_DEPTH));
+            let ids = lanes(&g.object[at.clone()], NO_OBJECT);
+            let id_lanes = u32x8::new(ids);
+            let filled = depth.simd_lt(f32x8::splat(EMPTY_DEPTH));
+            // Shown: filled by an object of the scene (a writer's unknown index shows
+            // the background, as nothing). Lane `l` is bit `l`.
+            let shown = filled.to_bitmask() & id_lanes.simd_lt(objects).to_bitmask();
+            if shown == 0 {
+                for (c, o) in color.iter_mut().zip(object.iter_mut()) {
+                    (*c, *o) = (self.background, NO_OBJECT);
+                }
+                continue;
+            }
+            let specular_of = |id: u32| self.specular.get(id as usize).copied().unwrap_or_default();
+            let one_object = id_lanes.simd_eq(u32x8::splat(ids[0])).to_bitmask() == ALL_LANES;
+            let (strength, shininess) = if one_object {
+                // (Mostly one object: one look-up.)
+                let (s, k) = specular_of(ids[0]);
+                (f32x8::splat(s), f32x8::splat(k))
+            } else {
+                let (mut s, mut k) = ([0.0; LANES], [0.0; LANES]);
+                for l in 0..n {
+                    (s[l], k[l]) = specular_of(ids[l]);
+                }
+                (f32x8::new(s), f32x8::new(k))
+            };
+            let albedo = i32x8::new(lanes(&g.albedo[at.clone()], 0).map(|a| a as i32));
+            let channel = |shift: i32| {
+                f32x8::from_i32x8((albedo >> shift) & i32x8::splat(0xff)) * f32x8::splat(1.0 / 255.0)
+            };
+            // (Normalised below: the scale does not matter.)
+            let component =
+                |k: usize| f32x8::from_i32x8(i32x8::from(i16x8::new(lanes(&g.normal[k][at.clone()], 0))));
+            let xs = f32x8::splat(x as f32) + lane_offsets;
+            let direction = Vec3x8 {
+                x: f32x8::splat(row_start.x) + f32x8::splat(self.x_step.x) * xs,
+                y: f32x8::splat(row_start.y) + f32x8::splat(self.x_step.y) * xs,
+                z: f32x8::splat(row_start.z) + f32x8::splat(self.x_step.z) * xs,
+            };
+            // (Empty lanes hold a huge depth: keep their positions finite.)
+            let depth = filled.select(depth, f32x8::ZERO);
+            let surfaces = SurfaceLanes {
+                albedo: Vec3x8 {
+                    x: channel(0),
+                    y: channel(8),
+                    z: channel(16),
+                },
+                normal: Vec3x8 {
+                    x: component(0),
+                    y: component(1),
+                    z: component(2),
+                }
+                .normalize_or_zero(),
+                position: eye.zip(direction.scale(depth), |e, d| e + d),
+                towards_eye: direction.map(|d| -d),
+                strength,
+                shininess,
+            };
+            let lit = to_rgb8_lanes(self.lighting.shade_lanes(&surfaces));
+            // (Through fixed-size arrays: a slice copy of a length unknown when compiled
+            // is a call to `memcpy`, a tenth of the time spent here.)
+            if let (ALL_LANES, Ok(color), Ok(object)) = (
+                shown,
+                <&mut [[u8; 3]; LANES]>::try_from(&mut *color),
+                <&mut [u32; LANES]>::try_from(&mut *object),
+            ) {
+                *color = lit;
+                *object = ids;
+                continue;
+            }
+            for l in 0..n {
+                let lit_here = shown & (1 << l) != 0;
+                color[l] = if lit_here { lit[l] } else { self.background };
+                object[l] = if lit_here { ids[l] } else { NO_OBJECT };
+            }
+        }
+    }
+}
+
+/// The bit mask of all [`LANES`] lanes.
+const ALL_LANES: u32 = (1 << LANES) - 1;
 
 /// Pixels cleared per task.
 const CLEAR_CHUNK: usize = 1 << 16;
