@@ -5,6 +5,7 @@
 
 use glam::Vec3;
 use rayon::prelude::*;
+use wide::f32x8;
 
 use relief_core::camera::Camera;
 use relief_core::relief::{ReliefTexture, SourceCamera};
@@ -13,6 +14,7 @@ use super::params::WarpParams;
 use super::prewarp::{Attributes, PrewarpImage};
 use super::round_small;
 use crate::gbuffer::{GBuffer, Stored};
+use relief_core::shading::LANES;
 
 /// The screen rectangle `[x0, x1) × [y0, y1)` that the plane region `corners` can
 /// cover; the whole screen when part of it is behind the eye.
@@ -91,63 +93,132 @@ pub fn map(
     let dots = |d: Vec3| Vec3::new(d.dot(c.f), d.dot(a_scale), d.dot(b_scale));
     let sx_step = 2.0 / camera.width as f32 * tan_half * aspect;
     let x_step = dots(camera.right * sx_step);
+    let footprints = footprints(image);
+    let lane_offsets = f32x8::new(std::array::from_fn(|l| l as f32));
+    // Plane coordinates minus these are the bilinear footprint's corner: the texel
+    // centres of `image` lie at `u0 + ½ + k`.
+    let (corner_u, corner_v) = (f32x8::splat(u0 + 0.5), f32x8::splat(v0 + 0.5));
+    let (last_x, last_y) = (
+        f32x8::splat(image.width as f32 - 1.0),
+        f32x8::splat(image.height as f32 - 1.0),
+    );
+    let (u1, v1) = (f32x8::splat(u1), f32x8::splat(v1));
     // Rows are independent (each pixel samples the image and depth-tests its own slot):
     // split across cores.
     gbuffer.bands(y0, y1, 1).into_par_iter().for_each(|mut pixels| {
         let y = pixels.y0();
         let sy = (1.0 - 2.0 * (y as f32 + 0.5) / camera.height as f32) * tan_half;
         let sx0 = (2.0 * (x0 as f32 + 0.5) / camera.width as f32 - 1.0) * tan_half * aspect;
-        let mut row = dots(camera.forward + camera.right * sx0 + camera.up * sy);
-        for x in x0 as usize..x1 as usize {
-            let along = row;
-            row += x_step;
-            let towards_plane = along.x;
-            if towards_plane.is_nan() || towards_plane <= 0.0 {
+        let row = dots(camera.forward + camera.right * sx0 + camera.up * sy);
+        // Eight pixels at once up to the texel look-ups: most of the rectangle is
+        // empty, and a group none of whose footprints holds a texel costs a few vector
+        // operations.
+        for x in (x0 as usize..x1 as usize).step_by(LANES) {
+            let steps = f32x8::splat((x - x0 as usize) as f32) + lane_offsets;
+            let along = |start: f32, step: f32| f32x8::splat(start) + f32x8::splat(step) * steps;
+            let towards_plane = along(row.x, x_step.x);
+            let s = f32x8::splat(params.h) / towards_plane;
+            let u = f32x8::splat(params.epipole.x) + s * along(row.y, x_step.y);
+            let v = f32x8::splat(params.epipole.y) + s * along(row.z, x_step.z);
+            let (fu, fv) = (u - corner_u, v - corner_v);
+            // (Every comparison is false for NaN.)
+            let facing = towards_plane.simd_gt(f32x8::ZERO);
+            let inside = facing
+                & fu.simd_ge(f32x8::ZERO)
+                & fv.simd_ge(f32x8::ZERO)
+                & fu.simd_lt(last_x)
+                & fv.simd_lt(last_y);
+            // Within the image but not its footprint: the outermost half texel.
+            let rim = facing
+                & !inside
+                & u.simd_ge(f32x8::splat(u0))
+                & v.simd_ge(f32x8::splat(v0))
+                & u.simd_lt(u1)
+                & v.simd_lt(v1);
+            let n = LANES.min(x1 as usize - x);
+            let lanes_in = (1u32 << n) - 1;
+            let (inside, rim) = (inside.to_bitmask() & lanes_in, rim.to_bitmask() & lanes_in);
+            if inside | rim == 0 {
                 continue;
             }
-            let s = params.h / towards_plane;
-            let u = params.epipole.x + s * along.y;
-            let v = params.epipole.y + s * along.z;
-            let Some((depth, attributes)) = sample(image, u, v) else {
-                continue;
-            };
-            let stored = Stored::with_encoded_normal(object, attributes.albedo(), attributes.normal());
-            pixels.keep_nearer_stored(x, (params.h + depth) / towards_plane, &stored);
+            // Exact: the inside lanes are non-negative and below the image's size.
+            let (xs, ys) = (fu.trunc_int().to_array(), fv.trunc_int().to_array());
+            let (fu, fv, u, v) = (fu.to_array(), fv.to_array(), u.to_array(), v.to_array());
+            let towards_plane = towards_plane.to_array();
+            for l in 0..n {
+                let found = if inside & (1 << l) != 0 {
+                    let k = ys[l] as usize * image.width as usize + xs[l] as usize;
+                    if footprints[k] == 0 {
+                        continue;
+                    }
+                    let (tx, ty) = (fu[l] - xs[l] as f32, fv[l] - ys[l] as f32);
+                    sample_inside(image, k, tx, ty)
+                } else if rim & (1 << l) != 0 {
+                    image
+                        .at(u[l], v[l])
+                        .filter(|t| !t.is_empty())
+                        .map(|t| (t.depth, t.attributes))
+                } else {
+                    None
+                };
+                let Some((depth, attributes)) = found else {
+                    continue;
+                };
+                let stored = Stored::with_encoded_normal(object, attributes.albedo(), attributes.normal());
+                pixels.keep_nearer_stored(x + l, (params.h + depth) / towards_plane[l], &stored);
+            }
         }
     });
 }
 
-/// The pre-warped image at plane coordinates `(u, v)`: bilinear where the four nearest
-/// texels are all covered (inside a surface), nearest at silhouettes (blending with
-/// empty texels would invent colours). Returns the depth and the attributes (albedo and
-/// the encoded normal, blended: the normal may come out shorter than unit, and the
-/// shading normalises it).
-#[inline]
-fn sample(image: &PrewarpImage, u: f32, v: f32) -> Option<(f32, Attributes)> {
-    let fu = u - 0.5 - image.u0 as f32;
-    let fv = v - 0.5 - image.v0 as f32;
-    let (x, y) = (fu.floor(), fv.floor());
-    let (tx, ty) = (fu - x, fv - y);
-    let (x, y) = (x as i64, y as i64);
-    let (w, h) = (image.width as i64, image.height as i64);
-    // (`x < w - 1`, not `x + 1 < w`: an infinite coordinate saturates to i64::MAX.)
-    if x >= 0 && y >= 0 && x < w - 1 && y < h - 1 {
-        let k = y as usize * w as usize + x as usize;
-        let w = w as usize;
-        let [a, b, c, d] = [k, k + 1, k + w, k + w + 1].map(|k| image.texels[k]);
-        if !(a.is_empty() || b.is_empty() || c.is_empty() || d.is_empty()) {
-            let lerp = |p: f32, q: f32, t: f32| p + (q - p) * t;
-            let depth = lerp(lerp(a.depth, b.depth, tx), lerp(c.depth, d.depth, tx), ty);
-            // (`min`: a NaN fraction must not underflow the lanes.)
-            let (sx, sy) = (
-                round_small(tx * 256.0).min(256) as u64,
-                round_small(ty * 256.0).min(256) as u64,
-            );
-            let top = a.attributes.lerp(b.attributes, sx);
-            let bottom = c.attributes.lerp(d.attributes, sx);
-            return Some((depth, top.lerp(bottom, sy)));
+/// Per texel `k` of `image` (but the last row and column): whether any of the four
+/// texels of the bilinear footprint whose top-left is `k` holds a surface — the one
+/// look-up that turns away most of a texture mapping's pixels.
+fn footprints(image: &PrewarpImage) -> Vec<u8> {
+    let w = image.width as usize;
+    let filled: Vec<u8> = image.texels.iter().map(|t| !t.is_empty() as u8).collect();
+    let mut out = vec![0; filled.len()];
+    for ((out, top), bottom) in out
+        .chunks_exact_mut(w)
+        .zip(filled.chunks_exact(w))
+        .zip(filled.chunks_exact(w).skip(1))
+    {
+        for x in 0..w.saturating_sub(1) {
+            out[x] = top[x] | top[x + 1] | bottom[x] | bottom[x + 1];
         }
     }
-    let texel = image.at(u, v)?;
-    (!texel.is_empty()).then_some((texel.depth, texel.attributes))
+    out
+}
+
+/// The pre-warped image in the bilinear footprint whose top-left texel is `k`, at
+/// fractions `(tx, ty)` of the way to its bottom-right: bilinear where the four texels
+/// are all covered (inside a surface), nearest at silhouettes (blending with empty
+/// texels would invent colours). Returns the depth and the attributes (albedo and the
+/// encoded normal, blended: the normal may come out shorter than unit, and the shading
+/// normalises it).
+#[inline]
+fn sample_inside(image: &PrewarpImage, k: usize, tx: f32, ty: f32) -> Option<(f32, Attributes)> {
+    let w = image.width as usize;
+    let [a, b, c, d] = [k, k + 1, k + w, k + w + 1].map(|k| image.texels[k]);
+    if a.is_empty() || b.is_empty() || c.is_empty() || d.is_empty() {
+        // Nearest: the texel holding the point is the right one of a pair past the
+        // pair's middle, the lower one past the middle of a column pair.
+        let nearest = match (tx >= 0.5, ty >= 0.5) {
+            (false, false) => a,
+            (true, false) => b,
+            (false, true) => c,
+            (true, true) => d,
+        };
+        return (!nearest.is_empty()).then_some((nearest.depth, nearest.attributes));
+    }
+    let lerp = |p: f32, q: f32, t: f32| p + (q - p) * t;
+    let depth = lerp(lerp(a.depth, b.depth, tx), lerp(c.depth, d.depth, tx), ty);
+    // (`min`: a NaN fraction must not underflow the lanes.)
+    let (sx, sy) = (
+        round_small(tx * 256.0).min(256) as u64,
+        round_small(ty * 256.0).min(256) as u64,
+    );
+    let top = a.attributes.lerp(b.attributes, sx);
+    let bottom = c.attributes.lerp(d.attributes, sx);
+    Some((depth, top.lerp(bottom, sy)))
 }
