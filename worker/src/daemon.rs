@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, anyhow};
+use rayon::prelude::*;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 use tokio_stream::wrappers::UnboundedReceiverStream;
@@ -30,7 +31,10 @@ type Scenes = pb::scenes_client::ScenesClient<InterceptedService<Channel, Bearer
 /// A scene this worker has loaded, with the BVHs built so far.
 struct Loaded {
     scene: Scene,
-    tracers: Mutex<HashMap<String, Arc<ObjectTracer>>>,
+    /// Every object's tracer, built when the scene is loaded: a BVH built on a job's
+    /// demand (a million triangles: a second on a busy host) delayed that job and all
+    /// queued behind it, late in a flight when latency matters.
+    tracers: HashMap<String, Arc<ObjectTracer>>,
 }
 
 /// What every job of a session shares.
@@ -250,25 +254,15 @@ async fn bake_job(job: pb::Job, context: &JobContext) -> Result<(), String> {
     let size = size_from_pb("size", job.size).map_err(message)?;
     let bits = depth_bits_from_pb("depth_bits", job.depth_bits).map_err(message)?;
     let loaded = scene(hash, context).await?;
-    let tracer = {
-        let cached = lock(&loaded.tracers).get(&job.object).cloned();
-        match cached {
-            Some(t) => t,
-            None => {
-                let building = loaded.clone();
-                let name = job.object.clone();
-                let tracer = tokio::task::spawn_blocking(move || {
-                    building
-                        .scene
-                        .object(&name)
-                        .map(|o| Arc::new(ObjectTracer::new(o)))
-                        .map_err(|e| e.to_string())
-                })
-                .await
-                .map_err(|e| e.to_string())??;
-                lock(&loaded.tracers).insert(job.object.clone(), tracer.clone());
-                tracer
-            }
+    let tracer = match loaded.tracers.get(&job.object) {
+        Some(tracer) => tracer.clone(),
+        // (The scene's own message names the object and what the scene holds.)
+        None => {
+            return Err(loaded
+                .scene
+                .object(&job.object)
+                .err()
+                .map_or_else(|| format!("no tracer for `{}`", job.object), |e| e.to_string()));
         }
     };
     let mut sizes = vec![size];
@@ -322,14 +316,19 @@ async fn scene(hash: ContentHash, context: &JobContext) -> Result<Arc<Loaded>, S
     }
     let bundle = Bundle::decode(encoded)?;
     let dir = context.scene_dir.clone();
-    let scene = tokio::task::spawn_blocking(move || bundle.load(&dir))
-        .await
-        .map_err(|e| e.to_string())?
-        .map_err(|e| format!("loading scene {hash}: {e}"))?;
-    let entry = Arc::new(Loaded {
-        scene,
-        tracers: Mutex::new(HashMap::new()),
-    });
+    let entry = tokio::task::spawn_blocking(move || {
+        let scene = bundle.load(&dir)?;
+        let tracers = scene
+            .objects
+            .par_iter()
+            .map(|o| (o.name.clone(), Arc::new(ObjectTracer::new(o))))
+            .collect();
+        Ok::<_, relief_core::Error>(Loaded { scene, tracers })
+    })
+    .await
+    .map_err(|e| e.to_string())?
+    .map_err(|e| format!("loading scene {hash}: {e}"))?;
+    let entry = Arc::new(entry);
     loaded.insert(hash, entry.clone());
     Ok(entry)
 }
