@@ -238,7 +238,12 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
             let pb = eb * inv_area * inv_depth[1];
             let pc = ec * inv_area * inv_depth[2];
             let sum = pa + pb + pc;
-            let depth = (f32x8::ONE / sum).to_array();
+            let depth = f32x8::ONE / sum;
+            if let Some(stored) = &uniform {
+                rows.keep_nearer_stored_lanes(row_start + x, inside, depth, stored);
+                continue;
+            }
+            let depth = depth.to_array();
             let (pa, pb, pc, sum) = (pa.to_array(), pb.to_array(), pc.to_array(), sum.to_array());
             while inside != 0 {
                 let l = inside.trailing_zeros() as usize;
@@ -248,10 +253,6 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
                 // `near`; tested as "nearer" all the same, so a NaN would not pass.)
                 let nearer = depth[l] < rows.depth(i);
                 if !nearer {
-                    continue;
-                }
-                if let Some(stored) = &uniform {
-                    rows.set_stored(i, depth[l], stored);
                     continue;
                 }
                 let bary = || (s.bary[0] * pa[l] + s.bary[1] * pb[l] + s.bary[2] * pc[l]) / sum[l];
