@@ -242,8 +242,9 @@ impl Lighting {
 /// `base^exponent` per lane, `base > 0`. An exponent that is the same small whole
 /// number in every lane (a group of pixels of one object, the usual case) takes square
 /// and multiply — a few multiplies where `powf` evaluates a logarithm and an exponential
-/// (a fifth of a frame's shading); any other falls back to `powf`. The two agree to a
-/// few units in the last place.
+/// (a fifth of a frame's shading); any other falls back to `powf`. Each squaring
+/// doubles the rounding error: the two agree within about `k·2⁻²⁴` relative (4e-5 at
+/// 1024), far below an 8-bit colour step.
 #[inline]
 fn power(base: f32x8, exponent: f32x8) -> f32x8 {
     let k = exponent.to_array()[0];
@@ -265,7 +266,7 @@ fn power(base: f32x8, exponent: f32x8) -> f32x8 {
     }
 }
 
-/// The largest exponent [`power`] multiplies out (9 squarings at most).
+/// The largest exponent [`power`] multiplies out (10 squarings at most).
 const MAX_WHOLE_EXPONENT: f32 = 1024.0;
 
 /// [`to_rgb8`] of each lane.
@@ -355,7 +356,7 @@ mod tests {
     }
 
     /// Whole exponents shared by all lanes are multiplied out; the result is `powf`'s
-    /// to a few units in the last place, and mixed or fractional exponents take `powf`.
+    /// within `k·2⁻²⁴` relative, and mixed or fractional exponents take `powf`.
     #[test]
     fn power_matches_powf() {
         let bases: [f32; LANES] = [1e-3, 0.1, 0.5, 0.9, 0.99, 0.999_9, 1.0, 0.75];
@@ -369,7 +370,7 @@ mod tests {
                 for l in 0..LANES {
                     let want = bases[l].powf(e[l]);
                     assert!(
-                        (got[l] - want).abs() <= 1e-5 * want + 1e-30,
+                        (got[l] - want).abs() <= e[l].max(1.0) * 6e-8 * want + 1e-30,
                         "{}^{}: {} vs {want}",
                         bases[l],
                         e[l],

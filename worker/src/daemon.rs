@@ -28,20 +28,56 @@ use crate::Args;
 
 type Scenes = pb::scenes_client::ScenesClient<InterceptedService<Channel, BearerToken>>;
 
-/// A scene this worker has loaded, with the BVHs built so far.
+/// A scene this worker has loaded: every object's tracer, built when the scene is
+/// loaded (a BVH built on a job's demand — a million triangles: a second on a busy
+/// host — delayed that job and all queued behind it, late in a flight when latency
+/// matters). The tracers own the objects; the scene itself is not kept.
 struct Loaded {
-    scene: Scene,
-    /// Every object's tracer, built when the scene is loaded: a BVH built on a job's
-    /// demand (a million triangles: a second on a busy host) delayed that job and all
-    /// queued behind it, late in a flight when latency matters.
+    /// The scene's name and its objects' names in order, for errors.
+    name: String,
+    names: Vec<String>,
     tracers: HashMap<String, Arc<ObjectTracer>>,
 }
+
+impl Loaded {
+    /// Builds every object's tracer, in parallel.
+    fn new(scene: Scene) -> Loaded {
+        let names = scene.objects.iter().map(|o| o.name.clone()).collect();
+        let tracers = scene
+            .objects
+            .into_par_iter()
+            .map(|o| (o.name.clone(), Arc::new(ObjectTracer::owning(o))))
+            .collect();
+        Loaded {
+            name: scene.name,
+            names,
+            tracers,
+        }
+    }
+
+    /// The tracer of `object`, or the scene's own error naming what it holds.
+    fn tracer(&self, object: &str) -> Result<Arc<ObjectTracer>, relief_core::Error> {
+        self.tracers
+            .get(object)
+            .cloned()
+            .ok_or_else(|| relief_core::Error::UnknownObject {
+                scene: self.name.clone(),
+                name: object.to_string(),
+                available: self.names.join(", "),
+            })
+    }
+}
+
+/// The scenes of this worker by hash, each loaded once: a slot is taken under the map's
+/// lock, the loading done in the slot (other scenes' jobs go on meanwhile, the same
+/// scene's wait for it). A failed load leaves the slot empty for the next job to retry.
+type LoadedScenes = Arc<Mutex<HashMap<ContentHash, Arc<tokio::sync::OnceCell<Arc<Loaded>>>>>>;
 
 /// What every job of a session shares.
 #[derive(Clone)]
 struct JobContext {
     scenes: Scenes,
-    loaded: Arc<tokio::sync::Mutex<HashMap<ContentHash, Arc<Loaded>>>>,
+    loaded: LoadedScenes,
     scene_dir: PathBuf,
     cancelled: Arc<Mutex<HashSet<u64>>>,
     out: mpsc::UnboundedSender<pb::WorkerMessage>,
@@ -77,7 +113,7 @@ pub async fn run(args: Args) -> Result<()> {
         shutdown_signal().await;
         let _ = stop_tx.send(true);
     });
-    let loaded = Arc::new(tokio::sync::Mutex::new(HashMap::new()));
+    let loaded = LoadedScenes::default();
     let mut backoff = Duration::from_millis(100);
     loop {
         if *stop.borrow() {
@@ -147,7 +183,7 @@ async fn session(
     endpoint: &Endpoint,
     auth: &BearerToken,
     scene_dir: &std::path::Path,
-    loaded: Arc<tokio::sync::Mutex<HashMap<ContentHash, Arc<Loaded>>>>,
+    loaded: LoadedScenes,
     mut stop: watch::Receiver<bool>,
 ) -> End {
     let channel = match endpoint.connect().await {
@@ -254,17 +290,7 @@ async fn bake_job(job: pb::Job, context: &JobContext) -> Result<(), String> {
     let size = size_from_pb("size", job.size).map_err(message)?;
     let bits = depth_bits_from_pb("depth_bits", job.depth_bits).map_err(message)?;
     let loaded = scene(hash, context).await?;
-    let tracer = match loaded.tracers.get(&job.object) {
-        Some(tracer) => tracer.clone(),
-        // (The scene's own message names the object and what the scene holds.)
-        None => {
-            return Err(loaded
-                .scene
-                .object(&job.object)
-                .err()
-                .map_or_else(|| format!("no tracer for `{}`", job.object), |e| e.to_string()));
-        }
-    };
+    let tracer = loaded.tracer(&job.object).map_err(|e| e.to_string())?;
     let mut sizes = vec![size];
     if job.progressive && size >= 64 {
         sizes.insert(0, size / 4);
@@ -294,10 +320,14 @@ async fn bake_job(job: pb::Job, context: &JobContext) -> Result<(), String> {
 
 /// The scene `hash`, fetched from the server and loaded the first time.
 async fn scene(hash: ContentHash, context: &JobContext) -> Result<Arc<Loaded>, String> {
-    let mut loaded = context.loaded.lock().await;
-    if let Some(s) = loaded.get(&hash) {
-        return Ok(s.clone());
-    }
+    let slot = lock(&context.loaded).entry(hash).or_default().clone();
+    slot.get_or_try_init(|| fetch_and_load(hash, context))
+        .await
+        .cloned()
+}
+
+/// Fetches scene `hash` from the server, unpacks and loads it, and builds its tracers.
+async fn fetch_and_load(hash: ContentHash, context: &JobContext) -> Result<Arc<Loaded>, String> {
     let mut scenes = context.scenes.clone();
     let mut stream = scenes
         .get_scene(pb::SceneRef {
@@ -316,21 +346,11 @@ async fn scene(hash: ContentHash, context: &JobContext) -> Result<Arc<Loaded>, S
     }
     let bundle = Bundle::decode(encoded)?;
     let dir = context.scene_dir.clone();
-    let entry = tokio::task::spawn_blocking(move || {
-        let scene = bundle.load(&dir)?;
-        let tracers = scene
-            .objects
-            .par_iter()
-            .map(|o| (o.name.clone(), Arc::new(ObjectTracer::new(o))))
-            .collect();
-        Ok::<_, relief_core::Error>(Loaded { scene, tracers })
-    })
-    .await
-    .map_err(|e| e.to_string())?
-    .map_err(|e| format!("loading scene {hash}: {e}"))?;
-    let entry = Arc::new(entry);
-    loaded.insert(hash, entry.clone());
-    Ok(entry)
+    let loaded = tokio::task::spawn_blocking(move || bundle.load(&dir).map(Loaded::new))
+        .await
+        .map_err(|e| e.to_string())?
+        .map_err(|e| format!("loading scene {hash}: {e}"))?;
+    Ok(Arc::new(loaded))
 }
 
 /// Locks `mutex`, taking over its data if a job panicked while holding it (the sets it

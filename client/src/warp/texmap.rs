@@ -175,7 +175,8 @@ pub fn map(
 /// texels of the bilinear footprint whose top-left is `k` holds a surface — the one
 /// look-up that turns away most of a texture mapping's pixels.
 fn footprints(image: &PrewarpImage) -> Vec<u8> {
-    let w = image.width as usize;
+    // (`max`: chunks must not be empty; an image of no texels yields no rows.)
+    let w = (image.width as usize).max(1);
     let filled: Vec<u8> = image.texels.iter().map(|t| !t.is_empty() as u8).collect();
     let mut out = vec![0; filled.len()];
     for ((out, top), bottom) in out
@@ -213,7 +214,7 @@ fn sample_inside(image: &PrewarpImage, k: usize, tx: f32, ty: f32) -> Option<(f3
     }
     let lerp = |p: f32, q: f32, t: f32| p + (q - p) * t;
     let depth = lerp(lerp(a.depth, b.depth, tx), lerp(c.depth, d.depth, tx), ty);
-    // (`min`: a NaN fraction must not underflow the lanes.)
+    // (`min`: the lerp's bound, 256; the fractions here are finite and below 1.)
     let (sx, sy) = (
         round_small(tx * 256.0).min(256) as u64,
         round_small(ty * 256.0).min(256) as u64,
