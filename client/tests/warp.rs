@@ -109,3 +109,69 @@ fn one_pass_and_two_pass_prewarps_agree() {
         assert!(filled > 3000 && share >= least, "{object} {angle}°: {share}");
     }
 }
+
+/// Texture mapping covers what the surface covers: a square filling its 8×8 texture
+/// (a texel is ~5 pixels here), shown from the texture's own eye, covers the pixels the
+/// rasterized square does — to its edges, the outermost half texel included — with no
+/// hole inside: every pixel where the two differ lies on the square's outline.
+#[test]
+fn texture_mapping_covers_a_full_texture_to_its_edges() {
+    use glam::Vec3;
+    use relief_client::gbuffer::GBuffer;
+    use relief_client::raster::rasterize;
+    use relief_client::warp::display;
+    use relief_core::camera::Camera;
+    use relief_core::mesh::{Material, Mesh};
+    use relief_core::scene::SceneObject;
+    use relief_core::shading::Specular;
+    use relief_worker::bake;
+    use relief_worker::tracer::ObjectTracer;
+
+    let square = Mesh {
+        positions: vec![
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(-1.0, 1.0, 0.0),
+        ],
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        materials: vec![Material::default()],
+        ..Default::default()
+    };
+    let object = SceneObject::new("square", square, Specular::default());
+    let eye = Vec3::new(0.0, 0.0, 4.0);
+    let texture = bake(&ObjectTracer::new(&object), eye, 8, DepthBits::Eight).expect("bake");
+    assert_eq!(texture.covered_texels(), 64, "the square fills its texture");
+    let camera = Camera::look_at(eye, Vec3::ZERO, Vec3::Y, 50.0, 96, 72).expect("camera");
+    let mut geometry = GBuffer::new(96, 72);
+    rasterize(&[(0, &object)], &camera, 0.01, &mut geometry);
+    let mut impostor = GBuffer::new(96, 72);
+    display(
+        Method::Interleaved,
+        &Impostor::new(texture),
+        0,
+        &camera,
+        &mut impostor,
+    )
+    .expect("display");
+    let covered = |g: &GBuffer, x: i64, y: i64| {
+        (0..96).contains(&x) && (0..72).contains(&y) && g.get(x as u32, y as u32).is_covered()
+    };
+    let (mut both, mut differ) = (0, 0);
+    for y in 0..72 {
+        for x in 0..96 {
+            let truth = covered(&geometry, x, y);
+            if truth == covered(&impostor, x, y) {
+                both += truth as usize;
+                continue;
+            }
+            differ += 1;
+            let on_outline = [(-1, 0), (1, 0), (0, -1), (0, 1)]
+                .iter()
+                .any(|&(dx, dy)| covered(&geometry, x + dx, y + dy) != truth);
+            assert!(on_outline, "pixel ({x}, {y}): geometry {truth}, impostor not");
+        }
+    }
+    assert!(both > 1200, "{both} pixels covered by both");
+    eprintln!("{both} pixels covered by both, {differ} on the outline differ");
+}
