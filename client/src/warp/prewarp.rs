@@ -210,12 +210,18 @@ fn between<const FORWARDS: bool>(a: f32, b: f32, end: i64, mut each: impl FnMut(
     if !ahead {
         return false;
     }
+    let (below_a, below_b) = ((a - 0.5).floor(), (b - 0.5).floor());
+    // No pixel centre between them (common where the pre-warp compresses the
+    // surface): no division, no conversions.
+    if below_a == below_b {
+        return true;
+    }
     // Infinite when they coincide, but then no pixel centre lies between them.
     let inv = 1.0 / (b - a);
     // Samples move towards the epipole, which is ahead in the visit: a far one makes
     // spans run far past the image on that side (never before it), cut at its end.
-    let first = ((a - 0.5).floor() as i64).saturating_add(1);
-    let last = ((b - 0.5).floor() as i64).min(end);
+    let first = (below_a as i64).saturating_add(1);
+    let last = (below_b as i64).min(end);
     // (Half-open ranges: `..=` iterates measurably slower here.)
     for x in first..last + 1 {
         let t = ((x as f32 + 0.5 - a) * inv).clamp(0.0, 1.0);
