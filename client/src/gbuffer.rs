@@ -16,7 +16,7 @@ use wide::{f32x8, i16x8, i32x8, u32x8};
 use relief_core::camera::Camera;
 use relief_core::frame::{Frame, NO_OBJECT};
 use relief_core::scene::Scene;
-use relief_core::shading::{LANES, SurfaceLanes, Vec3x8, to_rgb8, to_rgb8_lanes};
+use relief_core::shading::{LANE_INDEX, LANES, SurfaceLanes, Vec3x8, to_rgb8, to_rgb8_lanes};
 
 /// One pixel's nearest surface, as writers give it and readers get it back.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -406,22 +406,23 @@ impl GBuffer {
 }
 
 /// What lighting one row of a G-buffer needs: the planes, the scene's terms and the
-/// camera's ray directions.
+/// camera's rays (the buffer holds the camera's pixels).
 struct RowShader<'a> {
     gbuffer: &'a GBuffer,
     lighting: &'a relief_core::shading::Lighting,
     /// Specular strength and exponent of each object, by index.
     specular: Vec<(f32, f32)>,
+    /// The object count, in every lane (a scene's count fits its `u32` ids).
+    objects: u32x8,
     background: [u8; 3],
     camera: &'a Camera,
-    /// A ray direction's step from one pixel to the next in a row.
+    eye: Vec3x8,
+    /// [`Camera::ray`]'s step from one pixel to the next in a row.
     x_step: Vec3,
 }
 
 impl<'a> RowShader<'a> {
     fn new(gbuffer: &'a GBuffer, scene: &'a Scene, camera: &'a Camera) -> Self {
-        let tan_half = camera.tan_half_fov();
-        let aspect = gbuffer.width as f32 / gbuffer.height as f32;
         RowShader {
             gbuffer,
             lighting: &scene.lighting,
@@ -430,27 +431,21 @@ impl<'a> RowShader<'a> {
                 .iter()
                 .map(|o| (o.specular.strength, o.specular.shininess))
                 .collect(),
+            objects: u32x8::splat(u32::try_from(scene.objects.len()).unwrap_or(u32::MAX)),
             background: to_rgb8(scene.background),
             camera,
-            x_step: camera.right * (2.0 / gbuffer.width as f32 * tan_half * aspect),
+            eye: Vec3x8::splat(camera.eye),
+            x_step: camera.ray_x_step(),
         }
     }
 
     /// Lights row `y` into `color` and `object` (one row each), [`LANES`] pixels at once.
     fn row(&self, y: usize, color: &mut [[u8; 3]], object: &mut [u32]) {
         let g = self.gbuffer;
-        let (w, camera) = (g.width as usize, self.camera);
-        // Ray directions with a unit forward component: a pixel's position is
-        // `eye + direction · depth`. They are linear in x, so step them along rows.
-        let tan_half = camera.tan_half_fov();
-        let aspect = g.width as f32 / g.height as f32;
-        let sy = (1.0 - 2.0 * (y as f32 + 0.5) / g.height as f32) * tan_half;
-        let sx0 = (1.0 / g.width as f32 - 1.0) * tan_half * aspect;
-        let row_start = camera.forward + camera.right * sx0 + camera.up * sy;
-        let lane_offsets = f32x8::new(std::array::from_fn(|l| l as f32));
-        let eye = Vec3x8::splat(camera.eye);
-        // (A scene's object count fits its `u32` ids.)
-        let objects = u32x8::splat(u32::try_from(self.specular.len()).unwrap_or(u32::MAX));
+        let w = g.width as usize;
+        // A pixel's position is `eye + ray · depth`; rays are linear in x.
+        let row_start = self.camera.ray(0.5, y as f32 + 0.5);
+        let (eye, objects) = (self.eye, self.objects);
         let row = y * w;
         for x in (0..w).step_by(LANES) {
             let n = LANES.min(w - x);
@@ -489,7 +484,7 @@ impl<'a> RowShader<'a> {
             // (Normalised below: the scale does not matter.)
             let component =
                 |k: usize| f32x8::from_i32x8(i32x8::from(i16x8::new(lanes(&g.normal[k][at.clone()], 0))));
-            let xs = f32x8::splat(x as f32) + lane_offsets;
+            let xs = f32x8::splat(x as f32) + LANE_INDEX;
             let direction = Vec3x8 {
                 x: f32x8::splat(row_start.x) + f32x8::splat(self.x_step.x) * xs,
                 y: f32x8::splat(row_start.y) + f32x8::splat(self.x_step.y) * xs,

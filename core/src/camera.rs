@@ -89,11 +89,26 @@ impl Camera {
     /// `+0.5`; y grows downwards).
     #[inline]
     pub fn ray_direction(&self, x: f32, y: f32) -> Vec3 {
+        self.ray(x, y).normalize()
+    }
+
+    /// The direction of the ray through pixel position `(x, y)` scaled to a unit
+    /// forward component: the point it reaches at view depth `d` is `eye + ray · d`.
+    /// Linear in `x`, so row-wise writers step it by [`Camera::ray_x_step`].
+    #[inline]
+    pub fn ray(&self, x: f32, y: f32) -> Vec3 {
         let tan_half = self.tan_half_fov();
         let aspect = self.width as f32 / self.height as f32;
         let sx = (2.0 * x / self.width as f32 - 1.0) * tan_half * aspect;
         let sy = (1.0 - 2.0 * y / self.height as f32) * tan_half;
-        (self.forward + self.right * sx + self.up * sy).normalize()
+        self.forward + self.right * sx + self.up * sy
+    }
+
+    /// How [`Camera::ray`] changes from one pixel to the next along a row.
+    #[inline]
+    pub fn ray_x_step(&self) -> Vec3 {
+        let aspect = self.width as f32 / self.height as f32;
+        self.right * (2.0 / self.width as f32 * self.tan_half_fov() * aspect)
     }
 
     /// `tan(fov_y / 2)`.

@@ -61,6 +61,9 @@ pub struct SurfacePoint {
 /// wide (`wide` falls back to two SSE halves, or scalars, elsewhere).
 pub const LANES: usize = 8;
 
+/// Each lane's index: `l` in lane `l` (the offsets of [`LANES`] consecutive pixels).
+pub const LANE_INDEX: f32x8 = f32x8::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
+
 /// [`LANES`] vectors, one SIMD register per component: lane `l` of `x`, `y`, `z` is
 /// vector `l`.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -86,14 +86,10 @@ fn strip_choice<T: PartialOrd + Copy + std::fmt::Display>(
 }
 
 fn angle(text: &str) -> Result<f32, String> {
-    let a: f32 = text
-        .trim()
-        .parse()
-        .map_err(|_| format!("`{text}` is not a number"))?;
-    if !a.is_finite() || a.abs() > 180.0 {
-        return Err(format!("{a} is not an angle in -180..=180 degrees"));
+    match crate::args::finite(text)? {
+        a if a.abs() <= 180.0 => Ok(a),
+        a => Err(format!("{a} is not an angle in -180..=180 degrees")),
     }
-    Ok(a)
 }
 
 pub fn run(command: ReportCommand) -> Result<()> {

@@ -216,7 +216,7 @@ fn between<const FORWARDS: bool>(a: f32, b: f32, end: i64, mut each: impl FnMut(
     if below_a == below_b {
         return true;
     }
-    // Infinite when they coincide, but then no pixel centre lies between them.
+    // (Finite: samples that coincide have no centre between them, returned above.)
     let inv = 1.0 / (b - a);
     // Samples move towards the epipole, which is ahead in the visit: a far one makes
     // spans run far past the image on that side (never before it), cut at its end.

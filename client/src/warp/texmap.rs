@@ -14,7 +14,7 @@ use super::params::WarpParams;
 use super::prewarp::{Attributes, PrewarpImage};
 use super::round_small;
 use crate::gbuffer::{GBuffer, Stored};
-use relief_core::shading::LANES;
+use relief_core::shading::{LANE_INDEX, LANES};
 
 /// The screen rectangle `[x0, x1) × [y0, y1)` that the plane region `corners` can
 /// cover; the whole screen when part of it is behind the eye.
@@ -85,16 +85,12 @@ pub fn map(
     if x0 >= x1 || y0 >= y1 {
         return;
     }
-    let tan_half = camera.tan_half_fov();
-    let aspect = camera.width as f32 / camera.height as f32;
     let (a_scale, b_scale) = (c.a / c.a.length_squared(), c.b / c.b.length_squared());
-    // The ray direction D = forward + right·sx + up·sy is linear in the pixel, so are
+    // The ray direction D (`Camera::ray`) is linear in the pixel, so are
     // D·f, D·a/|a|², D·b/|b|²: step them along the row.
     let dots = |d: Vec3| Vec3::new(d.dot(c.f), d.dot(a_scale), d.dot(b_scale));
-    let sx_step = 2.0 / camera.width as f32 * tan_half * aspect;
-    let x_step = dots(camera.right * sx_step);
+    let x_step = dots(camera.ray_x_step());
     let footprints = footprints(image);
-    let lane_offsets = f32x8::new(std::array::from_fn(|l| l as f32));
     // Plane coordinates minus these are the bilinear footprint's corner: the texel
     // centres of `image` lie at `u0 + ½ + k`.
     let (corner_u, corner_v) = (f32x8::splat(u0 + 0.5), f32x8::splat(v0 + 0.5));
@@ -107,14 +103,12 @@ pub fn map(
     // split across cores.
     gbuffer.bands(y0, y1, 1).into_par_iter().for_each(|mut pixels| {
         let y = pixels.y0();
-        let sy = (1.0 - 2.0 * (y as f32 + 0.5) / camera.height as f32) * tan_half;
-        let sx0 = (2.0 * (x0 as f32 + 0.5) / camera.width as f32 - 1.0) * tan_half * aspect;
-        let row = dots(camera.forward + camera.right * sx0 + camera.up * sy);
+        let row = dots(camera.ray(x0 as f32 + 0.5, y as f32 + 0.5));
         // Eight pixels at once up to the texel look-ups: most of the rectangle is
         // empty, and a group none of whose footprints holds a texel costs a few vector
         // operations.
         for x in (x0 as usize..x1 as usize).step_by(LANES) {
-            let steps = f32x8::splat((x - x0 as usize) as f32) + lane_offsets;
+            let steps = f32x8::splat((x - x0 as usize) as f32) + LANE_INDEX;
             let along = |start: f32, step: f32| f32x8::splat(start) + f32x8::splat(step) * steps;
             let towards_plane = along(row.x, x_step.x);
             let s = f32x8::splat(params.h) / towards_plane;
