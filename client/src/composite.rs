@@ -162,7 +162,12 @@ impl FramePlan {
             stats.texels_baked += imp.pyramid.levels[0].texture.depth.len();
             match prepared.and_then(|p| draw(p, impostor, imp.index, camera, gbuffer)) {
                 Ok(()) => stats.texels_warped += impostor.texture.depth.len(),
-                Err(WarpError::EyeInPlane(_) | WarpError::NonFinite | WarpError::NeedsPreviousFrame) => {
+                Err(
+                    WarpError::EyeInPlane(_)
+                    | WarpError::NonFinite
+                    | WarpError::NeedsPreviousFrame
+                    | WarpError::DepthBiasUnsupported,
+                ) => {
                     stats.fell_back += 1;
                     geometry.push((imp.index, &scene.objects[imp.index as usize]));
                 }

@@ -18,6 +18,7 @@ use relief_core::scene::{Scene, SceneObject};
 
 use crate::composite::{GeometryReason, MIN_TEXTURE, TEXEL_TOLERANCE, geometry_reason, near_plane};
 use crate::gbuffer::GBuffer;
+use crate::impostor::Impostor;
 use crate::metrics::critical::CriticalPoints;
 use crate::metrics::schaufler::{needs_finer_texture, resolution_for, sprite_still_valid, volume_centre};
 use crate::predict::Predictor;
@@ -164,8 +165,9 @@ struct Grade {
 
 /// Beyond this turn around the object, or this change of distance, a texture is not
 /// used whatever the gap metric says: the metric sees holes between neighbours, not
-/// the stretching of a view seen from far off its axis.
-const MAX_TURN: f32 = 40.0 * std::f32::consts::PI / 180.0;
+/// the stretching of a view seen from far off its axis. (40° before partners: without
+/// one, the side of a sphere a texture never saw was missing beyond that.)
+const MAX_TURN: f32 = 60.0 * std::f32::consts::PI / 180.0;
 const MAX_DISTANCE_RATIO: f32 = 1.6;
 
 /// How far past the predicted eye (a fraction of the valid angle) predicted textures
@@ -185,6 +187,37 @@ const COARSEST_SHOWN: f32 = 2.0 * TEXEL_TOLERANCE;
 /// A texture this many times over the tolerance is not shown: geometry is drawn
 /// until a better one arrives (the frame still counts as stale).
 const SHOWN_STALE: f32 = 2.0;
+
+/// A partner (a second texture, drawn behind the shown one) is drawn once the eye is
+/// this far around the object from the shown texture's eye: nearer, what the texture
+/// cannot show is a sliver a pixel or two wide, not worth a second warp.
+const PARTNER_FROM: f32 = 15.0 * std::f32::consts::PI / 180.0;
+
+/// A partner is at most this far around the object from the eye: it fills in only
+/// where the shown texture has nothing, so the stretching [`MAX_TURN`] guards against
+/// shows only there.
+const PARTNER_MAX_TURN: f32 = 2.0 * MAX_TURN;
+
+/// Textures are asked for this many valid angles apart along the eye's turn, one
+/// ahead of the eye's future at all times, so that the eye is always between two: the
+/// nearer shown, the other its partner. (Below 2, the middle between two is within
+/// [`PLANNING_MARGIN`] of the tolerance from both, so no request for coverage fires
+/// there.)
+const PAIR_SPACING: f32 = 2.0 * PLANNING_MARGIN;
+
+/// How far behind the shown texture a partner is drawn: this fraction of the object's
+/// bounding radius — more than two textures of one surface disagree on its depth
+/// (depth quanta, reconstruction), so the partner shows only where the shown texture
+/// has nothing (or something much farther).
+const PARTNER_BEHIND: f32 = 0.05;
+
+/// The depth factor (see [`Prepared::behind`](crate::warp::Prepared::behind)) that
+/// puts a partner [`PARTNER_BEHIND`] behind, for an object with `bounds` seen from `eye`.
+fn partner_depth_factor(bounds: &relief_core::bounds::Aabb, eye: Vec3) -> f32 {
+    let radius = bounds.extent().length() * 0.5;
+    let distance = bounds.center().distance(eye).max(radius);
+    1.0 + PARTNER_BEHIND * radius / distance
+}
 
 /// Round trips remembered, and the percentile of them the predictor plans for.
 const LATENCY_WINDOW: usize = 16;
@@ -222,10 +255,12 @@ fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Show {
     Geometry,
-    /// Held texture `texture`, pyramid level `level`.
+    /// Held texture `texture`, pyramid level `level`; and a second held texture (with
+    /// its level) drawn behind it, filling what the first cannot show from this eye.
     Impostor {
         texture: usize,
         level: usize,
+        partner: Option<(usize, usize)>,
     },
 }
 
@@ -234,9 +269,13 @@ struct Kept {
     sprite: Sprite,
     /// The eye it was drawn from.
     eye: Vec3,
-    /// Which texture (by its eye) and pyramid level it shows.
-    key: (Vec3, usize),
+    /// Which textures (by their eyes) and pyramid levels it shows.
+    key: ShownKey,
 }
+
+/// The textures an impostor shows, by their eyes, and their pyramid levels: the
+/// first, and the partner behind it.
+type ShownKey = ((Vec3, usize), Option<(Vec3, usize)>);
 
 /// Counters for the demo's summary.
 #[derive(Debug, Clone, Default)]
@@ -244,6 +283,8 @@ pub struct Counters {
     /// Impostors redrawn as sprites (no warp) and impostors warped.
     pub sprites: u64,
     pub warps: u64,
+    /// Partners warped (second textures drawn behind the shown one).
+    pub partners: u64,
     pub requests_now: u64,
     pub requests_predicted: u64,
     pub withdrawn: u64,
@@ -400,73 +441,111 @@ impl Manager {
         self.sprites.resize_with(scene.objects.len(), || None);
         // Which impostors are redrawn as sprites and which warped: the warps' pre-warps
         // all run at once, then everything is drawn in order.
+        let key = |k: usize, show: &Show| match *show {
+            Show::Impostor {
+                texture,
+                level,
+                partner,
+            } => {
+                let held = &self.objects[k].held;
+                Some(((held[texture].eye, level), partner.map(|(p, l)| (held[p].eye, l))))
+            }
+            Show::Geometry => None,
+        };
         let sprite_holds: Vec<bool> = shows
             .iter()
             .enumerate()
-            .map(|(k, show)| match (show, &self.sprites[k]) {
-                (Show::Impostor { texture, level }, Some(kept)) => {
-                    kept.key == (self.objects[k].held[*texture].eye, *level)
-                        && sprite_still_valid(&scene.objects[k].bounds, kept.eye, camera)
+            .map(|(k, show)| match (key(k, show), &self.sprites[k]) {
+                (Some(key), Some(kept)) => {
+                    kept.key == key && sprite_still_valid(&scene.objects[k].bounds, kept.eye, camera)
                 }
                 _ => false,
             })
             .collect();
-        let shown = |k: usize| match shows[k] {
-            Show::Impostor { texture, level } if !sprite_holds[k] => {
-                Some(&self.objects[k].held[texture].pyramid.levels[level])
+        // The textures to warp: each impostor's, its partner right after it.
+        let mut warps: Vec<(usize, &Impostor, bool)> = Vec::new();
+        for (k, show) in shows.iter().enumerate() {
+            if let Show::Impostor {
+                texture,
+                level,
+                partner,
+            } = *show
+                && !sprite_holds[k]
+            {
+                let held = &self.objects[k].held;
+                warps.push((k, &held[texture].pyramid.levels[level], false));
+                if let Some((p, l)) = partner {
+                    warps.push((k, &held[p].pyramid.levels[l], true));
+                }
             }
-            _ => None,
-        };
-        let mut prepared: Vec<Option<_>> = (0..shows.len())
-            .into_par_iter()
-            .map(|k| shown(k).map(|impostor| prepare(Method::Interleaved, impostor, camera)))
+        }
+        let behind = |k: usize| partner_depth_factor(&scene.objects[k].bounds, camera.eye);
+        let prepared: Vec<_> = warps
+            .par_iter()
+            .map(|&(k, impostor, is_partner)| {
+                let prepared = prepare(Method::Interleaved, impostor, camera);
+                if is_partner {
+                    prepared.and_then(|p| p.behind(behind(k)))
+                } else {
+                    prepared
+                }
+            })
             .collect();
+        let mut prepared = warps.into_iter().zip(prepared).peekable();
         let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
         for (k, show) in shows.iter().enumerate() {
-            match *show {
-                Show::Geometry => {
-                    self.sprites[k] = None;
-                    geometry.push((k as u32, &scene.objects[k]));
+            let Some(key) = key(k, show) else {
+                self.sprites[k] = None;
+                geometry.push((k as u32, &scene.objects[k]));
+                continue;
+            };
+            if sprite_holds[k]
+                && let Some(kept) = &self.sprites[k]
+            {
+                kept.sprite.draw(gbuffer);
+                self.counters.sprites += 1;
+                continue;
+            }
+            // The impostor's warp, then its partner's (whose failure only leaves out
+            // what it would have filled in).
+            let mut drawn = false;
+            let mut rect: Option<(u32, u32, u32, u32)> = None;
+            while let Some(((_, impostor, is_partner), ready)) = prepared.next_if(|((j, _, _), _)| *j == k) {
+                if is_partner && !drawn {
+                    continue;
                 }
-                Show::Impostor { texture, level } => {
-                    if sprite_holds[k]
-                        && let Some(kept) = &self.sprites[k]
-                    {
-                        kept.sprite.draw(gbuffer);
-                        self.counters.sprites += 1;
-                        continue;
-                    }
-                    let impostor = &self.objects[k].held[texture].pyramid.levels[level];
-                    let drawn = prepared[k].take().is_some_and(|p| {
-                        p.and_then(|p| draw(p, impostor, k as u32, camera, gbuffer))
-                            .is_ok()
-                    });
-                    if !drawn {
-                        self.sprites[k] = None;
-                        geometry.push((k as u32, &scene.objects[k]));
-                        continue;
-                    }
-                    self.counters.warps += 1;
-                    // Kept only while the eye moves by less than the sprite test allows
-                    // per frame (or has not moved yet): else the next frame warps anyway,
-                    // and the copy (1.2 of a flight's 8 ms per frame) is wasted.
-                    let bounds = &scene.objects[k].bounds;
-                    if self
-                        .last_eye
-                        .is_some_and(|eye| !sprite_still_valid(bounds, eye, camera))
-                    {
-                        self.sprites[k] = None;
-                        continue;
-                    }
-                    let rect = volume_rect(camera, &impostor.texture.camera);
-                    let key = (self.objects[k].held[texture].eye, level);
-                    self.sprites[k] = Sprite::capture_in(gbuffer, k as u32, rect).map(|sprite| Kept {
-                        sprite,
-                        eye: camera.eye,
-                        key,
-                    });
+                if ready
+                    .and_then(|p| draw(p, impostor, k as u32, camera, gbuffer))
+                    .is_ok()
+                {
+                    drawn = true;
+                    self.counters.partners += u64::from(is_partner);
+                    let r = volume_rect(camera, &impostor.texture.camera);
+                    rect = Some(rect.map_or(r, |q| (q.0.min(r.0), q.1.min(r.1), q.2.max(r.2), q.3.max(r.3))));
                 }
             }
+            let Some(rect) = rect.filter(|_| drawn) else {
+                self.sprites[k] = None;
+                geometry.push((k as u32, &scene.objects[k]));
+                continue;
+            };
+            self.counters.warps += 1;
+            // Kept only while the eye moves by less than the sprite test allows
+            // per frame (or has not moved yet): else the next frame warps anyway,
+            // and the copy (1.2 of a flight's 8 ms per frame) is wasted.
+            let bounds = &scene.objects[k].bounds;
+            if self
+                .last_eye
+                .is_some_and(|eye| !sprite_still_valid(bounds, eye, camera))
+            {
+                self.sprites[k] = None;
+                continue;
+            }
+            self.sprites[k] = Sprite::capture_in(gbuffer, k as u32, rect).map(|sprite| Kept {
+                sprite,
+                eye: camera.eye,
+                key,
+            });
         }
         self.last_eye = Some(camera.eye);
         let impostors_done = Instant::now();
@@ -756,7 +835,12 @@ impl Manager {
             shows.push(match best {
                 Some((i, g)) if g.growth <= SHOWN_STALE * self.config.tolerance => {
                     let level = self.objects[k].held[i].pyramid.level_for(camera, TEXEL_TOLERANCE);
-                    Show::Impostor { texture: i, level }
+                    let partner = self.partner(k, i, centre, camera, &grades);
+                    Show::Impostor {
+                        texture: i,
+                        level,
+                        partner,
+                    }
                 }
                 _ => Show::Geometry,
             });
@@ -765,6 +849,70 @@ impl Manager {
             self.counters.stale_frames += 1;
         }
         shows
+    }
+
+    /// The texture (and its level) to draw behind object `k`'s shown texture `shown`,
+    /// with `grades` at this eye: a held one on the far side of the eye, the way it has
+    /// turned from `shown`'s eye, fine enough and within the shown limit — it holds
+    /// what the eye has turned to see and `shown` cannot. `None` while the eye is
+    /// within [`PARTNER_FROM`] of `shown`'s.
+    fn partner(
+        &self,
+        k: usize,
+        shown: usize,
+        centre: Vec3,
+        camera: &Camera,
+        grades: &[Grade],
+    ) -> Option<(usize, usize)> {
+        let held = &self.objects[k].held;
+        let (from, eye) = (held[shown].eye - centre, camera.eye - centre);
+        if from.angle_between(eye) < PARTNER_FROM {
+            return None;
+        }
+        let turn = from.cross(eye);
+        held.iter()
+            .zip(grades)
+            .enumerate()
+            .filter(|&(i, (h, g))| {
+                i != shown
+                    && !g.too_coarse
+                    && (h.eye - centre).angle_between(eye) <= PARTNER_MAX_TURN
+                    && turn.dot(eye.cross(h.eye - centre)) > 0.0
+            })
+            .min_by(|a, b| a.1.1.growth.total_cmp(&b.1.1.growth))
+            .map(|(i, (h, _))| {
+                // A level coarser than the shown texture's: it shows only slivers, and
+                // costs a quarter of the warp.
+                let level = h.pyramid.level_for(camera, TEXEL_TOLERANCE) + 1;
+                (i, level.min(h.pyramid.levels.len() - 1))
+            })
+    }
+
+    /// The eye of the texture to ask for now so that the eye, once at `future`, still
+    /// has one on its far side (the way it turns from `now`) to partner the one shown:
+    /// [`PAIR_SPACING`] valid angles past `future`. `None` while one is held or asked
+    /// for, or while the eye is not turning about the object.
+    fn next_partner(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Option<Vec3> {
+        let (from, to) = (now - centre, future - centre);
+        let axis = from.cross(to);
+        // (Below ~0.06° of turn per horizon, "ahead" means nothing.)
+        if axis.length() <= 1e-3 * from.length() * to.length() {
+            return None;
+        }
+        let reach = PAIR_SPACING * self.valid_angle(k);
+        // (Held or asked for within half as far again: an eye asked for `reach` ahead
+        // falls a little beyond it as the future moves on, or as the eye's elevation
+        // tilts the turn.)
+        let ahead = |eye: Vec3| {
+            let e = eye - centre;
+            axis.dot(to.cross(e)) > 0.0 && to.angle_between(e) <= 1.5 * reach
+        };
+        let held = self.objects[k].held.iter().any(|h| ahead(h.eye));
+        let asked = self.pending.values().any(|p| p.object == k && ahead(p.eye));
+        if held || asked {
+            return None;
+        }
+        Some(centre + glam::Quat::from_axis_angle(axis.normalize(), reach) * to)
     }
 
     /// The eye to make a predicted texture for: `future` turned further about `centre`,
@@ -809,6 +957,8 @@ impl Manager {
             || self.pending_covers(k, centre, future);
         if !covered {
             let eye = self.lead(k, centre, camera.eye, future);
+            self.request(scene, k, eye, camera, Some((horizon * 1e3) as u64));
+        } else if let Some(eye) = self.next_partner(k, centre, camera.eye, future) {
             self.request(scene, k, eye, camera, Some((horizon * 1e3) as u64));
         }
         // Predictions neither the eye nor its future will meet any more.

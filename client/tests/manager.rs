@@ -236,3 +236,54 @@ fn texture_edges_climb_in_half_octaves() {
         );
     }
 }
+
+/// Between two held textures of the sphere, far enough from both, the nearer is shown
+/// and the other drawn behind it as its partner (it holds what the eye has turned to
+/// see); near a texture's own eye, no partner is drawn.
+#[test]
+fn between_two_textures_the_other_is_drawn_behind() {
+    let scene = Arc::new(Scene::load("default").unwrap());
+    let (commands_tx, commands_rx) = unbounded_channel();
+    let (arrivals_tx, arrivals_rx) = unbounded_channel();
+    spawn_local(scene.clone(), commands_rx, arrivals_tx);
+    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let sphere = index(&scene, "sphere");
+    let centre = scene.objects[sphere].bounds.center();
+    let camera_at = |degrees: f32| {
+        Camera::look_at(
+            around(centre, degrees.to_radians()),
+            centre,
+            Vec3::Y,
+            60.0,
+            320,
+            180,
+        )
+        .unwrap()
+    };
+    for degrees in [0.0, 70.0] {
+        assert!(
+            manager.warm_up(&scene, &camera_at(degrees), Duration::from_secs(60)),
+            "textures for {degrees}° did not arrive"
+        );
+    }
+    let between = camera_at(40.0);
+    let shows = manager.frame(&scene, &between, 0.0);
+    let Show::Impostor {
+        texture,
+        partner: Some((partner, _)),
+        ..
+    } = shows[sphere]
+    else {
+        panic!("no partner at 40°: {:?}", shows[sphere]);
+    };
+    assert_ne!(texture, partner);
+    let mut gbuffer = GBuffer::new(320, 180);
+    manager.render(&scene, &shows, &between, &mut gbuffer);
+    assert!(manager.counters.partners >= 1);
+    let near = manager.frame(&scene, &camera_at(72.0), 0.1);
+    assert!(
+        matches!(near[sphere], Show::Impostor { partner: None, .. }),
+        "2° from a texture's eye: {:?}",
+        near[sphere]
+    );
+}

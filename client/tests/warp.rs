@@ -175,3 +175,62 @@ fn texture_mapping_covers_a_full_texture_to_its_edges() {
     assert!(both > 1200, "{both} pixels covered by both");
     eprintln!("{both} pixels covered by both, {differ} on the outline differ");
 }
+
+/// A texture drawn behind another ([`Prepared::behind`]) fills in what the first
+/// leaves empty: the sphere's textures baked 60° apart, seen from halfway between —
+/// where the first texture drew, the frame is as it alone left it (but for a few
+/// pixels at the silhouette, where the first's grazing samples stray in depth), and
+/// the second adds the side of the sphere the first never saw.
+#[test]
+fn a_texture_drawn_behind_fills_what_the_first_leaves_empty() {
+    use relief_client::gbuffer::GBuffer;
+    use relief_client::warp::{draw, prepare};
+
+    let scene = Scene::load("default").expect("default scene");
+    let solo = Solo::new(&scene, "sphere", 3.0).expect("solo");
+    let bake =
+        |degrees: f32| Impostor::new(solo.bake(solo.eye(degrees), 128, DepthBits::Eight).expect("bake"));
+    let (first, second) = (bake(0.0), bake(60.0));
+    let camera = solo.camera(solo.eye(30.0), 256);
+    let mut alone = GBuffer::new(256, 256);
+    let warp = |impostor: &Impostor, factor: f32, gbuffer: &mut GBuffer| {
+        let prepared = prepare(Method::Interleaved, impostor, &camera).expect("prepare");
+        let prepared = if factor > 1.0 {
+            prepared.behind(factor).expect("behind")
+        } else {
+            prepared
+        };
+        draw(prepared, impostor, 0, &camera, gbuffer).expect("draw");
+    };
+    warp(&first, 1.0, &mut alone);
+    let mut both = alone.clone();
+    warp(&second, 1.02, &mut both);
+    let mut reference = GBuffer::new(256, 256);
+    relief_client::raster::rasterize(&[(0, &solo.scene.objects[0])], &camera, 0.01, &mut reference);
+    let (mut kept, mut changed, mut added) = (0, 0, 0);
+    let (mut missing_alone, mut missing_both) = (0, 0);
+    for y in 0..256 {
+        for x in 0..256 {
+            let (a, b) = (alone.get(x, y), both.get(x, y));
+            if a.is_covered() {
+                kept += 1;
+                changed += usize::from(a != b);
+            } else if b.is_covered() {
+                added += 1;
+            }
+            let truth = reference.get(x, y).is_covered();
+            missing_alone += usize::from(truth && !a.is_covered());
+            missing_both += usize::from(truth && !b.is_covered());
+        }
+    }
+    eprintln!(
+        "{kept} drawn by the first ({changed} changed by the second), {added} added; \
+         sphere pixels missing: {missing_alone} alone, {missing_both} with the second"
+    );
+    assert!(kept > 10_000 && added > 300, "{kept} kept, {added} added");
+    assert!(changed * 200 < kept, "{changed} of {kept} changed");
+    assert!(
+        missing_both * 5 < missing_alone,
+        "{missing_both} of {missing_alone} still missing"
+    );
+}

@@ -137,6 +137,7 @@ struct Summary {
     /// Impostors redrawn unchanged while Schaufler's sprite test held, and warped.
     sprites: u64,
     warps: u64,
+    partners: u64,
     /// New textures received per full turn for each object orbited by the path.
     regenerations_per_orbit: BTreeMap<String, f64>,
     /// Against the point-sampled reference (one ray through each pixel centre);
@@ -452,6 +453,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         stale_frames: counters.stale_frames,
         sprites: counters.sprites,
         warps: counters.warps,
+        partners: counters.partners,
         regenerations_per_orbit: orbits
             .iter()
             .filter_map(|orbit| {

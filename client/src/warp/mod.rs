@@ -61,6 +61,9 @@ pub enum WarpError {
     /// The sprite method reuses a previous frame, which [`display`] does not have.
     #[error("the sprite method needs a previous frame")]
     NeedsPreviousFrame,
+    /// [`Prepared::behind`] asked of a method that does not pre-warp.
+    #[error("only the pre-warp methods can draw a surface pushed back")]
+    DepthBiasUnsupported,
 }
 
 /// A display method, selectable by name.
@@ -188,14 +191,32 @@ pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<P
     // The halves above and below the epipole on two threads: 1.5–1.8× faster at 512²
     // here when the epipole is inside (`relief bench warp`, "split ms").
     let image = prewarp::prewarp_split(impostor, &params, variant);
-    Ok(Prepared(Stage::Prewarped(image, params)))
+    Ok(Prepared(Stage::Prewarped(image, params, 1.0)))
 }
 
 /// What [`prepare`] made, for [`draw`].
 pub struct Prepared(Stage);
 
+impl Prepared {
+    /// Draws the surface `factor` (> 1) times farther from the eye than it is, along
+    /// each pixel's own ray — the same pixels, only the depth test changed — so that
+    /// it shows only where nothing else of the frame is within that margin in front:
+    /// a second texture filling in what the first cannot show, never fighting it where
+    /// both show the same surface. Only the pre-warp methods draw this way; an error
+    /// for the others.
+    pub fn behind(self, factor: f32) -> Result<Prepared, WarpError> {
+        match self.0 {
+            Stage::Prewarped(image, params, scale) => {
+                Ok(Prepared(Stage::Prewarped(image, params, scale * factor)))
+            }
+            _ => Err(WarpError::DepthBiasUnsupported),
+        }
+    }
+}
+
 enum Stage {
-    Prewarped(prewarp::PrewarpImage, params::WarpParams),
+    /// The pre-warped image, its constants, and the factor applied to its depths.
+    Prewarped(prewarp::PrewarpImage, params::WarpParams, f32),
     PullPush,
     Kernel(u8),
     Inverse(u16),
@@ -211,8 +232,16 @@ pub fn draw(
     gbuffer: &mut GBuffer,
 ) -> Result<(), WarpError> {
     match prepared.0 {
-        Stage::Prewarped(image, params) => {
-            texmap::map(&image, &impostor.texture, &params, object, camera, gbuffer);
+        Stage::Prewarped(image, params, depth_scale) => {
+            texmap::map(
+                &image,
+                &impostor.texture,
+                &params,
+                depth_scale,
+                object,
+                camera,
+                gbuffer,
+            );
             Ok(())
         }
         Stage::PullPush => forward::display(impostor, object, camera, gbuffer),

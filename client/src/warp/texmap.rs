@@ -58,11 +58,14 @@ pub fn volume_rect(camera: &Camera, c: &SourceCamera) -> (u32, u32, u32, u32) {
     screen_rect(camera, &corners)
 }
 
-/// Maps `image` (pre-warped for `camera.eye`) onto the screen into `gbuffer`.
+/// Maps `image` (pre-warped for `camera.eye`) onto the screen into `gbuffer`, its
+/// depths multiplied by `depth_scale` for the depth test and the buffer (1 for the true
+/// depths; see [`Prepared::behind`](super::Prepared::behind)).
 pub fn map(
     image: &PrewarpImage,
     texture: &ReliefTexture,
     params: &WarpParams,
+    depth_scale: f32,
     object: u32,
     camera: &Camera,
     gbuffer: &mut GBuffer,
@@ -159,7 +162,8 @@ pub fn map(
                     continue;
                 };
                 let stored = Stored::with_encoded_normal(object, attributes.albedo(), attributes.normal());
-                pixels.keep_nearer_stored(x + l, (params.h + depth) / towards_plane[l], &stored);
+                let view_depth = (params.h + depth) / towards_plane[l];
+                pixels.keep_nearer_stored(x + l, view_depth * depth_scale, &stored);
             }
         }
     });
