@@ -156,6 +156,17 @@ impl Rows<'_> {
         written
     }
 
+    /// [`Rows::keep_nearer_stored`] testing `tested` instead of `depth`: a surface
+    /// tested as if farther than it is (see `warp::Prepared::behind`), stored as it is.
+    #[inline(always)]
+    pub fn keep_nearer_stored_as(&mut self, i: usize, tested: f32, depth: f32, stored: &Stored) -> bool {
+        let written = self.nearer(i, tested) && depth > 0.0;
+        if written {
+            self.set_stored(i, depth, stored);
+        }
+        written
+    }
+
     /// The one depth test: `depth` positive and nearer than pixel `i`'s (so finite,
     /// and never NaN).
     #[inline(always)]

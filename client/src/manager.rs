@@ -215,7 +215,7 @@ const PARTNER_BEHIND: f32 = 0.05;
 /// puts a partner [`PARTNER_BEHIND`] behind, for an object with `bounds` seen from `eye`.
 fn partner_depth_factor(bounds: &relief_core::bounds::Aabb, eye: Vec3) -> f32 {
     let radius = bounds.extent().length() * 0.5;
-    let distance = bounds.center().distance(eye).max(radius);
+    let distance = bounds.center().distance(eye).max(radius).max(f32::MIN_POSITIVE);
     1.0 + PARTNER_BEHIND * radius / distance
 }
 
@@ -447,8 +447,11 @@ impl Manager {
                 level,
                 partner,
             } => {
+                // (A `Show` from before textures arrived or were dropped names textures
+                // no longer held: drawn as geometry, or without its partner.)
                 let held = &self.objects[k].held;
-                Some(((held[texture].eye, level), partner.map(|(p, l)| (held[p].eye, l))))
+                let shown = (held.get(texture)?.eye, level);
+                Some((shown, partner.and_then(|(p, l)| Some((held.get(p)?.eye, l)))))
             }
             Show::Geometry => None,
         };
@@ -472,10 +475,15 @@ impl Manager {
             } = *show
                 && !sprite_holds[k]
             {
-                let held = &self.objects[k].held;
-                warps.push((k, &held[texture].pyramid.levels[level], false));
-                if let Some((p, l)) = partner {
-                    warps.push((k, &held[p].pyramid.levels[l], true));
+                let at = |(texture, level): (usize, usize)| {
+                    self.objects[k].held.get(texture)?.pyramid.levels.get(level)
+                };
+                let Some(shown) = at((texture, level)) else {
+                    continue;
+                };
+                warps.push((k, shown, false));
+                if let Some(partner) = partner.and_then(at) {
+                    warps.push((k, partner, true));
                 }
             }
         }
@@ -508,23 +516,24 @@ impl Manager {
             }
             // The impostor's warp, then its partner's (whose failure only leaves out
             // what it would have filled in).
-            let mut drawn = false;
-            let mut rect: Option<(u32, u32, u32, u32)> = None;
+            let (mut rect, mut partner_drawn): (Option<(u32, u32, u32, u32)>, bool) = (None, false);
             while let Some(((_, impostor, is_partner), ready)) = prepared.next_if(|((j, _, _), _)| *j == k) {
-                if is_partner && !drawn {
+                if is_partner && rect.is_none() {
                     continue;
                 }
                 if ready
                     .and_then(|p| draw(p, impostor, k as u32, camera, gbuffer))
                     .is_ok()
                 {
-                    drawn = true;
+                    partner_drawn |= is_partner;
                     self.counters.partners += u64::from(is_partner);
                     let r = volume_rect(camera, &impostor.texture.camera);
                     rect = Some(rect.map_or(r, |q| (q.0.min(r.0), q.1.min(r.1), q.2.max(r.2), q.3.max(r.3))));
                 }
             }
-            let Some(rect) = rect.filter(|_| drawn) else {
+            // (The sprite says what it shows: without a partner that failed to draw.)
+            let key = (key.0, key.1.filter(|_| partner_drawn));
+            let Some(rect) = rect else {
                 self.sprites[k] = None;
                 geometry.push((k as u32, &scene.objects[k]));
                 continue;
@@ -853,9 +862,11 @@ impl Manager {
 
     /// The texture (and its level) to draw behind object `k`'s shown texture `shown`,
     /// with `grades` at this eye: a held one on the far side of the eye, the way it has
-    /// turned from `shown`'s eye, fine enough and within the shown limit — it holds
-    /// what the eye has turned to see and `shown` cannot. `None` while the eye is
-    /// within [`PARTNER_FROM`] of `shown`'s.
+    /// turned from `shown`'s eye, fine enough, within [`PARTNER_MAX_TURN`] of the eye
+    /// and [`MAX_DISTANCE_RATIO`] of its distance — it holds what the eye has turned to
+    /// see and `shown` cannot. The least growth first, then the nearest (past
+    /// [`MAX_TURN`] every growth is infinite). `None` while the eye is within
+    /// [`PARTNER_FROM`] of `shown`'s.
     fn partner(
         &self,
         k: usize,
@@ -870,19 +881,23 @@ impl Manager {
             return None;
         }
         let turn = from.cross(eye);
+        let distances = 1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO;
         held.iter()
             .zip(grades)
             .enumerate()
             .filter(|&(i, (h, g))| {
+                let other = h.eye - centre;
                 i != shown
                     && !g.too_coarse
-                    && (h.eye - centre).angle_between(eye) <= PARTNER_MAX_TURN
-                    && turn.dot(eye.cross(h.eye - centre)) > 0.0
+                    && other.angle_between(eye) <= PARTNER_MAX_TURN
+                    && distances.contains(&(eye.length() / other.length()))
+                    && turn.dot(eye.cross(other)) > 0.0
             })
-            .min_by(|a, b| a.1.1.growth.total_cmp(&b.1.1.growth))
-            .map(|(i, (h, _))| {
-                // A level coarser than the shown texture's: it shows only slivers, and
-                // costs a quarter of the warp.
+            .map(|(i, (h, g))| (i, h, g.growth, angle_between(centre, h.eye, camera.eye)))
+            .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
+            .map(|(i, h, _, _)| {
+                // One level coarser than the screen needs: it shows only slivers, and
+                // its pre-warp costs a quarter.
                 let level = h.pyramid.level_for(camera, TEXEL_TOLERANCE) + 1;
                 (i, level.min(h.pyramid.levels.len() - 1))
             })

@@ -198,13 +198,18 @@ pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<P
 pub struct Prepared(Stage);
 
 impl Prepared {
-    /// Draws the surface `factor` (> 1) times farther from the eye than it is, along
-    /// each pixel's own ray — the same pixels, only the depth test changed — so that
+    /// Depth-tests the surface as if `factor` (> 1) times farther from the eye than it
+    /// is, along each pixel's own ray — the same pixels, and the true depths stored;
+    /// only the test changes — so that
     /// it shows only where nothing else of the frame is within that margin in front:
     /// a second texture filling in what the first cannot show, never fighting it where
     /// both show the same surface. Only the pre-warp methods draw this way; an error
-    /// for the others.
+    /// for the others, and [`WarpError::NonFinite`] for a `factor` not finite and
+    /// positive.
     pub fn behind(self, factor: f32) -> Result<Prepared, WarpError> {
+        if !(factor.is_finite() && factor > 0.0) {
+            return Err(WarpError::NonFinite);
+        }
         match self.0 {
             Stage::Prewarped(image, params, scale) => {
                 Ok(Prepared(Stage::Prewarped(image, params, scale * factor)))

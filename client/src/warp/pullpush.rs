@@ -89,7 +89,7 @@ impl Pixel for Splat {
         f32x8::new([self.depth, f(r), f(g), f(b), f(x), f(y), f(z), 1.0])
     }
 
-    /// Rounds the attributes to bytes (to nearest even: the CPU's conversion).
+    /// Rounds the attributes to bytes (to nearest; ties to even on x86).
     #[inline(always)]
     fn from_lanes(lanes: Lanes) -> Splat {
         let depth = lanes.as_array()[0];
@@ -215,7 +215,8 @@ pub fn fill(layer: &mut Layer, levels: usize, tolerance: impl Fn(usize) -> Toler
     }
     // The coarse levels of this thread's last fill are reused: a 1280×720 layer's are
     // 9 MB, and allocating and clearing them anew was a serial pass over all of it
-    // (page faults included) before the parallel analysis overwrote every pixel.
+    // (page faults included) before the parallel analysis overwrote every pixel. (So a
+    // thread holds on to the largest levels it has filled.)
     let mut pyramid = COARSE_LEVELS.take();
     // Analysis.
     let mut built = 0;
@@ -280,7 +281,7 @@ fn front_mean<P: Pixel>(children: [P; 4], tolerance: Tolerance) -> Lanes {
 /// Overwrites `coarse` (of any size before) with it.
 fn analyse<P: Pixel>(fine: &Layer<P>, tolerance: Tolerance, coarse: &mut Layer<Lanes>) {
     let (w, h) = (fine.width.div_ceil(2), fine.height.div_ceil(2));
-    let children = |x: usize, fine: usize| [2 * x, (2 * x + 1).min(fine - 1)];
+    let children = |x: usize, fine_len: usize| [2 * x, (2 * x + 1).min(fine_len - 1)];
     let xs: Vec<[usize; 2]> = (0..w).map(|x| children(x, fine.width)).collect();
     // (Every pixel is written below: only new ones need a value here.)
     coarse.pixels.resize(w * h, EMPTY_LANES);
@@ -373,6 +374,12 @@ fn synthesise<P: Pixel>(fine: &mut Layer<P>, coarse: &Layer<Lanes>, here: Tolera
         [coarse.row(y0), coarse.row(y1)]
     };
     let weights = |y: usize| ys[y].map(|(_, w)| w);
+    // What the bands and pairs rely on: rows (columns) 2j + 1 and 2j + 2 read the same
+    // coarse ones, and every pair has the first pair's weights.
+    let shared = |taps: &[Taps], y: usize| taps[y].map(|(i, _)| i) == taps[y + 1].map(|(i, _)| i);
+    debug_assert!((1..ys.len().saturating_sub(1)).step_by(2).all(|y| shared(&ys, y)));
+    debug_assert!((1..xs.len().saturating_sub(1)).step_by(2).all(|x| shared(&xs, x)));
+    debug_assert!((3..xs.len()).all(|x| xs[x][0].1 == xs[1 + (x - 1) % 2][0].1));
     let (first, rest) = fine.pixels.split_at_mut(width);
     synthesise_band([(first, weights(0))], coarse_rows(0), &xs, here, above);
     rest.par_chunks_mut(2 * width).enumerate().for_each(|(j, rows)| {
@@ -419,7 +426,6 @@ fn synthesise_band<P: Pixel, const N: usize>(
     let mut x = 1;
     if x + 2 <= width {
         let pairs = weights(1);
-        debug_assert!((3..width).all(|x| xs[x][0].1 == xs[1 + (x - 1) % 2][0].1));
         while x + 2 <= width {
             synthesise_block::<P, N, 2>(&mut rows, x, &pairs, coarse, xs, here, above);
             x += 2;

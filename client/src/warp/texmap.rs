@@ -59,8 +59,8 @@ pub fn volume_rect(camera: &Camera, c: &SourceCamera) -> (u32, u32, u32, u32) {
 }
 
 /// Maps `image` (pre-warped for `camera.eye`) onto the screen into `gbuffer`, its
-/// depths multiplied by `depth_scale` for the depth test and the buffer (1 for the true
-/// depths; see [`Prepared::behind`](super::Prepared::behind)).
+/// depths multiplied by `depth_scale` for the depth test (1: as they are; see
+/// [`Prepared::behind`](super::Prepared::behind)) and stored as they are.
 pub fn map(
     image: &PrewarpImage,
     texture: &ReliefTexture,
@@ -163,7 +163,7 @@ pub fn map(
                 };
                 let stored = Stored::with_encoded_normal(object, attributes.albedo(), attributes.normal());
                 let view_depth = (params.h + depth) / towards_plane[l];
-                pixels.keep_nearer_stored(x + l, view_depth * depth_scale, &stored);
+                pixels.keep_nearer_stored_as(x + l, view_depth * depth_scale, view_depth, &stored);
             }
         }
     });
