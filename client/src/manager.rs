@@ -165,9 +165,12 @@ struct Grade {
 
 /// Beyond this turn around the object, or this change of distance, a texture is not
 /// used whatever the gap metric says: the metric sees holes between neighbours, not
-/// the stretching of a view seen from far off its axis. (40° before partners: without
-/// one, the side of a sphere a texture never saw was missing beyond that.)
+/// the stretching of a view seen from far off its axis.
 const MAX_TURN: f32 = 60.0 * std::f32::consts::PI / 180.0;
+/// … and beyond this turn a texture drawn without a partner counts as stale (and one
+/// for now is asked for): alone, it misses the side of the object the eye has turned
+/// to see.
+const LONE_MAX_TURN: f32 = 40.0 * std::f32::consts::PI / 180.0;
 const MAX_DISTANCE_RATIO: f32 = 1.6;
 
 /// How far past the predicted eye (a fraction of the valid angle) predicted textures
@@ -800,7 +803,14 @@ impl Manager {
             // Some texture is within tolerance — if none fine enough is, geometry is
             // drawn by choice (not a stale frame), and a finer one asked for if it can
             // be had.
-            let valid = within(least_growth(false));
+            // The shown texture's partner; without one, a texture more than
+            // [`LONE_MAX_TURN`] from its eye misses the side the eye has turned to.
+            let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
+            let lone_too_far = partner.is_none()
+                && best.is_some_and(|(i, _)| {
+                    angle_between(centre, self.objects[k].held[i].eye, camera.eye) > LONE_MAX_TURN
+                });
+            let valid = within(least_growth(false)) && !lone_too_far;
             let coarse = !within(best)
                 && grades
                     .iter()
@@ -844,7 +854,6 @@ impl Manager {
             shows.push(match best {
                 Some((i, g)) if g.growth <= SHOWN_STALE * self.config.tolerance => {
                     let level = self.objects[k].held[i].pyramid.level_for(camera, TEXEL_TOLERANCE);
-                    let partner = self.partner(k, i, centre, camera, &grades);
                     Show::Impostor {
                         texture: i,
                         level,
@@ -903,11 +912,11 @@ impl Manager {
             })
     }
 
-    /// The eye of the texture to ask for now so that the eye, once at `future`, still
-    /// has one on its far side (the way it turns from `now`) to partner the one shown:
-    /// [`PAIR_SPACING`] valid angles past `future`. `None` while one is held or asked
-    /// for, or while the eye is not turning about the object.
-    fn next_partner(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Option<Vec3> {
+    /// Whether object `k` has a texture held or asked for on the far side of `future`
+    /// (the way the eye turns from `now`), to partner the one shown there — and if not,
+    /// the eye to ask for one at: [`PAIR_SPACING`] valid angles past `future`. `None`
+    /// while the eye is not turning about the object.
+    fn ahead(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Option<Result<(), Vec3>> {
         let (from, to) = (now - centre, future - centre);
         let axis = from.cross(to);
         // (Below ~0.06° of turn per horizon, "ahead" means nothing.)
@@ -915,19 +924,23 @@ impl Manager {
             return None;
         }
         let reach = PAIR_SPACING * self.valid_angle(k);
-        // (Held or asked for within half as far again: an eye asked for `reach` ahead
+        // (Held or asked for within half as far again — an eye asked for `reach` ahead
         // falls a little beyond it as the future moves on, or as the eye's elevation
-        // tilts the turn.)
+        // tilts the turn — and at a distance [`Self::partner`] accepts.)
+        let distances = 1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO;
         let ahead = |eye: Vec3| {
             let e = eye - centre;
-            axis.dot(to.cross(e)) > 0.0 && to.angle_between(e) <= 1.5 * reach
+            axis.dot(to.cross(e)) > 0.0
+                && to.angle_between(e) <= 1.5 * reach
+                && distances.contains(&(to.length() / e.length()))
         };
         let held = self.objects[k].held.iter().any(|h| ahead(h.eye));
         let asked = self.pending.values().any(|p| p.object == k && ahead(p.eye));
-        if held || asked {
-            return None;
-        }
-        Some(centre + glam::Quat::from_axis_angle(axis.normalize(), reach) * to)
+        Some(if held || asked {
+            Ok(())
+        } else {
+            Err(centre + glam::Quat::from_axis_angle(axis.normalize(), reach) * to)
+        })
     }
 
     /// The eye to make a predicted texture for: `future` turned further about `centre`,
@@ -966,15 +979,30 @@ impl Manager {
         if geometry_reason(object, future) == Some(GeometryReason::TooNear) {
             return;
         }
-        let covered = self
-            .grades(scene, k, future, camera)
-            .any(|g| g.growth <= PLANNING_MARGIN * self.config.tolerance && !g.coarse)
+        // A texture covers the future within the planning margin of the tolerance, and
+        // of the turn it may be shown alone — unless a partner is there for it: then
+        // up to the turn any texture is shown.
+        let ahead = self.ahead(k, centre, camera.eye, future);
+        let turn = match ahead {
+            Some(Ok(())) => MAX_TURN,
+            _ => PLANNING_MARGIN * LONE_MAX_TURN,
+        };
+        let held = &self.objects[k].held;
+        let covered = held
+            .iter()
+            .zip(self.grades(scene, k, future, camera))
+            .any(|(h, g)| {
+                g.growth <= PLANNING_MARGIN * self.config.tolerance
+                    && !g.coarse
+                    && angle_between(centre, h.eye, future) <= turn
+            })
             || self.pending_covers(k, centre, future);
+        let deadline = Some((horizon * 1e3) as u64);
         if !covered {
             let eye = self.lead(k, centre, camera.eye, future);
-            self.request(scene, k, eye, camera, Some((horizon * 1e3) as u64));
-        } else if let Some(eye) = self.next_partner(k, centre, camera.eye, future) {
-            self.request(scene, k, eye, camera, Some((horizon * 1e3) as u64));
+            self.request(scene, k, eye, camera, deadline);
+        } else if let Some(Err(eye)) = ahead {
+            self.request(scene, k, eye, camera, deadline);
         }
         // Predictions neither the eye nor its future will meet any more.
         let reach = 2.0 * self.valid_angle(k);
