@@ -18,10 +18,7 @@ use relief_core::scene::Scene;
 #[test]
 fn still_eyes_draw_sprites_and_moving_eyes_warp() {
     let scene = Arc::new(Scene::load("default").unwrap());
-    let (commands_tx, commands_rx) = unbounded_channel();
-    let (arrivals_tx, arrivals_rx) = unbounded_channel();
-    spawn_local(scene.clone(), commands_rx, arrivals_tx);
-    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let mut manager = served_locally(&scene);
     let camera = Camera::look_at(
         Vec3::new(2.0, 3.0, 9.0),
         Vec3::new(0.0, 1.0, 0.0),
@@ -70,6 +67,14 @@ fn still_eyes_draw_sprites_and_moving_eyes_warp() {
     let shows = manager.frame(&scene, &moved, 0.4);
     manager.render(&scene, &shows, &moved, &mut gbuffer);
     assert_eq!(manager.counters.sprites, 2 * impostors);
+}
+
+/// A manager of `scene` whose textures the in-process generator makes.
+fn served_locally(scene: &Arc<Scene>) -> Manager {
+    let (commands_tx, commands_rx) = unbounded_channel();
+    let (arrivals_tx, arrivals_rx) = unbounded_channel();
+    spawn_local(scene.clone(), commands_rx, arrivals_tx);
+    Manager::new(scene, Config::default(), commands_tx, arrivals_rx)
 }
 
 /// The index of `name` in `scene`.
@@ -151,10 +156,7 @@ fn a_texture_far_too_coarse_for_the_screen_gives_way_to_geometry() {
     let scene = Arc::new(Scene::load("default").unwrap());
     let sphere = index(&scene, "sphere");
     let centre = scene.objects[sphere].bounds.center();
-    let (commands_tx, commands_rx) = unbounded_channel();
-    let (arrivals_tx, arrivals_rx) = unbounded_channel();
-    spawn_local(scene.clone(), commands_rx, arrivals_tx);
-    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let mut manager = served_locally(&scene);
     let eye = centre + Vec3::new(0.0, 0.5, 8.0);
     // Textures sized for a small screen …
     let small = Camera::look_at(eye, centre, Vec3::Y, 60.0, 64, 36).unwrap();
@@ -243,10 +245,7 @@ fn texture_edges_climb_in_half_octaves() {
 #[test]
 fn between_two_textures_the_other_is_drawn_behind() {
     let scene = Arc::new(Scene::load("default").unwrap());
-    let (commands_tx, commands_rx) = unbounded_channel();
-    let (arrivals_tx, arrivals_rx) = unbounded_channel();
-    spawn_local(scene.clone(), commands_rx, arrivals_tx);
-    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let mut manager = served_locally(&scene);
     let sphere = index(&scene, "sphere");
     let centre = scene.objects[sphere].bounds.center();
     let camera_at = |degrees: f32| {
