@@ -179,30 +179,24 @@ impl Tolerance {
     }
 }
 
-/// The nearest depth among `candidates` (`INFINITY` when all are empty).
+/// The nearest of `depths` and the farthest depth still counted as its surface, within
+/// `tolerance` of it; `None` when all are empty (`INFINITY`).
 #[inline(always)]
-fn nearest<P: Pixel>(candidates: &[(f32, P)]) -> f32 {
-    candidates
-        .iter()
-        .map(|(_, p)| p.depth())
-        .fold(f32::INFINITY, f32::min)
+fn front(depths: impl Iterator<Item = f32>, tolerance: Tolerance) -> Option<(f32, f32)> {
+    let nearest = depths.fold(f32::INFINITY, f32::min);
+    (nearest < f32::INFINITY).then(|| (nearest, nearest + tolerance.at(nearest)))
 }
 
 /// Averages the front-most group of `candidates` (positive weights, pixels): those
 /// within `tolerance` of the nearest. Empty lanes when all are empty.
 #[inline(always)]
 pub(crate) fn front_average<P: Pixel>(candidates: &[(f32, P)], tolerance: Tolerance) -> Lanes {
-    let nearest = nearest(candidates);
-    if nearest == f32::INFINITY {
+    let Some((_, limit)) = front(candidates.iter().map(|(_, p)| p.depth()), tolerance) else {
         return EMPTY_LANES;
-    }
-    let limit = nearest + tolerance.at(nearest);
-    let mut sum = f32x8::ZERO;
-    for (w, p) in candidates {
-        if p.depth() <= limit {
-            sum = p.lanes().mul_add(f32x8::splat(*w), sum);
-        }
-    }
+    };
+    let sum = candidates.iter().fold(f32x8::ZERO, |sum, (w, p)| {
+        p.lanes_within(limit).mul_add(f32x8::splat(*w), sum)
+    });
     // The last lane summed the weights.
     sum * f32x8::splat(1.0 / sum.as_array()[7])
 }
@@ -260,22 +254,6 @@ thread_local! {
 /// it out), so every weight is positive.
 type Taps = [(usize, f32); 2];
 
-/// The front-most average of a coarse pixel's four `children` (all of one weight; see
-/// [`front_average`]).
-#[inline(always)]
-fn front_mean<P: Pixel>(children: [P; 4], tolerance: Tolerance) -> Lanes {
-    let nearest = children.iter().map(P::depth).fold(f32::INFINITY, f32::min);
-    if nearest == f32::INFINITY {
-        return EMPTY_LANES;
-    }
-    let limit = nearest + tolerance.at(nearest);
-    let sum = children
-        .iter()
-        .fold(f32x8::ZERO, |sum, child| sum + child.lanes_within(limit));
-    // The last lane counted the children summed.
-    sum * f32x8::splat(1.0 / sum.as_array()[7])
-}
-
 /// The coarse level: each pixel the front-most average of its 2×2 children (a border
 /// pixel's missing ones are the edge's again).
 /// Overwrites `coarse` (of any size before) with it.
@@ -290,7 +268,8 @@ fn analyse<P: Pixel>(fine: &Layer<P>, tolerance: Tolerance, coarse: &mut Layer<L
         let [y0, y1] = children(y, fine.height);
         let (r0, r1) = (fine.row(y0), fine.row(y1));
         for (out, &[x0, x1]) in row.iter_mut().zip(&xs) {
-            *out = front_mean([r0[x0], r0[x1], r1[x0], r1[x1]], tolerance);
+            let children = [r0[x0], r0[x1], r1[x0], r1[x1]].map(|c| (1.0, c));
+            *out = front_average(&children, tolerance);
         }
     });
 }
@@ -324,11 +303,7 @@ impl Shared {
     /// them stay as they are).
     #[inline(always)]
     fn new(candidates: [Lanes; 4], above: Tolerance) -> Option<Shared> {
-        let nearest = candidates.iter().map(Pixel::depth).fold(f32::INFINITY, f32::min);
-        if nearest == f32::INFINITY {
-            return None;
-        }
-        let limit = nearest + above.at(nearest);
+        let (nearest, limit) = front(candidates.iter().map(Pixel::depth), above)?;
         let front = candidates.map(|c| c.lanes_within(limit));
         Some(Shared { front, nearest })
     }
@@ -552,7 +527,10 @@ mod tests {
                     let pixel = &mut fine.pixels[y * fine.width + x];
                     let depth = pixel.depth();
                     let valid = depth < f32::INFINITY;
-                    let nearest = nearest(&candidates);
+                    let nearest = candidates
+                        .iter()
+                        .map(|(_, c)| c.depth())
+                        .fold(f32::INFINITY, f32::min);
                     if valid && depth <= nearest + here.at(nearest.min(depth)) {
                         continue;
                     }
