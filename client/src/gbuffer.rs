@@ -149,11 +149,7 @@ impl Rows<'_> {
     /// positive and nearer (not NaN).
     #[inline(always)]
     pub fn keep_nearer_stored(&mut self, i: usize, depth: f32, stored: &Stored) -> bool {
-        let written = self.nearer(i, depth);
-        if written {
-            self.set_stored(i, depth, stored);
-        }
-        written
+        self.keep_nearer_stored_as(i, depth, depth, stored)
     }
 
     /// [`Rows::keep_nearer_stored`] testing `tested` instead of `depth`: a surface

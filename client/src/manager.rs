@@ -237,10 +237,7 @@ fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     let c = &texture.camera;
     let centre = c.plane_centre();
     let middle = volume_centre(c);
-    let ratio = (eye - middle).length() / (held.eye - middle).length();
-    if angle_between(middle, held.eye, eye) > MAX_TURN
-        || !(1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO).contains(&ratio)
-    {
+    if angle_between(middle, held.eye, eye) > MAX_TURN || !similar_distance(middle, eye, held.eye) {
         return f32::INFINITY;
     }
     let Ok(params) = WarpParams::new(texture, eye) else {
@@ -374,6 +371,17 @@ fn angle_between(centre: Vec3, a: Vec3, b: Vec3) -> f32 {
     (a - centre).angle_between(b - centre)
 }
 
+/// Whether `a` is within [`MAX_DISTANCE_RATIO`] of `b`'s distance from `centre`.
+fn similar_distance(centre: Vec3, a: Vec3, b: Vec3) -> bool {
+    let ratio = (a - centre).length() / (b - centre).length();
+    (1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO).contains(&ratio)
+}
+
+/// `offset` from `centre` turned by `angle` about `axis` (not zero), as a point.
+fn turned(centre: Vec3, offset: Vec3, axis: Vec3, angle: f32) -> Vec3 {
+    centre + glam::Quat::from_axis_angle(axis.normalize(), angle) * offset
+}
+
 impl Manager {
     pub fn new(
         scene: &Scene,
@@ -444,26 +452,30 @@ impl Manager {
         self.sprites.resize_with(scene.objects.len(), || None);
         // Which impostors are redrawn as sprites and which warped: the warps' pre-warps
         // all run at once, then everything is drawn in order.
-        let key = |k: usize, show: &Show| match *show {
-            Show::Impostor {
-                texture,
-                level,
-                partner,
-            } => {
-                // (A `Show` from before textures arrived or were dropped names textures
-                // no longer held: drawn as geometry, or without its partner.)
-                let held = &self.objects[k].held;
-                let shown = (held.get(texture)?.eye, level);
-                Some((shown, partner.and_then(|(p, l)| Some((held.get(p)?.eye, l)))))
-            }
-            Show::Geometry => None,
-        };
-        let sprite_holds: Vec<bool> = shows
+        let keys: Vec<Option<ShownKey>> = shows
             .iter()
             .enumerate()
-            .map(|(k, show)| match (key(k, show), &self.sprites[k]) {
+            .map(|(k, show)| match *show {
+                Show::Impostor {
+                    texture,
+                    level,
+                    partner,
+                } => {
+                    // (A `Show` from before textures arrived or were dropped names textures
+                    // no longer held: drawn as geometry, or without its partner.)
+                    let held = &self.objects[k].held;
+                    let shown = (held.get(texture)?.eye, level);
+                    Some((shown, partner.and_then(|(p, l)| Some((held.get(p)?.eye, l)))))
+                }
+                Show::Geometry => None,
+            })
+            .collect();
+        let sprite_holds: Vec<bool> = keys
+            .iter()
+            .enumerate()
+            .map(|(k, key)| match (key, &self.sprites[k]) {
                 (Some(key), Some(kept)) => {
-                    kept.key == key && sprite_still_valid(&scene.objects[k].bounds, kept.eye, camera)
+                    kept.key == *key && sprite_still_valid(&scene.objects[k].bounds, kept.eye, camera)
                 }
                 _ => false,
             })
@@ -504,8 +516,8 @@ impl Manager {
             .collect();
         let mut prepared = warps.into_iter().zip(prepared).peekable();
         let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
-        for (k, show) in shows.iter().enumerate() {
-            let Some(key) = key(k, show) else {
+        for (k, key) in keys.into_iter().enumerate() {
+            let Some(key) = key else {
                 self.sprites[k] = None;
                 geometry.push((k as u32, &scene.objects[k]));
                 continue;
@@ -890,19 +902,19 @@ impl Manager {
             return None;
         }
         let turn = from.cross(eye);
-        let distances = 1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO;
         held.iter()
             .zip(grades)
             .enumerate()
-            .filter(|&(i, (h, g))| {
+            .filter_map(|(i, (h, g))| {
                 let other = h.eye - centre;
-                i != shown
+                let angle = other.angle_between(eye);
+                let usable = i != shown
                     && !g.too_coarse
-                    && other.angle_between(eye) <= PARTNER_MAX_TURN
-                    && distances.contains(&(eye.length() / other.length()))
-                    && turn.dot(eye.cross(other)) > 0.0
+                    && angle <= PARTNER_MAX_TURN
+                    && similar_distance(centre, camera.eye, h.eye)
+                    && turn.dot(eye.cross(other)) > 0.0;
+                usable.then_some((i, h, g.growth, angle))
             })
-            .map(|(i, (h, g))| (i, h, g.growth, angle_between(centre, h.eye, camera.eye)))
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
             .map(|(i, h, _, _)| {
                 // One level coarser than the screen needs: it shows only slivers, and
@@ -927,19 +939,18 @@ impl Manager {
         // (Held or asked for within half as far again — an eye asked for `reach` ahead
         // falls a little beyond it as the future moves on, or as the eye's elevation
         // tilts the turn — and at a distance [`Self::partner`] accepts.)
-        let distances = 1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO;
         let ahead = |eye: Vec3| {
             let e = eye - centre;
             axis.dot(to.cross(e)) > 0.0
                 && to.angle_between(e) <= 1.5 * reach
-                && distances.contains(&(to.length() / e.length()))
+                && similar_distance(centre, future, eye)
         };
         let held = self.objects[k].held.iter().any(|h| ahead(h.eye));
         let asked = self.pending.values().any(|p| p.object == k && ahead(p.eye));
         Some(if held || asked {
             Ok(())
         } else {
-            Err(centre + glam::Quat::from_axis_angle(axis.normalize(), reach) * to)
+            Err(turned(centre, to, axis, reach))
         })
     }
 
@@ -956,7 +967,7 @@ impl Manager {
         if turn.is_nan() || lead <= 1e-4 || axis.length_squared() <= f32::MIN_POSITIVE {
             return future;
         }
-        centre + glam::Quat::from_axis_angle(axis.normalize(), lead) * to
+        turned(centre, to, axis, lead)
     }
 
     /// Asks ahead (when predicting) for the texture the eye will need once a request
