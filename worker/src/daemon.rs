@@ -33,16 +33,16 @@ type Scenes = pb::scenes_client::ScenesClient<InterceptedService<Channel, Bearer
 /// host — delayed that job and all queued behind it, late in a flight when latency
 /// matters). The tracers own the objects; the scene itself is not kept.
 struct Loaded {
-    /// The scene's name and its objects' names in order, for errors.
+    /// The scene's name and its objects' ([`Scene::object_names`]), for errors.
     name: String,
-    names: Vec<String>,
+    names: String,
     tracers: HashMap<String, Arc<ObjectTracer>>,
 }
 
 impl Loaded {
     /// Builds every object's tracer, in parallel.
     fn new(scene: Scene) -> Loaded {
-        let names = scene.objects.iter().map(|o| o.name.clone()).collect();
+        let names = scene.object_names();
         let tracers = scene
             .objects
             .into_par_iter()
@@ -63,7 +63,7 @@ impl Loaded {
             .ok_or_else(|| relief_core::Error::UnknownObject {
                 scene: self.name.clone(),
                 name: object.to_string(),
-                available: self.names.join(", "),
+                available: self.names.clone(),
             })
     }
 }

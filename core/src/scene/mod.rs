@@ -196,7 +196,8 @@ impl Scene {
         }
     }
 
-    fn object_names(&self) -> String {
+    /// The objects' names, comma-separated (what an unknown-object error offers).
+    pub fn object_names(&self) -> String {
         self.objects
             .iter()
             .map(|o| o.name.as_str())
