@@ -350,6 +350,26 @@ fn probe_valid_angle(held: &Held, centre: Vec3, camera: &Camera, tolerance: f32)
     lo
 }
 
+/// Which of an object's held textures (graded `grades` at the eye, `turn(i)` radians
+/// round the object from it) is shown: of those fine enough for the screen, the one
+/// nearest the eye within `tolerance`, else the one with the least growth. (The
+/// growth metric sees gaps, not the side of the object a texture from far round
+/// cannot show: a sphere's growth is about 0 from anywhere.)
+fn shown_texture(grades: &[Grade], tolerance: f32, turn: impl Fn(usize) -> f32) -> Option<(usize, Grade)> {
+    let tolerated = |g: &Grade| g.growth <= tolerance;
+    grades
+        .iter()
+        .copied()
+        .enumerate()
+        .filter(|(_, g)| !g.too_coarse)
+        .min_by(|(i, a), (j, b)| {
+            tolerated(b).cmp(&tolerated(a)).then_with(|| match tolerated(a) {
+                true => turn(*i).total_cmp(&turn(*j)),
+                false => a.growth.total_cmp(&b.growth),
+            })
+        })
+}
+
 /// The texture edges the manager asks for: half-octave steps from 32 to 512 (the odd
 /// steps, 32·√2^k, rounded to multiples of 8). With power-of-two edges a texture had up
 /// to 4× the texels the screen can show, each warped every frame; here at most 2.1×
@@ -375,6 +395,16 @@ fn angle_between(centre: Vec3, a: Vec3, b: Vec3) -> f32 {
 fn similar_distance(centre: Vec3, a: Vec3, b: Vec3) -> bool {
     let ratio = (a - centre).length() / (b - centre).length();
     (1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO).contains(&ratio)
+}
+
+/// Whether a texture made from `other` can partner one made from `shown` at `eye`
+/// (all about `centre`): on the far side of the eye, the way it has turned from
+/// `shown`, within [`PARTNER_MAX_TURN`] of the eye and at a similar distance.
+fn partners(centre: Vec3, shown: Vec3, eye: Vec3, other: Vec3) -> bool {
+    let (from, eye, other) = (shown - centre, eye - centre, other - centre);
+    from.cross(eye).dot(eye.cross(other)) > 0.0
+        && other.angle_between(eye) <= PARTNER_MAX_TURN
+        && similar_distance(Vec3::ZERO, eye, other)
 }
 
 /// `offset` from `centre` turned by `angle` about `axis` (not zero), as a point.
@@ -800,16 +830,10 @@ impl Manager {
             let centre = object.bounds.center();
             let grades: Vec<Grade> = self.grades(scene, k, camera.eye, camera).collect();
             self.counters.needs += 1;
-            let least_growth = |fine_only: bool| {
-                grades
-                    .iter()
-                    .copied()
-                    .enumerate()
-                    .filter(|(_, g)| !(fine_only && g.too_coarse))
-                    .min_by(|a, b| a.1.growth.total_cmp(&b.1.growth))
-            };
-            // What is shown: the best texture fine enough for the screen.
-            let best = least_growth(true);
+            let held = &self.objects[k].held;
+            let best = shown_texture(&grades, self.config.tolerance, |i| {
+                angle_between(centre, held[i].eye, camera.eye)
+            });
             let within =
                 |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= self.config.tolerance);
             // Some texture is within tolerance — if none fine enough is, geometry is
@@ -822,7 +846,7 @@ impl Manager {
                 && best.is_some_and(|(i, _)| {
                     angle_between(centre, self.objects[k].held[i].eye, camera.eye) > LONE_MAX_TURN
                 });
-            let valid = within(least_growth(false)) && !lone_too_far;
+            let valid = grades.iter().any(|g| g.growth <= self.config.tolerance) && !lone_too_far;
             let coarse = !within(best)
                 && grades
                     .iter()
@@ -843,9 +867,14 @@ impl Manager {
                             (p.sent.elapsed().as_millis(), p.predicted, degrees)
                         })
                         .collect();
+                    let shown_deg = best.map(|(i, _)| {
+                        angle_between(centre, self.objects[k].held[i].eye, camera.eye).to_degrees()
+                    });
                     tracing::debug!(
                         object = %object.name,
                         growth = best.map(|b| b.1.growth),
+                        shown_deg,
+                        lone_too_far,
                         held = self.objects[k].held.len(),
                         valid_deg = self.valid_angle(k).to_degrees(),
                         planned_latency_s = self.latency(k),
@@ -901,19 +930,13 @@ impl Manager {
         if from.angle_between(eye) < PARTNER_FROM {
             return None;
         }
-        let turn = from.cross(eye);
         held.iter()
             .zip(grades)
             .enumerate()
             .filter_map(|(i, (h, g))| {
-                let other = h.eye - centre;
-                let angle = other.angle_between(eye);
-                let usable = i != shown
-                    && !g.too_coarse
-                    && angle <= PARTNER_MAX_TURN
-                    && similar_distance(centre, camera.eye, h.eye)
-                    && turn.dot(eye.cross(other)) > 0.0;
-                usable.then_some((i, h, g.growth, angle))
+                let usable =
+                    i != shown && !g.too_coarse && partners(centre, held[shown].eye, camera.eye, h.eye);
+                usable.then_some((i, h, g.growth, (h.eye - centre).angle_between(eye)))
             })
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
             .map(|(i, h, _, _)| {
@@ -991,23 +1014,26 @@ impl Manager {
             return;
         }
         // A texture covers the future within the planning margin of the tolerance, and
-        // of the turn it may be shown alone — unless a partner is there for it: then
-        // up to the turn any texture is shown.
-        let ahead = self.ahead(k, centre, camera.eye, future);
-        let turn = match ahead {
-            Some(Ok(())) => MAX_TURN,
-            _ => PLANNING_MARGIN * LONE_MAX_TURN,
-        };
+        // of the turn it may be shown alone — unless a partner for it there is held or
+        // asked for: then up to the turn any texture is shown.
         let held = &self.objects[k].held;
+        let partnered = |shown: Vec3| {
+            held.iter()
+                .map(|h| h.eye)
+                .chain(self.pending.values().filter(|p| p.object == k).map(|p| p.eye))
+                .any(|other| partners(centre, shown, future, other))
+        };
         let covered = held
             .iter()
             .zip(self.grades(scene, k, future, camera))
             .any(|(h, g)| {
+                let turn = angle_between(centre, h.eye, future);
                 g.growth <= PLANNING_MARGIN * self.config.tolerance
                     && !g.coarse
-                    && angle_between(centre, h.eye, future) <= turn
+                    && (turn <= PLANNING_MARGIN * LONE_MAX_TURN || (turn <= MAX_TURN && partnered(h.eye)))
             })
             || self.pending_covers(k, centre, future);
+        let ahead = self.ahead(k, centre, camera.eye, future);
         let deadline = Some((horizon * 1e3) as u64);
         if !covered {
             let eye = self.lead(k, centre, camera.eye, future);
@@ -1034,5 +1060,49 @@ impl Manager {
             self.counters.withdrawn += stale.len() as u64;
             let _ = self.commands.send(Command::Withdraw(stale));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grade(growth: f32, too_coarse: bool) -> Grade {
+        Grade {
+            growth,
+            too_coarse,
+            coarse: false,
+        }
+    }
+
+    #[test]
+    fn the_texture_shown_is_the_nearest_within_tolerance_else_the_least_grown() {
+        let turns = [0.7, 0.1, 0.05, 0.3];
+        let turn = |i: usize| turns[i];
+        // 1 is nearer than 0, whose growth is less; 2 is nearer still but too coarse.
+        let grades = [
+            grade(0.0, false),
+            grade(2.0, false),
+            grade(0.0, true),
+            grade(9.0, false),
+        ];
+        assert_eq!(shown_texture(&grades, 4.0, turn).map(|s| s.0), Some(1));
+        // Only 3 within tolerance, though farther than 1.
+        let grades = [
+            grade(7.0, false),
+            grade(6.0, false),
+            grade(0.0, true),
+            grade(3.0, false),
+        ];
+        assert_eq!(shown_texture(&grades, 4.0, turn).map(|s| s.0), Some(3));
+        // None within: the least grown, wherever it is.
+        let grades = [
+            grade(5.0, false),
+            grade(8.0, false),
+            grade(0.0, true),
+            grade(f32::INFINITY, false),
+        ];
+        assert_eq!(shown_texture(&grades, 4.0, turn).map(|s| s.0), Some(0));
+        assert!(shown_texture(&[grade(0.0, true)], 4.0, turn).is_none());
     }
 }
