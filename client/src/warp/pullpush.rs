@@ -11,7 +11,7 @@
 //! about one sample spacing past its silhouette.
 
 use rayon::prelude::*;
-use wide::{f32x8, i32x8};
+use wide::{f32x8, i16x8, u8x16};
 
 /// One pixel of a layer being reconstructed. Attributes stay in the texture's 8-bit
 /// encoding: 12 bytes a pixel, so a 1280×720 layer is 11 MB — the fill is bound by
@@ -89,22 +89,19 @@ impl Pixel for Splat {
         f32x8::new([self.depth, f(r), f(g), f(b), f(x), f(y), f(z), 1.0])
     }
 
-    /// Rounds the attributes to bytes (to nearest; ties to even on x86).
+    /// Rounds the attributes to bytes (to nearest; ties to even on x86), clamped to
+    /// 0..=255.
     #[inline(always)]
     fn from_lanes(lanes: Lanes) -> Splat {
         let depth = lanes.as_array()[0];
-        // Clamped as vectors, so the bytes are plain truncations. (The plain conversion:
-        // a NaN or out-of-range lane converts to i32::MIN, clamped to 0.)
-        let q = lanes
-            .fast_round_int()
-            .max(i32x8::ZERO)
-            .min(i32x8::splat(255))
-            .to_array();
-        let byte = |k: usize| q[k] as u8;
+        // Two saturating packs clamp as they narrow (i32 → i16 → u8), as vectors. (The
+        // plain conversion: a NaN or out-of-range lane converts to i32::MIN, hence 0.)
+        let q16 = i16x8::from_i32x8_saturate(lanes.fast_round_int());
+        let q = u8x16::narrow_i16x8(q16, q16).to_array();
         Splat {
             depth,
-            albedo: [byte(1), byte(2), byte(3)],
-            normal: [byte(4), byte(5), byte(6)],
+            albedo: [q[1], q[2], q[3]],
+            normal: [q[4], q[5], q[6]],
         }
     }
 }
@@ -296,6 +293,10 @@ struct Shared {
     front: [Lanes; 4],
     /// The candidates' nearest depth (finite: no group is made without one).
     nearest: f32,
+    /// Whether all four are in the front-most group: then every pixel's weights sum
+    /// to exactly 1 (3/4 and 1/4 both ways: dyadic, so the sums are exact) and its
+    /// blend needs no division.
+    whole: bool,
 }
 
 impl Shared {
@@ -305,7 +306,8 @@ impl Shared {
     fn new(candidates: [Lanes; 4], above: Tolerance) -> Option<Shared> {
         let (nearest, limit) = front(candidates.iter().map(Pixel::depth), above)?;
         let front = candidates.map(|c| c.lanes_within(limit));
-        Some(Shared { front, nearest })
+        let whole = candidates.iter().all(|c| c.depth() <= limit);
+        Some(Shared { front, nearest, whole })
     }
 
     /// One fine pixel whose candidates' weights are `weights`: an empty pixel takes the
@@ -325,7 +327,10 @@ impl Shared {
             .zip(weights)
             .fold(f32x8::ZERO, |sum, (c, w)| c.mul_add(*w, sum));
         // The last lane summed the weights (the nearest candidate's at least: positive).
-        let blend = sum * f32x8::splat(1.0 / sum.as_array()[7]);
+        let blend = match self.whole {
+            true => sum,
+            false => sum * f32x8::splat(1.0 / sum.as_array()[7]),
+        };
         let blend_depth = blend.as_array()[0];
         // (Huge depths can overflow the sum.)
         if blend_depth < f32::INFINITY && (!valid || depth > blend_depth + here.at(blend_depth)) {
