@@ -1067,42 +1067,33 @@ impl Manager {
 mod tests {
     use super::*;
 
-    fn grade(growth: f32, too_coarse: bool) -> Grade {
-        Grade {
+    /// The texture shown among four with these growths, turns 0.7, 0.1, 0.05 and 0.3
+    /// from the eye; the third (the nearest) too coarse to be shown. Tolerance 4.
+    fn shown(growths: [f32; 4]) -> Option<usize> {
+        let turns = [0.7, 0.1, 0.05, 0.3];
+        let mut grades = growths.map(|growth| Grade {
             growth,
-            too_coarse,
+            too_coarse: false,
             coarse: false,
-        }
+        });
+        grades[2].too_coarse = true;
+        shown_texture(&grades, 4.0, |i| turns[i]).map(|s| s.0)
     }
 
     #[test]
     fn the_texture_shown_is_the_nearest_within_tolerance_else_the_least_grown() {
-        let turns = [0.7, 0.1, 0.05, 0.3];
-        let turn = |i: usize| turns[i];
-        // 1 is nearer than 0, whose growth is less; 2 is nearer still but too coarse.
-        let grades = [
-            grade(0.0, false),
-            grade(2.0, false),
-            grade(0.0, true),
-            grade(9.0, false),
-        ];
-        assert_eq!(shown_texture(&grades, 4.0, turn).map(|s| s.0), Some(1));
+        // 1 is nearer than 0, whose growth is less (2 is nearer still, but too coarse).
+        assert_eq!(shown([0.0, 2.0, 0.0, 9.0]), Some(1));
         // Only 3 within tolerance, though farther than 1.
-        let grades = [
-            grade(7.0, false),
-            grade(6.0, false),
-            grade(0.0, true),
-            grade(3.0, false),
-        ];
-        assert_eq!(shown_texture(&grades, 4.0, turn).map(|s| s.0), Some(3));
+        assert_eq!(shown([7.0, 6.0, 0.0, 3.0]), Some(3));
         // None within: the least grown, wherever it is.
-        let grades = [
-            grade(5.0, false),
-            grade(8.0, false),
-            grade(0.0, true),
-            grade(f32::INFINITY, false),
-        ];
-        assert_eq!(shown_texture(&grades, 4.0, turn).map(|s| s.0), Some(0));
-        assert!(shown_texture(&[grade(0.0, true)], 4.0, turn).is_none());
+        assert_eq!(shown([5.0, 8.0, 0.0, f32::INFINITY]), Some(0));
+        // Only a too coarse one: none.
+        let coarse = Grade {
+            growth: 0.0,
+            too_coarse: true,
+            coarse: false,
+        };
+        assert!(shown_texture(&[coarse], 4.0, |_| 0.0).is_none());
     }
 }

@@ -307,7 +307,11 @@ impl Shared {
         let (nearest, limit) = front(candidates.iter().map(Pixel::depth), above)?;
         let front = candidates.map(|c| c.lanes_within(limit));
         let whole = candidates.iter().all(|c| c.depth() <= limit);
-        Some(Shared { front, nearest, whole })
+        Some(Shared {
+            front,
+            nearest,
+            whole,
+        })
     }
 
     /// One fine pixel whose candidates' weights are `weights`: an empty pixel takes the
