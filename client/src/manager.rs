@@ -296,8 +296,23 @@ pub struct Counters {
     pub prediction_hits: u64,
     /// Frames where some impostor was shown above tolerance or missing.
     pub stale_frames: u64,
+    /// Why: the object-frames without a valid texture, by cause.
+    pub stale_causes: StaleCauses,
     /// Where each [`Manager::render`] spent its time.
     pub render_stages: Vec<RenderStages>,
+}
+
+/// Object-frames without a valid texture, by cause (the first that applies).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct StaleCauses {
+    /// No held texture can be warped to the eye at all: none held yet, or all too far
+    /// round the object (past 60°) or at too different a distance.
+    pub missing: u64,
+    /// Some can, but none within the tolerance.
+    pub beyond_tolerance: u64,
+    /// One within tolerance, but shown alone more than 40° from its eye (no partner
+    /// held to fill the side it misses).
+    pub alone: u64,
 }
 
 /// Where one [`Manager::render`] spent its time, milliseconds.
@@ -846,7 +861,8 @@ impl Manager {
                 && best.is_some_and(|(i, _)| {
                     angle_between(centre, self.objects[k].held[i].eye, camera.eye) > LONE_MAX_TURN
                 });
-            let valid = grades.iter().any(|g| g.growth <= self.config.tolerance) && !lone_too_far;
+            let within_any = grades.iter().any(|g| g.growth <= self.config.tolerance);
+            let valid = within_any && !lone_too_far;
             let coarse = !within(best)
                 && grades
                     .iter()
@@ -856,6 +872,14 @@ impl Manager {
                 self.counters.prediction_hits += 1;
             }
             if !valid {
+                let causes = &mut self.counters.stale_causes;
+                if grades.iter().all(|g| g.growth == f32::INFINITY) {
+                    causes.missing += 1;
+                } else if !within_any {
+                    causes.beyond_tolerance += 1;
+                } else {
+                    causes.alone += 1;
+                }
                 if tracing::enabled!(tracing::Level::DEBUG) {
                     // What was asked for: (age ms, predicted, degrees from this eye).
                     let asked: Vec<(u128, bool, f32)> = self

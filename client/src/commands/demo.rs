@@ -15,7 +15,7 @@ use tokio::sync::mpsc::unbounded_channel;
 
 use relief_client::composite::{is_cheap, render_geometry};
 use relief_client::gbuffer::GBuffer;
-use relief_client::manager::{Config, Manager, RenderStages};
+use relief_client::manager::{Config, Manager, RenderStages, StaleCauses};
 use relief_client::metrics::image::{compare, object_psnr};
 use relief_client::source::{spawn_local, spawn_remote};
 use relief_client::stats::{finite_mean, finite_min, median, percentile};
@@ -134,6 +134,8 @@ struct Summary {
     prediction_hits: u64,
     needs: u64,
     stale_frames: u64,
+    /// Object-frames without a valid texture, by cause.
+    stale_causes: StaleCauses,
     /// Impostors redrawn unchanged while Schaufler's sprite test held, and warped.
     sprites: u64,
     warps: u64,
@@ -451,6 +453,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         prediction_hits: counters.prediction_hits,
         needs: counters.needs,
         stale_frames: counters.stale_frames,
+        stale_causes: counters.stale_causes,
         sprites: counters.sprites,
         warps: counters.warps,
         partners: counters.partners,
