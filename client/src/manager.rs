@@ -228,7 +228,8 @@ const LATENCY_WINDOW: usize = 16;
 const OWN_LATENCIES: usize = 4;
 const LATENCY_PERCENTILE: f64 = 0.9;
 /// How far past the planned round trip predictions look: `--rtt-ms 100` demos, 4–8 runs
-/// each: ×1.0 9.5 stale frames of ~375, ×1.25 7.1, ×1.5 7.5.
+/// each (the path before its fly-through joined the orbit, ~375 frames): ×1.0 9.5
+/// stale frames, ×1.25 7.1, ×1.5 7.5.
 const HORIZON_SPARE: f64 = 1.25;
 
 /// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`.
@@ -294,7 +295,8 @@ pub struct Counters {
     pub needs: u64,
     /// … and one was there or already asked for.
     pub prediction_hits: u64,
-    /// Frames where some impostor was shown above tolerance or missing.
+    /// Frames where some impostor was shown above tolerance, alone too far from its
+    /// eye, or missing.
     pub stale_frames: u64,
     /// Why: the object-frames without a valid texture, by cause.
     pub stale_causes: StaleCauses,
@@ -415,7 +417,7 @@ fn similar_distance(centre: Vec3, a: Vec3, b: Vec3) -> bool {
 /// Whether a texture made from `other` can partner one made from `shown` at `eye`
 /// (all about `centre`): on the far side of the eye, the way it has turned from
 /// `shown`, within [`PARTNER_MAX_TURN`] of the eye and at a similar distance.
-fn partners(centre: Vec3, shown: Vec3, eye: Vec3, other: Vec3) -> bool {
+fn can_partner(centre: Vec3, shown: Vec3, eye: Vec3, other: Vec3) -> bool {
     let (from, eye, other) = (shown - centre, eye - centre, other - centre);
     from.cross(eye).dot(eye.cross(other)) > 0.0
         && other.angle_between(eye) <= PARTNER_MAX_TURN
@@ -851,10 +853,9 @@ impl Manager {
             });
             let within =
                 |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= self.config.tolerance);
-            // Some texture is within tolerance — if none fine enough is, geometry is
-            // drawn by choice (not a stale frame), and a finer one asked for if it can
-            // be had.
-            // The shown texture's partner; without one, a texture more than
+            // Valid: some texture is within tolerance (when only one too coarse to be
+            // shown is, a finer one is asked for if it can be had: `coarse`), and the one
+            // shown is not alone too far from its eye. The shown texture's partner; without one, a texture more than
             // [`LONE_MAX_TURN`] from its eye misses the side the eye has turned to.
             let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
             let lone_too_far = partner.is_none()
@@ -875,10 +876,10 @@ impl Manager {
                 let causes = &mut self.counters.stale_causes;
                 if grades.iter().all(|g| g.growth == f32::INFINITY) {
                     causes.missing += 1;
-                } else if !within_any {
-                    causes.beyond_tolerance += 1;
-                } else {
+                } else if within(best) {
                     causes.alone += 1;
+                } else {
+                    causes.beyond_tolerance += 1;
                 }
                 if tracing::enabled!(tracing::Level::DEBUG) {
                     // What was asked for: (age ms, predicted, degrees from this eye).
@@ -959,7 +960,7 @@ impl Manager {
             .enumerate()
             .filter_map(|(i, (h, g))| {
                 let usable =
-                    i != shown && !g.too_coarse && partners(centre, held[shown].eye, camera.eye, h.eye);
+                    i != shown && !g.too_coarse && can_partner(centre, held[shown].eye, camera.eye, h.eye);
                 usable.then_some((i, h, g.growth, (h.eye - centre).angle_between(eye)))
             })
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
@@ -974,7 +975,9 @@ impl Manager {
     /// Whether object `k` has a texture held or asked for on the far side of `future`
     /// (the way the eye turns from `now`), to partner the one shown there — and if not,
     /// the eye to ask for one at: [`PAIR_SPACING`] valid angles past `future`. `None`
-    /// while the eye is not turning about the object.
+    /// while the eye is not turning about the object. (This keeps partners coming
+    /// along the motion; [`can_partner`] is the test of one pair of textures at one
+    /// eye, by which side of the eye each is on, whatever the motion.)
     fn ahead(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Option<Result<(), Vec3>> {
         let (from, to) = (now - centre, future - centre);
         let axis = from.cross(to);
@@ -1045,7 +1048,7 @@ impl Manager {
             held.iter()
                 .map(|h| h.eye)
                 .chain(self.pending.values().filter(|p| p.object == k).map(|p| p.eye))
-                .any(|other| partners(centre, shown, future, other))
+                .any(|other| can_partner(centre, shown, future, other))
         };
         let covered = held
             .iter()

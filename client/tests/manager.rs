@@ -18,7 +18,7 @@ use relief_core::scene::Scene;
 #[test]
 fn still_eyes_draw_sprites_and_moving_eyes_warp() {
     let scene = Arc::new(Scene::load("default").unwrap());
-    let mut manager = served_locally(&scene);
+    let mut manager = served_locally(&scene, Config::default());
     let camera = Camera::look_at(
         Vec3::new(2.0, 3.0, 9.0),
         Vec3::new(0.0, 1.0, 0.0),
@@ -70,11 +70,11 @@ fn still_eyes_draw_sprites_and_moving_eyes_warp() {
 }
 
 /// A manager of `scene` whose textures the in-process generator makes.
-fn served_locally(scene: &Arc<Scene>) -> Manager {
+fn served_locally(scene: &Arc<Scene>, config: Config) -> Manager {
     let (commands_tx, commands_rx) = unbounded_channel();
     let (arrivals_tx, arrivals_rx) = unbounded_channel();
     spawn_local(scene.clone(), commands_rx, arrivals_tx);
-    Manager::new(scene, Config::default(), commands_tx, arrivals_rx)
+    Manager::new(scene, config, commands_tx, arrivals_rx)
 }
 
 /// The index of `name` in `scene`.
@@ -92,6 +92,19 @@ fn unanswered(scene: &Scene, config: Config) -> (Manager, UnboundedReceiver<Comm
 /// The eye 6 m from `centre`, `angle` radians round it, 0.5 m above.
 fn around(centre: Vec3, angle: f32) -> Vec3 {
     centre + Vec3::new(6.0 * angle.cos(), 0.5, 6.0 * angle.sin())
+}
+
+/// A 320×180 camera [`around`] `centre`, `degrees` round it, looking at it.
+fn camera_round(centre: Vec3, degrees: f32) -> Camera {
+    Camera::look_at(
+        around(centre, degrees.to_radians()),
+        centre,
+        Vec3::Y,
+        60.0,
+        320,
+        180,
+    )
+    .unwrap()
 }
 
 /// Draws a frame from `eye` (looking at `centre`) at `t`, and returns the eyes of the
@@ -156,7 +169,7 @@ fn a_texture_far_too_coarse_for_the_screen_gives_way_to_geometry() {
     let scene = Arc::new(Scene::load("default").unwrap());
     let sphere = index(&scene, "sphere");
     let centre = scene.objects[sphere].bounds.center();
-    let mut manager = served_locally(&scene);
+    let mut manager = served_locally(&scene, Config::default());
     let eye = centre + Vec3::new(0.0, 0.5, 8.0);
     // Textures sized for a small screen …
     let small = Camera::look_at(eye, centre, Vec3::Y, 60.0, 64, 36).unwrap();
@@ -245,20 +258,10 @@ fn texture_edges_climb_in_half_octaves() {
 #[test]
 fn between_two_textures_the_other_is_drawn_behind() {
     let scene = Arc::new(Scene::load("default").unwrap());
-    let mut manager = served_locally(&scene);
+    let mut manager = served_locally(&scene, Config::default());
     let sphere = index(&scene, "sphere");
     let centre = scene.objects[sphere].bounds.center();
-    let camera_at = |degrees: f32| {
-        Camera::look_at(
-            around(centre, degrees.to_radians()),
-            centre,
-            Vec3::Y,
-            60.0,
-            320,
-            180,
-        )
-        .unwrap()
-    };
+    let camera_at = |degrees: f32| camera_round(centre, degrees);
     for degrees in [0.0, 70.0] {
         assert!(
             manager.warm_up(&scene, &camera_at(degrees), Duration::from_secs(60)),
@@ -285,4 +288,30 @@ fn between_two_textures_the_other_is_drawn_behind() {
         "2° from a texture's eye: {:?}",
         near[sphere]
     );
+}
+
+/// Stale object-frames are counted by cause: before any texture, `missing`; a sphere's
+/// one texture 50° from the eye — within tolerance (a sphere's gaps do not grow) but
+/// with no partner to fill the side it never saw — `alone`.
+#[test]
+fn stale_object_frames_are_counted_by_cause() {
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let sphere = index(&scene, "sphere");
+    let centre = scene.objects[sphere].bounds.center();
+    let camera_at = |degrees: f32| camera_round(centre, degrees);
+    let config = Config {
+        predict: false,
+        ..Config::default()
+    };
+    let (mut unserved, _commands) = unanswered(&scene, config.clone());
+    unserved.frame(&scene, &camera_at(0.0), 0.0);
+    let causes = unserved.counters.stale_causes;
+    assert_eq!((causes.missing, causes.beyond_tolerance, causes.alone), (1, 0, 0));
+
+    let mut manager = served_locally(&scene, config);
+    assert!(manager.warm_up(&scene, &camera_at(0.0), Duration::from_secs(60)));
+    manager.frame(&scene, &camera_at(50.0), 0.0);
+    let causes = manager.counters.stale_causes;
+    assert_eq!((causes.missing, causes.beyond_tolerance, causes.alone), (0, 0, 1));
+    assert_eq!(manager.counters.stale_frames, 1);
 }

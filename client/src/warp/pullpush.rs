@@ -294,8 +294,10 @@ struct Shared {
     /// The candidates' nearest depth (finite: no group is made without one).
     nearest: f32,
     /// Whether all four are in the front-most group: then every pixel's weights sum
-    /// to exactly 1 (3/4 and 1/4 both ways: dyadic, so the sums are exact) and its
-    /// blend needs no division.
+    /// to exactly 1 (3/4 and 1/4 both ways, border taps included: dyadic, so the sums
+    /// are exact) and its blend needs no division — given that each candidate's last
+    /// lane is exactly 1, as the analysis's averages make it (x·(1/x) rounds to 1 for
+    /// its sums, 1 to 4 children).
     whole: bool,
 }
 
@@ -332,7 +334,10 @@ impl Shared {
             .fold(f32x8::ZERO, |sum, (c, w)| c.mul_add(*w, sum));
         // The last lane summed the weights (the nearest candidate's at least: positive).
         let blend = match self.whole {
-            true => sum,
+            true => {
+                debug_assert_eq!(sum.as_array()[7], 1.0);
+                sum
+            }
             false => sum * f32x8::splat(1.0 / sum.as_array()[7]),
         };
         let blend_depth = blend.as_array()[0];
