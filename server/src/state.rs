@@ -107,6 +107,10 @@ pub struct Counters {
     pub merged: u64,
     pub withdrawn: u64,
     pub requeued: u64,
+    /// Cancelled jobs their workers stopped before finishing.
+    pub stopped: u64,
+    /// Results that came for jobs no longer wanted.
+    pub discarded: u64,
 }
 
 /// Limits of the server.
@@ -413,7 +417,9 @@ impl State {
     /// the cache and ends the job.
     pub fn result(&mut self, job_id: u64, texture: pb::ReliefTexture, is_final: bool, bake_ms: u32) {
         let Some(job) = self.jobs.get(&job_id) else {
-            return; // Withdrawn meanwhile.
+            // Withdrawn meanwhile (and its worker not told in time, or unable to stop).
+            self.counters.discarded += 1;
+            return;
         };
         let texture = Arc::new(texture);
         for waiter_id in &job.waiters {
@@ -433,6 +439,11 @@ impl State {
             self.cache_insert(key, texture, bytes);
             self.finish(job_id);
         }
+    }
+
+    /// A worker stopped a cancelled job before finishing it.
+    pub fn stopped(&mut self) {
+        self.counters.stopped += 1;
     }
 
     /// A worker could not make a texture: the waiters get the reason.
@@ -588,6 +599,8 @@ impl State {
             latency_ms_p99: percentile(&latencies, 0.99),
             handling_us_p50: percentile(&handling, 0.5),
             handling_us_p99: percentile(&handling, 0.99),
+            jobs_stopped: self.counters.stopped,
+            results_discarded: self.counters.discarded,
         }
     }
 }

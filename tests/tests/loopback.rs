@@ -186,20 +186,24 @@ async fn withdrawn_predictions_are_cancelled() {
     assert!(results.last().unwrap().r#final);
 }
 
-/// Asks for a bake that takes seconds (the 2048² rock, request 1) and waits until a
-/// worker runs it.
+/// Asks for a bake that takes seconds (the 2048² rock, request 1, a 512² preview
+/// first) and waits until its preview has come: the worker is then baking the final.
 async fn start_long_bake(remote: &mut Remote, hash: &str) -> tonic::Streaming<pb::ImpostorResult> {
     let eye = Vec3::new(0.5, 2.0, 8.0);
-    let stream = remote
-        .request(request(hash, "rock", eye, 2048, 1, pb::Urgency::Now))
+    let mut stream = remote
+        .request(pb::ImpostorRequest {
+            progressive: true,
+            ..request(hash, "rock", eye, 2048, 1, pb::Urgency::Now)
+        })
         .await
         .unwrap();
-    wait_for(remote, "the job running", |s| s.jobs_in_flight == 1).await;
+    let preview = stream.message().await.unwrap().unwrap();
+    assert!(!preview.r#final);
     stream
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_client_that_goes_away_stops_its_job() {
+async fn withdrawn_running_jobs_stop_on_their_worker() {
     let (_server, url) = start_server(&[]);
     let _worker = start_worker(&url, &[]);
     let (mut remote, hash) = upload_default(&url).await;
@@ -207,9 +211,20 @@ async fn a_client_that_goes_away_stops_its_job() {
     // A long bake; the client cancels the call while it runs.
     let stream = start_long_bake(&mut remote, &hash).await;
     drop(stream);
-    // The server withdraws it and the worker stops: nothing is left running.
-    let stats = wait_for(&mut remote, "the job stopped", |s| s.jobs_in_flight == 0).await;
-    assert_eq!(stats.withdrawn, 1, "{stats:?}");
+    // The server withdraws it and the worker stops mid-bake (says so, sends nothing
+    // more): nothing is left running.
+    let stats = wait_for(&mut remote, "the worker stopping it", |s| s.jobs_stopped == 1).await;
+    assert_eq!(
+        (stats.withdrawn, stats.jobs_in_flight, stats.results_discarded),
+        (1, 0, 0),
+        "{stats:?}"
+    );
+    // The same for a running job whose request is withdrawn.
+    let stream = start_long_bake(&mut remote, &hash).await;
+    assert_eq!(remote.withdraw(&[1]).await.unwrap(), 1);
+    assert_eq!(collect(stream).await.unwrap_err().code(), Code::Cancelled);
+    let stats = wait_for(&mut remote, "the worker stopping it", |s| s.jobs_stopped == 2).await;
+    assert_eq!((stats.withdrawn, stats.results_discarded), (2, 0), "{stats:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

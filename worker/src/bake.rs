@@ -1,6 +1,8 @@
 //! Baking a relief texture: cast one orthographic ray per texel and record the first
 //! surface's albedo, shading normal and quantised depth.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use glam::Vec3;
 
 use relief_core::relief::{DepthBits, FacingError, ReliefTexture, SourceCamera, encode_normal};
@@ -35,6 +37,22 @@ pub fn bake(
     size: u32,
     depth_bits: DepthBits,
 ) -> Result<ReliefTexture, BakeError> {
+    match bake_unless_cancelled(target, eye, size, depth_bits, &AtomicBool::new(false))? {
+        Some(texture) => Ok(texture),
+        None => unreachable!("a bake nobody can cancel was cancelled"),
+    }
+}
+
+/// [`bake`], giving up (`Ok(None)`) once `cancelled` is set: it is read before each
+/// 8×8 block of rays, so a withdrawn job frees the worker's cores within a block's
+/// work instead of a whole texture's.
+pub fn bake_unless_cancelled(
+    target: &ObjectTracer,
+    eye: Vec3,
+    size: u32,
+    depth_bits: DepthBits,
+    cancelled: &AtomicBool,
+) -> Result<Option<ReliefTexture>, BakeError> {
     let camera =
         SourceCamera::facing(eye, &target.object.bounds, size, size).map_err(|reason| BakeError {
             object: target.object.name.clone(),
@@ -52,6 +70,10 @@ pub fn bake(
     };
     let mut texels = vec![empty; size as usize * size as usize];
     par_fill_blocks(size, size, &mut texels, |block, values| {
+        if cancelled.load(Ordering::Relaxed) {
+            values.resize((block.width * block.height) as usize, empty);
+            return;
+        }
         let rays: Vec<Ray> = block
             .pixels()
             .map(|(i, j)| Ray {
@@ -87,11 +109,14 @@ pub fn bake(
             }
         }));
     });
+    if cancelled.load(Ordering::Relaxed) {
+        return Ok(None);
+    }
     let mut texture = ReliefTexture::empty(camera, depth_bits, eye);
     for (k, t) in texels.into_iter().enumerate() {
         texture.albedo[k] = t.albedo;
         texture.normal[k] = t.normal;
         texture.depth[k] = t.depth;
     }
-    Ok(texture)
+    Ok(Some(texture))
 }

@@ -1,8 +1,9 @@
 //! The worker's life: connect, register, take jobs, bake, send results; reconnect with
 //! backoff when the server goes away; drain and stop on SIGINT/SIGTERM.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -21,7 +22,7 @@ use relief_proto::auth::BearerToken;
 use relief_proto::bundle::Bundle;
 use relief_proto::convert::{depth_bits_from_pb, hash_from_pb, size_from_pb, texture_to_pb, vec3_from_pb};
 use relief_proto::pb;
-use relief_worker::bake;
+use relief_worker::bake::bake_unless_cancelled;
 use relief_worker::tracer::ObjectTracer;
 
 use crate::Args;
@@ -79,7 +80,8 @@ struct JobContext {
     scenes: Scenes,
     loaded: LoadedScenes,
     scene_dir: PathBuf,
-    cancelled: Arc<Mutex<HashSet<u64>>>,
+    /// Each running job's cancel flag, set when the server cancels it.
+    cancelled: Arc<Mutex<HashMap<u64, Arc<AtomicBool>>>>,
     out: mpsc::UnboundedSender<pb::WorkerMessage>,
 }
 
@@ -236,7 +238,7 @@ async fn session(
         scenes,
         loaded,
         scene_dir: scene_dir.to_path_buf(),
-        cancelled: Arc::new(Mutex::new(HashSet::new())),
+        cancelled: Arc::new(Mutex::new(HashMap::new())),
         out,
     };
     let mut jobs = JoinSet::new();
@@ -245,10 +247,15 @@ async fn session(
             message = inbound.message() => match message {
                 Ok(Some(m)) => match m.kind {
                     Some(pb::server_message::Kind::Job(job)) => {
-                        jobs.spawn(run_job(job, context.clone()));
+                        // (Registered before the job runs: a cancel may follow at once.)
+                        let cancelled = Arc::new(AtomicBool::new(false));
+                        lock(&context.cancelled).insert(job.job_id, cancelled.clone());
+                        jobs.spawn(run_job(job, context.clone(), cancelled));
                     }
                     Some(pb::server_message::Kind::Cancel(c)) => {
-                        lock(&context.cancelled).insert(c.job_id);
+                        if let Some(flag) = lock(&context.cancelled).get(&c.job_id) {
+                            flag.store(true, Ordering::Relaxed);
+                        }
                     }
                     None => {}
                 },
@@ -268,22 +275,34 @@ async fn session(
     end
 }
 
-/// Bakes one job and sends its result (a preview first when asked), or its failure.
-async fn run_job(job: pb::Job, context: JobContext) {
+/// Bakes one job and sends its result (a preview first when asked), its failure, or —
+/// `cancelled` set before it finished — that it stopped.
+async fn run_job(job: pb::Job, context: JobContext, cancelled: Arc<AtomicBool>) {
     let id = job.job_id;
     let out = context.out.clone();
-    if let Err(reason) = bake_job(job, &context).await {
-        let _ = out.send(pb::WorkerMessage {
-            kind: Some(pb::worker_message::Kind::Failed(pb::JobFailed {
-                job_id: id,
-                reason,
-            })),
-        });
+    let kind = match bake_job(job, &context, &cancelled).await {
+        Ok(Baked::Finished) => None,
+        Ok(Baked::Stopped) => Some(pb::worker_message::Kind::Stopped(pb::JobStopped { job_id: id })),
+        Err(reason) => Some(pb::worker_message::Kind::Failed(pb::JobFailed {
+            job_id: id,
+            reason,
+        })),
+    };
+    if let Some(kind) = kind {
+        let _ = out.send(pb::WorkerMessage { kind: Some(kind) });
     }
     lock(&context.cancelled).remove(&id);
 }
 
-async fn bake_job(job: pb::Job, context: &JobContext) -> Result<(), String> {
+/// How a job's bakes ended.
+enum Baked {
+    /// Every texture was sent.
+    Finished,
+    /// Cancelled before the last was.
+    Stopped,
+}
+
+async fn bake_job(job: pb::Job, context: &JobContext, cancelled: &Arc<AtomicBool>) -> Result<Baked, String> {
     let message = |e: tonic::Status| e.message().to_string();
     let hash = hash_from_pb("scene_hash", &job.scene_hash).map_err(message)?;
     let eye = vec3_from_pb("eye", job.eye.as_ref()).map_err(message)?;
@@ -296,15 +315,19 @@ async fn bake_job(job: pb::Job, context: &JobContext) -> Result<(), String> {
         sizes.insert(0, size / 4);
     }
     for (k, edge) in sizes.iter().copied().enumerate() {
-        if lock(&context.cancelled).contains(&job.job_id) {
-            return Ok(());
+        if cancelled.load(Ordering::Relaxed) {
+            return Ok(Baked::Stopped);
         }
-        let tracer = tracer.clone();
+        let (tracer, flag) = (tracer.clone(), cancelled.clone());
         let start = Instant::now();
-        let texture = tokio::task::spawn_blocking(move || bake(&tracer, eye, edge, bits))
-            .await
-            .map_err(|e| e.to_string())?
-            .map_err(|e| e.to_string())?;
+        let texture =
+            tokio::task::spawn_blocking(move || bake_unless_cancelled(&tracer, eye, edge, bits, &flag))
+                .await
+                .map_err(|e| e.to_string())?
+                .map_err(|e| e.to_string())?;
+        let Some(texture) = texture else {
+            return Ok(Baked::Stopped);
+        };
         let result = pb::JobResult {
             job_id: job.job_id,
             texture: Some(texture_to_pb(&texture)),
@@ -315,7 +338,7 @@ async fn bake_job(job: pb::Job, context: &JobContext) -> Result<(), String> {
             kind: Some(pb::worker_message::Kind::Result(result)),
         });
     }
-    Ok(())
+    Ok(Baked::Finished)
 }
 
 /// The scene `hash`, fetched from the server and loaded the first time.
