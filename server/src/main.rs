@@ -46,6 +46,10 @@ struct Args {
     /// A worker silent for this long (ms) loses its jobs to other workers.
     #[arg(long, env = "RELIEF_LEASE_MS", default_value = "5000", value_parser = clap::value_parser!(u64).range(100..=3_600_000))]
     lease_ms: u64,
+    /// A job not finished this long (ms) after it was made ends with DEADLINE_EXCEEDED
+    /// to its callers (and is stopped on its worker).
+    #[arg(long, env = "RELIEF_JOB_TIMEOUT_MS", default_value = "60000", value_parser = clap::value_parser!(u64).range(100..=86_400_000))]
+    job_timeout_ms: u64,
     /// Most requests waiting at once.
     #[arg(long, env = "RELIEF_MAX_WAITING", default_value = "100000", value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
     max_waiting: u64,
@@ -71,22 +75,25 @@ async fn serve(args: Args) -> Result<()> {
         None => relief_proto::bundle::private_scene_dir("relief-server")?,
     };
     let lease = Duration::from_millis(args.lease_ms);
+    let job_timeout = Duration::from_millis(args.job_timeout_ms);
     let shared = Shared::new(
         State::new(Limits {
             cache_bytes: (args.cache_mb as usize) << 20,
             lease,
             max_waiting: args.max_waiting as usize,
+            job_timeout,
         }),
         scene_dir,
     );
-    // Leases: a silent worker's jobs go back to the queue.
+    // Leases: a silent worker's jobs go back to the queue; jobs past the timeout end.
     let watched = shared.clone();
     tokio::spawn(async move {
-        let mut tick = tokio::time::interval(lease / 4);
+        let mut tick = tokio::time::interval(lease.min(job_timeout) / 4);
         loop {
             tick.tick().await;
             let mut state = watched.state();
             state.expire_leases();
+            state.expire_jobs();
             state.dispatch();
         }
     });

@@ -70,6 +70,8 @@ struct Job {
     spec: pb::Job,
     state: JobState,
     waiters: HashSet<WaiterId>,
+    /// When it was made: past [`Limits::job_timeout`] it ends in an error.
+    created: Instant,
 }
 
 /// A client's request: `(client_id, request_id)`.
@@ -109,6 +111,8 @@ pub struct Counters {
     pub requeued: u64,
     /// Cancelled jobs their workers stopped before finishing.
     pub stopped: u64,
+    /// Jobs ended by [`Limits::job_timeout`].
+    pub timed_out: u64,
     /// Results that came for jobs no longer wanted.
     pub discarded: u64,
 }
@@ -122,6 +126,10 @@ pub struct Limits {
     pub lease: Duration,
     /// Most requests waiting at once.
     pub max_waiting: usize,
+    /// A job not finished this long after it was made ends with an error to its
+    /// waiters: none waits for ever, with no worker connected or on one that keeps its
+    /// lease but never finishes.
+    pub job_timeout: Duration,
 }
 
 /// Everything the server knows.
@@ -298,6 +306,7 @@ impl State {
                         spec,
                         state: JobState::Queued(priority),
                         waiters: HashSet::new(),
+                        created: Instant::now(),
                     },
                 );
                 self.queue.insert(priority);
@@ -448,15 +457,57 @@ impl State {
 
     /// A worker could not make a texture: the waiters get the reason.
     pub fn failed(&mut self, job_id: u64, reason: &str) {
+        self.fail(job_id, Status::aborted(format!("the worker failed: {reason}")));
+    }
+
+    /// Ends a job with `status` to its waiters.
+    fn fail(&mut self, job_id: u64, status: Status) {
         if let Some(job) = self.jobs.get(&job_id) {
             for waiter_id in &job.waiters {
                 if let Some(w) = self.waiters.get(waiter_id) {
-                    let _ =
-                        w.tx.send(Err(Status::aborted(format!("the worker failed: {reason}"))));
+                    let _ = w.tx.send(Err(status.clone()));
                 }
             }
         }
         self.finish(job_id);
+    }
+
+    /// Tells the worker running job `job_id`, if any, to stop it.
+    fn cancel_on_worker(&self, job_id: u64) {
+        if let Some(job) = self.jobs.get(&job_id)
+            && let JobState::Running { worker } = job.state
+            && let Some(w) = self.workers.get(&worker)
+        {
+            let cancel = pb::ServerMessage {
+                kind: Some(pb::server_message::Kind::Cancel(pb::CancelJob { job_id })),
+            };
+            let _ = w.tx.send(Ok(cancel));
+        }
+    }
+
+    /// Jobs past [`Limits::job_timeout`] end with DEADLINE_EXCEEDED to their waiters
+    /// (and are stopped on their worker).
+    pub fn expire_jobs(&mut self) {
+        let timeout = self.limits.job_timeout;
+        let expired: Vec<(u64, bool)> = self
+            .jobs
+            .iter()
+            .filter(|(_, j)| j.created.elapsed() > timeout)
+            .map(|(&id, j)| (id, matches!(j.state, JobState::Running { .. })))
+            .collect();
+        for (job_id, running) in expired {
+            let ms = timeout.as_millis();
+            let reason = match running {
+                true => format!("its worker did not finish it within the job timeout ({ms} ms)"),
+                false => format!(
+                    "no worker took it within the job timeout ({ms} ms); {} worker(s) connected",
+                    self.workers.len()
+                ),
+            };
+            self.cancel_on_worker(job_id);
+            self.fail(job_id, Status::deadline_exceeded(reason));
+            self.counters.timed_out += 1;
+        }
     }
 
     /// Ends a job: it leaves the queue or frees its worker's slot, and its waiters'
@@ -513,16 +564,7 @@ impl State {
                 continue;
             }
             // Nobody waits any more: stop the worker running it, then end it.
-            if let JobState::Running { worker } = job.state
-                && let Some(w) = self.workers.get(&worker)
-            {
-                let cancel = pb::ServerMessage {
-                    kind: Some(pb::server_message::Kind::Cancel(pb::CancelJob {
-                        job_id: waiter.job,
-                    })),
-                };
-                let _ = w.tx.send(Ok(cancel));
-            }
+            self.cancel_on_worker(waiter.job);
             self.finish(waiter.job);
         }
         withdrawn
@@ -600,6 +642,7 @@ impl State {
             handling_us_p50: percentile(&handling, 0.5),
             handling_us_p99: percentile(&handling, 0.99),
             jobs_stopped: self.counters.stopped,
+            jobs_timed_out: self.counters.timed_out,
             results_discarded: self.counters.discarded,
         }
     }
@@ -617,6 +660,7 @@ mod tests {
             cache_bytes: 1 << 20,
             lease: Duration::from_secs(5),
             max_waiting: 100,
+            job_timeout: Duration::from_secs(60),
         });
         let hash = ContentHash([7; 32]);
         let bounds = Aabb {
@@ -704,6 +748,41 @@ mod tests {
         assert_eq!(s.stats().queue_now, 1);
         assert!(s.withdraw_own("c", 7, &mine));
         assert_eq!(s.stats().queue_now, 0);
+    }
+
+    /// Past the job timeout a queued job (no worker) and a running one (a worker that
+    /// never finishes) both end in DEADLINE_EXCEEDED, the running one cancelled on its
+    /// worker; a job within the timeout is left alone.
+    #[test]
+    fn jobs_past_the_timeout_end_in_an_error() {
+        let (mut s, hash) = state_with_scene();
+        let (tx1, mut rx1) = unbounded_channel();
+        let (tx2, mut rx2) = unbounded_channel();
+        s.admit(&request(hash, 1, Vec3::new(0.0, 0.0, 5.0), Urgency::Now), tx1)
+            .unwrap();
+        s.admit(&request(hash, 2, Vec3::new(1.0, 0.0, 5.0), Urgency::Now), tx2)
+            .unwrap();
+        let (wtx, mut wrx) = unbounded_channel();
+        s.add_worker("w".into(), 1, wtx);
+        s.dispatch();
+        let running = next_job(&mut wrx).unwrap();
+        s.expire_jobs();
+        assert_eq!(s.stats().jobs_timed_out, 0);
+        s.limits.job_timeout = Duration::ZERO;
+        s.expire_jobs();
+        for rx in [&mut rx1, &mut rx2] {
+            let status = rx.try_recv().unwrap().unwrap_err();
+            assert_eq!(status.code(), tonic::Code::DeadlineExceeded, "{status:?}");
+        }
+        match wrx.try_recv().unwrap().unwrap().kind.unwrap() {
+            pb::server_message::Kind::Cancel(c) => assert_eq!(c.job_id, running.job_id),
+            other => panic!("expected a cancel, got {other:?}"),
+        }
+        let stats = s.stats();
+        assert_eq!(
+            (stats.jobs_timed_out, stats.queue_now, stats.jobs_in_flight),
+            (2, 0, 0)
+        );
     }
 
     #[test]

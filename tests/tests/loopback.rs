@@ -186,6 +186,21 @@ async fn withdrawn_predictions_are_cancelled() {
     assert!(results.last().unwrap().r#final);
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_request_no_worker_takes_ends_in_an_error() {
+    let (_server, url) = start_server(&["--job-timeout-ms", "300"]);
+    let (mut remote, hash) = upload_default(&url).await;
+    let eye = Vec3::new(6.0, 2.5, 4.0);
+    let stream = remote
+        .request(request(&hash, "knot", eye, 64, 1, pb::Urgency::Now))
+        .await
+        .unwrap();
+    let e = collect(stream).await.unwrap_err();
+    assert_eq!(e.code(), Code::DeadlineExceeded, "{e:?}");
+    assert!(e.message().contains("no worker took it"), "{}", e.message());
+    assert_eq!(remote.stats().await.unwrap().jobs_timed_out, 1);
+}
+
 /// Asks for a bake that takes seconds (the 2048² rock, request 1, a 512² preview
 /// first) and waits until its preview has come: the worker is then baking the final.
 async fn start_long_bake(remote: &mut Remote, hash: &str) -> tonic::Streaming<pb::ImpostorResult> {
