@@ -233,14 +233,30 @@ impl pb::workers_server::Workers for Service {
                 ));
             }
         };
+        if !(1..=64).contains(&register.slots) {
+            return Err(Status::invalid_argument(format!(
+                "field `register.slots`: {} is not between 1 and 64",
+                register.slots
+            )));
+        }
+        if register.name.len() > 256 {
+            return Err(Status::invalid_argument(
+                "field `register.name`: longer than 256 bytes",
+            ));
+        }
         let (tx, rx) = unbounded_channel();
         let id = {
             let mut state = self.0.state();
-            let id = state.add_worker(register.name.clone(), register.slots as usize, tx);
+            let id = state.add_worker(
+                register.name.clone(),
+                register.slots as usize,
+                register.threads,
+                tx,
+            );
             state.dispatch();
             id
         };
-        tracing::info!(worker = %register.name, slots = register.slots, "worker registered");
+        tracing::info!(worker = %register.name, slots = register.slots, threads = register.threads, "worker registered");
         let shared = self.0.clone();
         tokio::spawn(async move {
             while let Ok(Some(message)) = inbound.message().await {

@@ -88,6 +88,8 @@ struct Waiter {
 struct Worker {
     name: String,
     slots: usize,
+    /// Threads each of its jobs bakes on (as it says; for Stats).
+    threads: u32,
     running: HashSet<u64>,
     tx: JobSender,
     last_seen: Instant,
@@ -332,13 +334,14 @@ impl State {
     }
 
     /// Registers a worker; returns its id.
-    pub fn add_worker(&mut self, name: String, slots: usize, tx: JobSender) -> u64 {
+    pub fn add_worker(&mut self, name: String, slots: usize, threads: u32, tx: JobSender) -> u64 {
         let id = self.next();
         self.workers.insert(
             id,
             Worker {
                 name,
                 slots: slots.max(1),
+                threads,
                 running: HashSet::new(),
                 tx,
                 last_seen: Instant::now(),
@@ -643,6 +646,8 @@ impl State {
             handling_us_p99: percentile(&handling, 0.99),
             jobs_stopped: self.counters.stopped,
             jobs_timed_out: self.counters.timed_out,
+            worker_slots: self.workers.values().map(|w| w.slots as u32).sum(),
+            worker_threads: self.workers.values().map(|w| w.threads).sum(),
             results_discarded: self.counters.discarded,
         }
     }
@@ -725,7 +730,7 @@ mod tests {
         .unwrap();
         assert_eq!(s.counters.merged, 1);
         let (wtx, mut wrx) = unbounded_channel();
-        s.add_worker("w".into(), 3, wtx);
+        s.add_worker("w".into(), 3, 1, wtx);
         s.dispatch();
         let order: Vec<f32> = std::iter::from_fn(|| next_job(&mut wrx))
             .map(|j| j.eye.unwrap().x)
@@ -763,7 +768,7 @@ mod tests {
         s.admit(&request(hash, 2, Vec3::new(1.0, 0.0, 5.0), Urgency::Now), tx2)
             .unwrap();
         let (wtx, mut wrx) = unbounded_channel();
-        s.add_worker("w".into(), 1, wtx);
+        s.add_worker("w".into(), 1, 1, wtx);
         s.dispatch();
         let running = next_job(&mut wrx).unwrap();
         s.expire_jobs();
@@ -800,7 +805,7 @@ mod tests {
         )
         .unwrap();
         let (wtx, mut wrx) = unbounded_channel();
-        s.add_worker("w".into(), 1, wtx);
+        s.add_worker("w".into(), 1, 1, wtx);
         s.dispatch();
         let running = next_job(&mut wrx).unwrap();
         assert_eq!(s.withdraw("c", &[1, 2, 99]), 2);
@@ -823,7 +828,7 @@ mod tests {
         )
         .unwrap();
         let (wtx, _wrx) = unbounded_channel();
-        let w = s.add_worker("w".into(), 1, wtx);
+        let w = s.add_worker("w".into(), 1, 1, wtx);
         s.dispatch();
         assert_eq!(s.stats().jobs_in_flight, 1);
         s.remove_worker(w);

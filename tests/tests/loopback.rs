@@ -155,6 +155,25 @@ async fn bad_requests_are_refused_with_the_field_named() {
             .await,
     );
     assert!(e.message().contains("`size`"), "{}", e.message());
+    // A worker registering with no slots.
+    let channel = tonic::transport::Endpoint::from_shared(url.clone())
+        .unwrap()
+        .connect()
+        .await
+        .unwrap();
+    let register = pb::WorkerMessage {
+        kind: Some(pb::worker_message::Kind::Register(pb::Register {
+            name: "idle".into(),
+            slots: 0,
+            threads: 1,
+        })),
+    };
+    let e = pb::workers_client::WorkersClient::new(channel)
+        .session(tokio_stream::iter([register]))
+        .await
+        .expect_err("refused");
+    assert_eq!(e.code(), Code::InvalidArgument);
+    assert!(e.message().contains("register.slots"), "{}", e.message());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -222,7 +241,8 @@ async fn withdrawn_running_jobs_stop_on_their_worker() {
     let (_server, url) = start_server(&[]);
     let _worker = start_worker(&url, &[]);
     let (mut remote, hash) = upload_default(&url).await;
-    wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
+    let stats = wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
+    assert!(stats.worker_slots == 1 && stats.worker_threads >= 1, "{stats:?}");
     // A long bake; the client cancels the call while it runs.
     let stream = start_long_bake(&mut remote, &hash).await;
     drop(stream);

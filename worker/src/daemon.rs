@@ -15,6 +15,7 @@ use tokio_stream::wrappers::UnboundedReceiverStream;
 use tonic::codec::CompressionEncoding;
 use tonic::service::interceptor::InterceptedService;
 use tonic::transport::{Channel, Endpoint};
+use tracing::Instrument;
 
 use relief_core::hash::ContentHash;
 use relief_core::scene::Scene;
@@ -205,6 +206,7 @@ async fn session(
         kind: Some(pb::worker_message::Kind::Register(pb::Register {
             name: name.to_string(),
             slots: args.slots,
+            threads: rayon::current_num_threads() as u32,
         })),
     });
     let mut inbound = match workers.session(UnboundedReceiverStream::new(outbound)).await {
@@ -280,7 +282,9 @@ async fn session(
 async fn run_job(job: pb::Job, context: JobContext, cancelled: Arc<AtomicBool>) {
     let id = job.job_id;
     let out = context.out.clone();
-    let kind = match bake_job(job, &context, &cancelled).await {
+    // (Every log line of the job names it.)
+    let span = tracing::info_span!("job", id, object = %job.object, size = job.size);
+    let kind = match bake_job(job, &context, &cancelled).instrument(span).await {
         Ok(Baked::Finished) => None,
         Ok(Baked::Stopped) => Some(pb::worker_message::Kind::Stopped(pb::JobStopped { job_id: id })),
         Err(reason) => Some(pb::worker_message::Kind::Failed(pb::JobFailed {
@@ -326,8 +330,10 @@ async fn bake_job(job: pb::Job, context: &JobContext, cancelled: &Arc<AtomicBool
                 .map_err(|e| e.to_string())?
                 .map_err(|e| e.to_string())?;
         let Some(texture) = texture else {
+            tracing::debug!(edge, "cancelled: stopped mid-bake");
             return Ok(Baked::Stopped);
         };
+        tracing::debug!(edge, ms = start.elapsed().as_millis() as u64, "baked");
         let result = pb::JobResult {
             job_id: job.job_id,
             texture: Some(texture_to_pb(&texture)),
