@@ -7,6 +7,7 @@ use relief_client::gbuffer::GBuffer;
 use relief_client::impostor::Impostor;
 use relief_client::warp::params::WarpParams;
 use relief_client::warp::prewarp::{Variant, prewarp};
+use relief_client::warp::sprite::Sprite;
 use relief_client::warp::{Method, WarpError, display};
 use relief_core::camera::Camera;
 use relief_core::generators::Generator;
@@ -88,6 +89,14 @@ fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, wha
         drew += (gbuffer.covered() > 0) as usize;
         let frame = gbuffer.shade(scene, &camera);
         assert_eq!(frame.color.len(), 96 * 72);
+        // `sprite` redraws a previous frame's impostor: this one's, captured and drawn
+        // again, is the same pixels, as finite.
+        if let Some(sprite) = Sprite::capture(&gbuffer, 0) {
+            let mut again = GBuffer::new(camera.width, camera.height);
+            sprite.draw(&mut again);
+            assert_eq!(again.covered(), gbuffer.covered(), "{what}, sprite of {method}");
+            assert!(again.depths().iter().all(|d| d.is_finite() && *d > 0.0));
+        }
     }
     drew
 }
