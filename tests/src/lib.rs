@@ -59,9 +59,14 @@ impl Drop for Running {
 /// Starts `relief-server` on an ephemeral 127.0.0.1 port with `extra` flags; returns
 /// the process and its URL (read from the line it prints once bound).
 pub fn start_server(extra: &[&str]) -> (Running, String) {
+    start_server_at("127.0.0.1:0", extra)
+}
+
+/// [`start_server`] listening on `address` (e.g. a port a server before it had).
+pub fn start_server_at(address: &str, extra: &[&str]) -> (Running, String) {
     use std::io::{BufRead, BufReader};
     let mut child = command("relief-server")
-        .args(["--listen", "127.0.0.1:0"])
+        .args(["--listen", address])
         .args(extra)
         .stdout(std::process::Stdio::piped())
         .spawn()

@@ -12,7 +12,7 @@ use relief_core::scene::Scene;
 use relief_proto::bundle::bundle_for;
 use relief_proto::convert::{texture_from_pb, vec3_to_pb};
 use relief_proto::pb;
-use relief_tests::{start_server, start_worker};
+use relief_tests::{start_server, start_server_at, start_worker};
 use relief_worker::bake;
 use relief_worker::tracer::ObjectTracer;
 
@@ -276,6 +276,52 @@ async fn a_killed_workers_job_is_answered_by_another() {
     assert!(results.last().unwrap().r#final);
     let stats = remote.stats().await.unwrap();
     assert!(stats.requeued >= 1, "{stats:?}");
+}
+
+/// SIGTERM: the worker finishes (and sends) the job it holds, then exits cleanly.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_worker_told_to_stop_finishes_its_job_first() {
+    let (_server, url) = start_server(&[]);
+    let mut worker = start_worker(&url, &[]);
+    let (mut remote, hash) = upload_default(&url).await;
+    wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
+    let stream = start_long_bake(&mut remote, &hash).await;
+    let pid = worker.0.id().to_string();
+    let signal = std::process::Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .unwrap();
+    assert!(signal.success());
+    let results = collect(stream).await.expect("the held job is still answered");
+    assert!(results.last().unwrap().r#final);
+    let start = Instant::now();
+    let status = loop {
+        if let Some(status) = worker.0.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "the worker did not exit"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    assert!(status.success(), "{status}");
+    wait_for(&mut remote, "the worker gone", |s| s.workers == 0).await;
+}
+
+/// A worker whose server goes away dials again (with backoff) until one answers at
+/// the address again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_worker_reconnects_when_the_server_returns() {
+    let (server, url) = start_server(&[]);
+    let _worker = start_worker(&url, &[]);
+    let mut remote = Remote::connect(&url, None, "test").await.unwrap();
+    wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
+    drop(server);
+    let address = url.strip_prefix("http://").unwrap();
+    let (_again, url) = start_server_at(address, &[]);
+    let mut remote = Remote::connect(&url, None, "test").await.unwrap();
+    wait_for(&mut remote, "the worker back", |s| s.workers == 1).await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

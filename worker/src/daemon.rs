@@ -274,6 +274,18 @@ async fn session(
         }
     };
     heartbeat.abort();
+    if matches!(end, End::Stopped) {
+        // The results are queued, not yet sent: close this side (every sender gone)
+        // and wait — bounded — for the server to end the session, which it does once
+        // it has read them all. (Exiting at once lost the last result with the
+        // process; jobs the server handed out meanwhile it gives to others.)
+        let _ = heartbeat.await;
+        drop(context);
+        let _ = tokio::time::timeout(Duration::from_secs(10), async {
+            while let Ok(Some(_)) = inbound.message().await {}
+        })
+        .await;
+    }
     end
 }
 
