@@ -119,6 +119,11 @@ pub struct Counters {
     pub discarded: u64,
 }
 
+/// Upper bounds (ms) of the request latency histogram in [`pb::StatsReply`].
+pub const LATENCY_BUCKETS_MS: [f32; 12] = [
+    1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0,
+];
+
 /// Limits of the server.
 #[derive(Debug, Clone)]
 pub struct Limits {
@@ -149,6 +154,9 @@ pub struct State {
     next_id: u64,
     clock: u64,
     latencies: VecDeque<f32>,
+    /// Every request latency since start, counted in [`LATENCY_BUCKETS_MS`] (the last
+    /// count: above the last bound).
+    latency_counts: [u64; LATENCY_BUCKETS_MS.len() + 1],
     handling: VecDeque<f32>,
     pub counters: Counters,
 }
@@ -188,6 +196,7 @@ impl State {
             next_id: 1,
             clock: 0,
             latencies: VecDeque::new(),
+            latency_counts: [0; LATENCY_BUCKETS_MS.len() + 1],
             handling: VecDeque::new(),
             counters: Counters::default(),
         }
@@ -606,6 +615,8 @@ impl State {
 
     fn latencies_push(&mut self, ms: f32) {
         push_sample(&mut self.latencies, ms);
+        let bucket = LATENCY_BUCKETS_MS.partition_point(|&bound| bound < ms);
+        self.latency_counts[bucket] += 1;
     }
 
     /// Records the time (µs) the server's code spent on one request or result.
@@ -646,6 +657,8 @@ impl State {
             handling_us_p99: percentile(&handling, 0.99),
             jobs_stopped: self.counters.stopped,
             jobs_timed_out: self.counters.timed_out,
+            latency_bucket_ms: LATENCY_BUCKETS_MS.to_vec(),
+            latency_counts: self.latency_counts.to_vec(),
             worker_slots: self.workers.values().map(|w| w.slots as u32).sum(),
             worker_threads: self.workers.values().map(|w| w.threads).sum(),
             results_discarded: self.counters.discarded,

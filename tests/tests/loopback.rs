@@ -112,6 +112,9 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
     assert_eq!(again.len(), 1);
     let stats = remote.stats().await.unwrap();
     assert_eq!((stats.requests, stats.cache_hits), (2, 1), "{stats:?}");
+    // Both requests' latencies are in the histogram, one count per bucket and one over.
+    assert_eq!(stats.latency_counts.len(), stats.latency_bucket_ms.len() + 1);
+    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 2, "{stats:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
