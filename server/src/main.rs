@@ -46,8 +46,8 @@ struct Args {
     /// A worker silent for this long (ms) loses its jobs to other workers.
     #[arg(long, env = "RELIEF_LEASE_MS", default_value = "5000", value_parser = clap::value_parser!(u64).range(100..=3_600_000))]
     lease_ms: u64,
-    /// A job not finished this long (ms) after it was made ends with DEADLINE_EXCEEDED
-    /// to its callers (and is stopped on its worker).
+    /// A request waiting this long (ms) ends with DEADLINE_EXCEEDED (a job nobody waits
+    /// for any more is stopped on its worker).
     #[arg(long, env = "RELIEF_JOB_TIMEOUT_MS", default_value = "60000", value_parser = clap::value_parser!(u64).range(100..=86_400_000))]
     job_timeout_ms: u64,
     /// Most requests waiting at once.

@@ -70,8 +70,6 @@ struct Job {
     spec: pb::Job,
     state: JobState,
     waiters: HashSet<WaiterId>,
-    /// When it was made: past [`Limits::job_timeout`] it ends in an error.
-    created: Instant,
 }
 
 /// A client's request: `(client_id, request_id)`.
@@ -113,7 +111,7 @@ pub struct Counters {
     pub requeued: u64,
     /// Cancelled jobs their workers stopped before finishing.
     pub stopped: u64,
-    /// Jobs ended by [`Limits::job_timeout`].
+    /// Requests ended by [`Limits::job_timeout`].
     pub timed_out: u64,
     /// Results that came for jobs no longer wanted.
     pub discarded: u64,
@@ -133,9 +131,8 @@ pub struct Limits {
     pub lease: Duration,
     /// Most requests waiting at once.
     pub max_waiting: usize,
-    /// A job not finished this long after it was made ends with an error to its
-    /// waiters: none waits for ever, with no worker connected or on one that keeps its
-    /// lease but never finishes.
+    /// A request waiting this long ends with an error: none waits for ever, with no
+    /// worker connected or on one that keeps its lease but never finishes.
     pub job_timeout: Duration,
 }
 
@@ -317,7 +314,6 @@ impl State {
                         spec,
                         state: JobState::Queued(priority),
                         waiters: HashSet::new(),
-                        created: Instant::now(),
                     },
                 );
                 self.queue.insert(priority);
@@ -349,7 +345,7 @@ impl State {
             id,
             Worker {
                 name,
-                slots: slots.max(1),
+                slots,
                 threads,
                 running: HashSet::new(),
                 tx,
@@ -497,28 +493,41 @@ impl State {
         }
     }
 
-    /// Jobs past [`Limits::job_timeout`] end with DEADLINE_EXCEEDED to their waiters
-    /// (and are stopped on their worker).
+    /// Requests waiting longer than [`Limits::job_timeout`] end with DEADLINE_EXCEEDED
+    /// (each by its own arrival: one merged into an old job gets the whole time); a
+    /// job nobody waits for any more then ends, stopped on its worker.
     pub fn expire_jobs(&mut self) {
         let timeout = self.limits.job_timeout;
-        let expired: Vec<(u64, bool)> = self
-            .jobs
+        let expired: Vec<WaiterId> = self
+            .waiters
             .iter()
-            .filter(|(_, j)| j.created.elapsed() > timeout)
-            .map(|(&id, j)| (id, matches!(j.state, JobState::Running { .. })))
+            .filter(|(_, w)| w.arrived.elapsed() > timeout)
+            .map(|(id, _)| id.clone())
             .collect();
-        for (job_id, running) in expired {
+        for waiter_id in expired {
+            let Some(waiter) = self.waiters.remove(&waiter_id) else {
+                continue;
+            };
             let ms = timeout.as_millis();
-            let reason = match running {
-                true => format!("its worker did not finish it within the job timeout ({ms} ms)"),
-                false => format!(
+            let job = self.jobs.get_mut(&waiter.job);
+            let reason = match job.as_ref().map(|j| &j.state) {
+                Some(JobState::Running { .. }) => {
+                    format!("not finished within the job timeout ({ms} ms): a worker is still on it")
+                }
+                _ => format!(
                     "no worker took it within the job timeout ({ms} ms); {} worker(s) connected",
                     self.workers.len()
                 ),
             };
-            self.cancel_on_worker(job_id);
-            self.fail(job_id, Status::deadline_exceeded(reason));
+            let _ = waiter.tx.send(Err(Status::deadline_exceeded(reason)));
             self.counters.timed_out += 1;
+            if let Some(job) = job {
+                job.waiters.remove(&waiter_id);
+                if job.waiters.is_empty() {
+                    self.cancel_on_worker(waiter.job);
+                    self.finish(waiter.job);
+                }
+            }
         }
     }
 
@@ -801,6 +810,38 @@ mod tests {
             (stats.jobs_timed_out, stats.queue_now, stats.jobs_in_flight),
             (2, 0, 0)
         );
+        // Each request has the whole timeout: one merged into an old job outlives the
+        // first, and the job goes on for it.
+        s.limits.job_timeout = Duration::from_millis(100);
+        let eye = Vec3::new(2.0, 0.0, 5.0);
+        let (tx3, mut rx3) = unbounded_channel();
+        let (tx4, mut rx4) = unbounded_channel();
+        s.admit(&request(hash, 3, eye, Urgency::Now), tx3).unwrap();
+        s.dispatch();
+        std::thread::sleep(Duration::from_millis(150));
+        s.admit(&request(hash, 4, eye, Urgency::Now), tx4).unwrap();
+        assert_eq!(s.stats().merged, 1);
+        s.expire_jobs();
+        assert_eq!(
+            rx3.try_recv().unwrap().unwrap_err().code(),
+            tonic::Code::DeadlineExceeded
+        );
+        assert!(rx4.try_recv().is_err(), "the later request is still waiting");
+        assert_eq!(s.stats().jobs_in_flight, 1);
+    }
+
+    /// A latency on a bucket's bound counts in that bucket; above the last, in the
+    /// extra one.
+    #[test]
+    fn the_latency_histogram_counts_bounds_in_their_bucket() {
+        let (mut s, _) = state_with_scene();
+        for ms in [0.5, 1.0, 1.5, 5000.0, 5000.5] {
+            s.latencies_push(ms);
+        }
+        let counts = s.stats().latency_counts;
+        assert_eq!(counts.len(), LATENCY_BUCKETS_MS.len() + 1);
+        assert_eq!((counts[0], counts[1], counts[11], counts[12]), (2, 1, 1, 1));
+        assert_eq!(counts.iter().sum::<u64>(), 5);
     }
 
     #[test]

@@ -267,7 +267,8 @@ async fn withdrawn_running_jobs_stop_on_their_worker() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_killed_workers_job_is_answered_by_another() {
-    let (_server, url) = start_server(&["--lease-ms", "400"]);
+    // (A slow machine's long bakes must not meet the job timeout.)
+    let (_server, url) = start_server(&["--lease-ms", "400", "--job-timeout-ms", "600000"]);
     let mut first = start_worker(&url, &[]);
     let (mut remote, hash) = upload_default(&url).await;
     wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
@@ -284,7 +285,7 @@ async fn a_killed_workers_job_is_answered_by_another() {
 /// SIGTERM: the worker finishes (and sends) the job it holds, then exits cleanly.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_worker_told_to_stop_finishes_its_job_first() {
-    let (_server, url) = start_server(&[]);
+    let (_server, url) = start_server(&["--job-timeout-ms", "600000"]);
     let mut worker = start_worker(&url, &[]);
     let (mut remote, hash) = upload_default(&url).await;
     wait_for(&mut remote, "a worker", |s| s.workers == 1).await;

@@ -86,6 +86,15 @@ struct JobContext {
     out: mpsc::UnboundedSender<pb::WorkerMessage>,
 }
 
+impl JobContext {
+    /// The server cancelled job `id`: its bake stops (if it is still running here).
+    fn cancel(&self, id: u64) {
+        if let Some(flag) = lock(&self.cancelled).get(&id) {
+            flag.store(true, Ordering::Relaxed);
+        }
+    }
+}
+
 enum End {
     /// Asked to stop, and every held job is finished.
     Stopped,
@@ -217,6 +226,10 @@ async fn session(
                 e.message()
             ));
         }
+        // (A registration the server finds invalid would be refused again.)
+        Err(e) if e.code() == tonic::Code::InvalidArgument => {
+            return End::Refused(anyhow!("the server refused this worker: {}", e.message()));
+        }
         Err(e) => return End::Lost(anyhow!("opening the session: {}", e.message())),
     };
     tracing::info!("registered with {} as {name}", args.server);
@@ -254,11 +267,7 @@ async fn session(
                         lock(&context.cancelled).insert(job.job_id, cancelled.clone());
                         jobs.spawn(run_job(job, context.clone(), cancelled));
                     }
-                    Some(pb::server_message::Kind::Cancel(c)) => {
-                        if let Some(flag) = lock(&context.cancelled).get(&c.job_id) {
-                            flag.store(true, Ordering::Relaxed);
-                        }
-                    }
+                    Some(pb::server_message::Kind::Cancel(c)) => context.cancel(c.job_id),
                     None => {}
                 },
                 Ok(None) => break End::Lost(anyhow!("the server closed the session")),
@@ -266,9 +275,23 @@ async fn session(
             },
             Some(_) = jobs.join_next(), if !jobs.is_empty() => {}
             _ = stop.changed() => {
-                // Drain: finish (and send) what we hold, take nothing new.
+                // Drain: finish (and send) what we hold, take nothing new — but still
+                // listen, so a job cancelled meanwhile stops. (One handed out meanwhile
+                // is left: the server gives it to another when the session ends.)
                 tracing::info!("stopping: finishing {} job(s)", jobs.len());
-                while jobs.join_next().await.is_some() {}
+                while !jobs.is_empty() {
+                    tokio::select! {
+                        _ = jobs.join_next() => {}
+                        message = inbound.message() => match message {
+                            Ok(Some(pb::ServerMessage {
+                                kind: Some(pb::server_message::Kind::Cancel(c)),
+                            })) => context.cancel(c.job_id),
+                            Ok(Some(_)) => {}
+                            // (The server is gone: finish without listening.)
+                            Ok(None) | Err(_) => while jobs.join_next().await.is_some() {},
+                        },
+                    }
+                }
                 break End::Stopped;
             }
         }

@@ -29,8 +29,8 @@ pub struct Args {
     /// Jobs baked at once (each uses every core).
     #[arg(long, env = "RELIEF_SLOTS", default_value = "1", value_parser = clap::value_parser!(u32).range(1..=64))]
     slots: u32,
-    /// Name in the server's logs (default: host name and process id).
-    #[arg(long, env = "RELIEF_WORKER_NAME")]
+    /// Name in the server's logs, at most 256 bytes (default: host name and process id).
+    #[arg(long, env = "RELIEF_WORKER_NAME", value_parser = worker_name)]
     name: Option<String>,
     /// Where fetched scenes are unpacked (default: under the system's temp dir).
     #[arg(long, env = "RELIEF_SCENE_DIR")]
@@ -46,4 +46,12 @@ fn main() -> ExitCode {
             tokio::runtime::Runtime::new().map_err(|e| anyhow::anyhow!("starting the async runtime: {e}"))?;
         runtime.block_on(daemon::run(args))
     })
+}
+
+/// A `--name` the server accepts: at most 256 bytes.
+fn worker_name(name: &str) -> Result<String, String> {
+    match name.len() {
+        0..=256 => Ok(name.to_string()),
+        n => Err(format!("{n} bytes; at most 256")),
+    }
 }
