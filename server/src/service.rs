@@ -275,6 +275,14 @@ impl pb::workers_server::Workers for Service {
                 };
                 let mut state = shared.state();
                 state.touch(id);
+                // Which job the worker is now done with, if any (its slot held after a
+                // cancel is free again).
+                let done = match &message.kind {
+                    Some(pb::worker_message::Kind::Result(r)) if r.r#final => Some(r.job_id),
+                    Some(pb::worker_message::Kind::Failed(f)) => Some(f.job_id),
+                    Some(pb::worker_message::Kind::Stopped(s)) => Some(s.job_id),
+                    _ => None,
+                };
                 match message.kind {
                     Some(pb::worker_message::Kind::Result(r)) => match rejected {
                         Some(reason) => state.failed(r.job_id, &reason),
@@ -288,6 +296,9 @@ impl pb::workers_server::Workers for Service {
                     Some(pb::worker_message::Kind::Heartbeat(_))
                     | Some(pb::worker_message::Kind::Register(_))
                     | None => {}
+                }
+                if let Some(job_id) = done {
+                    state.released(id, job_id);
                 }
                 state.dispatch();
                 if is_result {

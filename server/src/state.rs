@@ -89,8 +89,18 @@ struct Worker {
     /// Threads each of its jobs bakes on (as it says; for Stats).
     threads: u32,
     running: HashSet<u64>,
+    /// Jobs it was told to stop and has not yet said it stopped (or finished): their
+    /// slots stay taken, so a worker that hangs is not handed job after job.
+    stopping: HashSet<u64>,
     tx: JobSender,
     last_seen: Instant,
+}
+
+impl Worker {
+    /// Slots taken: jobs running, and cancelled ones it has not answered for.
+    fn busy(&self) -> usize {
+        self.running.len() + self.stopping.len()
+    }
 }
 
 /// A finished texture kept for reuse.
@@ -348,6 +358,7 @@ impl State {
                 slots,
                 threads,
                 running: HashSet::new(),
+                stopping: HashSet::new(),
                 tx,
                 last_seen: Instant::now(),
             },
@@ -407,8 +418,8 @@ impl State {
             let Some((&worker_id, worker)) = self
                 .workers
                 .iter_mut()
-                .filter(|(_, w)| w.running.len() < w.slots)
-                .min_by_key(|(_, w)| w.running.len())
+                .filter(|(_, w)| w.busy() < w.slots)
+                .min_by_key(|(_, w)| w.busy())
             else {
                 return;
             };
@@ -480,16 +491,26 @@ impl State {
         self.finish(job_id);
     }
 
-    /// Tells the worker running job `job_id`, if any, to stop it.
-    fn cancel_on_worker(&self, job_id: u64) {
+    /// Tells the worker running job `job_id`, if any, to stop it; its slot stays taken
+    /// until the worker answers for the job ([`State::released`]).
+    fn cancel_on_worker(&mut self, job_id: u64) {
         if let Some(job) = self.jobs.get(&job_id)
             && let JobState::Running { worker } = job.state
-            && let Some(w) = self.workers.get(&worker)
+            && let Some(w) = self.workers.get_mut(&worker)
         {
             let cancel = pb::ServerMessage {
                 kind: Some(pb::server_message::Kind::Cancel(pb::CancelJob { job_id })),
             };
             let _ = w.tx.send(Ok(cancel));
+            w.stopping.insert(job_id);
+        }
+    }
+
+    /// Worker `worker` is done with job `job_id` (its final result, failure or stop
+    /// came): a slot held for it after a cancel is free again.
+    pub fn released(&mut self, worker: u64, job_id: u64) {
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.stopping.remove(&job_id);
         }
     }
 
@@ -718,6 +739,13 @@ mod tests {
         }
     }
 
+    /// Admits request `id` of client "c" for `hash`'s ball, needed now, from
+    /// `(x, 0, 5)`.
+    fn admit_now(s: &mut State, hash: ContentHash, id: u64, x: f32, results: ResultSender) {
+        s.admit(&request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Now), results)
+            .unwrap();
+    }
+
     fn next_job(
         rx: &mut tokio::sync::mpsc::UnboundedReceiver<Result<pb::ServerMessage, Status>>,
     ) -> Option<pb::Job> {
@@ -764,11 +792,7 @@ mod tests {
     fn a_stream_withdraws_only_its_own_request() {
         let (mut s, hash) = state_with_scene();
         let (mine, _rx) = unbounded_channel();
-        s.admit(
-            &request(hash, 7, Vec3::new(0.0, 0.0, 5.0), Urgency::Now),
-            mine.clone(),
-        )
-        .unwrap();
+        admit_now(&mut s, hash, 7, 0.0, mine.clone());
         // Another stream that used the same id (answered from the cache, say).
         let (other, _other_rx) = unbounded_channel();
         assert!(!s.withdraw_own("c", 7, &other));
@@ -785,12 +809,10 @@ mod tests {
         let (mut s, hash) = state_with_scene();
         let (tx1, mut rx1) = unbounded_channel();
         let (tx2, mut rx2) = unbounded_channel();
-        s.admit(&request(hash, 1, Vec3::new(0.0, 0.0, 5.0), Urgency::Now), tx1)
-            .unwrap();
-        s.admit(&request(hash, 2, Vec3::new(1.0, 0.0, 5.0), Urgency::Now), tx2)
-            .unwrap();
+        admit_now(&mut s, hash, 1, 0.0, tx1);
+        admit_now(&mut s, hash, 2, 1.0, tx2);
         let (wtx, mut wrx) = unbounded_channel();
-        s.add_worker("w".into(), 1, 1, wtx);
+        let w = s.add_worker("w".into(), 1, 1, wtx);
         s.dispatch();
         let running = next_job(&mut wrx).unwrap();
         s.expire_jobs();
@@ -811,7 +833,8 @@ mod tests {
             (2, 0, 0)
         );
         // Each request has the whole timeout: one merged into an old job outlives the
-        // first, and the job goes on for it.
+        // first, and the job goes on for it. (The worker has answered for the first.)
+        s.released(w, running.job_id);
         s.limits.job_timeout = Duration::from_millis(100);
         let eye = Vec3::new(2.0, 0.0, 5.0);
         let (tx3, mut rx3) = unbounded_channel();
@@ -844,20 +867,40 @@ mod tests {
         assert_eq!(counts.iter().sum::<u64>(), 5);
     }
 
+    /// A cancelled job keeps its worker's slot until the worker answers for it: a
+    /// worker that hangs is not handed the next job.
+    #[test]
+    fn a_cancelled_job_holds_its_slot_until_the_worker_answers() {
+        let (mut s, hash) = state_with_scene();
+        let (tx, _rx) = unbounded_channel();
+        admit_now(&mut s, hash, 1, 0.0, tx.clone());
+        let (wtx, mut wrx) = unbounded_channel();
+        let w = s.add_worker("w".into(), 1, 1, wtx);
+        s.dispatch();
+        let first = next_job(&mut wrx).unwrap();
+        assert_eq!(s.withdraw("c", &[1]), 1);
+        admit_now(&mut s, hash, 2, 1.0, tx);
+        s.dispatch();
+        assert!(matches!(
+            wrx.try_recv().unwrap().unwrap().kind,
+            Some(pb::server_message::Kind::Cancel(_))
+        ));
+        assert!(
+            wrx.try_recv().is_err(),
+            "a job went to a worker still on a cancelled one"
+        );
+        assert_eq!(s.stats().queue_now, 1);
+        s.released(w, first.job_id);
+        s.dispatch();
+        assert!(next_job(&mut wrx).is_some());
+    }
+
     #[test]
     fn withdrawal_cancels_queued_and_running_jobs() {
         let (mut s, hash) = state_with_scene();
         let (tx, _rx) = unbounded_channel();
-        s.admit(
-            &request(hash, 1, Vec3::new(0.0, 0.0, 5.0), Urgency::Now),
-            tx.clone(),
-        )
-        .unwrap();
-        s.admit(
-            &request(hash, 2, Vec3::new(1.0, 0.0, 5.0), Urgency::Now),
-            tx.clone(),
-        )
-        .unwrap();
+        admit_now(&mut s, hash, 1, 0.0, tx.clone());
+        admit_now(&mut s, hash, 2, 1.0, tx.clone());
         let (wtx, mut wrx) = unbounded_channel();
         s.add_worker("w".into(), 1, 1, wtx);
         s.dispatch();
@@ -876,11 +919,7 @@ mod tests {
     fn a_vanished_workers_jobs_are_requeued_and_bad_requests_refused() {
         let (mut s, hash) = state_with_scene();
         let (tx, _rx) = unbounded_channel();
-        s.admit(
-            &request(hash, 1, Vec3::new(0.0, 0.0, 5.0), Urgency::Now),
-            tx.clone(),
-        )
-        .unwrap();
+        admit_now(&mut s, hash, 1, 0.0, tx.clone());
         let (wtx, _wrx) = unbounded_channel();
         let w = s.add_worker("w".into(), 1, 1, wtx);
         s.dispatch();
