@@ -293,6 +293,7 @@ impl pb::workers_server::Workers for Service {
                     },
                     Some(pb::worker_message::Kind::Failed(f)) => state.failed(f.job_id, &f.reason),
                     Some(pb::worker_message::Kind::Stopped(_)) => state.stopped(),
+                    Some(pb::worker_message::Kind::Draining(_)) => state.draining(id),
                     Some(pb::worker_message::Kind::Heartbeat(_))
                     | Some(pb::worker_message::Kind::Register(_))
                     | None => {}

@@ -92,6 +92,8 @@ struct Worker {
     /// Jobs it was told to stop and has not yet said it stopped (or finished): their
     /// slots stay taken, so a worker that hangs is not handed job after job.
     stopping: HashSet<u64>,
+    /// It said it is stopping: no new jobs.
+    draining: bool,
     tx: JobSender,
     last_seen: Instant,
 }
@@ -359,6 +361,7 @@ impl State {
                 threads,
                 running: HashSet::new(),
                 stopping: HashSet::new(),
+                draining: false,
                 tx,
                 last_seen: Instant::now(),
             },
@@ -418,7 +421,7 @@ impl State {
             let Some((&worker_id, worker)) = self
                 .workers
                 .iter_mut()
-                .filter(|(_, w)| w.busy() < w.slots)
+                .filter(|(_, w)| !w.draining && w.busy() < w.slots)
                 .min_by_key(|(_, w)| w.busy())
             else {
                 return;
@@ -503,6 +506,13 @@ impl State {
             };
             let _ = w.tx.send(Ok(cancel));
             w.stopping.insert(job_id);
+        }
+    }
+
+    /// Worker `worker` is stopping: it gets no new jobs.
+    pub fn draining(&mut self, worker: u64) {
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.draining = true;
         }
     }
 

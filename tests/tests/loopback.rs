@@ -282,11 +282,12 @@ async fn a_killed_workers_job_is_answered_by_another() {
     assert!(stats.requeued >= 1, "{stats:?}");
 }
 
-/// SIGTERM: the worker finishes (and sends) the job it holds, then exits cleanly.
+/// SIGTERM: the worker takes no new job, finishes (and sends) the one it holds, then
+/// exits cleanly.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_worker_told_to_stop_finishes_its_job_first() {
     let (_server, url) = start_server(&["--job-timeout-ms", "600000"]);
-    let mut worker = start_worker(&url, &[]);
+    let mut worker = start_worker(&url, &["--slots", "2"]);
     let (mut remote, hash) = upload_default(&url).await;
     wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
     let stream = start_long_bake(&mut remote, &hash).await;
@@ -296,6 +297,16 @@ async fn a_worker_told_to_stop_finishes_its_job_first() {
         .status()
         .unwrap();
     assert!(signal.success());
+    // Draining, it is handed nothing new, though it has a free slot.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let eye = Vec3::new(6.0, 2.5, 4.0);
+    let _waiting = remote
+        .request(request(&hash, "knot", eye, 64, 2, pb::Urgency::Now))
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let stats = remote.stats().await.unwrap();
+    assert_eq!((stats.queue_now, stats.jobs_in_flight), (1, 1), "{stats:?}");
     let results = collect(stream).await.expect("the held job is still answered");
     assert!(results.last().unwrap().r#final);
     let start = Instant::now();

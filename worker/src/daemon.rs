@@ -275,10 +275,14 @@ async fn session(
             },
             Some(_) = jobs.join_next(), if !jobs.is_empty() => {}
             _ = stop.changed() => {
-                // Drain: finish (and send) what we hold, take nothing new — but still
-                // listen, so a job cancelled meanwhile stops. (One handed out meanwhile
-                // is left: the server gives it to another when the session ends.)
+                // Drain: say so (the server hands out no more), finish (and send) what
+                // we hold — but still listen, so a job cancelled meanwhile stops. (One
+                // already on its way is left: the server gives it to another when the
+                // session ends.)
                 tracing::info!("stopping: finishing {} job(s)", jobs.len());
+                let _ = context.out.send(pb::WorkerMessage {
+                    kind: Some(pb::worker_message::Kind::Draining(pb::Draining {})),
+                });
                 while !jobs.is_empty() {
                     tokio::select! {
                         _ = jobs.join_next() => {}
