@@ -535,31 +535,42 @@ impl State {
             .filter(|(_, w)| w.arrived.elapsed() > timeout)
             .map(|(id, _)| id.clone())
             .collect();
+        let ms = timeout.as_millis();
         for waiter_id in expired {
-            let Some(waiter) = self.waiters.remove(&waiter_id) else {
-                continue;
-            };
-            let ms = timeout.as_millis();
-            let job = self.jobs.get_mut(&waiter.job);
-            let reason = match job.as_ref().map(|j| &j.state) {
-                Some(JobState::Running { .. }) => {
-                    format!("not finished within the job timeout ({ms} ms): a worker is still on it")
-                }
-                _ => format!(
+            let running = self
+                .waiters
+                .get(&waiter_id)
+                .and_then(|w| self.jobs.get(&w.job))
+                .is_some_and(|j| matches!(j.state, JobState::Running { .. }));
+            let reason = match running {
+                true => format!("not finished within the job timeout ({ms} ms): a worker is still on it"),
+                false => format!(
                     "no worker took it within the job timeout ({ms} ms); {} worker(s) connected",
                     self.workers.len()
                 ),
             };
-            let _ = waiter.tx.send(Err(Status::deadline_exceeded(reason)));
-            self.counters.timed_out += 1;
-            if let Some(job) = job {
-                job.waiters.remove(&waiter_id);
-                if job.waiters.is_empty() {
-                    self.cancel_on_worker(waiter.job);
-                    self.finish(waiter.job);
-                }
+            if self.end_waiter(&waiter_id, Status::deadline_exceeded(reason)) {
+                self.counters.timed_out += 1;
             }
         }
+    }
+
+    /// Ends request `waiter_id` before its job is done, with `status`; a job nobody
+    /// waits for any more then ends too, stopped on its worker. Returns whether the
+    /// request was waiting.
+    fn end_waiter(&mut self, waiter_id: &WaiterId, status: Status) -> bool {
+        let Some(waiter) = self.waiters.remove(waiter_id) else {
+            return false;
+        };
+        let _ = waiter.tx.send(Err(status));
+        if let Some(job) = self.jobs.get_mut(&waiter.job) {
+            job.waiters.remove(waiter_id);
+            if job.waiters.is_empty() {
+                self.cancel_on_worker(waiter.job);
+                self.finish(waiter.job);
+            }
+        }
+        true
     }
 
     /// Ends a job: it leaves the queue or frees its worker's slot, and its waiters'
@@ -602,22 +613,13 @@ impl State {
     pub fn withdraw(&mut self, client_id: &str, request_ids: &[u64]) -> u32 {
         let mut withdrawn = 0;
         for &request_id in request_ids {
-            let Some(waiter) = self.waiters.remove(&(client_id.to_string(), request_id)) else {
-                continue;
-            };
-            withdrawn += 1;
-            self.counters.withdrawn += 1;
-            let _ = waiter.tx.send(Err(Status::cancelled("withdrawn")));
-            let Some(job) = self.jobs.get_mut(&waiter.job) else {
-                continue;
-            };
-            job.waiters.remove(&(client_id.to_string(), request_id));
-            if !job.waiters.is_empty() {
-                continue;
+            if self.end_waiter(
+                &(client_id.to_string(), request_id),
+                Status::cancelled("withdrawn"),
+            ) {
+                withdrawn += 1;
+                self.counters.withdrawn += 1;
             }
-            // Nobody waits any more: stop the worker running it, then end it.
-            self.cancel_on_worker(waiter.job);
-            self.finish(waiter.job);
         }
         withdrawn
     }
