@@ -855,13 +855,12 @@ impl Manager {
                 |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= self.config.tolerance);
             // Valid: some texture is within tolerance (when only one too coarse to be
             // shown is, a finer one is asked for if it can be had: `coarse`), and the one
-            // shown is not alone too far from its eye. The shown texture's partner; without one, a texture more than
-            // [`LONE_MAX_TURN`] from its eye misses the side the eye has turned to.
+            // shown is not alone too far from its eye — without a partner, a texture
+            // more than [`LONE_MAX_TURN`] from its eye misses the side the eye has
+            // turned to.
+            let shown_turn = best.map(|(i, _)| angle_between(centre, held[i].eye, camera.eye));
             let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
-            let lone_too_far = partner.is_none()
-                && best.is_some_and(|(i, _)| {
-                    angle_between(centre, self.objects[k].held[i].eye, camera.eye) > LONE_MAX_TURN
-                });
+            let lone_too_far = partner.is_none() && shown_turn.is_some_and(|turn| turn > LONE_MAX_TURN);
             let within_any = grades.iter().any(|g| g.growth <= self.config.tolerance);
             let valid = within_any && !lone_too_far;
             let coarse = !within(best)
@@ -892,9 +891,7 @@ impl Manager {
                             (p.sent.elapsed().as_millis(), p.predicted, degrees)
                         })
                         .collect();
-                    let shown_deg = best.map(|(i, _)| {
-                        angle_between(centre, self.objects[k].held[i].eye, camera.eye).to_degrees()
-                    });
+                    let shown_deg = shown_turn.map(f32::to_degrees);
                     tracing::debug!(
                         object = %object.name,
                         growth = best.map(|b| b.1.growth),
