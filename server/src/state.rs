@@ -28,12 +28,19 @@ pub struct StoredScene {
     pub objects: HashMap<String, Aabb>,
 }
 
-/// What makes two requests satisfiable by one texture.
+/// Where a texture is made from: the scene, the object and the eye. Textures of one
+/// view differ only in their texel count and depth bits.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub struct JobKey {
+struct View {
     scene: ContentHash,
     object: String,
     eye: [u32; 3],
+}
+
+/// What a job makes, or a request asks for: a view, at a size and depth.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct JobKey {
+    view: View,
     size: u32,
     depth_bits: u32,
 }
@@ -41,12 +48,21 @@ pub struct JobKey {
 impl JobKey {
     fn of(r: &Request) -> JobKey {
         JobKey {
-            scene: r.scene,
-            object: r.object.clone(),
-            eye: r.eye.to_array().map(f32::to_bits),
+            view: View {
+                scene: r.scene,
+                object: r.object.clone(),
+                eye: r.eye.to_array().map(f32::to_bits),
+            },
             size: r.size,
             depth_bits: r.depth_bits.bits(),
         }
+    }
+
+    /// Whether the texture made for `self` serves a request for `wanted`: the same
+    /// view, with at least its texels and depth bits (a client draws the pyramid level
+    /// its screen needs, so more texels cost it bytes on the wire, not warp time).
+    fn satisfies(&self, wanted: &JobKey) -> bool {
+        self.view == wanted.view && self.size >= wanted.size && self.depth_bits >= wanted.depth_bits
     }
 }
 
@@ -108,6 +124,7 @@ impl Worker {
 /// A finished texture kept for reuse.
 #[derive(Debug)]
 struct Cached {
+    key: JobKey,
     texture: Arc<pb::ReliefTexture>,
     bytes: usize,
     used: u64,
@@ -155,10 +172,12 @@ pub struct State {
     scenes: HashMap<ContentHash, Arc<StoredScene>>,
     jobs: HashMap<u64, Job>,
     queue: BTreeSet<Priority>,
-    by_key: HashMap<JobKey, u64>,
+    /// The jobs of each view (a few: one per size and depth asked for).
+    by_view: HashMap<View, Vec<u64>>,
     waiters: HashMap<WaiterId, Waiter>,
     workers: HashMap<u64, Worker>,
-    cache: HashMap<JobKey, Cached>,
+    /// The cached textures of each view.
+    cache: HashMap<View, Vec<Cached>>,
     cache_bytes: usize,
     next_id: u64,
     clock: u64,
@@ -197,7 +216,7 @@ impl State {
             scenes: HashMap::new(),
             jobs: HashMap::new(),
             queue: BTreeSet::new(),
-            by_key: HashMap::new(),
+            by_view: HashMap::new(),
             waiters: HashMap::new(),
             workers: HashMap::new(),
             cache: HashMap::new(),
@@ -256,8 +275,9 @@ impl State {
         self.counters.requests += 1;
         let key = JobKey::of(request);
         self.clock += 1;
-        if let Some(hit) = self.cache.get_mut(&key) {
-            hit.used = self.clock;
+        let clock = self.clock;
+        if let Some(hit) = self.cached_for(&key) {
+            hit.used = clock;
             let texture = hit.texture.clone();
             self.counters.cache_hits += 1;
             self.latencies_push(0.0);
@@ -283,7 +303,7 @@ impl State {
                 Urgency::Predicted { in_ms } => in_ms.saturating_mul(1000),
             };
         let predicted = matches!(request.urgency, Urgency::Predicted { .. });
-        let job_id = match self.by_key.get(&key).copied() {
+        let job_id = match self.job_for(&key) {
             Some(id) => {
                 self.counters.merged += 1;
                 // A more urgent request moves a queued job forward.
@@ -329,7 +349,7 @@ impl State {
                     },
                 );
                 self.queue.insert(priority);
-                self.by_key.insert(key, id);
+                self.by_view.entry(key.view).or_default().push(id);
                 id
             }
         };
@@ -579,7 +599,12 @@ impl State {
         let Some(job) = self.jobs.remove(&job_id) else {
             return;
         };
-        self.by_key.remove(&job.key);
+        if let Some(ids) = self.by_view.get_mut(&job.key.view) {
+            ids.retain(|&id| id != job_id);
+            if ids.is_empty() {
+                self.by_view.remove(&job.key.view);
+            }
+        }
         match job.state {
             JobState::Queued(p) => {
                 self.queue.remove(&p);
@@ -624,33 +649,62 @@ impl State {
         withdrawn
     }
 
+    /// The smallest cached texture that serves `wanted`.
+    fn cached_for(&mut self, wanted: &JobKey) -> Option<&mut Cached> {
+        self.cache
+            .get_mut(&wanted.view)?
+            .iter_mut()
+            .filter(|c| c.key.satisfies(wanted))
+            .min_by_key(|c| c.bytes)
+    }
+
+    /// The job whose texture will serve `wanted`: a running one before a queued one
+    /// (it finishes sooner), then the smallest.
+    fn job_for(&self, wanted: &JobKey) -> Option<u64> {
+        self.by_view
+            .get(&wanted.view)?
+            .iter()
+            .filter_map(|id| Some((*id, self.jobs.get(id)?)))
+            .filter(|(_, job)| job.key.satisfies(wanted))
+            .min_by_key(|(_, job)| (matches!(job.state, JobState::Queued(_)), job.key.size))
+            .map(|(id, _)| id)
+    }
+
     fn cache_insert(&mut self, key: JobKey, texture: Arc<pb::ReliefTexture>, bytes: usize) {
         if bytes > self.limits.cache_bytes {
             return;
         }
         self.clock += 1;
-        if let Some(old) = self.cache.insert(
+        let entry = Cached {
             key,
-            Cached {
-                texture,
-                bytes,
-                used: self.clock,
-            },
-        ) {
-            self.cache_bytes -= old.bytes;
+            texture,
+            bytes,
+            used: self.clock,
+        };
+        let entries = self.cache.entry(entry.key.view.clone()).or_default();
+        match entries.iter_mut().find(|c| c.key == entry.key) {
+            Some(old) => {
+                self.cache_bytes -= old.bytes;
+                *old = entry;
+            }
+            None => entries.push(entry),
         }
         self.cache_bytes += bytes;
         while self.cache_bytes > self.limits.cache_bytes {
-            let Some(oldest) = self
+            let Some((view, k)) = self
                 .cache
                 .iter()
-                .min_by_key(|(_, c)| c.used)
-                .map(|(k, _)| k.clone())
+                .flat_map(|(view, entries)| entries.iter().enumerate().map(move |(k, c)| (view, k, c.used)))
+                .min_by_key(|&(_, _, used)| used)
+                .map(|(view, k, _)| (view.clone(), k))
             else {
                 break;
             };
-            if let Some(c) = self.cache.remove(&oldest) {
-                self.cache_bytes -= c.bytes;
+            if let Some(entries) = self.cache.get_mut(&view) {
+                self.cache_bytes -= entries.swap_remove(k).bytes;
+                if entries.is_empty() {
+                    self.cache.remove(&view);
+                }
             }
         }
     }
@@ -798,6 +852,46 @@ mod tests {
             .map(|j| j.eye.unwrap().x)
             .collect();
         assert_eq!(order, vec![3.0, 2.0, 1.0]);
+    }
+
+    /// One texture serves every request at its view for no more texels and depth
+    /// bits: smaller requests join a bigger job, queued or running, and hit a bigger
+    /// cached texture; a bigger one, or one with more depth bits, gets a job of its own.
+    #[test]
+    fn a_bigger_texture_serves_smaller_requests() {
+        let (mut s, hash) = state_with_scene();
+        let (tx, mut rx) = unbounded_channel();
+        let sized = |id: u64, size: u32, depth_bits: DepthBits| Request {
+            size,
+            depth_bits,
+            ..request(hash, id, Vec3::new(1.0, 0.0, 5.0), Urgency::Now)
+        };
+        s.admit(&sized(1, 64, DepthBits::Sixteen), tx.clone()).unwrap();
+        s.admit(&sized(2, 32, DepthBits::Eight), tx.clone()).unwrap();
+        s.admit(&sized(3, 128, DepthBits::Eight), tx.clone()).unwrap();
+        assert_eq!((s.counters.merged, s.stats().queue_now), (1, 2));
+        let (wtx, mut wrx) = unbounded_channel();
+        s.add_worker("w".into(), 1, 1, wtx);
+        s.dispatch();
+        let job = next_job(&mut wrx).unwrap();
+        assert_eq!((job.size, job.depth_bits), (64, 16));
+        // While it runs, a smaller request joins it.
+        s.admit(&sized(4, 16, DepthBits::Eight), tx.clone()).unwrap();
+        assert_eq!(s.counters.merged, 2);
+        s.result(job.job_id, pb::ReliefTexture::default(), true, 1);
+        let mut served: Vec<u64> = std::iter::from_fn(|| rx.try_recv().ok())
+            .map(|r| r.unwrap().request_id)
+            .collect();
+        served.sort();
+        assert_eq!(served, vec![1, 2, 4]);
+        // Now cached: a smaller request is a hit, one with more depth bits is not.
+        assert!(matches!(
+            s.admit(&sized(5, 64, DepthBits::Eight), tx.clone()),
+            Ok(Admission::Cached(_))
+        ));
+        s.admit(&sized(6, 128, DepthBits::Sixteen), tx.clone()).unwrap();
+        assert_eq!(s.counters.cache_hits, 1);
+        assert_eq!((s.counters.merged, s.stats().queue_now), (2, 2));
     }
 
     #[test]

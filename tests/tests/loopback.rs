@@ -108,13 +108,20 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
     // Asked again: served from the cache.
     req.request_id = 2;
     req.progressive = false;
-    let again = collect(remote.request(req).await.unwrap()).await.unwrap();
+    let again = collect(remote.request(req.clone()).await.unwrap()).await.unwrap();
     assert_eq!(again.len(), 1);
+    // A smaller request at the same eye: the bigger cached texture serves it.
+    req.request_id = 3;
+    req.size = 64;
+    let smaller = collect(remote.request(req).await.unwrap()).await.unwrap();
+    assert_eq!(smaller.len(), 1);
+    let served = texture_from_pb("texture", smaller[0].texture.as_ref().unwrap()).unwrap();
+    assert_eq!(served, local, "the 64² request gets the cached 128² texture");
     let stats = remote.stats().await.unwrap();
-    assert_eq!((stats.requests, stats.cache_hits), (2, 1), "{stats:?}");
-    // Both requests' latencies are in the histogram, one count per bucket and one over.
+    assert_eq!((stats.requests, stats.cache_hits), (3, 2), "{stats:?}");
+    // Every request's latency is in the histogram, one count per bucket and one over.
     assert_eq!(stats.latency_counts.len(), stats.latency_bucket_ms.len() + 1);
-    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 2, "{stats:?}");
+    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 3, "{stats:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
