@@ -21,6 +21,9 @@
 //!   eq. 8-1, solved here in closed form) instead of a linear blend.
 //! - [`Variant::Interleaved`]: one pass; each row sample goes straight into its column.
 
+use wide::bytemuck::cast;
+use wide::{i16x8, u8x16, u16x8, u64x2};
+
 use super::params::WarpParams;
 use crate::impostor::Impostor;
 
@@ -111,22 +114,30 @@ fn level_of(texel: u64) -> u16 {
     (texel >> 48) as u16
 }
 
-/// The even bytes of a `u64`, each in its own 16-bit lane.
-const EVEN_BYTES: u64 = 0x00ff_00ff_00ff_00ff;
+/// The eight bytes of `x`, each in a 16-bit lane.
+#[inline(always)]
+fn widen(x: u64) -> u16x8 {
+    // (`splat`, one register move: `new([x, 0])` went through memory and stalled,
+    // its two 8-byte stores read back as one 16-byte load. Only the low half is read.)
+    u16x8::from_u8x16_low(cast::<u64x2, u8x16>(u64x2::splat(x)))
+}
 
-/// One half in each 16-bit lane of a fraction of 256: rounds a lerp to nearest.
-const HALF_LANES: u64 = 0x0080_0080_0080_0080;
+/// The inverse of [`widen`] for lanes below 256.
+#[inline(always)]
+fn narrow(lanes: u16x8) -> u64 {
+    let signed = cast::<u16x8, i16x8>(lanes);
+    cast::<u8x16, u64x2>(u8x16::narrow_i16x8(signed, signed)).to_array()[0]
+}
 
 impl Attributes {
-    /// `self + (other − self)·t/256` per byte, rounded, `t ∈ [0, 256]`: every 16-bit
-    /// lane holds one byte, and `a·(256 − t) + b·t + 128 ≤ 255·256 + 128` fits it.
+    /// `self + (other − self)·t/256` per byte, rounded, `t ∈ [0, 256]`: every byte
+    /// widened to a 16-bit lane of one vector, where `a·(256 − t) + b·t + 128 ≤
+    /// 255·256 + 128` fits. (Eight bytes at once: the two unread ones blend along.)
     #[inline(always)]
     pub(crate) fn lerp(self, other: Attributes, t: u64) -> Attributes {
-        let blend = |a: u64, b: u64| ((a * (256 - t) + b * t + HALF_LANES) >> 8) & EVEN_BYTES;
-        let (a, b) = (self.0, other.0);
-        let even = blend(a & EVEN_BYTES, b & EVEN_BYTES);
-        let odd = blend((a >> 8) & EVEN_BYTES, (b >> 8) & EVEN_BYTES);
-        Attributes(even | (odd << 8))
+        let t = u16x8::splat(t as u16);
+        let mixed = (widen(self.0) * (u16x8::splat(256) - t) + widen(other.0) * t + u16x8::splat(128)) >> 8;
+        Attributes(narrow(mixed))
     }
 
     #[inline(always)]
