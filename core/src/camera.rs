@@ -2,7 +2,7 @@
 
 use std::f32::consts::TAU;
 
-use glam::Vec3;
+use glam::{Quat, Vec3};
 use serde::Deserialize;
 
 /// Largest frame edge in pixels that any command accepts.
@@ -171,8 +171,9 @@ pub enum PathSegment {
         turns: f32,
         frames: u32,
     },
-    /// Fly through `points` in order (piecewise linear), looking ahead along the path,
-    /// or at `look_at` when given.
+    /// Fly through `points` in order (piecewise linear), looking along the path (its
+    /// direction over about a second, so corners turn the view gradually), or at
+    /// `look_at` when given.
     Fly {
         points: Vec<[f32; 3]>,
         #[serde(default)]
@@ -278,11 +279,21 @@ impl PathSegment {
                 let target = match look_at {
                     Some(p) => Vec3::from_array(*p),
                     None => {
-                        let ahead = at(t + 0.02);
-                        if ahead.distance(eye) > 1e-6 {
-                            ahead
+                        // Along the path from where the eye was [`FLY_LOOK_FRAMES`] ago
+                        // to where it will be as long after (each clamped to the ends):
+                        // a corner turns the view over that time, not at once.
+                        let window = (FLY_LOOK_FRAMES / self.frames() as f64) as f32;
+                        let (behind, ahead) = (at(t - window), at(t + window));
+                        if ahead.distance(behind) > 1e-6 {
+                            eye + (ahead - behind)
                         } else {
-                            eye + (eye - at(t - 0.02))
+                            // (A leg that doubles straight back: look ahead.)
+                            let ahead = at(t + 0.02);
+                            if ahead.distance(eye) > 1e-6 {
+                                ahead
+                            } else {
+                                eye + (eye - at(t - 0.02))
+                            }
                         }
                     }
                 };
@@ -315,10 +326,18 @@ impl CameraPath {
         } else {
             frame.clamp(0.0, last)
         };
-        for segment in &self.segments {
+        for (k, segment) in self.segments.iter().enumerate() {
             let n = segment.frames() as f64;
             if rest < n {
-                return Some(segment.pose((rest / n) as f32));
+                let pose = segment.pose((rest / n) as f32);
+                let turn = TURN_FRAMES.min(0.5 * n);
+                return Some(match k.checked_sub(1) {
+                    Some(before) if rest < turn => {
+                        let s = (rest / turn) as f32;
+                        pose.turned_from(&self.segments[before].pose(1.0), s * s * (3.0 - 2.0 * s))
+                    }
+                    _ => pose,
+                });
             }
             rest -= n;
         }
@@ -326,9 +345,81 @@ impl CameraPath {
     }
 }
 
+/// Frames over which the view turns from where one segment last looked to where the
+/// next one looks: legs need not agree (an orbit looks at its centre, a fly-through
+/// ahead), and a sudden turn of the whole view reads as a cut. (A second at 30 fps; at
+/// most half the segment.)
+const TURN_FRAMES: f64 = 30.0;
+
+/// How far back and ahead along its path a fly-through looks, in frames: a second
+/// either way at 30 fps, so the default path's sharpest corner (about 140°) turns the
+/// view by at most 6° a frame (71° at once when it looked 4 frames ahead).
+const FLY_LOOK_FRAMES: f64 = 30.0;
+
+impl Pose {
+    /// This pose with its view direction turned back towards `before`'s: `s = 0` looks
+    /// the way `before` did, `s = 1` is this pose. The eye stays where it is.
+    fn turned_from(&self, before: &Pose, s: f32) -> Pose {
+        let to = self.target - self.eye;
+        let from = (before.target - before.eye).normalize_or_zero();
+        let distance = to.length();
+        if from == Vec3::ZERO || !distance.is_normal() {
+            return *self;
+        }
+        let turn = Quat::IDENTITY.slerp(Quat::from_rotation_arc(from, to / distance), s);
+        Pose {
+            eye: self.eye,
+            target: self.eye + turn * from * distance,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Where one segment ends looking elsewhere than the next begins (an orbit at its
+    /// centre, a fly-through ahead), the view turns over a few frames, not at once;
+    /// elsewhere the poses are the segments' own.
+    #[test]
+    fn the_view_turns_smoothly_between_segments() {
+        let orbit = PathSegment::Orbit {
+            center: [0.0; 3],
+            radius: 5.0,
+            height: 1.0,
+            turns: 1.0,
+            frames: 120,
+        };
+        // The orbit ends at (5, 1, 0) heading +z: fly on that way, looking ahead.
+        let fly = PathSegment::Fly {
+            points: vec![[5.0, 1.0, 0.0], [5.0, 1.0, 10.0]],
+            look_at: None,
+            frames: 60,
+        };
+        let direction = |p: Pose| (p.target - p.eye).normalize();
+        let jump = direction(orbit.pose(1.0))
+            .angle_between(direction(fly.pose(0.0)))
+            .to_degrees();
+        assert!(jump > 90.0, "{jump}");
+        let path = CameraPath {
+            segments: vec![orbit.clone(), fly.clone()],
+        };
+        let largest = |path: &CameraPath| {
+            (1..path.frame_count())
+                .map(|f| {
+                    let [a, b] = [f - 1, f].map(|f| direction(path.pose(f).unwrap()));
+                    a.angle_between(b).to_degrees()
+                })
+                .fold(0.0, f32::max)
+        };
+        // 90°+ over 30 frames, smoothstep's steepest slope 1.5: about 5° a frame.
+        assert!(largest(&path) < 6.0, "{}°", largest(&path));
+        // (Within the fly-through, too: its corners.)
+        assert_eq!(path.pose(120 + 30), Some(fly.pose(30.0 / 60.0)));
+        assert_eq!(path.pose(30), Some(orbit.pose(30.0 / 120.0)));
+        let default = crate::scene::Scene::load("default").unwrap().path;
+        assert!(largest(&default) < 7.0, "default path: {}°", largest(&default));
+    }
 
     #[test]
     fn look_at_rejects_bad_input() {
