@@ -1,8 +1,8 @@
 //! The perspective camera of a frame, and camera paths through a scene.
 
-use std::f32::consts::TAU;
+use std::f32::consts::{PI, TAU};
 
-use glam::{Quat, Vec3};
+use glam::Vec3;
 use serde::Deserialize;
 
 /// Largest frame edge in pixels that any command accepts.
@@ -283,9 +283,11 @@ impl PathSegment {
                         // to where it will be as long after (each clamped to the ends):
                         // a corner turns the view over that time, not at once.
                         let window = (FLY_LOOK_FRAMES / self.frames() as f64) as f32;
-                        let (behind, ahead) = (at(t - window), at(t + window));
-                        if ahead.distance(behind) > 1e-6 {
-                            eye + (ahead - behind)
+                        let along = (at(t + window) - at(t - window)).normalize_or_zero();
+                        if along != Vec3::ZERO {
+                            // (At least a metre, and more far from the origin: a
+                            // target must not round back onto the eye.)
+                            eye + along * (1.0 + eye.abs().max_element())
                         } else {
                             // (A leg that doubles straight back: look ahead.)
                             let ahead = at(t + 0.02);
@@ -359,6 +361,10 @@ const FLY_LOOK_FRAMES: f64 = 30.0;
 impl Pose {
     /// This pose with its view direction turned back towards `before`'s: `s = 0` looks
     /// the way `before` did, `s = 1` is this pose. The eye stays where it is.
+    ///
+    /// Heading (about world +y) and pitch turn each on their own: the shortest arc
+    /// between two directions can pass straight up or down, where the camera's "up",
+    /// world +y, turns the image over.
     fn turned_from(&self, before: &Pose, s: f32) -> Pose {
         let to = self.target - self.eye;
         let from = (before.target - before.eye).normalize_or_zero();
@@ -366,10 +372,19 @@ impl Pose {
         if from == Vec3::ZERO || !distance.is_normal() {
             return *self;
         }
-        let turn = Quat::IDENTITY.slerp(Quat::from_rotation_arc(from, to / distance), s);
+        let angles = |d: Vec3| (d.x.atan2(d.z), d.y.clamp(-1.0, 1.0).asin());
+        let ((heading0, pitch0), (heading1, pitch1)) = (angles(from), angles(to / distance));
+        // The shorter way round.
+        let turn = (heading1 - heading0 + PI).rem_euclid(TAU) - PI;
+        let (heading, pitch) = (heading0 + turn * s, pitch0 + (pitch1 - pitch0) * s);
+        let direction = Vec3::new(
+            heading.sin() * pitch.cos(),
+            pitch.sin(),
+            heading.cos() * pitch.cos(),
+        );
         Pose {
             eye: self.eye,
-            target: self.eye + turn * from * distance,
+            target: self.eye + direction * distance,
         }
     }
 }
@@ -417,6 +432,36 @@ mod tests {
         // (Within the fly-through, too: its corners.)
         assert_eq!(path.pose(120 + 30), Some(fly.pose(30.0 / 60.0)));
         assert_eq!(path.pose(30), Some(orbit.pose(30.0 / 120.0)));
+        // An orbit looking down at its centre, then a fly straight outwards: the view
+        // turns 149° and must not pass through straight down, where the image's "up"
+        // (the camera's right, by world +y) would turn over between two frames.
+        let high = PathSegment::Orbit {
+            center: [0.0; 3],
+            radius: 5.0,
+            height: 3.0,
+            turns: 1.0,
+            frames: 120,
+        };
+        let out = PathSegment::Fly {
+            points: vec![[5.0, 3.0, 0.0], [25.0, 3.0, 0.0]],
+            look_at: None,
+            frames: 60,
+        };
+        let path = CameraPath {
+            segments: vec![high, out],
+        };
+        let right = |f: u32| {
+            let pose = path.pose(f).unwrap();
+            pose.camera(60.0, 64, 48).unwrap().right
+        };
+        for f in 1..path.frame_count() {
+            assert!(
+                right(f - 1).dot(right(f)) > 0.95,
+                "the image turns over at frame {f}"
+            );
+        }
+        // (Its heading turns 180° in a second: at most about 9° a frame.)
+        assert!(largest(&path) < 10.0, "{}°", largest(&path));
         let default = crate::scene::Scene::load("default").unwrap().path;
         assert!(largest(&default) < 7.0, "default path: {}°", largest(&default));
     }
@@ -460,7 +505,9 @@ mod tests {
         assert!(p0.eye.abs_diff_eq(Vec3::new(2.0, 1.0, 0.0), 1e-6));
         let p5 = path.pose(5).unwrap();
         assert!(p5.eye.abs_diff_eq(Vec3::new(1.0, 0.0, 0.0), 1e-6));
-        assert!(p5.target.x > p5.eye.x);
+        // (Past the turn from the orbit's view: looking along the fly.)
+        let p6 = path.pose(6).unwrap();
+        assert!(p6.target.x > p6.eye.x);
         assert_eq!(path.pose(100), path.pose(7));
         assert_eq!(CameraPath::default().pose(0), None);
     }

@@ -59,12 +59,20 @@ impl JobKey {
     }
 
     /// Whether the texture made for `self` serves a request for `wanted`: the same
-    /// view, with at least its texels and depth bits (a client draws the pyramid level
-    /// its screen needs, so more texels cost it bytes on the wire, not warp time).
+    /// view, with at least its depth bits and its edge, up to [`MAX_SERVED_RATIO`]
+    /// times it (a client draws the pyramid level its screen needs, so more texels cost
+    /// it bytes on the wire, not warp time).
     fn satisfies(&self, wanted: &JobKey) -> bool {
-        self.view == wanted.view && self.size >= wanted.size && self.depth_bits >= wanted.depth_bits
+        self.view == wanted.view
+            && self.depth_bits >= wanted.depth_bits
+            && (wanted.size..=wanted.size.saturating_mul(MAX_SERVED_RATIO)).contains(&self.size)
     }
 }
+
+/// How many times a request's edge a texture that serves it may be: 2 (4× the texels).
+/// A far bigger one would cost a small request's client far more bytes — and, still
+/// being made, far more waiting than a bake of its own.
+const MAX_SERVED_RATIO: u32 = 2;
 
 /// Queue order: needed-now first, then nearest deadline, then arrival.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -854,9 +862,10 @@ mod tests {
         assert_eq!(order, vec![3.0, 2.0, 1.0]);
     }
 
-    /// One texture serves every request at its view for no more texels and depth
-    /// bits: smaller requests join a bigger job, queued or running, and hit a bigger
-    /// cached texture; a bigger one, or one with more depth bits, gets a job of its own.
+    /// One texture serves every request at its view for no more depth bits and at
+    /// least half its edge: smaller requests join a bigger job, queued or running, and
+    /// hit a bigger cached texture; a bigger one, one with more depth bits, or one far
+    /// smaller gets a job of its own.
     #[test]
     fn a_bigger_texture_serves_smaller_requests() {
         let (mut s, hash) = state_with_scene();
@@ -876,7 +885,7 @@ mod tests {
         let job = next_job(&mut wrx).unwrap();
         assert_eq!((job.size, job.depth_bits), (64, 16));
         // While it runs, a smaller request joins it.
-        s.admit(&sized(4, 16, DepthBits::Eight), tx.clone()).unwrap();
+        s.admit(&sized(4, 32, DepthBits::Eight), tx.clone()).unwrap();
         assert_eq!(s.counters.merged, 2);
         s.result(job.job_id, pb::ReliefTexture::default(), true, 1);
         let mut served: Vec<u64> = std::iter::from_fn(|| rx.try_recv().ok())
@@ -892,6 +901,10 @@ mod tests {
         s.admit(&sized(6, 128, DepthBits::Sixteen), tx.clone()).unwrap();
         assert_eq!(s.counters.cache_hits, 1);
         assert_eq!((s.counters.merged, s.stats().queue_now), (2, 2));
+        // Nothing more than twice its edge serves a request: 16² gets a job of its own.
+        s.admit(&sized(7, 16, DepthBits::Eight), tx.clone()).unwrap();
+        assert_eq!(s.counters.cache_hits, 1);
+        assert_eq!((s.counters.merged, s.stats().queue_now), (2, 3));
     }
 
     #[test]
