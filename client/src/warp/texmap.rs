@@ -5,7 +5,7 @@
 
 use glam::Vec3;
 use rayon::prelude::*;
-use wide::f32x8;
+use wide::{f32x8, i32x8};
 
 use relief_core::camera::Camera;
 use relief_core::relief::{ReliefTexture, SourceCamera};
@@ -139,12 +139,14 @@ pub fn map(
                 continue;
             }
             // Exact: the inside lanes are non-negative and below the image's size.
-            let (xs, ys) = (fu.trunc_int().to_array(), fv.trunc_int().to_array());
+            let (xs, ys) = (fu.trunc_int(), fv.trunc_int());
+            let ks = (ys * i32x8::splat(image.width as i32) + xs).to_array();
+            let (xs, ys) = (xs.to_array(), ys.to_array());
             let (fu, fv, u, v) = (fu.to_array(), fv.to_array(), u.to_array(), v.to_array());
             let towards_plane = towards_plane.to_array();
             for l in 0..n {
                 let found = if inside & (1 << l) != 0 {
-                    let k = ys[l] as usize * image.width as usize + xs[l] as usize;
+                    let k = ks[l] as usize;
                     if footprints[k] == 0 {
                         continue;
                     }
@@ -198,7 +200,8 @@ fn footprints(image: &PrewarpImage) -> Vec<u8> {
 #[inline]
 fn sample_inside(image: &PrewarpImage, k: usize, tx: f32, ty: f32) -> Option<(f32, Attributes)> {
     let w = image.width as usize;
-    let [a, b, c, d] = [k, k + 1, k + w, k + w + 1].map(|k| image.texels[k]);
+    let (top, bottom) = (&image.texels[k..k + 2], &image.texels[k + w..k + w + 2]);
+    let [a, b, c, d] = [top[0], top[1], bottom[0], bottom[1]];
     if a.is_empty() || b.is_empty() || c.is_empty() || d.is_empty() {
         // Nearest: the texel holding the point is the right one of a pair past the
         // pair's middle, the lower one past the middle of a column pair.
