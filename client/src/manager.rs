@@ -387,6 +387,31 @@ fn shown_texture(grades: &[Grade], tolerance: f32, turn: impl Fn(usize) -> f32) 
         })
 }
 
+/// Whether one of an object's held textures (`held`: eye and grade at `future`)
+/// covers the eye `future` (all about `centre`), as prediction plans it: within the
+/// planning margin of `tolerance`, not too coarse with a finer one to be had, and
+/// within the planning margin of the turn a texture may be shown alone — or up to
+/// [`MAX_TURN`] with a partner there, held (fine enough to be drawn there, as drawing
+/// requires) or asked for (`asked`).
+fn held_covers(centre: Vec3, future: Vec3, held: &[(Vec3, Grade)], asked: &[Vec3], tolerance: f32) -> bool {
+    let partners = held
+        .iter()
+        .filter(|(_, g)| !g.too_coarse)
+        .map(|(eye, _)| *eye)
+        .chain(asked.iter().copied());
+    let partnered = |shown: Vec3| {
+        partners
+            .clone()
+            .any(|other| can_partner(centre, shown, future, other))
+    };
+    held.iter().any(|&(eye, g)| {
+        let turn = angle_between(centre, eye, future);
+        g.growth <= PLANNING_MARGIN * tolerance
+            && !g.coarse
+            && (turn <= PLANNING_MARGIN * LONE_MAX_TURN || (turn <= MAX_TURN && partnered(eye)))
+    })
+}
+
 /// The texture edges the manager asks for: half-octave steps from 32 to 512 (the odd
 /// steps, 32·√2^k, rounded to multiples of 8). With power-of-two edges a texture had up
 /// to 4× the texels the screen can show, each warped every frame; here at most 2.1×
@@ -1037,25 +1062,14 @@ impl Manager {
         if geometry_reason(object, future) == Some(GeometryReason::TooNear) {
             return;
         }
-        // A texture covers the future within the planning margin of the tolerance, and
-        // of the turn it may be shown alone — unless a partner for it there is held or
-        // asked for: then up to the turn any texture is shown.
-        let held = &self.objects[k].held;
-        let partnered = |shown: Vec3| {
-            held.iter()
-                .map(|h| h.eye)
-                .chain(self.pending.values().filter(|p| p.object == k).map(|p| p.eye))
-                .any(|other| can_partner(centre, shown, future, other))
-        };
-        let covered = held
-            .iter()
+        let held: Vec<(Vec3, Grade)> = (self.objects[k].held.iter().map(|h| h.eye))
             .zip(self.grades(scene, k, future, camera))
-            .any(|(h, g)| {
-                let turn = angle_between(centre, h.eye, future);
-                g.growth <= PLANNING_MARGIN * self.config.tolerance
-                    && !g.coarse
-                    && (turn <= PLANNING_MARGIN * LONE_MAX_TURN || (turn <= MAX_TURN && partnered(h.eye)))
-            })
+            .collect();
+        let asked: Vec<Vec3> = (self.pending.values())
+            .filter(|p| p.object == k)
+            .map(|p| p.eye)
+            .collect();
+        let covered = held_covers(centre, future, &held, &asked, self.config.tolerance)
             || self.pending_covers(k, centre, future);
         let ahead = self.ahead(k, centre, camera.eye, future);
         let deadline = Some((horizon * 1e3) as u64);
@@ -1102,6 +1116,37 @@ mod tests {
         });
         grades[2].too_coarse = true;
         shown_texture(&grades, 4.0, |i| turns[i]).map(|s| s.0)
+    }
+
+    /// Prediction counts a texture 40° from the future eye as covering it only with a
+    /// partner on the far side that could be drawn there: one too coarse at that eye
+    /// does not count (drawing would not use it), one asked for does.
+    #[test]
+    fn a_partner_too_coarse_to_draw_does_not_cover_the_future() {
+        let around = |degrees: f32| {
+            let a = degrees.to_radians();
+            Vec3::new(6.0 * a.cos(), 0.0, 6.0 * a.sin())
+        };
+        // (Too coarse, and a finer one to be had: not shown there either.)
+        let grade = |too_coarse| Grade {
+            growth: 0.0,
+            too_coarse,
+            coarse: too_coarse,
+        };
+        let future = around(40.0);
+        let covers = |partner_too_coarse, asked: &[Vec3]| {
+            let held = [
+                (around(0.0), grade(false)),
+                (around(75.0), grade(partner_too_coarse)),
+            ];
+            held_covers(Vec3::ZERO, future, &held, asked, 4.0)
+        };
+        assert!(covers(false, &[]));
+        assert!(!covers(true, &[]));
+        assert!(covers(true, &[around(60.0)]));
+        // Near a held texture's own eye no partner is needed.
+        let near = [(around(35.0), grade(false))];
+        assert!(held_covers(Vec3::ZERO, future, &near, &[], 4.0));
     }
 
     #[test]
