@@ -595,7 +595,9 @@ fn prewarp_with(impostor: &Impostor, params: &WarpParams, variant: Variant, para
 /// point of the 3D segment between their surface points that pre-warps exactly there:
 /// with `u(t) = u_a + t·Δu`, `d(t) = d_a + t·Δd` in the source, solve
 /// `(u(t) + e1·k3·d(t)) / (1 + k3·d(t)) = centre` for `t`.
-#[inline]
+// (Always inlined: called, it returned its cell through memory, and the vector lerp's
+// result read back piecewise stalled every pixel — 2.6× slower.)
+#[inline(always)]
 fn compensated(a: &RowSample, b: &RowSample, centre: f32, p: &WarpParams) -> Cell {
     let (k3, e1) = (p.k3, p.epipole.x);
     let (ad, bd) = (a.cell.depth, b.cell.depth);
