@@ -96,7 +96,8 @@ fn axis_extent(n: f32, e: f32, s_min: f32) -> (i32, i32) {
 }
 
 /// A texel's albedo and encoded normal: six bytes in the low bytes of a `u64`, so one
-/// interpolation blends all six at once (two multiplies on 16-bit lanes). The top two
+/// interpolation blends all six at once (two multiplies on a vector of 16-bit lanes;
+/// see [`Attributes::lerp`]). The top two
 /// bytes are not read; a source texel keeps its depth level there (see [`pack_texel`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Attributes(u64);
