@@ -398,27 +398,30 @@ mod tests {
     /// elsewhere the poses are the segments' own.
     #[test]
     fn the_view_turns_smoothly_between_segments() {
-        let orbit = PathSegment::Orbit {
-            center: [0.0; 3],
-            radius: 5.0,
-            height: 1.0,
-            turns: 1.0,
-            frames: 120,
-        };
-        // The orbit ends at (5, 1, 0) heading +z: fly on that way, looking ahead.
-        let fly = PathSegment::Fly {
-            points: vec![[5.0, 1.0, 0.0], [5.0, 1.0, 10.0]],
-            look_at: None,
-            frames: 60,
+        // An orbit round the origin, 5 m out, `height` up, ending at (5, height, 0);
+        // then a fly from there to `to`, looking ahead.
+        let orbit_then_fly = |height: f32, to: [f32; 3]| {
+            let orbit = PathSegment::Orbit {
+                center: [0.0; 3],
+                radius: 5.0,
+                height,
+                turns: 1.0,
+                frames: 120,
+            };
+            let fly = PathSegment::Fly {
+                points: vec![[5.0, height, 0.0], to],
+                look_at: None,
+                frames: 60,
+            };
+            (
+                CameraPath {
+                    segments: vec![orbit.clone(), fly.clone()],
+                },
+                orbit,
+                fly,
+            )
         };
         let direction = |p: Pose| (p.target - p.eye).normalize();
-        let jump = direction(orbit.pose(1.0))
-            .angle_between(direction(fly.pose(0.0)))
-            .to_degrees();
-        assert!(jump > 90.0, "{jump}");
-        let path = CameraPath {
-            segments: vec![orbit.clone(), fly.clone()],
-        };
         let largest = |path: &CameraPath| {
             (1..path.frame_count())
                 .map(|f| {
@@ -427,29 +430,20 @@ mod tests {
                 })
                 .fold(0.0, f32::max)
         };
+        // The orbit ends heading +z: fly on that way.
+        let (path, orbit, fly) = orbit_then_fly(1.0, [5.0, 1.0, 10.0]);
+        let jump = direction(orbit.pose(1.0))
+            .angle_between(direction(fly.pose(0.0)))
+            .to_degrees();
+        assert!(jump > 90.0, "{jump}");
         // 90°+ over 30 frames, smoothstep's steepest slope 1.5: about 5° a frame.
         assert!(largest(&path) < 6.0, "{}°", largest(&path));
-        // (Within the fly-through, too: its corners.)
         assert_eq!(path.pose(120 + 30), Some(fly.pose(30.0 / 60.0)));
         assert_eq!(path.pose(30), Some(orbit.pose(30.0 / 120.0)));
         // An orbit looking down at its centre, then a fly straight outwards: the view
         // turns 149° and must not pass through straight down, where the image's "up"
         // (the camera's right, by world +y) would turn over between two frames.
-        let high = PathSegment::Orbit {
-            center: [0.0; 3],
-            radius: 5.0,
-            height: 3.0,
-            turns: 1.0,
-            frames: 120,
-        };
-        let out = PathSegment::Fly {
-            points: vec![[5.0, 3.0, 0.0], [25.0, 3.0, 0.0]],
-            look_at: None,
-            frames: 60,
-        };
-        let path = CameraPath {
-            segments: vec![high, out],
-        };
+        let (path, ..) = orbit_then_fly(3.0, [25.0, 3.0, 0.0]);
         let right = |f: u32| {
             let pose = path.pose(f).unwrap();
             pose.camera(60.0, 64, 48).unwrap().right
@@ -462,6 +456,7 @@ mod tests {
         }
         // (Its heading turns 180° in a second: at most about 9° a frame.)
         assert!(largest(&path) < 10.0, "{}°", largest(&path));
+        // The default path, its fly-through's corners included.
         let default = crate::scene::Scene::load("default").unwrap().path;
         assert!(largest(&default) < 7.0, "default path: {}°", largest(&default));
     }
