@@ -286,6 +286,9 @@ pub struct Counters {
     pub warps: u64,
     /// Partners warped (second textures drawn behind the shown one).
     pub partners: u64,
+    /// Texels pre-warped, over all warps and partners (each at the pyramid level its
+    /// screen needs): what a frame's impostors cost.
+    pub texels_warped: u64,
     pub requests_now: u64,
     pub requests_predicted: u64,
     pub withdrawn: u64,
@@ -575,6 +578,9 @@ impl Manager {
             }
         }
         let behind = |k: usize| partner_depth_factor(&scene.objects[k].bounds, camera.eye);
+        self.counters.texels_warped += (warps.iter())
+            .map(|(_, impostor, _)| impostor.texture.depth.len() as u64)
+            .sum::<u64>();
         let prepared: Vec<_> = warps
             .par_iter()
             .map(|&(k, impostor, is_partner)| {

@@ -140,6 +140,8 @@ struct Summary {
     sprites: u64,
     warps: u64,
     partners: u64,
+    /// Texels pre-warped per frame drawn, warps and partners together.
+    texels_warped_per_frame: f64,
     /// New textures received per full turn for each object orbited by the path.
     regenerations_per_orbit: BTreeMap<String, f64>,
     /// Against the point-sampled reference (one ray through each pixel centre);
@@ -457,6 +459,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         sprites: counters.sprites,
         warps: counters.warps,
         partners: counters.partners,
+        texels_warped_per_frame: counters.texels_warped as f64 / rendered.max(1) as f64,
         regenerations_per_orbit: orbits
             .iter()
             .filter_map(|orbit| {
