@@ -286,8 +286,9 @@ pub struct Counters {
     pub warps: u64,
     /// Partners warped (second textures drawn behind the shown one).
     pub partners: u64,
-    /// Texels pre-warped, over all warps and partners (each at the pyramid level its
-    /// screen needs): what a frame's impostors cost.
+    /// Texels pre-warped, over all warps and partners (the shown texture at the
+    /// pyramid level the screen needs, a partner one coarser): what a frame's
+    /// impostors cost.
     pub texels_warped: u64,
     pub requests_now: u64,
     pub requests_predicted: u64,
@@ -578,9 +579,6 @@ impl Manager {
             }
         }
         let behind = |k: usize| partner_depth_factor(&scene.objects[k].bounds, camera.eye);
-        self.counters.texels_warped += (warps.iter())
-            .map(|(_, impostor, _)| impostor.texture.depth.len() as u64)
-            .sum::<u64>();
         let prepared: Vec<_> = warps
             .par_iter()
             .map(|&(k, impostor, is_partner)| {
@@ -592,6 +590,11 @@ impl Manager {
                 }
             })
             .collect();
+        // (Only those pre-warped: an eye in or behind a texture's plane is refused first.)
+        self.counters.texels_warped += (warps.iter().zip(&prepared))
+            .filter(|(_, ready)| ready.is_ok())
+            .map(|((_, impostor, _), _)| impostor.texture.depth.len() as u64)
+            .sum::<u64>();
         let mut prepared = warps.into_iter().zip(prepared).peekable();
         let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
         for (k, key) in keys.into_iter().enumerate() {
