@@ -286,11 +286,10 @@ impl Column {
     };
 }
 
-/// The rows of the pre-warped image one half of the work writes, as plane coordinates
-/// starting at `(u0, v0)`.
+/// The rows of the pre-warped image one half of the work writes: all its columns (the
+/// pass's, from the image's first), and plane rows from `v0`.
 struct Output<'a> {
     texels: &'a mut [PTexel],
-    u0: i64,
     /// The plane rows `v0..v1` held.
     v0: i64,
     v1: i64,
@@ -298,13 +297,15 @@ struct Output<'a> {
 }
 
 impl Output<'_> {
+    /// Writes `cell` at column `xi` of the image (counted from its first, so already
+    /// within it: a column of the pass) and plane row `y`, if that row is held.
     #[inline(always)]
-    fn put(&mut self, x: i64, y: i64, cell: &Cell) {
-        let (xx, yy) = (x - self.u0, y - self.v0);
-        if xx < 0 || yy < 0 || xx as usize >= self.width {
+    fn put(&mut self, xi: usize, y: i64, cell: &Cell) {
+        let yy = y - self.v0;
+        if yy < 0 {
             return;
         }
-        if let Some(t) = self.texels.get_mut(yy as usize * self.width + xx as usize) {
+        if let Some(t) = self.texels.get_mut(yy as usize * self.width + xi) {
             *t = cell.attributes.texel(cell.depth);
         }
     }
@@ -456,14 +457,18 @@ impl Job<'_> {
         let Some(column) = (xi >= 0).then(|| columns.get_mut(xi as usize)).flatten() else {
             return;
         };
+        // (The image has a column per pass column: this one is within it.)
+        let column_index = xi as usize;
         // Visiting downwards the previous row's sample carries the link; upwards this one.
         let last = column.last;
         let linked = seq != 0 && column.next_row == seq && if DOWN { last.down } else { cell.down };
         let end = signed_end::<DOWN>(out.v0..out.v1);
-        let spanned =
-            linked && between::<DOWN>(last.v, cell.v, end, |y, t| out.put(x, y, &last.lerp(&cell, t)));
+        let spanned = linked
+            && between::<DOWN>(last.v, cell.v, end, |y, t| {
+                out.put(column_index, y, &last.lerp(&cell, t))
+            });
         if !spanned {
-            out.put(x, cell.v.floor() as i64, &cell);
+            out.put(column_index, cell.v.floor() as i64, &cell);
         }
         *column = Column {
             last: cell,
@@ -562,14 +567,12 @@ fn prewarp_with(impostor: &Impostor, params: &WarpParams, variant: Variant, para
     let row_split = split_at(h, params.epipole.y);
     let mut upper = Output {
         texels: upper,
-        u0: u0 as i64,
         v0: v0 as i64,
         v1: v0 as i64 + split as i64,
         width,
     };
     let mut lower = Output {
         texels: lower,
-        u0: u0 as i64,
         v0: v0 as i64 + split as i64,
         v1: v0 as i64 + height as i64,
         width,
