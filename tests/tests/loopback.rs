@@ -346,6 +346,43 @@ async fn a_worker_reconnects_when_the_server_returns() {
     wait_for(&mut remote, "the worker back", |s| s.workers == 1).await;
 }
 
+/// A worker whose server keeps dropping it redials with doubling delays — 100, 200,
+/// 400, 800 ms — measured between its connections to a listener on 127.0.0.1 that
+/// accepts each and closes it at once.
+#[test]
+fn a_dropped_worker_redials_with_doubling_delays() {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    listener.set_nonblocking(true).unwrap();
+    let url = format!("http://{}", listener.local_addr().unwrap());
+    let _worker = start_worker(&url, &[]);
+    let start = Instant::now();
+    let mut connections = Vec::new();
+    while connections.len() < 5 && start.elapsed() < Duration::from_secs(20) {
+        match listener.accept() {
+            Ok((stream, _)) => {
+                connections.push(Instant::now());
+                drop(stream);
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                std::thread::sleep(Duration::from_millis(2));
+            }
+            Err(e) => panic!("accept: {e}"),
+        }
+    }
+    assert_eq!(connections.len(), 5, "the worker did not redial");
+    let gaps: Vec<f64> = connections
+        .windows(2)
+        .map(|w| (w[1] - w[0]).as_secs_f64() * 1e3)
+        .collect();
+    for (k, &gap) in gaps.iter().enumerate() {
+        let expected = 100.0 * f64::from(1u32 << k);
+        assert!(
+            (0.9 * expected..expected + 1000.0).contains(&gap),
+            "redial {k}: after {gap:.0} ms, not about {expected} ms (all: {gaps:.0?})"
+        );
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn health_and_authentication() {
     let (_server, url) = start_server(&["--token", "s3cret"]);
