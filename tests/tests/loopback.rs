@@ -364,7 +364,7 @@ fn a_dropped_worker_redials_with_doubling_delays() {
                 drop(stream);
             }
             Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
-                std::thread::sleep(Duration::from_millis(2));
+                std::thread::sleep(Duration::from_millis(1));
             }
             Err(e) => panic!("accept: {e}"),
         }
@@ -374,10 +374,13 @@ fn a_dropped_worker_redials_with_doubling_delays() {
         .windows(2)
         .map(|w| (w[1] - w[0]).as_secs_f64() * 1e3)
         .collect();
+    // (A connection noticed late — this thread starved by a busy machine — shortens
+    // the next gap: hence the margin below. A constant delay still fails from the
+    // second gap on.)
     for (k, &gap) in gaps.iter().enumerate() {
         let expected = 100.0 * f64::from(1u32 << k);
         assert!(
-            (0.9 * expected..expected + 1000.0).contains(&gap),
+            (0.75 * expected..expected + 1000.0).contains(&gap),
             "redial {k}: after {gap:.0} ms, not about {expected} ms (all: {gaps:.0?})"
         );
     }
