@@ -11,7 +11,7 @@ use relief_core::camera::Camera;
 use relief_core::relief::{ReliefTexture, SourceCamera};
 
 use super::params::WarpParams;
-use super::prewarp::{Attributes, PTexel, PrewarpImage};
+use super::prewarp::{Attributes, PrewarpImage};
 use super::round_small;
 use crate::gbuffer::{GBuffer, Stored};
 use relief_core::shading::{LANE_INDEX, LANES};
@@ -173,29 +173,22 @@ pub fn map(
 
 /// Per texel `k` of `image` (but the last row and column): whether any of the four
 /// texels of the bilinear footprint whose top-left is `k` holds a surface — the one
-/// look-up that turns away most of a texture mapping's pixels. Rows in parallel: it
-/// reads the whole pre-warped image (4 MB at 512²), before the mapping can start.
+/// look-up that turns away most of a texture mapping's pixels. Both passes in
+/// parallel: they read the whole pre-warped image (4 MB at 512²) before the mapping
+/// can start.
 fn footprints(image: &PrewarpImage) -> Vec<u8> {
     // (`max`: chunks must not be empty; an image of no texels yields no rows.)
     let w = (image.width as usize).max(1);
-    let mut out = vec![0; image.texels.len()];
-    let filled = |row: &[PTexel], bytes: &mut Vec<u8>| {
-        bytes.clear();
-        bytes.extend(row.iter().map(|t| !t.is_empty() as u8));
-    };
+    let filled: Vec<u8> = image.texels.par_iter().map(|t| !t.is_empty() as u8).collect();
+    let mut out = vec![0; filled.len()];
     out.par_chunks_exact_mut(w)
-        .zip(image.texels.par_chunks_exact(w))
-        .zip(image.texels.par_chunks_exact(w).skip(1))
-        .for_each_init(
-            || (Vec::with_capacity(w), Vec::with_capacity(w)),
-            |(top, bottom), ((out, upper), lower)| {
-                filled(upper, top);
-                filled(lower, bottom);
-                for x in 0..w.saturating_sub(1) {
-                    out[x] = top[x] | top[x + 1] | bottom[x] | bottom[x + 1];
-                }
-            },
-        );
+        .zip(filled.par_chunks_exact(w))
+        .zip(filled.par_chunks_exact(w).skip(1))
+        .for_each(|((out, top), bottom)| {
+            for x in 0..w.saturating_sub(1) {
+                out[x] = top[x] | top[x + 1] | bottom[x] | bottom[x + 1];
+            }
+        });
     out
 }
 
