@@ -57,6 +57,30 @@ pub fn size_from_pb(field: &str, size: u32) -> Result<u32, Status> {
     Ok(size)
 }
 
+/// Most jobs a worker may bake at once (`Register.slots`).
+pub const MAX_WORKER_SLOTS: u32 = 64;
+
+/// Longest worker name (`Register.name`), bytes.
+pub const MAX_WORKER_NAME_BYTES: usize = 256;
+
+/// A worker's registration: `1 ..= MAX_WORKER_SLOTS` slots, a name of at most
+/// [`MAX_WORKER_NAME_BYTES`].
+pub fn check_register(r: &pb::Register) -> Result<(), Status> {
+    if !(1..=MAX_WORKER_SLOTS).contains(&r.slots) {
+        return Err(invalid(
+            "register.slots",
+            format_args!("{} is not between 1 and {MAX_WORKER_SLOTS}", r.slots),
+        ));
+    }
+    if r.name.len() > MAX_WORKER_NAME_BYTES {
+        return Err(invalid(
+            "register.name",
+            format_args!("longer than {MAX_WORKER_NAME_BYTES} bytes"),
+        ));
+    }
+    Ok(())
+}
+
 /// A relief texture on the wire.
 pub fn texture_to_pb(t: &ReliefTexture) -> pb::ReliefTexture {
     let c = &t.camera;

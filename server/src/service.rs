@@ -10,7 +10,7 @@ use tokio_stream::wrappers::UnboundedReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
 use relief_proto::bundle::{Bundle, MAX_BUNDLE_BYTES};
-use relief_proto::convert::{check_texture_pb, hash_from_pb, request_from_pb};
+use relief_proto::convert::{check_register, check_texture_pb, hash_from_pb, request_from_pb};
 use relief_proto::pb;
 
 use crate::state::{Admission, State, StoredScene};
@@ -233,17 +233,7 @@ impl pb::workers_server::Workers for Service {
                 ));
             }
         };
-        if !(1..=64).contains(&register.slots) {
-            return Err(Status::invalid_argument(format!(
-                "field `register.slots`: {} is not between 1 and 64",
-                register.slots
-            )));
-        }
-        if register.name.len() > 256 {
-            return Err(Status::invalid_argument(
-                "field `register.name`: longer than 256 bytes",
-            ));
-        }
+        check_register(&register)?;
         let (tx, rx) = unbounded_channel();
         let id = {
             let mut state = self.0.state();

@@ -507,12 +507,8 @@ impl State {
 
     /// A worker could not make a texture: the waiters get the reason.
     pub fn failed(&mut self, job_id: u64, reason: &str) {
-        self.fail(job_id, Status::aborted(format!("the worker failed: {reason}")));
-    }
-
-    /// Ends a job with `status` to its waiters.
-    fn fail(&mut self, job_id: u64, status: Status) {
         if let Some(job) = self.jobs.get(&job_id) {
+            let status = Status::aborted(format!("the worker failed: {reason}"));
             for waiter_id in &job.waiters {
                 if let Some(w) = self.waiters.get(waiter_id) {
                     let _ = w.tx.send(Err(status.clone()));

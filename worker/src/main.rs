@@ -9,6 +9,8 @@ use std::process::ExitCode;
 
 use clap::Parser;
 
+use relief_proto::convert::{MAX_WORKER_NAME_BYTES, MAX_WORKER_SLOTS};
+
 #[derive(Parser)]
 #[command(
     name = "relief-worker",
@@ -27,7 +29,7 @@ pub struct Args {
     #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
     token: Option<String>,
     /// Jobs baked at once (each uses every core).
-    #[arg(long, env = "RELIEF_SLOTS", default_value = "1", value_parser = clap::value_parser!(u32).range(1..=64))]
+    #[arg(long, env = "RELIEF_SLOTS", default_value = "1", value_parser = clap::value_parser!(u32).range(1..=i64::from(MAX_WORKER_SLOTS)))]
     slots: u32,
     /// Name in the server's logs, at most 256 bytes (default: host name and process id).
     #[arg(long, env = "RELIEF_WORKER_NAME", value_parser = worker_name)]
@@ -48,10 +50,10 @@ fn main() -> ExitCode {
     })
 }
 
-/// A `--name` the server accepts: at most 256 bytes.
+/// A `--name` the server accepts: at most [`MAX_WORKER_NAME_BYTES`].
 fn worker_name(name: &str) -> Result<String, String> {
     match name.len() {
-        0..=256 => Ok(name.to_string()),
-        n => Err(format!("{n} bytes; at most 256")),
+        n if n <= MAX_WORKER_NAME_BYTES => Ok(name.to_string()),
+        n => Err(format!("{n} bytes; at most {MAX_WORKER_NAME_BYTES}")),
     }
 }
