@@ -83,7 +83,8 @@ pub struct FramePlan {
 /// What drawing one frame did.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct FrameStats {
-    /// Texels warped (the pyramid level each impostor used).
+    /// Texels warped (of the pyramid level each impostor used, those that can reach
+    /// the screen).
     pub texels_warped: usize,
     /// Texels the full-resolution textures have.
     pub texels_baked: usize,
@@ -160,8 +161,12 @@ impl FramePlan {
         let prepared: Vec<_> = shown.par_iter().map(|i| prepare(method, i, camera)).collect();
         for ((imp, impostor), prepared) in self.impostors.iter().zip(shown).zip(prepared) {
             stats.texels_baked += imp.pyramid.levels[0].texture.depth.len();
-            match prepared.and_then(|p| draw(p, impostor, imp.index, camera, gbuffer)) {
-                Ok(()) => stats.texels_warped += impostor.texture.depth.len(),
+            let drawn = prepared.and_then(|p| {
+                let texels = p.texels_warped(impostor);
+                draw(p, impostor, imp.index, camera, gbuffer).map(|()| texels)
+            });
+            match drawn {
+                Ok(texels) => stats.texels_warped += texels,
                 Err(
                     WarpError::EyeInPlane(_)
                     | WarpError::NonFinite

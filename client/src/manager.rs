@@ -287,8 +287,8 @@ pub struct Counters {
     /// Partners warped (second textures drawn behind the shown one).
     pub partners: u64,
     /// Texels pre-warped, over all warps and partners (the shown texture at the
-    /// pyramid level the screen needs, a partner one coarser): what a frame's
-    /// impostors cost.
+    /// pyramid level the screen needs, a partner one coarser; of those, the ones that
+    /// can reach the screen): what a frame's impostors cost.
     pub texels_warped: u64,
     pub requests_now: u64,
     pub requests_predicted: u64,
@@ -324,8 +324,10 @@ pub struct StaleCauses {
 /// Where one [`Manager::render`] spent its time, milliseconds.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct RenderStages {
-    /// Impostors warped, or redrawn as sprites.
-    pub impostors_ms: f64,
+    /// The warped impostors' pre-warps (all at once).
+    pub prewarp_ms: f64,
+    /// Impostors drawn: texture mapping of the pre-warps, and sprites redrawn.
+    pub draw_ms: f64,
     /// Objects drawn as geometry (cheap ones, too-near ones, failed warps).
     pub geometry_ms: f64,
     /// Lighting the G-buffer into the frame.
@@ -590,10 +592,10 @@ impl Manager {
                 }
             })
             .collect();
+        let prewarps_done = Instant::now();
         // (Only those pre-warped: an eye in or behind a texture's plane is refused first.)
         self.counters.texels_warped += (warps.iter().zip(&prepared))
-            .filter(|(_, ready)| ready.is_ok())
-            .map(|((_, impostor, _), _)| impostor.texture.depth.len() as u64)
+            .map(|((_, impostor, _), ready)| ready.as_ref().map_or(0, |p| p.texels_warped(impostor)) as u64)
             .sum::<u64>();
         let mut prepared = warps.into_iter().zip(prepared).peekable();
         let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
@@ -659,7 +661,8 @@ impl Manager {
         let frame = gbuffer.shade(scene, camera);
         let ms = |from: Instant, to: Instant| (to - from).as_secs_f64() * 1e3;
         self.counters.render_stages.push(RenderStages {
-            impostors_ms: ms(start, impostors_done),
+            prewarp_ms: ms(start, prewarps_done),
+            draw_ms: ms(prewarps_done, impostors_done),
             geometry_ms: ms(impostors_done, geometry_done),
             shade_ms: ms(geometry_done, Instant::now()),
         });

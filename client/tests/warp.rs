@@ -110,6 +110,201 @@ fn one_pass_and_two_pass_prewarps_agree() {
     }
 }
 
+/// A pre-warp through a window of the plane (what a screen sees) makes, over the
+/// window and its margin, exactly the texels the whole pre-warp makes there — from
+/// fewer texels visited — for every variant, windows inside, across and outside the
+/// image, epipoles inside and far off to a side.
+#[test]
+fn a_windowed_prewarp_equals_the_whole_one_where_it_reaches() {
+    use relief_client::warp::prewarp::{PlaneWindow, PrewarpImage, prewarp_split};
+    let scene = Scene::load("default").expect("default scene");
+    let windows = [
+        (10.0, 20.0, 60.0, 50.0),
+        (-40.0, 100.0, 30.0, 200.0),
+        (90.0, -30.0, 400.0, 70.0),
+        (0.5, 0.5, 127.5, 127.5),
+        (300.0, 300.0, 400.0, 400.0),
+    ];
+    let mut cropped = 0;
+    let cases = [
+        ("knot", 10.0),
+        ("knot", -25.0),
+        ("rock", 40.0),
+        ("tree", 3.0),
+        ("deep plane", 20.0),
+    ];
+    for (object, angle) in cases {
+        let solo =
+            Solo::new(&scene, if object == "deep plane" { "knot" } else { object }, 3.0).expect("solo");
+        let mut texture = solo.bake(solo.eye(0.0), 128, DepthBits::Eight).expect("bake");
+        if object == "deep plane" {
+            // Every texel at the deepest level, each its own colour: every texel lands
+            // as far in as any can, so the first that can reach a window often does,
+            // and the span from the one before must be made.
+            let deepest = texture.depth_bits.max_level();
+            for (k, (depth, albedo)) in texture.depth.iter_mut().zip(&mut texture.albedo).enumerate() {
+                *depth = deepest;
+                *albedo = [(k * 7) as u8, (k * 13) as u8, (k / 128 * 5) as u8];
+            }
+        }
+        let impostor = Impostor::new(texture);
+        let params = WarpParams::new(&impostor.texture, solo.eye(angle)).expect("params");
+        for variant in [
+            Variant::OneD,
+            Variant::Asymmetric,
+            Variant::Compensated,
+            Variant::Interleaved,
+        ] {
+            let whole = prewarp(&impostor, &params, variant);
+            // (Outside an image and empty in it are the same: nothing there.)
+            let at = |image: &PrewarpImage, u: i32, v: i32| {
+                image
+                    .at(u as f32 + 0.5, v as f32 + 0.5)
+                    .filter(|t| !t.is_empty())
+                    .copied()
+            };
+            for (u0, v0, u1, v1) in windows {
+                let window = PlaneWindow { u0, v0, u1, v1 };
+                let part = prewarp_split(&impostor, &params, variant, Some(&window));
+                cropped += usize::from(part.texels.len() < whole.texels.len());
+                // The window's own texels and its margin's.
+                let (wu1, wv1) = (whole.u0 + whole.width as i32, whole.v0 + whole.height as i32);
+                let (x0, x1) = (
+                    (u0.floor() as i32 - 2).max(whole.u0),
+                    (u1.ceil() as i32 + 2).min(wu1),
+                );
+                let (y0, y1) = (
+                    (v0.floor() as i32 - 2).max(whole.v0),
+                    (v1.ceil() as i32 + 2).min(wv1),
+                );
+                for v in y0..y1 {
+                    for u in x0..x1 {
+                        assert_eq!(
+                            at(&part, u, v),
+                            at(&whole, u, v),
+                            "{object} {angle}° {variant:?} window {window:?} texel ({u}, {v})"
+                        );
+                    }
+                }
+            }
+        }
+    }
+    // (Every window but the one holding the whole quad crops something.)
+    assert!(cropped >= 5 * 4 * 4, "{cropped}");
+}
+
+/// Cameras near a textured object, looking at it, past it and away from it: the
+/// window a camera sees holds the plane point of every pixel whose ray crosses the
+/// plane within the pre-warp's reach (computed per pixel as the texture mapping does)
+/// and is no larger than they need; a frame drawn through the window is the frame
+/// drawn from the whole pre-warp, pixel for pixel.
+#[test]
+fn the_window_a_camera_sees_leaves_out_only_what_it_cannot_show() {
+    use glam::Vec3;
+    use relief_client::gbuffer::GBuffer;
+    use relief_client::warp::display;
+    use relief_client::warp::prewarp::{PlaneWindow, prewarp_split};
+    use relief_client::warp::texmap;
+    use relief_core::camera::Camera;
+
+    let scene = Scene::load("default").expect("default scene");
+    let solo = Solo::new(&scene, "knot", 3.0).expect("solo");
+    let impostor = Impostor::new(solo.bake(solo.eye(0.0), 128, DepthBits::Eight).expect("bake"));
+    let c = impostor.texture.camera;
+    let centre = solo.scene.objects[0].bounds.center();
+    let radius = solo.scene.objects[0].bounds.extent().length() / 2.0;
+    let mut tested = 0;
+    // Eye distance and aim (in radii from the centre), and the most of the image the
+    // window may keep (measured when written: all, 63 %, 54 %, 44 %, one texel twice).
+    for (k, (distance, aim, most)) in [
+        (3.0, Vec3::ZERO, 1.0),
+        (1.6, Vec3::new(0.6, 0.0, 0.0), 0.7),
+        (1.4, Vec3::new(-0.5, 0.4, 0.0), 0.6),
+        (1.3, Vec3::new(0.0, -0.9, 0.3), 0.5),
+        (2.0, Vec3::new(3.0, 0.0, 0.0), 0.0),
+        (1.5, Vec3::new(0.0, 0.0, 2.0), 0.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let eye = centre + (solo.eye(4.0 * k as f32) - centre).normalize() * radius * distance;
+        let camera = Camera::look_at(eye, centre + aim * radius, Vec3::Y, 50.0, 160, 120).expect("camera");
+        let params = WarpParams::new(&impostor.texture, eye).expect("params");
+        let window = PlaneWindow::seen_by(&camera, &c).expect("finite");
+        // Every pixel's plane point within reach (one quad past the quad).
+        let (w, h) = (c.width as f32, c.height as f32);
+        let (a_scale, b_scale) = (c.a / c.a.length_squared(), c.b / c.b.length_squared());
+        let mut hit = PlaneWindow {
+            u0: f32::MAX,
+            v0: f32::MAX,
+            u1: f32::MIN,
+            v1: f32::MIN,
+        };
+        for y in 0..camera.height {
+            for x in 0..camera.width {
+                let ray = camera.ray(x as f32 + 0.5, y as f32 + 0.5);
+                let towards = ray.dot(c.f);
+                if towards <= 0.0 {
+                    continue;
+                }
+                let s = params.h / towards;
+                let (u, v) = (
+                    params.epipole.x + s * ray.dot(a_scale),
+                    params.epipole.y + s * ray.dot(b_scale),
+                );
+                if u < -w || u > 2.0 * w || v < -h || v > 2.0 * h {
+                    continue;
+                }
+                assert!(
+                    u >= window.u0 - 0.01
+                        && u <= window.u1 + 0.01
+                        && v >= window.v0 - 0.01
+                        && v <= window.v1 + 0.01,
+                    "camera {k}: pixel ({x}, {y}) sees ({u}, {v}) outside {window:?}"
+                );
+                hit = PlaneWindow {
+                    u0: hit.u0.min(u),
+                    v0: hit.v0.min(v),
+                    u1: hit.u1.max(u),
+                    v1: hit.v1.max(v),
+                };
+            }
+        }
+        // No larger than the pixels need (plus the half pixel to the screen's edge).
+        let slack = 0.05 * (w + h);
+        assert!(
+            window.u0 >= hit.u0 - slack
+                && window.u1 <= hit.u1 + slack
+                && window.v0 >= hit.v0 - slack
+                && window.v1 <= hit.v1 + slack,
+            "camera {k}: {window:?} against the pixels' {hit:?}"
+        );
+        let whole = prewarp_split(&impostor, &params, Variant::Interleaved, None);
+        let part = prewarp_split(&impostor, &params, Variant::Interleaved, Some(&window));
+        let kept = part.texels.len() as f32 / whole.texels.len() as f32;
+        assert!(part.texels.len() == 1 || kept <= most, "camera {k} keeps {kept}");
+        assert!(
+            (part.texels.len() == 1) == (most == 0.0),
+            "camera {k} keeps {kept}"
+        );
+        let mut expected = GBuffer::new(camera.width, camera.height);
+        texmap::map(&whole, &impostor.texture, &params, 1.0, 0, &camera, &mut expected);
+        let mut got = GBuffer::new(camera.width, camera.height);
+        display(Method::Interleaved, &impostor, 0, &camera, &mut got).expect("display");
+        let (expected, got) = (
+            expected.shade(&solo.scene, &camera),
+            got.shade(&solo.scene, &camera),
+        );
+        tested += got.object.iter().filter(|&&o| o == 0).count();
+        assert!(
+            expected.color == got.color && expected.object == got.object,
+            "camera {k}"
+        );
+    }
+    // (The frames show the object.)
+    assert!(tested > 10_000, "{tested} pixels");
+}
+
 /// Texture mapping covers what the surface covers: a square filling its 8×8 texture
 /// (a texel is ~5 pixels here), shown from the texture's own eye, covers the pixels the
 /// rasterized square does — to its edges, the outermost half texel included — with no

@@ -312,6 +312,7 @@ fn warp(args: WarpArgs) -> Result<()> {
                     &impostor,
                     &params,
                     Variant::Interleaved,
+                    None,
                 )))
             })
         });

@@ -93,8 +93,10 @@ pub struct DemoArgs {
 struct FrameStages {
     /// The impostor manager's decisions and requests.
     plan: f64,
-    /// Impostors warped or redrawn as sprites.
-    impostors: f64,
+    /// The warped impostors' pre-warps.
+    prewarp: f64,
+    /// Impostors drawn: pre-warps texture-mapped, sprites redrawn.
+    draw: f64,
     /// Objects drawn as geometry.
     geometry: f64,
     /// Lighting.
@@ -106,7 +108,8 @@ impl FrameStages {
         let of = |stage: fn(&RenderStages) -> f64| median(render.iter().map(stage).collect());
         FrameStages {
             plan: median(plan_ms.to_vec()),
-            impostors: of(|r| r.impostors_ms),
+            prewarp: of(|r| r.prewarp_ms),
+            draw: of(|r| r.draw_ms),
             geometry: of(|r| r.geometry_ms),
             shade: of(|r| r.shade_ms),
         }

@@ -190,7 +190,10 @@ pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<P
     let params = params::WarpParams::new(&impostor.texture, camera.eye)?;
     // The halves above and below the epipole on two threads: 1.5–1.8× faster at 512²
     // here when the epipole is inside (`relief bench warp`, "split ms").
-    let image = prewarp::prewarp_split(impostor, &params, variant);
+    // Only what the screen can show: a texture partly off screen (or far larger than
+    // it) pre-warps only the texels that can land on it.
+    let seen = prewarp::PlaneWindow::seen_by(camera, &impostor.texture.camera);
+    let image = prewarp::prewarp_split(impostor, &params, variant, seen.as_ref());
     Ok(Prepared(Stage::Prewarped(image, params, 1.0)))
 }
 
@@ -198,6 +201,15 @@ pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<P
 pub struct Prepared(Stage);
 
 impl Prepared {
+    /// Texels of `impostor` (the one prepared) this display visits: those a pre-warp
+    /// reached the screen from, or all.
+    pub fn texels_warped(&self, impostor: &Impostor) -> usize {
+        match &self.0 {
+            Stage::Prewarped(image, ..) => image.visited,
+            _ => impostor.texture.depth.len(),
+        }
+    }
+
     /// Depth-tests the surface as if `factor` (> 1) times farther from the eye than it
     /// is, along each pixel's own ray — the same pixels, and the true depths stored;
     /// only the test changes — so that

@@ -24,6 +24,10 @@
 use wide::bytemuck::cast;
 use wide::{i16x8, u8x16, u16x8, u64x2};
 
+use glam::Vec3;
+use relief_core::camera::Camera;
+use relief_core::relief::SourceCamera;
+
 use super::params::WarpParams;
 use crate::impostor::Impostor;
 
@@ -67,6 +71,9 @@ pub struct PrewarpImage {
     pub width: u32,
     pub height: u32,
     pub texels: Vec<PTexel>,
+    /// Source texels visited: all of the texture's, or those that can reach a
+    /// [`PlaneWindow`].
+    pub visited: usize,
 }
 
 impl PrewarpImage {
@@ -358,6 +365,9 @@ struct Job<'a> {
     variant: Variant,
     u0: i64,
     columns: usize,
+    /// The texels of each row visited: those before the epipole (rightwards), and
+    /// those after it (leftwards) — all, or those that can land where the screen sees.
+    row_halves: [std::ops::Range<usize>; 2],
 }
 
 impl Job<'_> {
@@ -371,10 +381,9 @@ impl Job<'_> {
         interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell + Copy,
         sink: &mut impl RowSink,
     ) {
-        let w = self.impostor.texture.camera.width as usize;
-        let split = split_at(w, self.params.epipole.x);
-        self.row_half::<true>(j, 0..split, interpolate, sink);
-        self.row_half::<false>(j, split..w, interpolate, sink);
+        let [before, after] = &self.row_halves;
+        self.row_half::<true>(j, before.clone(), interpolate, sink);
+        self.row_half::<false>(j, after.clone(), interpolate, sink);
     }
 
     /// The texels `texels` of source row `j`, visited rightwards when `RIGHT`:
@@ -536,22 +545,182 @@ impl Job<'_> {
 
 /// Pre-warps `impostor` for the eye of `params`, on the calling thread.
 pub fn prewarp(impostor: &Impostor, params: &WarpParams, variant: Variant) -> PrewarpImage {
-    prewarp_with(impostor, params, variant, false)
+    prewarp_with(impostor, params, variant, None, false)
 }
 
 /// As [`prewarp`], with the halves above and below the epipole on two threads: they
 /// write disjoint rows (texels move towards the epipole, never past it), so each
-/// writes straight into the final image.
-pub fn prewarp_split(impostor: &Impostor, params: &WarpParams, variant: Variant) -> PrewarpImage {
-    prewarp_with(impostor, params, variant, true)
+/// writes straight into the final image. With `seen` (see [`PlaneWindow::seen_by`]),
+/// only the part of the image a texture mapping through that window reads is made,
+/// from only the texels that can reach it — the same pixels there as without.
+pub fn prewarp_split(
+    impostor: &Impostor,
+    params: &WarpParams,
+    variant: Variant,
+    seen: Option<&PlaneWindow>,
+) -> PrewarpImage {
+    prewarp_with(impostor, params, variant, seen, true)
 }
 
-fn prewarp_with(impostor: &Impostor, params: &WarpParams, variant: Variant, parallel: bool) -> PrewarpImage {
+/// A rectangle of the source plane, in texel coordinates: `u ∈ [u0, u1], v ∈ [v0, v1]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneWindow {
+    pub u0: f32,
+    pub v0: f32,
+    pub u1: f32,
+    pub v1: f32,
+}
+
+impl PlaneWindow {
+    /// The part of the source plane of `c` that the screen of `camera` shows, as far
+    /// as a pre-warped image can reach (one quad size past the quad, see
+    /// [`MAX_MARGIN`]): that plane rectangle clipped to the camera's frustum, whose
+    /// four side planes pass through the eye — exactly the plane points some pixel's
+    /// ray crosses ahead of the eye — and the clipped polygon's bounding box. Empty
+    /// (`u1 < u0`) when the screen shows none of it; `None` when anything is not
+    /// finite (then nothing is left out).
+    pub fn seen_by(camera: &Camera, c: &SourceCamera) -> Option<PlaneWindow> {
+        // (In f64: at large coordinates the points' offsets from the eye lose f32 bits.)
+        let wide = |v: Vec3| [v.x as f64, v.y as f64, v.z as f64];
+        let (origin, a, b) = (wide(c.origin - camera.eye), wide(c.a), wide(c.b));
+        let (n, m) = (
+            (c.width as f64) * MAX_MARGIN as f64,
+            (c.height as f64) * MAX_MARGIN as f64,
+        );
+        let (w, h) = (c.width as f64, c.height as f64);
+        let mut polygon = vec![(-n, -m), (w + n, -m), (w + n, h + m), (-n, h + m)];
+        // The side planes: a view point (x, y, z) is on screen when |x| ≤ z·tan·aspect
+        // and |y| ≤ z·tan.
+        let tan = camera.tan_half_fov() as f64;
+        let tan_x = tan * camera.width as f64 / camera.height as f64;
+        let axes = [wide(camera.right), wide(camera.up), wide(camera.forward)];
+        let view = |(u, v): (f64, f64)| {
+            axes.map(|d| {
+                (0..3)
+                    .map(|k| (origin[k] + a[k] * u + b[k] * v) * d[k])
+                    .sum::<f64>()
+            })
+        };
+        let sides: [&dyn Fn([f64; 3]) -> f64; 4] = [
+            &|p| p[2] * tan_x + p[0],
+            &|p| p[2] * tan_x - p[0],
+            &|p| p[2] * tan + p[1],
+            &|p| p[2] * tan - p[1],
+        ];
+        for side in sides {
+            let inside = |q: (f64, f64)| side(view(q));
+            let mut clipped = Vec::with_capacity(polygon.len() + 1);
+            for (k, &p) in polygon.iter().enumerate() {
+                let q = polygon[(k + 1) % polygon.len()];
+                let (gp, gq) = (inside(p), inside(q));
+                if gp >= 0.0 {
+                    clipped.push(p);
+                }
+                if (gp >= 0.0) != (gq >= 0.0) {
+                    let t = gp / (gp - gq);
+                    clipped.push((p.0 + (q.0 - p.0) * t, p.1 + (q.1 - p.1) * t));
+                }
+            }
+            polygon = clipped;
+        }
+        let mut window = PlaneWindow {
+            u0: f32::INFINITY,
+            v0: f32::INFINITY,
+            u1: f32::NEG_INFINITY,
+            v1: f32::NEG_INFINITY,
+        };
+        for (u, v) in polygon {
+            if !(u.is_finite() && v.is_finite()) {
+                return None;
+            }
+            window = PlaneWindow {
+                u0: window.u0.min(u as f32),
+                v0: window.v0.min(v as f32),
+                u1: window.u1.max(u as f32),
+                v1: window.v1.max(v as f32),
+            };
+        }
+        Some(window)
+    }
+}
+
+/// How far (in texels) the pre-warped image reaches past a [`PlaneWindow`]: the
+/// texture mapping's bilinear footprint of a pixel at the window's edge lies within
+/// it, so the pixels it reads are those it would read in the whole image.
+const WINDOW_MARGIN: i32 = 2;
+
+/// The cells of `cells` — one half of an axis, before the epipole `e` (`before`) or
+/// after it — whose texels can land within `[lo, hi]`, and one more on either side
+/// (the span from the last cell outside to the first inside crosses into it). A texel
+/// at `x` lands at `e + s·(x − e)` for an `s` in `[s_lo, s_hi]` (> 0): a linear bound
+/// each way, so the cells are a range. Cells past it in the visit land beyond `hi`
+/// (or before `lo`) and so do the spans between them.
+fn reaching(
+    cells: std::ops::Range<usize>,
+    before: bool,
+    e: f32,
+    (s_lo, s_hi): (f32, f32),
+    (lo, hi): (f32, f32),
+) -> std::ops::Range<usize> {
+    let (e, lo, hi) = (e as f64, lo as f64, hi as f64);
+    // Before the epipole (x ≤ e) the landing spans [e + s_hi·(x − e), e + s_lo·(x − e)];
+    // after it the reverse.
+    let (for_lo, for_hi) = if before { (s_lo, s_hi) } else { (s_hi, s_lo) };
+    let (x_min, x_max) = (e + (lo - e) / for_lo as f64, e + (hi - e) / for_hi as f64);
+    // Cell k has its centre at k + ½; bounded first so the conversions are exact.
+    let bound = |x: f64| x.clamp(cells.start as f64 - 1.0, cells.end as f64 + 1.0);
+    let first = (bound(x_min - 0.5).ceil() - 1.0).max(cells.start as f64) as usize;
+    let last = (bound(x_max - 0.5).floor() + 1.0).min(cells.end as f64 - 1.0);
+    if last < first as f64 {
+        return first..first;
+    }
+    first..last as usize + 1
+}
+
+fn prewarp_with(
+    impostor: &Impostor,
+    params: &WarpParams,
+    variant: Variant,
+    seen: Option<&PlaneWindow>,
+    parallel: bool,
+) -> PrewarpImage {
     let c = &impostor.texture.camera;
     let (w, h) = (c.width as usize, c.height as usize);
     let s_min = 1.0 / (1.0 + params.k3 * params.max_depth());
-    let (u0, u1) = axis_extent(w as f32, params.epipole.x, s_min);
-    let (v0, v1) = axis_extent(h as f32, params.epipole.y, s_min);
+    let (mut u0, mut u1) = axis_extent(w as f32, params.epipole.x, s_min);
+    let (mut v0, mut v1) = axis_extent(h as f32, params.epipole.y, s_min);
+    let (column_split, row_split) = (split_at(w, params.epipole.x), split_at(h, params.epipole.y));
+    let (mut row_halves, mut rows) = ([0..column_split, column_split..w], [0..row_split, row_split..h]);
+    // The scale factors' range: the table's ends (depth is linear in the level).
+    let (first, last) = (params.scale.first().copied(), params.scale.last().copied());
+    let scales = first.zip(last).map(|(a, b)| (a.min(b), a.max(b)));
+    if let (Some(seen), Some(scales)) = (seen, scales.filter(|&(lo, hi)| lo > 0.0 && hi.is_finite())) {
+        // (Saturating: a window may reach far past the image.)
+        u0 = u0.max((seen.u0.floor() as i32).saturating_sub(WINDOW_MARGIN));
+        u1 = u1.min((seen.u1.ceil() as i32).saturating_add(WINDOW_MARGIN));
+        v0 = v0.max((seen.v0.floor() as i32).saturating_sub(WINDOW_MARGIN));
+        v1 = v1.min((seen.v1.ceil() as i32).saturating_add(WINDOW_MARGIN));
+        if u1 <= u0 || v1 <= v0 {
+            // The screen sees none of it.
+            return PrewarpImage {
+                u0,
+                v0,
+                width: 1,
+                height: 1,
+                texels: vec![PTexel::EMPTY],
+                visited: 0,
+            };
+        }
+        let (e, cu, cv) = (params.epipole, (u0 as f32, u1 as f32), (v0 as f32, v1 as f32));
+        row_halves = [
+            reaching(0..column_split, true, e.x, scales, cu),
+            reaching(column_split..w, false, e.x, scales, cu),
+        ];
+        rows = [
+            reaching(0..row_split, true, e.y, scales, cv),
+            reaching(row_split..h, false, e.y, scales, cv),
+        ];
+    }
     let (width, height) = ((u1 - u0).max(1) as usize, (v1 - v0).max(1) as usize);
     let mut texels = vec![PTexel::EMPTY; width * height];
     let job = Job {
@@ -560,11 +729,11 @@ fn prewarp_with(impostor: &Impostor, params: &WarpParams, variant: Variant, para
         variant,
         u0: u0 as i64,
         columns: width,
+        row_halves,
     };
     // Output rows whose centres lie above the epipole belong to the upper half.
     let split = ((params.epipole.y - 0.5).ceil() as i64 - v0 as i64).clamp(0, height as i64) as usize;
     let (upper, lower) = texels.split_at_mut(split * width);
-    let row_split = split_at(h, params.epipole.y);
     let mut upper = Output {
         texels: upper,
         v0: v0 as i64,
@@ -577,14 +746,16 @@ fn prewarp_with(impostor: &Impostor, params: &WarpParams, variant: Variant, para
         v1: v0 as i64 + height as i64,
         width,
     };
+    let [above, below] = rows;
+    let visited = (job.row_halves[0].len() + job.row_halves[1].len()) * (above.len() + below.len());
     if parallel {
         rayon::join(
-            || job.half::<true>(0..row_split, &mut upper),
-            || job.half::<false>(row_split..h, &mut lower),
+            || job.half::<true>(above, &mut upper),
+            || job.half::<false>(below, &mut lower),
         );
     } else {
-        job.half::<true>(0..row_split, &mut upper);
-        job.half::<false>(row_split..h, &mut lower);
+        job.half::<true>(above, &mut upper);
+        job.half::<false>(below, &mut lower);
     }
     PrewarpImage {
         u0,
@@ -592,6 +763,7 @@ fn prewarp_with(impostor: &Impostor, params: &WarpParams, variant: Variant, para
         width: width as u32,
         height: height as u32,
         texels,
+        visited,
     }
 }
 
