@@ -324,7 +324,7 @@ pub struct StaleCauses {
 /// Where one [`Manager::render`] spent its time, milliseconds.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct RenderStages {
-    /// The warped impostors' pre-warps (all at once).
+    /// Deciding which impostors are warped, and their pre-warps (all at once).
     pub prewarp_ms: f64,
     /// Impostors drawn: texture mapping of the pre-warps, and sprites redrawn.
     pub draw_ms: f64,

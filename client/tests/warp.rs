@@ -123,6 +123,7 @@ fn a_windowed_prewarp_equals_the_whole_one_where_it_reaches() {
         (-40.0, 100.0, 30.0, 200.0),
         (90.0, -30.0, 400.0, 70.0),
         (0.5, 0.5, 127.5, 127.5),
+        // (Past every texel's reach: nothing to compare, but it must make nothing.)
         (300.0, 300.0, 400.0, 400.0),
     ];
     let mut cropped = 0;
