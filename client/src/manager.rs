@@ -295,7 +295,8 @@ pub struct Counters {
     pub withdrawn: u64,
     /// Request → final texture, milliseconds.
     pub latencies_ms: Vec<f64>,
-    /// Frames × objects where a valid texture was needed.
+    /// Frames × objects where a valid texture was needed (impostors that may be on
+    /// screen).
     pub needs: u64,
     /// … and one was there or already asked for.
     pub prediction_hits: u64,
@@ -880,6 +881,14 @@ impl Manager {
                     continue;
                 }
                 None => {}
+            }
+            if !camera.may_see(&object.bounds) {
+                // Off screen: nothing shown, so nothing stale and nothing needed now
+                // (drawn as geometry, which the rasterizer leaves out at once); the
+                // textures for where the eye is going are still asked for.
+                self.predict_for(scene, k, camera);
+                shows.push(Show::Geometry);
+                continue;
             }
             let centre = object.bounds.center();
             let grades: Vec<Grade> = self.grades(scene, k, camera.eye, camera).collect();

@@ -315,3 +315,32 @@ fn stale_object_frames_are_counted_by_cause() {
     assert_eq!((causes.missing, causes.beyond_tolerance, causes.alone), (0, 0, 1));
     assert_eq!(manager.counters.stale_frames, 1);
 }
+
+/// An object wholly off screen is not needed now: no stale frame, no request for now
+/// (only predicted ones), drawn as nothing; turned towards, it is needed and asked for.
+#[test]
+fn an_object_off_screen_is_not_needed_now() {
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let sphere = index(&scene, "sphere");
+    let centre = scene.objects[sphere].bounds.center();
+    let eye = around(centre, 0.0);
+    let config = Config {
+        predict: false,
+        ..Config::default()
+    };
+    let (mut manager, mut commands) = unanswered(&scene, config);
+    // Looking straight away from it.
+    let away = (eye, eye + (eye - centre), 0.0);
+    let now = requests_from_frame(&mut manager, &mut commands, &scene, away, "sphere", false);
+    assert!(now.is_empty(), "{now:?}");
+    assert_eq!((manager.counters.needs, manager.counters.stale_frames), (0, 0));
+    let camera = Camera::look_at(away.0, away.1, Vec3::Y, 60.0, 320, 180).unwrap();
+    let shows = manager.frame(&scene, &camera, 0.1);
+    let frame = manager.render(&scene, &shows, &camera, &mut GBuffer::new(320, 180));
+    assert!(!frame.object.contains(&(sphere as u32)));
+    // Turned towards it: needed, stale without a texture, asked for now.
+    let towards = (eye, centre, 0.2);
+    let now = requests_from_frame(&mut manager, &mut commands, &scene, towards, "sphere", false);
+    assert_eq!(now.len(), 1);
+    assert_eq!((manager.counters.needs, manager.counters.stale_frames), (1, 1));
+}

@@ -46,6 +46,11 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
     let mut triangles: Vec<ScreenTriangle> = Vec::new();
     let projection = camera.projection();
     for (slot, &(_, object)) in objects.iter().enumerate() {
+        // An object wholly off screen costs nothing (its vertices would all be
+        // projected before the triangle cull throws them out).
+        if !camera.may_see(&object.bounds) {
+            continue;
+        }
         // Each vertex projected once (a vertex is a corner of ~6 triangles); only the
         // triangles crossing the near plane are projected again, corner by corner.
         let vertices: Vec<clip::Corner> = object
