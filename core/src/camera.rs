@@ -450,7 +450,7 @@ mod tests {
         }
         // (Measured when written: 1,701 seen, and all 3,499 others told unseen.)
         assert!(seen > 1500 && unseen > 3300, "{seen} seen, {unseen} told unseen");
-        // Behind, far to the right, above: not seen. Around the eye: seen.
+        // Behind, far to one side, above: not seen. Around the eye: seen.
         for centre in [
             Vec3::new(0.0, 0.0, -5.0),
             Vec3::new(50.0, 0.0, 5.0),
@@ -458,6 +458,13 @@ mod tests {
         ] {
             assert!(!camera.may_see(&boxed(centre, 1.0)), "{centre}");
         }
+        // A wide box just behind the eye: only the plane through the eye facing
+        // forwards leaves it out (its corners lie on both sides of every other).
+        let wide_behind = Aabb {
+            min: Vec3::new(-10.0, -10.0, -2.0),
+            max: Vec3::new(10.0, 10.0, -1.0),
+        };
+        assert!(!camera.may_see(&wide_behind));
         assert!(camera.may_see(&boxed(Vec3::ZERO, 1.0)));
         assert!(camera.may_see(&boxed(Vec3::splat(f32::NAN), 1.0)));
     }
