@@ -2,7 +2,7 @@
 
 use std::f32::consts::{PI, TAU};
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use serde::Deserialize;
 
 /// Largest frame edge in pixels that any command accepts.
@@ -122,16 +122,27 @@ impl Camera {
     /// one of the frustum's side planes) — a box may pass and still show nothing, next
     /// to a corner of the frustum. Non-finite bounds pass.
     pub fn may_see(&self, bounds: &crate::bounds::Aabb) -> bool {
-        let tan_y = self.tan_half_fov();
-        let tan_x = tan_y * self.width as f32 / self.height as f32;
-        let corners = bounds.corners().map(|p| self.to_view(p));
-        // Each plane as "this is ≥ 0 inside" (false for NaN: such a box passes).
-        let outside = |inside: &dyn Fn(Vec3) -> f32| corners.iter().all(|&v| inside(v) < 0.0);
-        !(outside(&|v| v.z)
-            || outside(&|v| v.z * tan_x - v.x)
-            || outside(&|v| v.z * tan_x + v.x)
-            || outside(&|v| v.z * tan_y - v.y)
-            || outside(&|v| v.z * tan_y + v.y))
+        let corners = bounds
+            .corners()
+            .map(|p| self.frustum_margins(self.to_view(p).as_dvec3()));
+        // (False for NaN: such a box passes.)
+        !(0..5).any(|plane| corners.iter().all(|m| m[plane] < 0.0))
+    }
+
+    /// How far the view-space point `v` lies inside each of the frustum's planes that
+    /// pass through the eye, scaled (≥ 0 inside, < 0 outside): the four sides (`|x| ≤
+    /// z·tan_x`, `|y| ≤ z·tan_y`, the screen's edges), then the plane facing forwards
+    /// (`z ≥ 0`). In f64 for callers that need the bits.
+    pub fn frustum_margins(&self, v: DVec3) -> [f64; 5] {
+        let tan_y = self.tan_half_fov() as f64;
+        let tan_x = tan_y * self.width as f64 / self.height as f64;
+        [
+            v.z * tan_x + v.x,
+            v.z * tan_x - v.x,
+            v.z * tan_y + v.y,
+            v.z * tan_y - v.y,
+            v.z,
+        ]
     }
 
     /// View-space coordinates `(right, up, forward)` of a world point; `forward` is the

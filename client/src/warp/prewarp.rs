@@ -24,7 +24,7 @@
 use wide::bytemuck::cast;
 use wide::{i16x8, u8x16, u16x8, u64x2};
 
-use glam::Vec3;
+use glam::DVec3;
 use relief_core::camera::Camera;
 use relief_core::relief::SourceCamera;
 
@@ -582,36 +582,23 @@ impl PlaneWindow {
     pub fn seen_by(camera: &Camera, c: &SourceCamera) -> Option<PlaneWindow> {
         // (In f64, the eye subtracted too: at large coordinates the points' offsets
         // from the eye lose f32 bits.)
-        let wide = |v: Vec3| [v.x as f64, v.y as f64, v.z as f64];
-        let (origin, eye) = (wide(c.origin), wide(camera.eye));
-        let origin: [f64; 3] = std::array::from_fn(|k| origin[k] - eye[k]);
-        let (a, b) = (wide(c.a), wide(c.b));
+        let origin = c.origin.as_dvec3() - camera.eye.as_dvec3();
+        let (a, b) = (c.a.as_dvec3(), c.b.as_dvec3());
         let (n, m) = (
             (c.width as f64) * MAX_MARGIN as f64,
             (c.height as f64) * MAX_MARGIN as f64,
         );
         let (w, h) = (c.width as f64, c.height as f64);
         let mut polygon = vec![(-n, -m), (w + n, -m), (w + n, h + m), (-n, h + m)];
-        // The side planes: a view point (x, y, z) is on screen when |x| ≤ z·tan·aspect
-        // and |y| ≤ z·tan.
-        let tan = camera.tan_half_fov() as f64;
-        let tan_x = tan * camera.width as f64 / camera.height as f64;
-        let axes = [wide(camera.right), wide(camera.up), wide(camera.forward)];
+        let axes = [camera.right, camera.up, camera.forward].map(|d| d.as_dvec3());
         let view = |(u, v): (f64, f64)| {
-            axes.map(|d| {
-                (0..3)
-                    .map(|k| (origin[k] + a[k] * u + b[k] * v) * d[k])
-                    .sum::<f64>()
-            })
+            let p = origin + a * u + b * v;
+            DVec3::new(p.dot(axes[0]), p.dot(axes[1]), p.dot(axes[2]))
         };
-        let sides: [&dyn Fn([f64; 3]) -> f64; 4] = [
-            &|p| p[2] * tan_x + p[0],
-            &|p| p[2] * tan_x - p[0],
-            &|p| p[2] * tan + p[1],
-            &|p| p[2] * tan - p[1],
-        ];
-        for side in sides {
-            let inside = |q: (f64, f64)| side(view(q));
+        // Clipped by the four side planes (through the eye, so the plane facing
+        // forwards adds nothing).
+        for side in 0..4 {
+            let inside = |q: (f64, f64)| camera.frustum_margins(view(q))[side];
             let mut clipped = Vec::with_capacity(polygon.len() + 1);
             for (k, &p) in polygon.iter().enumerate() {
                 let q = polygon[(k + 1) % polygon.len()];
