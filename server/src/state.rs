@@ -2,7 +2,7 @@
 //! under one lock by the methods here (no `await` inside), so every rule of the
 //! scheduler lives in this file.
 
-use std::collections::{BTreeSet, HashMap, HashSet, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -186,6 +186,9 @@ pub struct State {
     workers: HashMap<u64, Worker>,
     /// The cached textures of each view.
     cache: HashMap<View, Vec<Cached>>,
+    /// The cached textures by their last use (the clock), least recent first: what
+    /// eviction takes, without a scan of the cache.
+    recency: BTreeMap<u64, JobKey>,
     cache_bytes: usize,
     next_id: u64,
     clock: u64,
@@ -228,6 +231,7 @@ impl State {
             waiters: HashMap::new(),
             workers: HashMap::new(),
             cache: HashMap::new(),
+            recency: BTreeMap::new(),
             cache_bytes: 0,
             next_id: 1,
             clock: 0,
@@ -285,8 +289,10 @@ impl State {
         self.clock += 1;
         let clock = self.clock;
         if let Some(hit) = self.cached_for(&key) {
-            hit.used = clock;
-            let texture = hit.texture.clone();
+            let last = std::mem::replace(&mut hit.used, clock);
+            let (texture, hit_key) = (hit.texture.clone(), hit.key.clone());
+            self.recency.remove(&last);
+            self.recency.insert(clock, hit_key);
             self.counters.cache_hits += 1;
             self.latencies_push(0.0);
             return Ok(Admission::Cached(texture));
@@ -685,29 +691,29 @@ impl State {
             bytes,
             used: self.clock,
         };
+        self.recency.insert(self.clock, entry.key.clone());
         let entries = self.cache.entry(entry.key.view.clone()).or_default();
         match entries.iter_mut().find(|c| c.key == entry.key) {
             Some(old) => {
                 self.cache_bytes -= old.bytes;
+                self.recency.remove(&old.used);
                 *old = entry;
             }
             None => entries.push(entry),
         }
         self.cache_bytes += bytes;
+        // Least recently used first (the one just put in is the most recent, and fits
+        // alone).
         while self.cache_bytes > self.limits.cache_bytes {
-            let Some((view, k)) = self
-                .cache
-                .iter()
-                .flat_map(|(view, entries)| entries.iter().enumerate().map(move |(k, c)| (view, k, c.used)))
-                .min_by_key(|&(_, _, used)| used)
-                .map(|(view, k, _)| (view.clone(), k))
-            else {
+            let Some((_, key)) = self.recency.pop_first() else {
                 break;
             };
-            if let Some(entries) = self.cache.get_mut(&view) {
-                self.cache_bytes -= entries.swap_remove(k).bytes;
+            if let Some(entries) = self.cache.get_mut(&key.view) {
+                if let Some(k) = entries.iter().position(|c| c.key == key) {
+                    self.cache_bytes -= entries.swap_remove(k).bytes;
+                }
                 if entries.is_empty() {
-                    self.cache.remove(&view);
+                    self.cache.remove(&key.view);
                 }
             }
         }
@@ -901,6 +907,49 @@ mod tests {
         s.admit(&sized(7, 16, DepthBits::Eight), tx.clone()).unwrap();
         assert_eq!(s.counters.cache_hits, 1);
         assert_eq!((s.counters.merged, s.stats().queue_now), (2, 3));
+    }
+
+    /// The cache keeps within its bytes by dropping the least recently used texture:
+    /// a hit counts as a use.
+    #[test]
+    fn the_cache_drops_the_least_recently_used_texture() {
+        let (mut s, hash) = state_with_scene();
+        let (tx, _rx) = unbounded_channel();
+        let (wtx, mut wrx) = unbounded_channel();
+        s.add_worker("w".into(), 1, 1, wtx);
+        // 300 kB each: three fit in the 1 MiB cache, four do not.
+        let texture = || pb::ReliefTexture {
+            albedo: vec![0; 300_000],
+            ..Default::default()
+        };
+        let mut id = 0;
+        let mut ask = |s: &mut State, x: f32| {
+            id += 1;
+            s.admit(
+                &request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Now),
+                tx.clone(),
+            )
+            .unwrap()
+        };
+        for x in [1.0, 2.0, 3.0] {
+            ask(&mut s, x);
+            s.dispatch();
+            let job = next_job(&mut wrx).unwrap();
+            s.result(job.job_id, texture(), true, 1);
+        }
+        assert_eq!(s.stats().cache_bytes, 900_000);
+        // Eye 1 used again: eye 2 is now the least recent.
+        assert!(matches!(ask(&mut s, 1.0), Admission::Cached(_)));
+        ask(&mut s, 4.0);
+        s.dispatch();
+        let job = next_job(&mut wrx).unwrap();
+        s.result(job.job_id, texture(), true, 1);
+        assert_eq!(s.stats().cache_bytes, 900_000);
+        for x in [1.0, 3.0, 4.0] {
+            assert!(matches!(ask(&mut s, x), Admission::Cached(_)), "eye {x}");
+        }
+        assert!(!matches!(ask(&mut s, 2.0), Admission::Cached(_)));
+        assert_eq!(s.counters.cache_hits, 4);
     }
 
     #[test]
