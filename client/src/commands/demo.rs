@@ -93,7 +93,8 @@ pub struct DemoArgs {
 struct FrameStages {
     /// The impostor manager's decisions and requests.
     plan: f64,
-    /// The warped impostors' pre-warps.
+    /// Deciding which impostors are warped (or redrawn as sprites), and their
+    /// pre-warps.
     prewarp: f64,
     /// Impostors drawn: pre-warps texture-mapped, sprites redrawn.
     draw: f64,
