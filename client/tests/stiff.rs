@@ -58,12 +58,7 @@ fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, wha
                 .chain(&params.scale)
                 .all(|x| x.is_finite())
         );
-        for variant in [
-            Variant::OneD,
-            Variant::Asymmetric,
-            Variant::Compensated,
-            Variant::Interleaved,
-        ] {
+        for variant in Variant::ALL {
             let image = prewarp(&impostor, &params, variant);
             assert!(
                 image.texels.iter().all(|t| t.depth.is_finite()),

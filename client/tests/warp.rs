@@ -150,12 +150,7 @@ fn a_windowed_prewarp_equals_the_whole_one_where_it_reaches() {
         }
         let impostor = Impostor::new(texture);
         let params = WarpParams::new(&impostor.texture, solo.eye(angle)).expect("params");
-        for variant in [
-            Variant::OneD,
-            Variant::Asymmetric,
-            Variant::Compensated,
-            Variant::Interleaved,
-        ] {
+        for variant in Variant::ALL {
             let whole = prewarp(&impostor, &params, variant);
             // (Outside an image and empty in it are the same: nothing there.)
             let at = |image: &PrewarpImage, u: i32, v: i32| {

@@ -40,6 +40,16 @@ pub enum Variant {
     Interleaved,
 }
 
+impl Variant {
+    /// Every variant, in table 8.1's order.
+    pub const ALL: [Variant; 4] = [
+        Variant::OneD,
+        Variant::Asymmetric,
+        Variant::Compensated,
+        Variant::Interleaved,
+    ];
+}
+
 /// A pre-warped texel. `depth < 0` marks an empty one.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PTexel {
