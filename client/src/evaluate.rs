@@ -24,17 +24,26 @@ pub struct Solo {
 }
 
 impl Solo {
-    /// Isolates `name` of `scene`; eyes orbit at `distance_factor` bounding radii.
+    /// Isolates `name` of `scene`; eyes orbit at `distance_factor` bounding radii
+    /// (more than 1.1, so the cameras' view of the bounding sphere, with 10 % to
+    /// spare, is narrower than 180°). An object without extent (every vertex at one
+    /// point) cannot be orbited: an error naming it.
     pub fn new(scene: &Scene, name: &str, distance_factor: f32) -> relief_core::Result<Solo> {
         let object = scene.object(name)?.clone();
+        let radius = object.bounds.extent().length() * 0.5;
+        let distance = radius * distance_factor;
+        if !(radius > 0.0 && distance.is_finite() && distance_factor > 1.1) {
+            return Err(relief_core::Error::Invalid(format!(
+                "object `{name}` cannot be orbited at {distance_factor} bounding radii: its bounding radius is {radius}"
+            )));
+        }
         let solo = Scene {
             objects: vec![object],
             ..scene.clone()
         };
         let tracer = SceneTracer::new(&solo);
-        let radius = solo.objects[0].bounds.extent().length() * 0.5;
         Ok(Solo {
-            distance: radius * distance_factor,
+            distance,
             scene: solo,
             tracer,
         })
@@ -50,12 +59,13 @@ impl Solo {
     }
 
     /// A square camera at `eye` looking at the object's centre, its field of view just
-    /// wide enough for the object's bounding sphere (with 10 % to spare).
-    pub fn camera(&self, eye: Vec3, size: u32) -> Camera {
+    /// wide enough for the object's bounding sphere (with 10 % to spare) from the
+    /// orbit; an error for an eye or size no camera can have.
+    pub fn camera(&self, eye: Vec3, size: u32) -> relief_core::Result<Camera> {
         let centre = self.scene.objects[0].bounds.center();
         let radius = self.scene.objects[0].bounds.extent().length() * 0.5;
         let fov = 2.0 * (radius * 1.1 / self.distance).asin().to_degrees();
-        Camera::look_at(eye, centre, Vec3::Y, fov, size, size).expect("orbit camera is valid")
+        Camera::look_at(eye, centre, Vec3::Y, fov, size, size).map_err(relief_core::Error::Invalid)
     }
 
     /// Bakes the object's relief texture for `eye` (an error for an object too

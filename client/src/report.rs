@@ -149,12 +149,12 @@ pub fn error_vs_time(
     for name in objects {
         let solo = Solo::new(scene, name, options.distance)?;
         let source_eye = solo.eye(0.0);
-        let source_camera = solo.camera(source_eye, options.frame_size);
-        let cameras: Vec<_> = options
+        let source_camera = solo.camera(source_eye, options.frame_size)?;
+        let cameras = options
             .angles
             .iter()
             .map(|&a| solo.camera(solo.eye(a), options.frame_size))
-            .collect();
+            .collect::<relief_core::Result<Vec<_>>>()?;
         let references: Vec<Frame> = cameras.iter().map(|c| solo.reference(c, 1)).collect();
         let antialiased: Vec<Frame> = cameras
             .iter()

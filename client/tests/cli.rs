@@ -103,6 +103,50 @@ fn bad_objects_and_eyes() {
         &bake_args("default", &["--object", "sphere", "--eye", "0,5"]),
         &["X,Y,Z"],
     );
+    // An eye so far that squared lengths overflow still has a view direction; here it
+    // looks straight down, along the default up vector.
+    assert_one_line_error(
+        &[
+            "frame",
+            "--eye",
+            "0,1e20,1",
+            "--target",
+            "0,0,0",
+            "--out",
+            "/tmp/relief-cli-unused.png",
+        ],
+        &["up vector", "parallel"],
+    );
+    // An object whose vertices are all one point has no orbit to measure on.
+    let dir = scratch("degenerate");
+    let obj = dir.join("point.obj");
+    std::fs::write(&obj, "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n").unwrap();
+    let (obj, out) = (obj.to_str().unwrap(), dir.join("report"));
+    assert_one_line_error(
+        &[
+            "report",
+            "error-vs-time",
+            "--scene",
+            obj,
+            "--object",
+            "point",
+            "--sizes",
+            "16",
+            "--angles",
+            "0",
+            "--runs",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &["point", "cannot be orbited"],
+    );
+    assert_one_line_error(
+        &[
+            "bench", "warp", "--scene", obj, "--object", "point", "--size", "16", "--runs", "1",
+        ],
+        &["point", "cannot be orbited"],
+    );
 }
 
 #[test]
@@ -180,6 +224,13 @@ fn help_works_everywhere() {
         &["bake", "--help"],
         &["reference", "--help"],
         &["bench", "raytrace", "--help"],
+        &["bench", "warp", "--help"],
+        &["bench", "rpc", "--help"],
+        &["demo", "--help"],
+        &["render", "--help"],
+        &["frame", "--help"],
+        &["load", "--help"],
+        &["report", "error-vs-time", "--help"],
     ] {
         let (code, stdout, _) = relief(args);
         assert_eq!(code, 0, "{args:?}");
@@ -205,4 +256,167 @@ fn bench_raytrace_prints_the_promised_json() {
         assert!(v[key].as_f64().is_some_and(|x| x > 0.0), "{key} in {stdout}");
     }
     assert_eq!(v["triangles"].as_u64(), Some(20480));
+}
+
+/// The keys of `v` that are not positive numbers, among `keys`.
+fn not_positive<'a>(v: &serde_json::Value, keys: &[&'a str]) -> Vec<&'a str> {
+    keys.iter()
+        .copied()
+        .filter(|key| !v[*key].as_f64().is_some_and(|x| x > 0.0))
+        .collect()
+}
+
+#[test]
+fn bench_warp_prints_the_promised_json() {
+    let (code, stdout, stderr) = relief(&[
+        "bench",
+        "warp",
+        "--object",
+        "sphere",
+        "--size",
+        "16",
+        "--frame-size",
+        "32",
+        "--runs",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON object");
+    let missing = not_positive(&v, &["memcpy_ms", "naive_ms", "lut_ms", "pullpush_1280x720_ms"]);
+    assert!(missing.is_empty(), "{missing:?} in {stdout}");
+    let methods = v["methods"].as_object().expect("methods");
+    // Every method the CLI knows, by name (sprite included: it redraws the last image).
+    for name in [
+        "sprite",
+        "twopass-1d",
+        "twopass-asym",
+        "twopass-comp",
+        "interleaved",
+        "forward-pullpush",
+        "inverse-64",
+    ] {
+        let timing = &methods[name];
+        let missing = not_positive(timing, &["ms", "texels_per_s", "memcpy_ratio", "naive_ratio"]);
+        assert!(missing.is_empty(), "{name}: {missing:?} in {timing}");
+    }
+    let missing = not_positive(&methods["interleaved"], &["prewarp_ms", "prewarp_split_ms"]);
+    assert!(missing.is_empty(), "interleaved: {missing:?} in {stdout}");
+    let table = v["table_8_1"].as_object().expect("table_8_1");
+    assert_eq!(table["interleaved"].as_f64(), Some(1.0), "{stdout}");
+    assert_eq!(table.len(), 4, "{stdout}");
+}
+
+#[test]
+fn frame_writes_the_picture_and_the_promised_json() {
+    let dir = scratch("frame");
+    let out = dir.join("frame.png");
+    let out = out.to_str().unwrap();
+    let (code, stdout, stderr) = relief(&[
+        "frame",
+        "--eye",
+        "9,2.5,8",
+        "--target",
+        "0,1,0",
+        "--size",
+        "64x36",
+        "--runs",
+        "1",
+        "--compare",
+        "--json",
+        "--out",
+        out,
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON object");
+    let names = |key: &str| -> Vec<String> {
+        let list = v[key].as_array().unwrap_or_else(|| panic!("{key} in {stdout}"));
+        list.iter().filter_map(|n| n.as_str().map(String::from)).collect()
+    };
+    assert_eq!(names("impostors"), ["sphere", "knot", "tree", "rock"], "{stdout}");
+    assert_eq!(names("geometry"), ["ground"], "{stdout}");
+    let missing = not_positive(
+        &v,
+        &[
+            "frame_ms",
+            "geometry_frame_ms",
+            "speedup",
+            "texels_warped",
+            "texels_baked",
+            "psnr_db",
+        ],
+    );
+    assert!(missing.is_empty(), "{missing:?} in {stdout}");
+    assert_eq!(v["fell_back"].as_u64(), Some(0), "{stdout}");
+    let picture = image::open(out).expect("the frame is a PNG");
+    assert_eq!((picture.width(), picture.height()), (64, 36));
+}
+
+#[test]
+fn report_error_vs_time_writes_the_promised_files() {
+    let dir = scratch("report");
+    let (code, stdout, stderr) = relief(&[
+        "report",
+        "error-vs-time",
+        "--object",
+        "sphere",
+        "--sizes",
+        "16",
+        "--angles",
+        "0,5",
+        "--runs",
+        "1",
+        "--methods",
+        "interleaved,forward-pullpush",
+        "--frame-size",
+        "32",
+        "--json",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let csv = std::fs::read_to_string(dir.join("error_vs_time.csv")).expect("error_vs_time.csv");
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next(),
+        Some("object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac,psnr_aa_db")
+    );
+    // Geometry at each angle, then each method at each size and angle.
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    let keys: Vec<(&str, &str, &str)> = rows.iter().map(|r| (r[1], r[2], r[3])).collect();
+    assert_eq!(
+        keys,
+        [
+            ("geometry", "0", "0"),
+            ("geometry", "0", "5"),
+            ("interleaved", "16", "0"),
+            ("forward-pullpush", "16", "0"),
+            ("interleaved", "16", "5"),
+            ("forward-pullpush", "16", "5"),
+        ]
+    );
+    for row in &rows {
+        let number = |k: usize| row[k].parse::<f64>().unwrap_or_else(|_| panic!("{row:?}"));
+        assert!(number(4) > 0.0 && number(5) > 10.0, "{row:?}: time and PSNR");
+        assert!(
+            (0.0..=1.0).contains(&number(6)) && (0.0..=1.0).contains(&number(7)),
+            "{row:?}"
+        );
+    }
+    let json: serde_json::Value = serde_json::from_str(stdout.trim()).expect("a JSON array");
+    let json = json.as_array().expect("a JSON array");
+    assert_eq!(json.len(), rows.len());
+    for (v, row) in json.iter().zip(&rows) {
+        assert_eq!(v["method"].as_str(), Some(row[1]));
+        assert!(
+            v["psnr_db"].as_f64().is_some() && v["hole_frac"].as_f64().is_some(),
+            "{v}"
+        );
+    }
+    for png in ["error_vs_time.png", "error_vs_angle.png", "strip_sphere.png"] {
+        let picture = image::open(dir.join(png)).unwrap_or_else(|e| panic!("{png}: {e}"));
+        assert!(picture.width() > 32 && picture.height() > 32, "{png}");
+    }
+    let predicted = std::fs::read_to_string(dir.join("predicted_error.csv")).expect("predicted_error.csv");
+    assert_eq!(predicted.lines().count(), 1 + 2, "{predicted}");
 }

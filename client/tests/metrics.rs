@@ -64,7 +64,7 @@ fn predicted_gap_tracks_the_hole_fraction() {
         let critical = CriticalPoints::find(&impostor.texture, 8, 8);
         let mut last = (0.0f32, 0.0f64);
         for angle in [5.0f32, 10.0, 20.0, 40.0] {
-            let camera = solo.camera(solo.eye(angle), 256);
+            let camera = solo.camera(solo.eye(angle), 256).expect("orbit camera");
             let params = WarpParams::new(&impostor.texture, camera.eye).unwrap();
             let predicted = critical.worst_region_gap(&params);
             let mut gbuffer = GBuffer::new(camera.width, camera.height);
@@ -88,9 +88,9 @@ fn schaufler_tests_on_an_orbit() {
     let solo = Solo::new(&scene, "sphere", 3.0).unwrap();
     let bounds = solo.scene.objects[0].bounds;
     let source = solo.eye(0.0);
-    let camera = solo.camera(source, 512);
+    let camera = solo.camera(source, 512).expect("orbit camera");
     assert!(sprite_still_valid(&bounds, source, &camera));
-    let turned = solo.camera(solo.eye(5.0), 512);
+    let turned = solo.camera(solo.eye(5.0), 512).expect("orbit camera");
     assert!(!sprite_still_valid(&bounds, source, &turned), "5° is many pixels");
     // 64 texels across an object that covers ~230 of 512 pixels is too coarse; 512 is not.
     let coarse = solo.bake(source, 64, DepthBits::Eight).unwrap();

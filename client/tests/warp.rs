@@ -382,7 +382,7 @@ fn a_texture_drawn_behind_fills_what_the_first_leaves_empty() {
     let bake =
         |degrees: f32| Impostor::new(solo.bake(solo.eye(degrees), 128, DepthBits::Eight).expect("bake"));
     let (first, second) = (bake(0.0), bake(60.0));
-    let camera = solo.camera(solo.eye(30.0), 256);
+    let camera = solo.camera(solo.eye(30.0), 256).expect("orbit camera");
     let mut alone = GBuffer::new(256, 256);
     let warp = |impostor: &Impostor, factor: f32, gbuffer: &mut GBuffer| {
         let prepared = prepare(Method::Interleaved, impostor, &camera).expect("prepare");

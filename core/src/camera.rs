@@ -45,6 +45,14 @@ impl Projection {
     }
 }
 
+/// The unit vector along `v`, or `None` for a zero vector. Scaled to its largest
+/// component first: finite vectors whose squared length overflows (components beyond
+/// about 1.8e19) or underflows still normalise.
+fn direction(v: Vec3) -> Option<Vec3> {
+    let largest = v.abs().max_element();
+    (largest > 0.0 && largest.is_finite()).then(|| (v / largest).normalize())
+}
+
 impl Camera {
     /// A camera at `eye` looking at `target`. Errors name the bad argument.
     pub fn look_at(
@@ -66,14 +74,19 @@ impl Camera {
                 "frame size {width}x{height} must be between 1x1 and {MAX_FRAME_SIZE}x{MAX_FRAME_SIZE}"
             ));
         }
-        let forward = (target - eye).normalize_or_zero();
-        if forward == Vec3::ZERO || !forward.is_finite() {
-            return Err("eye and target coincide: no view direction".into());
+        let offset = target - eye;
+        if !offset.is_finite() {
+            return Err(format!(
+                "eye and target are too far apart ({offset}): the view direction overflows"
+            ));
         }
-        let right = forward.cross(up).normalize_or_zero();
-        if right == Vec3::ZERO || !right.is_finite() {
-            return Err("up vector is zero or parallel to the view direction".into());
-        }
+        let forward = direction(offset).ok_or("eye and target coincide: no view direction")?;
+        // (Unit vectors: a cross this short is parallel to rounding, its direction noise.)
+        let right = direction(up)
+            .map(|up| forward.cross(up))
+            .filter(|right| right.length() > 1e-6)
+            .ok_or("up vector is zero or parallel to the view direction")?
+            .normalize();
         Ok(Camera {
             eye,
             forward,
@@ -562,6 +575,20 @@ mod tests {
         assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 180.0, 4, 4).is_err());
         assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 60.0, 0, 4).is_err());
         assert!(Camera::look_at(Vec3::NAN, Vec3::ZERO, Vec3::Y, 60.0, 4, 4).is_err());
+        // Far beyond where squared lengths overflow (1.8e19), the direction is still
+        // found; and a huge or tiny up vector is only a direction.
+        let far = Camera::look_at(Vec3::new(0.0, 1e20, 1e20), Vec3::ZERO, Vec3::Y * 1e30, 60.0, 4, 4)
+            .expect("a far eye has a view direction");
+        assert!(
+            far.forward
+                .abs_diff_eq(Vec3::new(0.0, -1.0, -1.0).normalize(), 1e-6)
+        );
+        assert!(Camera::look_at(Vec3::Z * 1e-30, Vec3::ZERO, Vec3::Y * 1e-30, 60.0, 4, 4).is_ok());
+        // Eye and target on opposite ends of the float range: the offset overflows.
+        let err = Camera::look_at(Vec3::X * 3e38, Vec3::X * -3e38, Vec3::Y, 60.0, 4, 4).unwrap_err();
+        assert!(err.contains("too far apart"), "{err}");
+        // An up vector a rounding error away from the view direction is parallel.
+        assert!(Camera::look_at(Vec3::Y, Vec3::ZERO, Vec3::new(1e-9, 1.0, 0.0), 60.0, 4, 4).is_err());
     }
 
     #[test]

@@ -231,7 +231,7 @@ fn warp(args: WarpArgs) -> Result<()> {
     let scene = Scene::load(&args.scene)?;
     let solo = Solo::new(&scene, &args.object, 3.0)?;
     let impostor = Impostor::new(solo.bake(solo.eye(0.0), args.size, DepthBits::Eight)?);
-    let camera = solo.camera(solo.eye(args.angle), args.frame_size);
+    let camera = solo.camera(solo.eye(args.angle), args.frame_size)?;
     let params = WarpParams::new(&impostor.texture, camera.eye)
         .map_err(|e| anyhow::anyhow!("--angle {}: {e}", args.angle))?;
     let texture = &impostor.texture;
@@ -278,7 +278,7 @@ fn warp(args: WarpArgs) -> Result<()> {
         std::hint::black_box(&warped);
     });
     let mut gbuffer = GBuffer::new(camera.width, camera.height);
-    let source_camera = solo.camera(solo.eye(0.0), args.frame_size);
+    let source_camera = solo.camera(solo.eye(0.0), args.frame_size)?;
     display(Method::Interleaved, &impostor, 0, &source_camera, &mut gbuffer)?;
     let sprite = Sprite::capture(&gbuffer, 0);
     let mut methods = std::collections::BTreeMap::new();

@@ -10,9 +10,11 @@ use relief_core::frame::{Frame, NO_OBJECT};
 /// does.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ImageError {
-    /// Peak signal-to-noise ratio over RGB, dB (`INFINITY` when identical).
+    /// Peak signal-to-noise ratio over RGB, dB (`INFINITY` when identical; NaN when
+    /// no pixel is covered by both: nothing to compare).
     pub psnr_db: f64,
-    /// Mean SSIM of the luma over 8×8 windows holding pixels both frames cover.
+    /// Mean SSIM of the luma over 8×8 windows holding pixels both frames cover (NaN
+    /// when there are none).
     pub ssim: f64,
     /// Fraction of covered pixels that only one frame covers.
     pub hole_frac: f64,
@@ -50,9 +52,12 @@ pub fn compare(frame: &Frame, reference: &Frame, object: Option<u32>) -> ImageEr
 }
 
 /// PSNR over RGB from the summed squared error of `pixels` pixels (`INFINITY` when
-/// there is no error).
+/// there is no error, NaN when there are no pixels: an empty comparison is no match).
 fn psnr(squared: f64, pixels: usize) -> f64 {
-    let mse = squared / (3 * pixels.max(1)) as f64;
+    if pixels == 0 {
+        return f64::NAN;
+    }
+    let mse = squared / (3 * pixels) as f64;
     if mse == 0.0 {
         f64::INFINITY
     } else {
@@ -132,7 +137,11 @@ fn ssim(a: &Frame, b: &Frame, region: &[bool]) -> f64 {
             windows += 1;
         }
     }
-    if windows == 0 { 1.0 } else { total / windows as f64 }
+    if windows == 0 {
+        f64::NAN
+    } else {
+        total / windows as f64
+    }
 }
 
 #[cfg(test)]
