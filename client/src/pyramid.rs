@@ -90,3 +90,134 @@ pub fn downsample(texture: &ReliefTexture) -> ReliefTexture {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+    use relief_core::bounds::Aabb;
+    use relief_core::relief::DepthBits;
+
+    use super::*;
+
+    /// A `width × height` texture of the unit box seen from +z: texel `(i, j)` holds
+    /// `surface(i, j)` — `None` for empty, else (depth, albedo, encoded normal).
+    fn texture(
+        width: u32,
+        height: u32,
+        surface: impl Fn(u32, u32) -> Option<(f32, [u8; 3], [u8; 3])>,
+    ) -> ReliefTexture {
+        let bounds = Aabb::from_points([Vec3::splat(-0.5), Vec3::splat(0.5)]);
+        let eye = Vec3::new(0.0, 0.0, 4.0);
+        let camera = SourceCamera::facing(eye, &bounds, width, height).expect("faces the box");
+        let bits = DepthBits::Sixteen;
+        let mut t = ReliefTexture::empty(camera, bits, eye);
+        for j in 0..height {
+            for i in 0..width {
+                if let Some((depth, albedo, normal)) = surface(i, j) {
+                    let k = t.index(i, j);
+                    t.depth[k] = camera.level_of_depth(depth, bits);
+                    t.albedo[k] = albedo;
+                    t.normal[k] = normal;
+                }
+            }
+        }
+        t
+    }
+
+    #[test]
+    fn levels_halve_down_to_the_minimum_and_keep_the_quad() {
+        let pyramid = Pyramid::new(texture(64, 48, |_, _| Some((0.5, [9; 3], [128; 3]))), 8);
+        let sizes: Vec<(u32, u32)> = pyramid
+            .levels
+            .iter()
+            .map(|l| (l.texture.camera.width, l.texture.camera.height))
+            .collect();
+        // 48 → 24 → 12; halving 12 would go below 8 texels.
+        assert_eq!(sizes, [(64, 48), (32, 24), (16, 12)]);
+        let quad = |c: &SourceCamera| (c.a * c.width as f32, c.b * c.height as f32, c.origin);
+        let base = quad(&pyramid.levels[0].texture.camera);
+        for level in &pyramid.levels {
+            let (a, b, origin) = quad(&level.texture.camera);
+            assert!(a.abs_diff_eq(base.0, 1e-5) && b.abs_diff_eq(base.1, 1e-5) && origin == base.2);
+        }
+    }
+
+    #[test]
+    fn downsampling_averages_the_front_surface_of_each_block() {
+        // Rows alternate between a near surface and one 0.8 behind it, except where
+        // both are missing; odd size, so the last block is cut in half.
+        let surface = |i: u32, j: u32| match (i % 3, j % 2) {
+            (2, _) if j > 4 => None,
+            (_, 0) => Some((0.1 + 0.01 * i as f32, [10 * i as u8, 0, 200], [128, 128, 255])),
+            _ => Some((0.9, [255, 255, 0], [0, 128, 128])),
+        };
+        let fine = texture(9, 7, surface);
+        let coarse = downsample(&fine);
+        let (fc, cc) = (fine.camera, coarse.camera);
+        assert_eq!((cc.width, cc.height), (5, 4));
+        let tolerance = 2.0 * cc.a.length().max(cc.b.length());
+        let empty = DepthBits::Sixteen.empty();
+        for j in 0..4 {
+            for i in 0..5 {
+                // Brute force: the block's covered texels, the nearest, those near it.
+                let block: Vec<usize> = (0..4)
+                    .map(|n| (2 * i + n % 2, 2 * j + n / 2))
+                    .filter(|&(x, y)| x < 9 && y < 7)
+                    .map(|(x, y)| fine.index(x, y))
+                    .filter(|&k| fine.depth[k] != empty)
+                    .collect();
+                let depth = |k: usize| fc.depth_of_level(fine.depth[k], DepthBits::Sixteen);
+                let k = coarse.index(i, j);
+                let Some(front) = block.iter().map(|&k| depth(k)).reduce(f32::min) else {
+                    assert_eq!(coarse.depth[k], empty, "({i}, {j}) holds nothing");
+                    continue;
+                };
+                let kept: Vec<usize> = block
+                    .into_iter()
+                    .filter(|&k| depth(k) <= front + tolerance)
+                    .collect();
+                let n = kept.len() as f32;
+                let mean_depth = kept.iter().map(|&k| depth(k)).sum::<f32>() / n;
+                let got = cc.depth_of_level(coarse.depth[k], DepthBits::Sixteen);
+                assert!(
+                    (got - mean_depth).abs() < 1e-4,
+                    "({i}, {j}): {got} vs {mean_depth}"
+                );
+                // Only the near rows' colours (blue 200) are averaged, never the far yellow.
+                assert!(
+                    front < 0.5 && coarse.albedo[k][2] == 200,
+                    "({i}, {j}) {:?}",
+                    coarse.albedo[k]
+                );
+                let red = kept.iter().map(|&k| fine.albedo[k][0] as f32).sum::<f32>() / n;
+                assert_eq!(coarse.albedo[k][0], (red + 0.5) as u8);
+            }
+        }
+    }
+
+    #[test]
+    fn each_level_is_the_coarsest_the_resolution_test_accepts() {
+        let pyramid = Pyramid::new(texture(256, 256, |_, _| Some((0.5, [9; 3], [128; 3]))), 4);
+        let mut previous = 0;
+        for distance in [2.0f32, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0] {
+            let camera = Camera::look_at(Vec3::new(0.0, 0.0, distance), Vec3::ZERO, Vec3::Y, 40.0, 320, 240)
+                .expect("camera");
+            let level = pyramid.level_for(&camera, 1.0);
+            let fine_enough =
+                |l: usize| !needs_finer_texture(&pyramid.levels[l].texture.camera, &camera, 1.0);
+            // Fine enough (or the finest), and the next coarser one is not.
+            assert!(level == 0 || fine_enough(level), "{distance}: level {level}");
+            assert!(
+                level + 1 == pyramid.levels.len() || !fine_enough(level + 1),
+                "{distance}: level {level}"
+            );
+            // Farther never needs finer texels.
+            assert!(level >= previous, "{distance}: level {level} after {previous}");
+            previous = level;
+        }
+        assert!(
+            previous >= 3,
+            "at 128 m the texture is far coarser: level {previous}"
+        );
+    }
+}
