@@ -219,6 +219,18 @@ fn plotted_psnr(psnr: f64) -> f64 {
     psnr.min(60.0)
 }
 
+/// Palette entries kept for the report's series: geometry, then each method.
+const SERIES_COLOURS: usize = 1 + Method::ALL.len();
+
+/// The palette entry of a report series named after a method (or geometry), the same
+/// in every chart whichever series it holds; `None` for other series.
+fn series_colour(name: &str) -> Option<usize> {
+    if name == report::GEOMETRY {
+        return Some(0);
+    }
+    Method::ALL.iter().position(|m| m.name() == name).map(|k| 1 + k)
+}
+
 /// A line chart: one curve per series (points keyed for order), PNG at `path`.
 pub(crate) fn draw_chart(
     path: &Path,
@@ -265,7 +277,8 @@ pub(crate) fn draw_chart(
                     .draw()
                     .map_err(|e| anyhow!("plot: {e}"))?;
                 for (i, (method, s)) in series.iter().enumerate() {
-                    let color = Palette99::pick(i).to_rgba();
+                    let color =
+                        Palette99::pick(series_colour(method).unwrap_or(SERIES_COLOURS + i)).to_rgba();
                     let pts: Vec<(f64, f64)> = s.values().copied().collect();
                     chart
                         .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
@@ -342,20 +355,24 @@ fn plot_error_vs_angle(rows: &[Row], options: &Options, path: &Path) -> Result<(
     )
 }
 
-/// Reference and each method side by side; below each method, its difference from the
-/// reference (×4).
+/// Height of the strip's row of column names, pixels.
+const LABEL_HEIGHT: u32 = 22;
+
+/// Reference and each method side by side, each column named; below each method, its
+/// difference from the reference (×4).
 fn write_strip(strip: &Strip, path: &Path) -> Result<()> {
     let (fw, fh) = (strip.reference.width, strip.reference.height);
     if strip.frames.is_empty() || fw <= 1 {
         return Ok(());
     }
     let columns = 1 + strip.frames.len() as u32;
-    let mut out = Frame::new(fw * columns, fh * 2, [255, 255, 255]);
+    let (width, height) = (fw * columns, LABEL_HEIGHT + 2 * fh);
+    let mut rgb = vec![255u8; (width * height * 3) as usize];
     let mut blit = |frame: &Frame, col: u32, row: u32| {
         for y in 0..fh {
             for x in 0..fw {
-                let k = (y * fw + x) as usize;
-                out.color[((row * fh + y) * fw * columns + col * fw + x) as usize] = frame.color[k];
+                let at = (((LABEL_HEIGHT + row * fh + y) * width + col * fw + x) * 3) as usize;
+                rgb[at..at + 3].copy_from_slice(&frame.color[(y * fw + x) as usize]);
             }
         }
     };
@@ -368,10 +385,17 @@ fn write_strip(strip: &Strip, path: &Path) -> Result<()> {
         }
         blit(&diff, i as u32 + 1, 1);
     }
-    out.save_png(path)?;
-    let names: Vec<String> = std::iter::once("reference".to_string())
-        .chain(strip.frames.iter().map(|(m, _)| m.name()))
-        .collect();
-    tracing::info!("{}: columns {}", path.display(), names.join(" | "));
-    Ok(())
+    let names = std::iter::once("reference".to_string()).chain(strip.frames.iter().map(|(m, _)| m.name()));
+    {
+        let root = BitMapBackend::with_buffer(&mut rgb, (width, height)).into_drawing_area();
+        let style = ("sans-serif", 16).into_font().color(&BLACK);
+        for (col, name) in names.enumerate() {
+            let at = ((col as u32 * fw + 4) as i32, 3);
+            root.draw_text(&name, &style, at)
+                .map_err(|e| anyhow!("strip: {e}"))?;
+        }
+        root.present().map_err(|e| anyhow!("strip: {e}"))?;
+    }
+    image::save_buffer(path, &rgb, width, height, image::ColorType::Rgb8)
+        .with_context(|| format!("writing {}", path.display()))
 }
