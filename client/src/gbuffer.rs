@@ -674,11 +674,11 @@ mod tests {
         for y in 0..h {
             for x in 0..w {
                 k += 1;
-                if k % 5 == 0 {
+                if k.is_multiple_of(5) {
                     continue; // empty
                 }
                 let a = k as f32 * 0.7;
-                let object = if k % 7 == 0 {
+                let object = if k.is_multiple_of(7) {
                     99
                 } else {
                     k % scene.objects.len() as u32

@@ -168,7 +168,8 @@ struct Summary {
     rtt_ms: u64,
     predict: bool,
     tolerance: f32,
-    workers: u32,
+    /// Workers started; `None` with `--server`, whose own workers serve.
+    workers: Option<u32>,
     source: String,
 }
 
@@ -415,10 +416,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
         {
             break;
         }
-        if args.write_every > 0 && rendered % args.write_every == 0 {
+        if args.write_every > 0 && rendered.is_multiple_of(args.write_every) {
             image.save_png(&args.out.join(format!("frame_{frame:05}.png")))?;
         }
-        if compare_every > 0 && rendered % compare_every == 0 {
+        if compare_every > 0 && rendered.is_multiple_of(compare_every) {
             // Judged after the flight: tracing references here would stall it. A long
             // flight keeps every other one, comparing half as often, to stay within
             // the memory budget.
@@ -432,7 +433,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
                 compare_every *= 2;
             }
         }
-        if rendered % args.geometry_every == 0 {
+        if rendered.is_multiple_of(args.geometry_every) {
             let mut all = GBuffer::new(w, h);
             let began = Instant::now();
             drop(render_geometry(&scene, &camera, &mut all));
@@ -487,7 +488,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         rtt_ms: args.rtt_ms,
         predict: !args.no_predict,
         tolerance: args.tolerance,
-        workers: args.workers,
+        workers: args.server.is_none().then_some(args.workers),
         source,
     };
     let json = serde_json::to_string_pretty(&summary)?;

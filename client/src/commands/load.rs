@@ -312,7 +312,7 @@ fn fly(
         let camera = camera_at(position)?;
         let shows = manager.frame(scene, &camera, t);
         drawn += 1;
-        if client == 0 && (drawn - 1) % every == 0 {
+        if client == 0 && (drawn - 1).is_multiple_of(every) {
             let image = manager.render(scene, &shows, &camera, &mut gbuffer);
             psnr.push(compare(&image, &render_reference(tracer, &camera, 1), None).psnr_db);
         }
