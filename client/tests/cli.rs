@@ -302,6 +302,9 @@ fn bench_warp_prints_the_promised_json() {
     }
     let missing = not_positive(&methods["interleaved"], &["prewarp_ms", "prewarp_split_ms"]);
     assert!(missing.is_empty(), "interleaved: {missing:?} in {stdout}");
+    let two = &v["two_prewarps"];
+    let missing = not_positive(two, &["own_threads_ms", "split_in_turn_ms", "split_at_once_ms"]);
+    assert!(missing.is_empty(), "two_prewarps: {missing:?} in {stdout}");
     let table = v["table_8_1"].as_object().expect("table_8_1");
     assert_eq!(table["interleaved"].as_f64(), Some(1.0), "{stdout}");
     assert_eq!(table.len(), 4, "{stdout}");

@@ -201,11 +201,25 @@ struct WarpReport {
     methods: std::collections::BTreeMap<String, WarpTiming>,
     /// Table 8.1 as ratios: each pre-warp variant's `prewarp_ms` over interleaved's.
     table_8_1: std::collections::BTreeMap<String, f64>,
+    /// Two interleaved pre-warps (of this texture) three ways: which way of using the
+    /// cores is faster here.
+    two_prewarps: TwoPrewarps,
     /// Pull–push reconstruction of a 1280×720 layer with one splat per 2×2 pixels.
     pullpush_1280x720_ms: f64,
     /// The same impostor seen from four times as far: the full texture against the
     /// pyramid level the resolution test picks (no texels the screen cannot show).
     multires: MultiRes,
+}
+
+/// Two pre-warps on the machine's threads, ms for both.
+#[derive(Serialize)]
+struct TwoPrewarps {
+    /// Each whole on a thread of its own, at once.
+    own_threads_ms: f64,
+    /// Each split into its halves across the threads, one after the other.
+    split_in_turn_ms: f64,
+    /// Each split, both at once: what a frame does with its impostors.
+    split_at_once_ms: f64,
 }
 
 #[derive(Serialize)]
@@ -328,6 +342,17 @@ fn warp(args: WarpArgs) -> Result<()> {
             },
         );
     }
+    bar.set_message("two pre-warps");
+    let two_prewarps = {
+        use std::hint::black_box;
+        let whole = || prewarp(&impostor, &params, Variant::Interleaved);
+        let split = || prewarp_split(&impostor, &params, Variant::Interleaved, None);
+        TwoPrewarps {
+            own_threads_ms: median_ms(args.runs, || drop(black_box(rayon::join(whole, whole)))),
+            split_in_turn_ms: median_ms(args.runs, || drop(black_box((split(), split())))),
+            split_at_once_ms: median_ms(args.runs, || drop(black_box(rayon::join(split, split)))),
+        }
+    };
     bar.set_message("pull-push 1280x720");
     let pullpush_1280x720_ms = {
         use relief_client::warp::pullpush::{Layer, Splat, Tolerance, fill};
@@ -404,6 +429,7 @@ fn warp(args: WarpArgs) -> Result<()> {
         lut_ms,
         methods,
         table_8_1,
+        two_prewarps,
         pullpush_1280x720_ms,
         multires,
     };
@@ -437,6 +463,11 @@ fn warp(args: WarpArgs) -> Result<()> {
         .map(|(k, v)| format!("{k} {v:.2}"))
         .collect();
     println!("table 8.1 (pre-warp time over interleaved): {}", table.join(", "));
+    let two = &report.two_prewarps;
+    println!(
+        "two interleaved pre-warps: each on its own thread {:.3} ms, each split in turn {:.3} ms, both split at once {:.3} ms",
+        two.own_threads_ms, two.split_in_turn_ms, two.split_at_once_ms
+    );
     println!(
         "{:<18} {:>9} {:>11} {:>9} {:>9} {:>11} {:>11}",
         "method", "ms", "Mtexels/s", "/memcpy", "/naive", "prewarp ms", "split ms"
