@@ -174,8 +174,12 @@ mod tests {
         // MSE 100 → PSNR = 10·log10(255²/100) = 28.13 dB.
         let e = compare(&a, &b, Some(0));
         assert!((e.psnr_db - 28.1308).abs() < 1e-3, "{}", e.psnr_db);
+        // A frame without the object has nothing to compare: all holes, no PSNR or
+        // SSIM (NaN), never a perfect score.
         let missing = frame([0, 0, 0], NO_OBJECT);
-        assert_eq!(compare(&missing, &a, Some(0)).hole_frac, 1.0);
+        let e = compare(&missing, &a, Some(0));
+        assert_eq!((e.hole_frac, e.pixels), (1.0, 0));
+        assert!(e.psnr_db.is_nan() && e.ssim.is_nan(), "{e:?}");
     }
 
     #[test]
