@@ -32,7 +32,12 @@ impl Solo {
         let object = scene.object(name)?.clone();
         let radius = object.bounds.extent().length() * 0.5;
         let distance = radius * distance_factor;
-        if !(radius > 0.0 && distance.is_finite() && distance_factor > 1.1) {
+        if distance_factor.is_nan() || distance_factor <= 1.1 {
+            return Err(relief_core::Error::Invalid(format!(
+                "an orbit at {distance_factor} bounding radii is not outside the bounding sphere with 10 % to spare"
+            )));
+        }
+        if !(radius > 0.0 && distance.is_finite()) {
             return Err(relief_core::Error::Invalid(format!(
                 "object `{name}` cannot be orbited at {distance_factor} bounding radii: its bounding radius is {radius}"
             )));

@@ -103,13 +103,28 @@ fn bad_objects_and_eyes() {
         &bake_args("default", &["--object", "sphere", "--eye", "0,5"]),
         &["X,Y,Z"],
     );
-    // An eye so far that squared lengths overflow still has a view direction; here it
-    // looks straight down, along the default up vector.
+    // An eye so far that squared lengths overflow (1.8e19) still has a view direction
+    // (it was told it coincided with its target) …
+    let dir = scratch("far");
+    let far = dir.join("far.png");
+    let (code, _, stderr) = relief(&[
+        "reference",
+        "--eye",
+        "1e20,1e20,1e20",
+        "--target",
+        "0,0,0",
+        "--size",
+        "8x8",
+        "--out",
+        far.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    // … and one straight above its target has none with the default up vector.
     assert_one_line_error(
         &[
             "frame",
             "--eye",
-            "0,1e20,1",
+            "0,20,0",
             "--target",
             "0,0,0",
             "--out",
@@ -246,15 +261,17 @@ fn bench_raytrace_prints_the_promised_json() {
     ]);
     assert_eq!(code, 0, "{stderr}");
     let v: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON object");
-    for key in [
-        "triangles",
-        "bvh_build_ms",
-        "rays_per_s_1t",
-        "rays_per_s_mt",
-        "threads",
-    ] {
-        assert!(v[key].as_f64().is_some_and(|x| x > 0.0), "{key} in {stdout}");
-    }
+    let missing = not_positive(
+        &v,
+        &[
+            "triangles",
+            "bvh_build_ms",
+            "rays_per_s_1t",
+            "rays_per_s_mt",
+            "threads",
+        ],
+    );
+    assert!(missing.is_empty(), "{missing:?} in {stdout}");
     assert_eq!(v["triangles"].as_u64(), Some(20480));
 }
 
@@ -287,20 +304,30 @@ fn bench_warp_prints_the_promised_json() {
     assert!(missing.is_empty(), "{missing:?} in {stdout}");
     let methods = v["methods"].as_object().expect("methods");
     // Every method the CLI knows, by name (sprite included: it redraws the last image).
-    for name in [
+    let names: Vec<&str> = methods.keys().map(String::as_str).collect();
+    let mut every = [
         "sprite",
         "twopass-1d",
         "twopass-asym",
         "twopass-comp",
         "interleaved",
         "forward-pullpush",
+        "forward-kernel-3",
+        "forward-kernel-5",
+        "inverse-16",
         "inverse-64",
-    ] {
-        let timing = &methods[name];
+        "inverse-128",
+    ];
+    every.sort();
+    assert_eq!(names, every, "{stdout}");
+    for (name, timing) in methods {
         let missing = not_positive(timing, &["ms", "texels_per_s", "memcpy_ratio", "naive_ratio"]);
         assert!(missing.is_empty(), "{name}: {missing:?} in {timing}");
     }
-    let missing = not_positive(&methods["interleaved"], &["prewarp_ms", "prewarp_split_ms"]);
+    let missing = not_positive(
+        &methods["interleaved"],
+        &["prewarp_ms", "prewarp_split_ms", "map_ms"],
+    );
     assert!(missing.is_empty(), "interleaved: {missing:?} in {stdout}");
     let two = &v["two_prewarps"];
     let missing = not_positive(two, &["own_threads_ms", "split_in_turn_ms", "split_at_once_ms"]);
@@ -411,14 +438,28 @@ fn report_error_vs_time_writes_the_promised_files() {
     assert_eq!(json.len(), rows.len());
     for (v, row) in json.iter().zip(&rows) {
         assert_eq!(v["method"].as_str(), Some(row[1]));
+        // (PSNR may be null in JSON: infinite for an identical image.)
         assert!(
-            v["psnr_db"].as_f64().is_some() && v["hole_frac"].as_f64().is_some(),
+            v.get("psnr_db").is_some() && v["hole_frac"].as_f64().is_some(),
             "{v}"
         );
     }
-    for png in ["error_vs_time.png", "error_vs_angle.png", "strip_sphere.png"] {
+    for png in ["error_vs_time.png", "error_vs_angle.png"] {
         let picture = image::open(dir.join(png)).unwrap_or_else(|e| panic!("{png}: {e}"));
         assert!(picture.width() > 32 && picture.height() > 32, "{png}");
+    }
+    // The strip: reference and two methods, 32² each, above their differences, under a
+    // row of names (22 pixels) with text in it in each column.
+    let strip = image::open(dir.join("strip_sphere.png"))
+        .expect("strip_sphere.png")
+        .to_rgb8();
+    assert_eq!(strip.dimensions(), (3 * 32, 22 + 2 * 32));
+    for column in 0..3 {
+        let inked = (0..22)
+            .flat_map(|y| (0..32).map(move |x| (column * 32 + x, y)))
+            .filter(|&(x, y)| strip.get_pixel(x, y).0 != [255; 3])
+            .count();
+        assert!(inked > 5, "column {column} has no name");
     }
     let predicted = std::fs::read_to_string(dir.join("predicted_error.csv")).expect("predicted_error.csv");
     assert_eq!(predicted.lines().count(), 1 + 2, "{predicted}");

@@ -119,12 +119,11 @@ impl SourceCamera {
         }
         let centre = bounds.center();
         // (An offset whose squared length over- or underflows — a far eye, a tiny
-        // object — is scaled before normalising.)
+        // object — still has a direction; an eye at the centre is inside the bounds,
+        // refused above.)
         let offset = centre - eye;
-        let f = if offset.length_squared().is_normal() {
-            offset.normalize()
-        } else {
-            (offset / offset.abs().max_element()).normalize()
+        let Some(f) = crate::vector::direction(offset) else {
+            return Err(FacingError::OutOfRange(eye));
         };
         // Image "up" follows world +y unless the view is nearly vertical.
         let world_up = if f.y.abs() < 0.99 { Vec3::Y } else { Vec3::Z };

@@ -32,6 +32,18 @@ pub fn ensure_finite(what: &str, v: Vec3) -> Result<Vec3, String> {
     }
 }
 
+/// The unit vector along `v`, or `None` for a zero or non-finite one. A finite vector
+/// whose squared length over- or underflows (components beyond about 1.8e19, or tiny
+/// ones) is scaled by its largest component first, so it still normalises; any other
+/// is normalised as it is (the same bits as `normalize`).
+pub fn direction(v: Vec3) -> Option<Vec3> {
+    if v.length_squared().is_normal() {
+        return Some(v.normalize());
+    }
+    let largest = v.abs().max_element();
+    (largest > 0.0 && largest.is_finite()).then(|| (v / largest).normalize())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -44,5 +56,22 @@ mod tests {
         assert!(parse_vec3("inf,0,0").unwrap_err().contains("finite"));
         assert!(parse_vec3("1,2,x").unwrap_err().contains("z component `x`"));
         assert!(parse_vec3("1e39,0,0").unwrap_err().contains("finite"));
+    }
+
+    #[test]
+    fn directions_of_huge_tiny_zero_and_infinite_vectors() {
+        let unit = Vec3::new(1.0, -2.0, 2.0) / 3.0;
+        for scale in [1.0, 1e20, 1e-30, 3e38] {
+            let d = direction(unit * scale).expect("a direction");
+            assert!(d.abs_diff_eq(unit, 1e-6), "{scale}: {d}");
+        }
+        // Ordinary vectors: exactly `normalize`.
+        assert_eq!(
+            direction(Vec3::new(3.0, 4.0, 0.5)),
+            Some(Vec3::new(3.0, 4.0, 0.5).normalize())
+        );
+        assert_eq!(direction(Vec3::ZERO), None);
+        assert_eq!(direction(Vec3::new(f32::INFINITY, 0.0, 0.0)), None);
+        assert_eq!(direction(Vec3::NAN), None);
     }
 }

@@ -182,6 +182,10 @@ struct WarpTiming {
     /// The pre-warp split into the halves above and below the epipole on two threads.
     #[serde(skip_serializing_if = "Option::is_none")]
     prewarp_split_ms: Option<f64>,
+    /// The texture mapping of the pre-warped image into the frame alone (the rest of
+    /// `ms`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    map_ms: Option<f64>,
 }
 
 #[derive(Serialize)]
@@ -239,7 +243,7 @@ fn warp(args: WarpArgs) -> Result<()> {
     use relief_client::warp::params::WarpParams;
     use relief_client::warp::prewarp::{Variant, prewarp, prewarp_split};
     use relief_client::warp::sprite::Sprite;
-    use relief_client::warp::{Method, display};
+    use relief_client::warp::{Method, display, draw, prepare};
 
     let bar = progress::spinner("baking");
     let scene = Scene::load(&args.scene)?;
@@ -330,6 +334,21 @@ fn warp(args: WarpArgs) -> Result<()> {
                 )))
             })
         });
+        let map_ms = (method == Method::Interleaved).then(|| {
+            median_ms_after(
+                args.runs,
+                &mut (GBuffer::new(camera.width, camera.height), None),
+                |(gbuffer, prepared)| {
+                    gbuffer.clear();
+                    *prepared = prepare(method, &impostor, &camera).ok();
+                },
+                |(gbuffer, prepared)| {
+                    if let Some(prepared) = prepared.take() {
+                        let _ = draw(prepared, &impostor, 0, &camera, gbuffer);
+                    }
+                },
+            )
+        });
         methods.insert(
             method.name(),
             WarpTiming {
@@ -339,6 +358,7 @@ fn warp(args: WarpArgs) -> Result<()> {
                 naive_ratio: ms / naive_ms,
                 prewarp_ms,
                 prewarp_split_ms,
+                map_ms,
             },
         );
     }
@@ -469,19 +489,20 @@ fn warp(args: WarpArgs) -> Result<()> {
         two.own_threads_ms, two.split_in_turn_ms, two.split_at_once_ms
     );
     println!(
-        "{:<18} {:>9} {:>11} {:>9} {:>9} {:>11} {:>11}",
-        "method", "ms", "Mtexels/s", "/memcpy", "/naive", "prewarp ms", "split ms"
+        "{:<18} {:>9} {:>11} {:>9} {:>9} {:>11} {:>11} {:>9}",
+        "method", "ms", "Mtexels/s", "/memcpy", "/naive", "prewarp ms", "split ms", "map ms"
     );
     for (name, t) in &report.methods {
         let opt = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.3}"));
         println!(
-            "{name:<18} {:>9.3} {:>11.1} {:>9.1} {:>9.1} {:>11} {:>11}",
+            "{name:<18} {:>9.3} {:>11.1} {:>9.1} {:>9.1} {:>11} {:>11} {:>9}",
             t.ms,
             t.texels_per_s / 1e6,
             t.memcpy_ratio,
             t.naive_ratio,
             opt(t.prewarp_ms),
-            opt(t.prewarp_split_ms)
+            opt(t.prewarp_split_ms),
+            opt(t.map_ms)
         );
     }
     Ok(())

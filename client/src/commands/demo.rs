@@ -168,7 +168,8 @@ struct Summary {
     rtt_ms: u64,
     predict: bool,
     tolerance: f32,
-    /// Workers started; `None` with `--server`, whose own workers serve.
+    /// Workers started; `None` with `--server` (whose own workers serve) or when no
+    /// server could start (textures made in-process).
     workers: Option<u32>,
     source: String,
 }
@@ -314,10 +315,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
             }
         },
     };
-    if args.server.is_none()
-        && let Some(url) = &url
-    {
-        start_workers(&mut children, url, args.workers, &args.out)?;
+    // The workers this run starts: none with --server, or without a server.
+    let started_workers = (args.server.is_none() && url.is_some()).then_some(args.workers);
+    if let (Some(url), Some(count)) = (&url, started_workers) {
+        start_workers(&mut children, url, count, &args.out)?;
     }
     let (commands_tx, commands_rx) = unbounded_channel();
     let (arrivals_tx, arrivals_rx) = unbounded_channel();
@@ -330,7 +331,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
                 args.tls_ca.as_deref(),
                 &format!("demo-{}", std::process::id()),
                 &bundle_for(&args.scene)?,
-                args.server.is_none().then_some(args.workers),
+                started_workers,
             )
             .await?;
             spawn_remote(
@@ -488,7 +489,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         rtt_ms: args.rtt_ms,
         predict: !args.no_predict,
         tolerance: args.tolerance,
-        workers: args.server.is_none().then_some(args.workers),
+        workers: started_workers,
         source,
     };
     let json = serde_json::to_string_pretty(&summary)?;

@@ -214,9 +214,11 @@ fn mean_by(
         .collect()
 }
 
-/// PSNR for plotting: identical images (infinite PSNR) sit at the top of the axis.
+/// PSNR for plotting: identical images (infinite PSNR) sit at the top of the axis; NaN
+/// (nothing compared: the method could not draw) stays NaN, which no curve plots.
 fn plotted_psnr(psnr: f64) -> f64 {
-    psnr.min(60.0)
+    // (Not `min`: `NaN.min(60.0)` is 60, a perfect score for nothing drawn.)
+    if psnr > 60.0 { 60.0 } else { psnr }
 }
 
 /// Palette entries kept for the report's series: geometry, then each method.
@@ -389,8 +391,11 @@ fn write_strip(strip: &Strip, path: &Path) -> Result<()> {
     {
         let root = BitMapBackend::with_buffer(&mut rgb, (width, height)).into_drawing_area();
         let style = ("sans-serif", 16).into_font().color(&BLACK);
+        // (Cut to the column, about 9 pixels a character, so names never run together.)
+        let fits = ((fw as usize).saturating_sub(8) / 9).max(1);
         for (col, name) in names.enumerate() {
             let at = ((col as u32 * fw + 4) as i32, 3);
+            let name: String = name.chars().take(fits).collect();
             root.draw_text(&name, &style, at)
                 .map_err(|e| anyhow!("strip: {e}"))?;
         }
