@@ -85,14 +85,34 @@ impl Bundle {
 
 /// A fresh directory for scene bundles under the system's temp dir, readable by this
 /// user only ([`unique_name`](relief_core::scratch::unique_name)): a name nobody could
-/// have prepared (or linked) beforehand, since creating it fails if it exists.
-pub fn private_scene_dir(prefix: &str) -> Result<PathBuf> {
+/// have prepared (or linked) beforehand, since creating it fails if it exists. Removed,
+/// with the scenes in it, when the returned [`PrivateDir`] is dropped — when the server
+/// or worker exits in good order — so runs do not pile up directories in the temp dir.
+pub fn private_scene_dir(prefix: &str) -> Result<PrivateDir> {
     let dir = std::env::temp_dir().join(relief_core::scratch::unique_name(prefix));
     let mut builder = std::fs::DirBuilder::new();
     #[cfg(unix)]
     std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
     builder.create(&dir).map_err(|e| Error::io(&dir, e))?;
-    Ok(dir)
+    Ok(PrivateDir(dir))
+}
+
+/// A directory this process made for itself ([`private_scene_dir`]), deleted with its
+/// contents on drop.
+#[derive(Debug)]
+pub struct PrivateDir(PathBuf);
+
+impl PrivateDir {
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for PrivateDir {
+    fn drop(&mut self) {
+        // (Nothing to do about a failure on the way out; the name is unique anyway.)
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// The argument of every `keyword` line of an OBJ or MTL file: the keyword, any
@@ -221,15 +241,16 @@ mod tests {
         let again = Bundle::decode(b.encoded.clone()).unwrap();
         assert_eq!(again.hash, b.hash);
         assert_eq!(bundle_for("default").unwrap().hash, b.hash, "stable hash");
-        let dir = std::env::temp_dir().join(format!("relief-bundle-{}", std::process::id()));
-        let scene = again.load(&dir).unwrap();
+        // (Removed when the test ends.)
+        let dir = private_scene_dir("relief-bundle-test").unwrap();
+        let scene = again.load(dir.path()).unwrap();
         assert!(scene.object("knot").is_ok());
     }
 
     #[test]
     fn a_bundle_reads_no_file_outside_itself() {
-        let dir = std::env::temp_dir().join(format!("relief-bundle-refs-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let made = private_scene_dir("relief-bundle-refs").unwrap();
+        let dir = made.path();
         // Beside the bundles' directory: a material that would paint the object red.
         std::fs::write(dir.join("outside.mtl"), "newmtl red\nKd 1 0 0\n").unwrap();
         let triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
@@ -270,7 +291,6 @@ mod tests {
             let materials = &scene.objects[0].mesh.materials;
             assert!(materials.iter().all(|m| m.name != "red"), "{line}: {materials:?}");
         }
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -67,12 +67,16 @@ fn main() -> ExitCode {
 }
 
 async fn serve(args: Args) -> Result<()> {
-    let scene_dir = match args.scene_dir {
+    // (A directory of its own, `_made`, is removed when `serve` returns; one given is kept.)
+    let (scene_dir, _made) = match args.scene_dir {
         Some(dir) => {
             std::fs::create_dir_all(&dir).with_context(|| format!("--scene-dir {}", dir.display()))?;
-            dir
+            (dir, None)
         }
-        None => relief_proto::bundle::private_scene_dir("relief-server")?,
+        None => {
+            let made = relief_proto::bundle::private_scene_dir("relief-server")?;
+            (made.path().to_path_buf(), Some(made))
+        }
     };
     let lease = Duration::from_millis(args.lease_ms);
     let job_timeout = Duration::from_millis(args.job_timeout_ms);
@@ -152,7 +156,25 @@ async fn serve(args: Args) -> Result<()> {
     let scheme = if args.tls_cert.is_some() { "https" } else { "http" };
     println!("relief-server listening on {scheme}://{address}");
     let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
-    builder
+    // On SIGINT/SIGTERM: stop taking connections and let calls in flight end, but not
+    // for ever — a worker's session stream lasts as long as the worker.
+    let (stop_tx, stop) = tokio::sync::watch::channel(false);
+    tokio::spawn(async move {
+        relief_proto::shutdown::signal().await;
+        let _ = stop_tx.send(true);
+    });
+    let stopped = |mut stop: tokio::sync::watch::Receiver<bool>| async move {
+        let _ = stop.wait_for(|stopped| *stopped).await;
+    };
+    let grace = {
+        let stop = stop.clone();
+        async move {
+            stopped(stop).await;
+            tokio::time::sleep(SHUTDOWN_GRACE).await;
+            tracing::info!("calls still open {SHUTDOWN_GRACE:?} after the stop signal: closing them");
+        }
+    };
+    let serving = builder
         .add_service(health_service)
         .add_service(reflection)
         .add_service(tonic::service::interceptor::InterceptedService::new(
@@ -166,10 +188,14 @@ async fn serve(args: Args) -> Result<()> {
         .add_service(tonic::service::interceptor::InterceptedService::new(
             workers, check,
         ))
-        .serve_with_incoming_shutdown(incoming, async {
-            let _ = tokio::signal::ctrl_c().await;
-        })
-        .await
-        .context("serving")?;
+        .serve_with_incoming_shutdown(incoming, stopped(stop));
+    tokio::select! {
+        served = serving => served.context("serving")?,
+        () = grace => {}
+    }
     Ok(())
 }
+
+/// How long a stopping server waits for calls in flight (worker sessions included)
+/// before it exits anyway.
+const SHUTDOWN_GRACE: Duration = Duration::from_secs(2);

@@ -64,10 +64,16 @@ pub fn start_server(extra: &[&str]) -> (Running, String) {
 
 /// [`start_server`] listening on `address` (e.g. a port a server before it had).
 pub fn start_server_at(address: &str, extra: &[&str]) -> (Running, String) {
+    let mut server = command("relief-server");
+    server.args(["--listen", address]).args(extra);
+    spawn_server(server)
+}
+
+/// Starts the server `server` describes (its `--listen` and flags set); returns the
+/// process and its URL.
+pub fn spawn_server(mut server: Command) -> (Running, String) {
     use std::io::{BufRead, BufReader};
-    let mut child = command("relief-server")
-        .args(["--listen", address])
-        .args(extra)
+    let mut child = server
         .stdout(std::process::Stdio::piped())
         .spawn()
         .expect("starting relief-server");
@@ -82,6 +88,35 @@ pub fn start_server_at(address: &str, extra: &[&str]) -> (Running, String) {
         .unwrap_or_else(|| panic!("unexpected first line from relief-server: {line:?}"))
         .to_string();
     (Running(child), url)
+}
+
+/// Sends SIGTERM to `child`: what a service manager sends to stop it in good order.
+pub fn send_sigterm(child: &std::process::Child) {
+    let pid = child.id().to_string();
+    let sent = Command::new("kill")
+        .args(["-TERM", &pid])
+        .status()
+        .expect("running kill");
+    assert!(sent.success(), "kill -TERM {pid}");
+}
+
+/// Waits, at most `within`, for `child` to exit.
+///
+/// # Panics
+/// When it is still running after `within`.
+pub fn wait_exit(child: &mut std::process::Child, within: std::time::Duration) -> std::process::ExitStatus {
+    let start = std::time::Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("waiting for the child") {
+            return status;
+        }
+        assert!(
+            start.elapsed() < within,
+            "process {} still running after {within:?}",
+            child.id()
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
 }
 
 /// Starts a `relief-worker` dialling `url`.

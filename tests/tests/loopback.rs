@@ -12,7 +12,9 @@ use relief_core::scene::Scene;
 use relief_proto::bundle::bundle_for;
 use relief_proto::convert::{texture_from_pb, vec3_to_pb};
 use relief_proto::pb;
-use relief_tests::{start_server, start_server_at, start_worker};
+use relief_tests::{
+    command, scratch, send_sigterm, spawn_server, start_server, start_server_at, start_worker, wait_exit,
+};
 use relief_worker::bake;
 use relief_worker::tracer::ObjectTracer;
 
@@ -298,12 +300,7 @@ async fn a_worker_told_to_stop_finishes_its_job_first() {
     let (mut remote, hash) = upload_default(&url).await;
     wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
     let stream = start_long_bake(&mut remote, &hash).await;
-    let pid = worker.0.id().to_string();
-    let signal = std::process::Command::new("kill")
-        .args(["-TERM", &pid])
-        .status()
-        .unwrap();
-    assert!(signal.success());
+    send_sigterm(&worker.0);
     // Draining, it is handed nothing new, though it has a free slot.
     tokio::time::sleep(Duration::from_millis(300)).await;
     let eye = Vec3::new(6.0, 2.5, 4.0);
@@ -316,19 +313,45 @@ async fn a_worker_told_to_stop_finishes_its_job_first() {
     assert_eq!((stats.queue_now, stats.jobs_in_flight), (1, 1), "{stats:?}");
     let results = collect(stream).await.expect("the held job is still answered");
     assert!(results.last().unwrap().r#final);
-    let start = Instant::now();
-    let status = loop {
-        if let Some(status) = worker.0.try_wait().unwrap() {
-            break status;
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "the worker did not exit"
-        );
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    };
+    let status = tokio::task::block_in_place(|| wait_exit(&mut worker.0, Duration::from_secs(30)));
     assert!(status.success(), "{status}");
     wait_for(&mut remote, "the worker gone", |s| s.workers == 0).await;
+}
+
+/// Told to stop (SIGTERM), a server and a worker remove the scene directories they
+/// made for themselves in the temp dir as they exit — the server within its grace
+/// period although the worker's session is still open, the worker then.
+#[test]
+fn stopped_processes_remove_their_scene_directories() {
+    let temp = scratch("stopping");
+    let entries = || std::fs::read_dir(&temp).expect("the scratch temp dir").count();
+    let mut server = command("relief-server");
+    server.args(["--listen", "127.0.0.1:0"]).env("TMPDIR", &temp);
+    let (mut server, url) = spawn_server(server);
+    let worker = command("relief-worker")
+        .args(["--server", &url, "--heartbeat-ms", "100"])
+        .env("TMPDIR", &temp)
+        .spawn()
+        .expect("starting relief-worker");
+    let mut worker = relief_tests::Running(worker);
+    let start = Instant::now();
+    while entries() < 2 {
+        assert!(
+            start.elapsed() < Duration::from_secs(10),
+            "no scene directories made"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // (Time to register: its session is the open call the server must not wait for.)
+    std::thread::sleep(Duration::from_millis(500));
+    send_sigterm(&server.0);
+    let status = wait_exit(&mut server.0, Duration::from_secs(10));
+    assert!(status.success(), "server: {status}");
+    assert_eq!(entries(), 1, "the server's directory is left");
+    send_sigterm(&worker.0);
+    let status = wait_exit(&mut worker.0, Duration::from_secs(15));
+    assert!(status.success(), "worker: {status}");
+    assert_eq!(entries(), 0, "the worker's directory is left");
 }
 
 /// A worker whose server goes away dials again (with backoff) until one answers at

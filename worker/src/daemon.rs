@@ -108,9 +108,13 @@ pub async fn run(args: Args) -> Result<()> {
     let endpoint = relief_proto::connect::endpoint(&args.server, args.tls_ca.as_deref())
         .map_err(|e| anyhow!("--server/--tls-ca: {e}"))?;
     let auth = BearerToken::new(args.token.as_deref()).map_err(|e| anyhow!("--token: {e}"))?;
-    let scene_dir = match args.scene_dir.clone() {
-        Some(dir) => dir,
-        None => relief_proto::bundle::private_scene_dir("relief-worker")?,
+    // (A directory of its own, `_made`, is removed when `run` returns; one given is kept.)
+    let (scene_dir, _made) = match &args.scene_dir {
+        Some(dir) => (dir.clone(), None),
+        None => {
+            let made = relief_proto::bundle::private_scene_dir("relief-worker")?;
+            (made.path().to_path_buf(), Some(made))
+        }
     };
     // A scene directory it cannot write would fail every job: refuse to start.
     std::fs::create_dir_all(&scene_dir)
@@ -122,7 +126,7 @@ pub async fn run(args: Args) -> Result<()> {
     });
     let (stop_tx, stop) = watch::channel(false);
     tokio::spawn(async move {
-        shutdown_signal().await;
+        relief_proto::shutdown::signal().await;
         let _ = stop_tx.send(true);
     });
     let loaded = LoadedScenes::default();
@@ -162,29 +166,6 @@ pub async fn run(args: Args) -> Result<()> {
                 backoff = (backoff * 2).min(Duration::from_secs(5));
             }
         }
-    }
-}
-
-/// Resolves on SIGINT or SIGTERM.
-async fn shutdown_signal() {
-    #[cfg(unix)]
-    {
-        use tokio::signal::unix::{SignalKind, signal};
-        match signal(SignalKind::terminate()) {
-            Ok(mut term) => {
-                tokio::select! {
-                    _ = tokio::signal::ctrl_c() => {}
-                    _ = term.recv() => {}
-                }
-            }
-            Err(_) => {
-                let _ = tokio::signal::ctrl_c().await;
-            }
-        }
-    }
-    #[cfg(not(unix))]
-    {
-        let _ = tokio::signal::ctrl_c().await;
     }
 }
 

@@ -591,11 +591,13 @@ fn rpc(args: RpcArgs) -> Result<()> {
     use relief_proto::convert::vec3_to_pb;
     use relief_proto::pb;
 
-    let dir = std::env::temp_dir().join(format!("relief-bench-rpc-{}", std::process::id()));
+    // The processes' scene directories, removed at the end — after the processes, which
+    // are declared later and so dropped (killed) first.
+    let dir = relief_proto::bundle::private_scene_dir("relief-bench-rpc")?;
     let mut children = Children(Vec::new());
     let bar = progress::spinner("starting server and workers");
-    let url = start_server(&mut children, &dir.join("server"))?;
-    start_workers(&mut children, &url, args.workers, &dir)?;
+    let url = start_server(&mut children, &dir.path().join("server"))?;
+    start_workers(&mut children, &url, args.workers, dir.path())?;
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
