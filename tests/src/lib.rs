@@ -12,7 +12,10 @@ pub fn bin_dir() -> PathBuf {
     deps.parent().expect("profile directory").to_path_buf()
 }
 
-/// A command for one of the workspace's binaries, e.g. `relief`.
+/// A command for one of the workspace's binaries, e.g. `relief`. Its temp dir
+/// (`TMPDIR`) is `target/<profile>/test-tmp`: the scene directories of servers and
+/// workers a test kills (rather than stops) stay out of the system's temp dir, and
+/// `cargo clean` removes them.
 ///
 /// # Panics
 /// When the binary has not been built (run the tests with `cargo test --workspace`,
@@ -24,7 +27,11 @@ pub fn command(name: &str) -> Command {
         "{} is missing: build the workspace first",
         path.display()
     );
-    Command::new(path)
+    let temp = bin_dir().join("test-tmp");
+    std::fs::create_dir_all(&temp).expect("creating the binaries' temp dir");
+    let mut command = Command::new(path);
+    command.env("TMPDIR", temp);
+    command
 }
 
 /// Runs `relief` with `args` and returns its output.
