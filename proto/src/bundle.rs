@@ -97,6 +97,32 @@ pub fn private_scene_dir(prefix: &str) -> Result<PrivateDir> {
     Ok(PrivateDir(dir))
 }
 
+/// Where a server or worker unpacks scenes: the directory it was given (`--scene-dir`,
+/// kept), or by default one of its own ([`private_scene_dir`], removed when this is
+/// dropped).
+#[derive(Debug)]
+pub enum SceneDir {
+    Given(PathBuf),
+    Own(PrivateDir),
+}
+
+impl SceneDir {
+    /// `given`, or a private directory named after `prefix`.
+    pub fn new(given: Option<PathBuf>, prefix: &str) -> Result<SceneDir> {
+        Ok(match given {
+            Some(dir) => SceneDir::Given(dir),
+            None => SceneDir::Own(private_scene_dir(prefix)?),
+        })
+    }
+
+    pub fn path(&self) -> &Path {
+        match self {
+            SceneDir::Given(dir) => dir,
+            SceneDir::Own(dir) => dir.path(),
+        }
+    }
+}
+
 /// A directory this process made for itself ([`private_scene_dir`]), deleted with its
 /// contents on drop.
 #[derive(Debug)]

@@ -17,6 +17,7 @@ use tonic::transport::server::TcpIncoming;
 use tonic::{Request, Status};
 
 use relief_proto::auth::BearerToken;
+use relief_proto::bundle::SceneDir;
 use relief_proto::pb;
 use relief_server::service::{Service, Shared};
 use relief_server::state::{Limits, State};
@@ -67,17 +68,10 @@ fn main() -> ExitCode {
 }
 
 async fn serve(args: Args) -> Result<()> {
-    // (A directory of its own, `_made`, is removed when `serve` returns; one given is kept.)
-    let (scene_dir, _made) = match args.scene_dir {
-        Some(dir) => {
-            std::fs::create_dir_all(&dir).with_context(|| format!("--scene-dir {}", dir.display()))?;
-            (dir, None)
-        }
-        None => {
-            let made = relief_proto::bundle::private_scene_dir("relief-server")?;
-            (made.path().to_path_buf(), Some(made))
-        }
-    };
+    // (Held to the end of `serve`: a directory of its own is removed then.)
+    let scene_dir = SceneDir::new(args.scene_dir, "relief-server")?;
+    std::fs::create_dir_all(scene_dir.path())
+        .with_context(|| format!("--scene-dir {}", scene_dir.path().display()))?;
     let lease = Duration::from_millis(args.lease_ms);
     let job_timeout = Duration::from_millis(args.job_timeout_ms);
     let shared = Shared::new(
@@ -87,7 +81,7 @@ async fn serve(args: Args) -> Result<()> {
             max_waiting: args.max_waiting as usize,
             job_timeout,
         }),
-        scene_dir,
+        scene_dir.path().to_path_buf(),
     );
     // Leases: a silent worker's jobs go back to the queue; jobs past the timeout end.
     let watched = shared.clone();
@@ -158,11 +152,7 @@ async fn serve(args: Args) -> Result<()> {
     let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
     // On SIGINT/SIGTERM: stop taking connections and let calls in flight end, but not
     // for ever — a worker's session stream lasts as long as the worker.
-    let (stop_tx, stop) = tokio::sync::watch::channel(false);
-    tokio::spawn(async move {
-        relief_proto::shutdown::signal().await;
-        let _ = stop_tx.send(true);
-    });
+    let stop = relief_proto::shutdown::watch();
     let stopped = |mut stop: tokio::sync::watch::Receiver<bool>| async move {
         let _ = stop.wait_for(|stopped| *stopped).await;
     };

@@ -126,10 +126,17 @@ pub fn wait_exit(child: &mut std::process::Child, within: std::time::Duration) -
     }
 }
 
+/// A `relief-worker` command dialling `url` (heartbeats every 100 ms), for more flags
+/// or environment before it starts.
+pub fn worker_command(url: &str) -> Command {
+    let mut worker = command("relief-worker");
+    worker.args(["--server", url, "--heartbeat-ms", "100"]);
+    worker
+}
+
 /// Starts a `relief-worker` dialling `url`.
 pub fn start_worker(url: &str, extra: &[&str]) -> Running {
-    let child = command("relief-worker")
-        .args(["--server", url, "--heartbeat-ms", "100"])
+    let child = worker_command(url)
         .args(extra)
         .spawn()
         .expect("starting relief-worker");

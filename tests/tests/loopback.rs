@@ -13,7 +13,8 @@ use relief_proto::bundle::bundle_for;
 use relief_proto::convert::{texture_from_pb, vec3_to_pb};
 use relief_proto::pb;
 use relief_tests::{
-    command, scratch, send_sigterm, spawn_server, start_server, start_server_at, start_worker, wait_exit,
+    Running, command, scratch, send_sigterm, spawn_server, start_server, start_server_at, start_worker,
+    wait_exit, worker_command,
 };
 use relief_worker::bake;
 use relief_worker::tracer::ObjectTracer;
@@ -328,12 +329,11 @@ fn stopped_processes_remove_their_scene_directories() {
     let mut server = command("relief-server");
     server.args(["--listen", "127.0.0.1:0"]).env("TMPDIR", &temp);
     let (mut server, url) = spawn_server(server);
-    let worker = command("relief-worker")
-        .args(["--server", &url, "--heartbeat-ms", "100"])
+    let worker = worker_command(&url)
         .env("TMPDIR", &temp)
         .spawn()
         .expect("starting relief-worker");
-    let mut worker = relief_tests::Running(worker);
+    let mut worker = Running(worker);
     let start = Instant::now();
     while entries() < 2 {
         assert!(
@@ -445,24 +445,16 @@ async fn health_and_authentication() {
     assert!(right.stats().await.is_ok());
     // A worker with the wrong token stops with an error naming it: retrying would not
     // mend it.
-    let mut worker = relief_tests::command("relief-worker")
-        .args(["--server", &url, "--token", "guess"])
+    let worker = worker_command(&url)
+        .args(["--token", "guess"])
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(20);
-    let status = loop {
-        if let Some(status) = worker.try_wait().unwrap() {
-            break status;
-        }
-        if Instant::now() > deadline {
-            let _ = worker.kill();
-            panic!("a worker with a wrong token kept retrying");
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    };
+    // (Killed on drop if it keeps retrying and the wait panics.)
+    let mut worker = Running(worker);
+    let status = tokio::task::block_in_place(|| wait_exit(&mut worker.0, Duration::from_secs(20)));
     let mut stderr = String::new();
-    std::io::Read::read_to_string(&mut worker.stderr.take().unwrap(), &mut stderr).unwrap();
+    std::io::Read::read_to_string(&mut worker.0.stderr.take().unwrap(), &mut stderr).unwrap();
     assert!(
         !status.success() && stderr.contains("--token"),
         "{status}: {stderr}"

@@ -108,27 +108,18 @@ pub async fn run(args: Args) -> Result<()> {
     let endpoint = relief_proto::connect::endpoint(&args.server, args.tls_ca.as_deref())
         .map_err(|e| anyhow!("--server/--tls-ca: {e}"))?;
     let auth = BearerToken::new(args.token.as_deref()).map_err(|e| anyhow!("--token: {e}"))?;
-    // (A directory of its own, `_made`, is removed when `run` returns; one given is kept.)
-    let (scene_dir, _made) = match &args.scene_dir {
-        Some(dir) => (dir.clone(), None),
-        None => {
-            let made = relief_proto::bundle::private_scene_dir("relief-worker")?;
-            (made.path().to_path_buf(), Some(made))
-        }
-    };
+    // (Held to the end of `run`: a directory of its own is removed then.)
+    let scenes = relief_proto::bundle::SceneDir::new(args.scene_dir.clone(), "relief-worker")?;
+    let scene_dir = scenes.path();
     // A scene directory it cannot write would fail every job: refuse to start.
-    std::fs::create_dir_all(&scene_dir)
-        .and_then(|()| relief_core::scratch::probe_writable(&scene_dir))
+    std::fs::create_dir_all(scene_dir)
+        .and_then(|()| relief_core::scratch::probe_writable(scene_dir))
         .map_err(|e| anyhow!("--scene-dir {}: {e}", scene_dir.display()))?;
     let name = args.name.clone().unwrap_or_else(|| {
         let host = std::fs::read_to_string("/etc/hostname").unwrap_or_default();
         format!("{}-{}", host.trim(), std::process::id())
     });
-    let (stop_tx, stop) = watch::channel(false);
-    tokio::spawn(async move {
-        relief_proto::shutdown::signal().await;
-        let _ = stop_tx.send(true);
-    });
+    let stop = relief_proto::shutdown::watch();
     let loaded = LoadedScenes::default();
     let mut backoff = Duration::from_millis(100);
     loop {
@@ -141,7 +132,7 @@ pub async fn run(args: Args) -> Result<()> {
             &name,
             &endpoint,
             &auth,
-            &scene_dir,
+            scene_dir,
             loaded.clone(),
             stop.clone(),
         )
