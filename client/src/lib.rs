@@ -1,34 +1,29 @@
-//! The Relief client's local pipeline: draw geometry, show relief impostors from new
-//! eyes, and measure how wrong and how fast each way of doing it is.
+//! Relief's impostor client: the manager that decides, frame by frame, which objects
+//! are drawn as relief impostors and with which textures, asks for the textures the
+//! eye will need, and takes them in without ever waiting for the network.
 //!
-//! - [`gbuffer`] — the frame's per-pixel surface record (depth, object, albedo, normal)
-//!   that geometry and impostors both write with a depth test, and the one shading pass
-//!   that turns it into colour with the shared Phong model.
-//! - [`impostor`] — a relief texture prepared for display (texel connectivity).
-//! - [`predict`] — the viewpoint predictor.
-//! - [`pyramid`] — multi-resolution relief textures: no texels the screen cannot show.
-//! - [`raster`] — the software rasterizer for geometry.
-//! - [`warp`] — relief impostors shown from new eyes: every method of the sources.
-//! - [`composite`] — whole frames: geometry where cheap or near, impostors elsewhere.
-//! - [`evaluate`] — the orbit set-up of the error reports: bake, reference, show, compare.
-//! - [`remote`] — the client side of the protocol: scenes up, textures down, withdrawals.
-//! - [`report`] — the error-against-run-time measurement.
-//! - [`stats`] — median, percentiles and means of measured samples.
-//! - [`manager`] — the impostor manager: geometry / warp / regenerate per object, texture cache, predicted requests.
-//! - [`source`] — where textures come from: a server over gRPC, or the in-process generator.
-//! - [`metrics`] — image error against the reference; warp-error predictions.
+//! # Brief overview
+//!
+//! The principal type is [`Manager`](manager::Manager). A [`flight`] drives it along a
+//! scene's camera path in real time; textures come from a [`source`] — a Relief server
+//! reached through [`remote`], or the in-process generator — and the viewpoint
+//! [`predict`]or tells the manager where the eye is going. Drawing is the renderer's
+//! (`relief-render`); this crate adds the decisions and the network.
+//!
+//! - [`manager`] — per object and frame: geometry or impostor, which texture, what to
+//!   ask for; its tuning in [`manager::policy`].
+//! - [`predict`] — the viewpoint predictor (least-squares quadratic fit of recent eyes).
+//! - [`source`] — where textures come from: a server over gRPC, or the in-process
+//!   generator.
+//! - [`remote`] — the client side of the protocol: scenes up, textures down,
+//!   withdrawals.
+//! - [`flight`] — the real-time flight along a camera path that `relief demo`,
+//!   `render` and `load` share.
+//!
+//! See [`manager`] for an example.
 
-pub mod composite;
-pub mod evaluate;
-pub mod gbuffer;
-pub mod impostor;
+pub mod flight;
 pub mod manager;
-pub mod metrics;
 pub mod predict;
-pub mod pyramid;
-pub mod raster;
 pub mod remote;
-pub mod report;
 pub mod source;
-pub mod stats;
-pub mod warp;

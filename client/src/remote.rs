@@ -24,12 +24,35 @@ pub struct Remote {
     pub client_id: String,
 }
 
+/// Why a connection or a wait failed; each names the server or the problem.
+#[derive(Debug, thiserror::Error)]
+pub enum RemoteError {
+    #[error(transparent)]
+    Endpoint(#[from] relief_proto::connect::EndpointError),
+    #[error("connecting to {url}: {error}")]
+    Connect {
+        url: String,
+        error: tonic::transport::Error,
+    },
+    #[error(transparent)]
+    Token(#[from] relief_proto::auth::TokenError),
+    /// A call the server answered with an error.
+    #[error("{}", .0.message())]
+    Call(#[from] Status),
+    #[error("{registered} of {wanted} workers registered within {limit:?}")]
+    TooFewWorkers {
+        registered: u32,
+        wanted: u32,
+        limit: std::time::Duration,
+    },
+}
+
 /// Largest piece of a scene upload.
 const CHUNK: usize = 1 << 20;
 
 impl Remote {
     /// Connects to `url` (e.g. `http://127.0.0.1:7411`); errors name the problem.
-    pub async fn connect(url: &str, token: Option<&str>, client_id: &str) -> Result<Remote, String> {
+    pub async fn connect(url: &str, token: Option<&str>, client_id: &str) -> Result<Remote, RemoteError> {
         Self::connect_with(url, token, None, client_id).await
     }
 
@@ -40,12 +63,12 @@ impl Remote {
         token: Option<&str>,
         ca: Option<&std::path::Path>,
         client_id: &str,
-    ) -> Result<Remote, String> {
+    ) -> Result<Remote, RemoteError> {
         let endpoint = relief_proto::connect::endpoint(url, ca)?;
-        let channel = endpoint
-            .connect()
-            .await
-            .map_err(|e| format!("connecting to {url}: {e}"))?;
+        let channel = endpoint.connect().await.map_err(|error| RemoteError::Connect {
+            url: url.to_string(),
+            error,
+        })?;
         let auth = BearerToken::new(token)?;
         Ok(Remote {
             scenes: pb::scenes_client::ScenesClient::with_interceptor(channel.clone(), auth.clone())
@@ -96,17 +119,23 @@ impl Remote {
 
     /// Waits until at least `count` workers are registered, polling the counters;
     /// an error after `limit`.
-    pub async fn wait_for_workers(&mut self, count: u32, limit: std::time::Duration) -> Result<(), String> {
+    pub async fn wait_for_workers(
+        &mut self,
+        count: u32,
+        limit: std::time::Duration,
+    ) -> Result<(), RemoteError> {
         let start = std::time::Instant::now();
         loop {
-            let workers = self.stats().await.map_err(|e| e.message().to_string())?.workers;
+            let workers = self.stats().await?.workers;
             if workers >= count {
                 return Ok(());
             }
             if start.elapsed() > limit {
-                return Err(format!(
-                    "{workers} of {count} workers registered within {limit:?}"
-                ));
+                return Err(RemoteError::TooFewWorkers {
+                    registered: workers,
+                    wanted: count,
+                    limit,
+                });
             }
             tokio::time::sleep(std::time::Duration::from_millis(20)).await;
         }

@@ -12,10 +12,10 @@ use relief_core::hash::ContentHash;
 use relief_core::scene::Scene;
 use relief_proto::convert::{texture_from_pb, vec3_to_pb};
 use relief_proto::pb;
-use relief_worker::bake;
-use relief_worker::tracer::ObjectTracer;
+use relief_trace::bake;
+use relief_trace::tracer::ObjectTracer;
 
-use crate::manager::{Arrival, Command, Prepared, TextureRequest};
+use crate::manager::{Arrival, Command, Config, Manager, ReadyTexture, TextureRequest};
 use crate::remote::Remote;
 
 fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::ImpostorRequest {
@@ -106,7 +106,7 @@ async fn serve_request(
                     Some(Ok(texture)) => {
                         let _ = arrivals.send(Arrival::Texture {
                             id,
-                            texture: Box::new(Prepared::new(texture)),
+                            texture: Box::new(ReadyTexture::new(texture)),
                             is_final: result.r#final,
                         });
                     }
@@ -182,7 +182,7 @@ pub fn spawn_local(
                         match pool.install(|| bake(tracer, request.eye, request.size, request.depth_bits)) {
                             Ok(texture) => Arrival::Texture {
                                 id: request.id,
-                                texture: Box::new(Prepared::new(texture)),
+                                texture: Box::new(ReadyTexture::new(texture)),
                                 is_final: true,
                             },
                             Err(e) => Arrival::Failed {
@@ -199,4 +199,28 @@ pub fn spawn_local(
         })
         .map(drop)
         .unwrap_or_else(|e| tracing::warn!("no local generator: {e}"));
+}
+
+/// A manager of `scene` whose textures come from `remote`, the scene uploaded there as
+/// `scene_hash` (its requests served on the current tokio runtime; `rtt` added to
+/// every exchange, half each way).
+pub fn remote_manager(
+    scene: &Arc<Scene>,
+    config: Config,
+    remote: Remote,
+    scene_hash: ContentHash,
+    rtt: Duration,
+) -> Manager {
+    let (commands_tx, commands_rx) = unbounded_channel();
+    let (arrivals_tx, arrivals_rx) = unbounded_channel();
+    spawn_remote(remote, scene_hash, scene.clone(), commands_rx, arrivals_tx, rtt);
+    Manager::new(scene, config, commands_tx, arrivals_rx)
+}
+
+/// A manager of `scene` whose textures the in-process generator makes.
+pub fn local_manager(scene: &Arc<Scene>, config: Config) -> Manager {
+    let (commands_tx, commands_rx) = unbounded_channel();
+    let (arrivals_tx, arrivals_rx) = unbounded_channel();
+    spawn_local(scene.clone(), commands_rx, arrivals_tx);
+    Manager::new(scene, config, commands_tx, arrivals_rx)
 }

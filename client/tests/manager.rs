@@ -9,11 +9,11 @@ use std::time::Duration;
 use glam::Vec3;
 use tokio::sync::mpsc::{UnboundedReceiver, unbounded_channel};
 
-use relief_client::gbuffer::GBuffer;
 use relief_client::manager::{Command, Config, Manager, Show, texture_ladder};
 use relief_client::source::spawn_local;
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
+use relief_render::gbuffer::GBuffer;
 
 #[test]
 fn still_eyes_draw_sprites_and_moving_eyes_warp() {

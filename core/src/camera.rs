@@ -46,6 +46,40 @@ impl Projection {
     }
 }
 
+/// Why no camera can be made from the arguments given; each names the bad one.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CameraError {
+    #[error(transparent)]
+    NotFinite(#[from] crate::vector::VectorError),
+    #[error("field of view {0}° must be in (0, 180)")]
+    FieldOfView(f32),
+    #[error("frame size {width}x{height} must be between 1x1 and {MAX_FRAME_SIZE}x{MAX_FRAME_SIZE}")]
+    FrameSize { width: u32, height: u32 },
+    #[error("eye and target are too far apart ({0}): the view direction overflows")]
+    TooFarApart(Vec3),
+    #[error("eye and target coincide: no view direction")]
+    EyeAtTarget,
+    #[error("up vector is zero or parallel to the view direction")]
+    UpAlongView,
+}
+
+/// A camera path segment that cannot be flown; the message names the field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PathError {
+    #[error("a path segment needs 1 to {MAX_SEGMENT_FRAMES} frames")]
+    Frames,
+    #[error("orbit: center, radius (> 0), height and turns must be finite")]
+    Orbit,
+    #[error("fly: needs at least two points")]
+    FlyTooFewPoints,
+    #[error("fly: points and look_at must be finite")]
+    FlyNotFinite,
+    /// Points `first` and `first + 1` (counted from 1) are the same: a leg of length
+    /// zero has no direction to look along.
+    #[error("fly: points {first} and {} coincide", first + 1)]
+    FlyPointsCoincide { first: usize },
+}
+
 impl Camera {
     /// A camera at `eye` looking at `target`. Errors name the bad argument.
     pub fn look_at(
@@ -55,28 +89,24 @@ impl Camera {
         fov_y_degrees: f32,
         width: u32,
         height: u32,
-    ) -> Result<Camera, String> {
+    ) -> Result<Camera, CameraError> {
         for (name, v) in [("eye", eye), ("target", target), ("up", up)] {
             crate::vector::ensure_finite(name, v)?;
         }
         if !(fov_y_degrees.is_finite() && fov_y_degrees > 0.0 && fov_y_degrees < 180.0) {
-            return Err(format!("field of view {fov_y_degrees}° must be in (0, 180)"));
+            return Err(CameraError::FieldOfView(fov_y_degrees));
         }
         if width == 0 || height == 0 || width > MAX_FRAME_SIZE || height > MAX_FRAME_SIZE {
-            return Err(format!(
-                "frame size {width}x{height} must be between 1x1 and {MAX_FRAME_SIZE}x{MAX_FRAME_SIZE}"
-            ));
+            return Err(CameraError::FrameSize { width, height });
         }
         let offset = target - eye;
         if !offset.is_finite() {
-            return Err(format!(
-                "eye and target are too far apart ({offset}): the view direction overflows"
-            ));
+            return Err(CameraError::TooFarApart(offset));
         }
-        let forward = direction(offset).ok_or("eye and target coincide: no view direction")?;
+        let forward = direction(offset).ok_or(CameraError::EyeAtTarget)?;
         let right = direction(up)
             .and_then(|up| direction(forward.cross(up)))
-            .ok_or("up vector is zero or parallel to the view direction")?;
+            .ok_or(CameraError::UpAlongView)?;
         Ok(Camera {
             eye,
             forward,
@@ -226,7 +256,7 @@ pub struct Pose {
 
 impl Pose {
     /// The camera of this pose (world +y up). Errors name the bad argument.
-    pub fn camera(&self, fov_y_degrees: f32, width: u32, height: u32) -> Result<Camera, String> {
+    pub fn camera(&self, fov_y_degrees: f32, width: u32, height: u32) -> Result<Camera, CameraError> {
         Camera::look_at(self.eye, self.target, Vec3::Y, fov_y_degrees, width, height)
     }
 }
@@ -250,10 +280,10 @@ impl PathSegment {
     }
 
     /// Checks the segment; the error names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), PathError> {
         let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
         if self.frames() == 0 || self.frames() > MAX_SEGMENT_FRAMES {
-            return Err(format!("a path segment needs 1 to {MAX_SEGMENT_FRAMES} frames"));
+            return Err(PathError::Frames);
         }
         match self {
             PathSegment::Orbit {
@@ -264,19 +294,19 @@ impl PathSegment {
                 ..
             } => {
                 if !finite(center) || !finite(&[*radius, *height, *turns]) || *radius <= 0.0 {
-                    return Err("orbit: center, radius (> 0), height and turns must be finite".into());
+                    return Err(PathError::Orbit);
                 }
             }
             PathSegment::Fly { points, look_at, .. } => {
                 if points.len() < 2 {
-                    return Err("fly: needs at least two points".into());
+                    return Err(PathError::FlyTooFewPoints);
                 }
                 if !points.iter().all(|p| finite(p)) || !look_at.is_none_or(|p| finite(&p)) {
-                    return Err("fly: points and look_at must be finite".into());
+                    return Err(PathError::FlyNotFinite);
                 }
                 // A leg of length zero has no direction to look along.
                 if let Some(k) = points.windows(2).position(|w| w[0] == w[1]) {
-                    return Err(format!("fly: points {} and {} coincide", k + 1, k + 2));
+                    return Err(PathError::FlyPointsCoincide { first: k + 1 });
                 }
             }
         }
@@ -575,7 +605,9 @@ mod tests {
         );
         assert!(Camera::look_at(Vec3::Z * 1e-30, Vec3::ZERO, Vec3::Y * 1e-30, 60.0, 4, 4).is_ok());
         // Eye and target on opposite ends of the float range: the offset overflows.
-        let err = Camera::look_at(Vec3::X * 3e38, Vec3::X * -3e38, Vec3::Y, 60.0, 4, 4).unwrap_err();
+        let err = Camera::look_at(Vec3::X * 3e38, Vec3::X * -3e38, Vec3::Y, 60.0, 4, 4)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("too far apart"), "{err}");
     }
 
@@ -617,7 +649,12 @@ mod tests {
             frames: 4,
         };
         let stay = fly(vec![[0.0; 3], [0.0; 3], [1.0, 0.0, 0.0]], None);
-        assert!(stay.validate().unwrap_err().contains("points 1 and 2"));
+        assert!(
+            stay.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("points 1 and 2")
+        );
         // Flying to a point while looking at it is fine: the eye never reaches it.
         let towards = fly(vec![[0.0; 3], [1.0, 0.0, 0.0]], Some([1.0, 0.0, 0.0]));
         assert!(towards.validate().is_ok());

@@ -1,6 +1,26 @@
-//! Shared types of Relief, the relief-impostor render service.
+//! Shared types of Relief, the relief-impostor render service: everything that more
+//! than one machine of the system must agree on.
 //!
-//! Everything that more than one machine of the system must agree on lives here:
+//! # Brief overview
+//!
+//! The principal type is [`Scene`](scene::Scene): objects placed in the world (each a
+//! triangle [`Mesh`](mesh::Mesh) with a content hash, the name under which machines
+//! agree on what they render), lights, and a camera path. A
+//! [`ReliefTexture`](relief::ReliefTexture) is what the workers make of one object for
+//! one eye, and [`Lighting`](shading::Lighting) the one model every image is lit with.
+//! No threads of its own but rayon's inside mesh generation and scene loading; no
+//! network, no command line.
+//!
+//! ```
+//! use relief_core::scene::Scene;
+//!
+//! let scene = Scene::load("orbit-knot")?; // a built-in name, a .toml or an .obj file
+//! let knot = scene.object("knot")?;
+//! assert!(knot.mesh.triangle_count() > 1000);
+//! let camera = scene.path.pose(0).unwrap().camera(scene.fov_y_degrees, 640, 360)?;
+//! assert!(camera.may_see(&knot.bounds));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 //!
 //! - [`bounds`] — axis-aligned boxes and the ray/box slab test.
 //! - [`camera`] — the perspective camera of a frame and the scene's camera path.
@@ -14,12 +34,14 @@
 //! - [`shading`] — the one lighting model (per-pixel Phong) that the reference renderer
 //!   and the client's display stage share.
 //! - [`hash`] — content hashes, so that machines agree on what they render.
-//! - [`cli`] — start-up shared by the binaries: argument errors, logging, exit codes.
 //! - [`vector`] — parsing and validation of user-given vectors.
+//! - [`stats`] — median, percentiles and finite means: one definition for every report.
+//! - [`reach`], [`scratch`] — which files a scene may open; files of our own beside
+//!   the user's.
+//! - [`error`] — [`Error`]: every variant names the file, object or value at fault.
 
 pub mod bounds;
 pub mod camera;
-pub mod cli;
 pub mod error;
 pub mod frame;
 pub mod generators;
@@ -31,6 +53,7 @@ pub mod relief;
 pub mod scene;
 pub mod scratch;
 pub mod shading;
+pub mod stats;
 pub mod vector;
 
 pub use error::{Error, Result};

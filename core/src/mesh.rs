@@ -74,55 +74,72 @@ pub struct Mesh {
     pub materials: Vec<Material>,
 }
 
+/// What makes a mesh unusable; vertices and triangles are counted from 1.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MeshError {
+    #[error("the mesh has no triangles")]
+    NoTriangles,
+    #[error("the mesh has {0} triangles; at most {MAX_TRIANGLES} are supported")]
+    TooManyTriangles(usize),
+    #[error("the mesh has no material")]
+    NoMaterial,
+    #[error("vertex {vertex} has a non-finite position")]
+    NonFinitePosition { vertex: usize },
+    #[error("normal count differs from vertex count")]
+    NormalCount,
+    #[error("texture-coordinate count differs from vertex count")]
+    TexcoordCount,
+    #[error("triangle {triangle} refers to a vertex that does not exist")]
+    MissingVertex { triangle: usize },
+    #[error("material-id count differs from triangle count")]
+    MaterialIdCount,
+    #[error("a triangle refers to a material that does not exist")]
+    MissingMaterial,
+}
+
 impl Mesh {
     pub fn triangle_count(&self) -> usize {
         self.triangles.len()
     }
 
     /// Checks index ranges, attribute lengths and finiteness; the error says what is wrong.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), MeshError> {
         if self.triangles.is_empty() {
-            return Err("the mesh has no triangles".into());
+            return Err(MeshError::NoTriangles);
         }
         if self.triangles.len() > MAX_TRIANGLES {
-            return Err(format!(
-                "the mesh has {} triangles; at most {MAX_TRIANGLES} are supported",
-                self.triangles.len()
-            ));
+            return Err(MeshError::TooManyTriangles(self.triangles.len()));
         }
         if self.materials.is_empty() {
-            return Err("the mesh has no material".into());
+            return Err(MeshError::NoMaterial);
         }
         let n = self.positions.len();
         if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
-            return Err(format!("vertex {} has a non-finite position", i + 1));
+            return Err(MeshError::NonFinitePosition { vertex: i + 1 });
         }
         if let Some(normals) = &self.normals
             && normals.len() != n
         {
-            return Err("normal count differs from vertex count".into());
+            return Err(MeshError::NormalCount);
         }
         if let Some(uv) = &self.texcoords
             && uv.len() != n
         {
-            return Err("texture-coordinate count differs from vertex count".into());
+            return Err(MeshError::TexcoordCount);
         }
         if let Some(t) = self
             .triangles
             .iter()
             .position(|t| t.iter().any(|&i| i as usize >= n))
         {
-            return Err(format!(
-                "triangle {} refers to a vertex that does not exist",
-                t + 1
-            ));
+            return Err(MeshError::MissingVertex { triangle: t + 1 });
         }
         if let Some(ids) = &self.triangle_materials {
             if ids.len() != self.triangles.len() {
-                return Err("material-id count differs from triangle count".into());
+                return Err(MeshError::MaterialIdCount);
             }
             if ids.iter().any(|&m| m as usize >= self.materials.len()) {
-                return Err("a triangle refers to a material that does not exist".into());
+                return Err(MeshError::MissingMaterial);
             }
         }
         Ok(())
@@ -343,10 +360,10 @@ mod tests {
     fn validate_names_the_problem() {
         let mut m = triangle(0.0, false);
         m.positions[1].x = f32::NAN;
-        assert!(m.validate().unwrap_err().contains("vertex 2"));
+        assert!(m.validate().unwrap_err().to_string().contains("vertex 2"));
         let mut m = triangle(0.0, false);
         m.triangles[0][2] = 7;
-        assert!(m.validate().unwrap_err().contains("triangle 1"));
+        assert!(m.validate().unwrap_err().to_string().contains("triangle 1"));
     }
 
     #[test]

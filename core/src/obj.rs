@@ -118,7 +118,7 @@ pub fn load_obj(path: &Path, reach: Reach) -> Result<Mesh> {
     mesh.normals = any_normals.then_some(normals);
     mesh.texcoords = any_texcoords.then_some(texcoords);
     mesh.triangle_materials = Some(ids);
-    mesh.validate().map_err(obj_error)?;
+    mesh.validate().map_err(|e| obj_error(e.to_string()))?;
     Ok(mesh)
 }
 

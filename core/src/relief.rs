@@ -217,13 +217,13 @@ pub struct ReliefTexture {
 
 /// Encodes a unit normal as RGB8 (`n·0.5 + 0.5`).
 #[inline]
-pub fn encode_normal(n: Vec3) -> [u8; 3] {
+pub fn encode_normal_rgb8(n: Vec3) -> [u8; 3] {
     crate::shading::to_rgb8(n * 0.5 + Vec3::splat(0.5))
 }
 
 /// Decodes an RGB8 normal back to a unit vector.
 #[inline]
-pub fn decode_normal(rgb: [u8; 3]) -> Vec3 {
+pub fn decode_normal_rgb8(rgb: [u8; 3]) -> Vec3 {
     (Vec3::new(rgb[0] as f32, rgb[1] as f32, rgb[2] as f32) / 127.5 - Vec3::ONE).normalize_or_zero()
 }
 
@@ -521,7 +521,7 @@ mod tests {
     #[test]
     fn normals_encode_within_a_degree() {
         for n in [Vec3::X, -Vec3::Y, Vec3::new(0.3, -0.5, 0.8).normalize()] {
-            assert!(decode_normal(encode_normal(n)).angle_between(n) < 1f32.to_radians());
+            assert!(decode_normal_rgb8(encode_normal_rgb8(n)).angle_between(n) < 1f32.to_radians());
         }
     }
 
@@ -533,7 +533,7 @@ mod tests {
             let mut t = ReliefTexture::empty(c, bits, Vec3::Z * 5.0);
             t.depth[4] = 7;
             t.albedo[4] = [1, 2, 3];
-            t.normal[4] = encode_normal(Vec3::Z);
+            t.normal[4] = encode_normal_rgb8(Vec3::Z);
             t.write_dir(&dir).unwrap();
             let back = ReliefTexture::read_dir(&dir).unwrap();
             assert_eq!(back, t);

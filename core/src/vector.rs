@@ -2,21 +2,37 @@
 
 use glam::Vec3;
 
+/// A vector that is not three finite numbers; the message names what is wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum VectorError {
+    #[error("expected three comma-separated numbers X,Y,Z, got `{0}`")]
+    NotThree(String),
+    #[error("{axis} component `{part}` is not a number")]
+    NotANumber { axis: &'static str, part: String },
+    #[error("{axis} component is {part}: must be finite")]
+    NotFiniteComponent { axis: &'static str, part: String },
+    /// `what` (the vector's name) holds NaN or infinity.
+    #[error("{what} ({}, {}, {}) is not finite", value.x, value.y, value.z)]
+    NotFinite { what: String, value: Vec3 },
+}
+
 /// Parses `"X,Y,Z"` into a finite vector. The error names the bad component.
-pub fn parse_vec3(text: &str) -> Result<Vec3, String> {
+pub fn parse_vec3(text: &str) -> Result<Vec3, VectorError> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     if parts.len() != 3 {
-        return Err(format!(
-            "expected three comma-separated numbers X,Y,Z, got `{text}`"
-        ));
+        return Err(VectorError::NotThree(text.to_string()));
     }
     let mut xyz = [0.0f32; 3];
-    for (axis, (part, out)) in ["x", "y", "z"].iter().zip(parts.iter().zip(&mut xyz)) {
-        let value: f32 = part
-            .parse()
-            .map_err(|_| format!("{axis} component `{part}` is not a number"))?;
+    for (axis, (part, out)) in ["x", "y", "z"].into_iter().zip(parts.iter().zip(&mut xyz)) {
+        let value: f32 = part.parse().map_err(|_| VectorError::NotANumber {
+            axis,
+            part: part.to_string(),
+        })?;
         if !value.is_finite() {
-            return Err(format!("{axis} component is {part}: must be finite"));
+            return Err(VectorError::NotFiniteComponent {
+                axis,
+                part: part.to_string(),
+            });
         }
         *out = value;
     }
@@ -24,11 +40,14 @@ pub fn parse_vec3(text: &str) -> Result<Vec3, String> {
 }
 
 /// Checks that every component of `v` is finite; the error names `what`.
-pub fn ensure_finite(what: &str, v: Vec3) -> Result<Vec3, String> {
+pub fn ensure_finite(what: &str, v: Vec3) -> Result<Vec3, VectorError> {
     if v.is_finite() {
         Ok(v)
     } else {
-        Err(format!("{what} ({}, {}, {}) is not finite", v.x, v.y, v.z))
+        Err(VectorError::NotFinite {
+            what: what.to_string(),
+            value: v,
+        })
     }
 }
 
@@ -51,11 +70,21 @@ mod tests {
     #[test]
     fn parses_and_rejects() {
         assert_eq!(parse_vec3("1, -2,3.5"), Ok(Vec3::new(1.0, -2.0, 3.5)));
-        assert!(parse_vec3("1,2").unwrap_err().contains("three"));
-        assert!(parse_vec3("1,NaN,2").unwrap_err().contains("y component"));
-        assert!(parse_vec3("inf,0,0").unwrap_err().contains("finite"));
-        assert!(parse_vec3("1,2,x").unwrap_err().contains("z component `x`"));
-        assert!(parse_vec3("1e39,0,0").unwrap_err().contains("finite"));
+        assert!(parse_vec3("1,2").unwrap_err().to_string().contains("three"));
+        assert!(
+            parse_vec3("1,NaN,2")
+                .unwrap_err()
+                .to_string()
+                .contains("y component")
+        );
+        assert!(parse_vec3("inf,0,0").unwrap_err().to_string().contains("finite"));
+        assert!(
+            parse_vec3("1,2,x")
+                .unwrap_err()
+                .to_string()
+                .contains("z component `x`")
+        );
+        assert!(parse_vec3("1e39,0,0").unwrap_err().to_string().contains("finite"));
     }
 
     #[test]

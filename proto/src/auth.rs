@@ -3,21 +3,28 @@
 use tonic::metadata::{Ascii, MetadataValue};
 use tonic::{Request, Status};
 
+/// A token that cannot be sent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum TokenError {
+    #[error("the token is empty")]
+    Empty,
+    #[error("the token holds characters not allowed in a header")]
+    NotAHeader,
+}
+
 /// A client-side interceptor adding the token, when there is one, to every call.
 #[derive(Debug, Clone, Default)]
 pub struct BearerToken(Option<MetadataValue<Ascii>>);
 
 impl BearerToken {
     /// From the shared secret; an error names the problem when it cannot be a header.
-    pub fn new(token: Option<&str>) -> Result<BearerToken, String> {
+    pub fn new(token: Option<&str>) -> Result<BearerToken, TokenError> {
         token
             .map(|t| {
                 if t.is_empty() {
-                    return Err("the token is empty".to_string());
+                    return Err(TokenError::Empty);
                 }
-                format!("Bearer {t}")
-                    .parse()
-                    .map_err(|_| "the token holds characters not allowed in a header".to_string())
+                format!("Bearer {t}").parse().map_err(|_| TokenError::NotAHeader)
             })
             .transpose()
             .map(BearerToken)

@@ -25,6 +25,19 @@ pub struct Bundle {
     pub hash: ContentHash,
 }
 
+/// A received bundle that cannot be taken; each names what is wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BundleError {
+    #[error("scene bundle of {0} bytes exceeds {MAX_BUNDLE_BYTES}")]
+    TooLarge(usize),
+    #[error("malformed scene bundle: {0}")]
+    Malformed(prost::DecodeError),
+    #[error("scene bundle has no file `{0}` (its root)")]
+    NoRoot(String),
+    #[error("scene bundle path `{0}` is not a plain relative path")]
+    NotRelative(String),
+}
+
 impl Bundle {
     fn new(bundle: SceneBundle) -> Bundle {
         let encoded = bundle.encode_to_vec();
@@ -36,21 +49,16 @@ impl Bundle {
     }
 
     /// Decodes a received bundle; errors say what is wrong with it.
-    pub fn decode(encoded: Vec<u8>) -> std::result::Result<Bundle, String> {
+    pub fn decode(encoded: Vec<u8>) -> std::result::Result<Bundle, BundleError> {
         if encoded.len() > MAX_BUNDLE_BYTES {
-            return Err(format!(
-                "scene bundle of {} bytes exceeds {MAX_BUNDLE_BYTES}",
-                encoded.len()
-            ));
+            return Err(BundleError::TooLarge(encoded.len()));
         }
-        let bundle =
-            SceneBundle::decode(encoded.as_slice()).map_err(|e| format!("malformed scene bundle: {e}"))?;
+        let bundle = SceneBundle::decode(encoded.as_slice()).map_err(BundleError::Malformed)?;
         if !bundle.files.iter().any(|f| f.path == bundle.root) {
-            return Err(format!("scene bundle has no file `{}` (its root)", bundle.root));
+            return Err(BundleError::NoRoot(bundle.root));
         }
         for f in &bundle.files {
-            safe_relative(&f.path)
-                .ok_or_else(|| format!("scene bundle path `{}` is not a plain relative path", f.path))?;
+            safe_relative(&f.path).ok_or_else(|| BundleError::NotRelative(f.path.clone()))?;
         }
         Ok(Bundle {
             hash: bundle_hash(&encoded),
@@ -332,6 +340,7 @@ mod tests {
         assert!(
             Bundle::decode(escape.encode_to_vec())
                 .unwrap_err()
+                .to_string()
                 .contains("relative")
         );
         let rootless = SceneBundle {
@@ -341,6 +350,7 @@ mod tests {
         assert!(
             Bundle::decode(rootless.encode_to_vec())
                 .unwrap_err()
+                .to_string()
                 .contains("root")
         );
     }

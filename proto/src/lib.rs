@@ -4,6 +4,26 @@
 //! scene bundles ([`bundle`]), how scenes travel by content hash; and what the server
 //! and the workers share besides: the bearer token ([`auth`]), endpoints
 //! ([`connect`]) and the shutdown signal ([`shutdown`]).
+//!
+//! # Brief overview
+//!
+//! The principal types are the messages of [`pb`] (`ImpostorRequest`, `Job`,
+//! `ReliefTexture`, …), documented in the `.proto` file. Nothing reads a field of one
+//! directly: [`convert`] turns each into a checked core type, and a bad field becomes
+//! `INVALID_ARGUMENT` naming it. A [`Bundle`](bundle::Bundle) is a scene with every file
+//! it needs, under one content hash.
+//!
+//! ```
+//! use relief_proto::convert::{vec3_from_pb, vec3_to_pb};
+//! use relief_proto::pb;
+//!
+//! let eye = vec3_from_pb("eye", Some(&vec3_to_pb(glam::Vec3::new(1.0, 2.0, 3.0))))?;
+//! assert_eq!(eye, glam::Vec3::new(1.0, 2.0, 3.0));
+//! let bad = vec3_from_pb("eye", Some(&pb::Vec3 { x: f32::NAN, y: 0.0, z: 0.0 })).unwrap_err();
+//! assert_eq!(bad.code(), tonic::Code::InvalidArgument);
+//! assert!(bad.message().contains("eye"));
+//! # Ok::<(), tonic::Status>(())
+//! ```
 
 pub mod auth;
 pub mod bundle;

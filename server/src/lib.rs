@@ -1,4 +1,27 @@
-//! Relief's server: the one address clients and workers need.
+//! Relief's server: the one address clients and workers need. The `relief-server`
+//! binary (`src/main.rs`) serves this library over gRPC, with health checking and
+//! reflection.
+//!
+//! # Brief overview
+//!
+//! The principal type is [`State`](state::State): every rule of the scheduler, as
+//! plain data changed under one lock by methods that never wait, so each can be tested
+//! without a network. [`Service`](service::Service) answers the three gRPC services
+//! with it.
+//!
+//! ```
+//! use std::time::Duration;
+//! use relief_server::state::{Limits, State};
+//!
+//! let state = State::new(Limits {
+//!     cache_bytes: 64 << 20,
+//!     lease: Duration::from_secs(5),
+//!     max_waiting: 1000,
+//!     job_timeout: Duration::from_secs(60),
+//! });
+//! let stats = state.stats();
+//! assert_eq!((stats.workers, stats.requests), (0, 0));
+//! ```
 //!
 //! - [`state`] — the scheduler and registries as plain data under one lock: scenes by
 //!   content hash, the job queue (needed-now before predicted, nearest deadline first,

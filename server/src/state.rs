@@ -12,6 +12,7 @@ use tonic::Status;
 use relief_core::bounds::Aabb;
 use relief_core::hash::ContentHash;
 use relief_core::relief::{FacingError, SourceCamera};
+use relief_core::stats::sorted_percentile;
 use relief_proto::convert::{Request, Urgency, vec3_to_pb};
 use relief_proto::pb;
 
@@ -733,17 +734,15 @@ impl State {
     /// The counters as the protocol's `StatsReply`.
     pub fn stats(&self) -> pb::StatsReply {
         let sorted = |samples: &VecDeque<f32>| {
-            let mut v: Vec<f32> = samples.iter().copied().collect();
-            v.sort_by(f32::total_cmp);
+            let mut v: Vec<f64> = samples.iter().map(|&s| f64::from(s)).collect();
+            v.sort_by(f64::total_cmp);
             v
         };
         let (latencies, handling) = (sorted(&self.latencies), sorted(&self.handling));
-        let percentile = |v: &[f32], p: f32| {
-            if v.is_empty() {
-                0.0
-            } else {
-                v[((v.len() - 1) as f32 * p).round() as usize]
-            }
+        // (0 before any sample, as the protocol says.)
+        let percentile = |v: &[f64], p: f64| match sorted_percentile(v, p) {
+            q if q.is_nan() => 0.0,
+            q => q as f32,
         };
         let queued = |predicted: bool| self.queue.iter().filter(|p| p.predicted == predicted).count() as u32;
         pb::StatsReply {

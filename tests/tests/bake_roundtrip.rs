@@ -5,10 +5,10 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use relief_core::relief::{ReliefTexture, decode_normal};
+use relief_core::relief::{ReliefTexture, decode_normal_rgb8};
 use relief_core::scene::Scene;
 use relief_tests::{relief, scratch, shared_models};
-use relief_worker::bvh::intersect_brute_force;
+use relief_trace::bvh::intersect_brute_force;
 
 /// Agreement between a baked texture and brute-force rays through its texel centres.
 #[derive(Debug, Default)]
@@ -68,7 +68,7 @@ fn check(scene_spec: &str, object: &str, eye: &str, size: u32, bits: u32) -> Agr
                         agreement.depth_mismatch += 1;
                     }
                     let want = mesh.shading_normal(hit.triangle as usize, hit.u, hit.v);
-                    let got = decode_normal(texture.normal[texture.index(i, j)]);
+                    let got = decode_normal_rgb8(texture.normal[texture.index(i, j)]);
                     if got.angle_between(want) > 2f32.to_radians() {
                         agreement.normal_mismatch += 1;
                     }

@@ -16,8 +16,8 @@ use relief_tests::{
     Running, command, scratch, send_sigterm, spawn_server, start_server, start_server_at, start_worker,
     wait_exit, worker_command,
 };
-use relief_worker::bake;
-use relief_worker::tracer::ObjectTracer;
+use relief_trace::bake;
+use relief_trace::tracer::ObjectTracer;
 
 fn request(
     scene: &str,
@@ -525,7 +525,7 @@ async fn tls_with_a_self_signed_certificate() {
     // Without trusting the certificate the connection is refused.
     let mut untrusting = match Remote::connect(&url, None, "test").await {
         Err(e) => {
-            assert!(e.contains("connecting"), "{e}");
+            assert!(e.to_string().contains("connecting"), "{e}");
             return;
         }
         Ok(r) => r,

@@ -23,8 +23,8 @@ use relief_proto::auth::BearerToken;
 use relief_proto::bundle::Bundle;
 use relief_proto::convert::{depth_bits_from_pb, hash_from_pb, size_from_pb, texture_to_pb, vec3_from_pb};
 use relief_proto::pb;
-use relief_worker::bake::bake_unless_cancelled;
-use relief_worker::tracer::ObjectTracer;
+use relief_trace::bake::bake_unless_cancelled;
+use relief_trace::tracer::ObjectTracer;
 
 use crate::Args;
 
@@ -384,7 +384,7 @@ async fn fetch_and_load(hash: ContentHash, context: &JobContext) -> Result<Arc<L
     {
         encoded.extend_from_slice(&chunk.data);
     }
-    let bundle = Bundle::decode(encoded)?;
+    let bundle = Bundle::decode(encoded).map_err(|e| e.to_string())?;
     let dir = context.scene_dir.clone();
     let loaded = tokio::task::spawn_blocking(move || bundle.load(&dir).map(Loaded::new))
         .await

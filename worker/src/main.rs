@@ -43,7 +43,7 @@ pub struct Args {
 }
 
 fn main() -> ExitCode {
-    relief_core::cli::run(|args: Args| {
+    relief_startup::run(|args: Args| {
         let runtime =
             tokio::runtime::Runtime::new().map_err(|e| anyhow::anyhow!("starting the async runtime: {e}"))?;
         runtime.block_on(daemon::run(args))

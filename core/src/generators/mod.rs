@@ -43,10 +43,15 @@ const MAX_SUBDIVISIONS: u32 = 8;
 const MAX_GRID: u32 = 2048;
 const MAX_TREE_DEPTH: u32 = 9;
 
+/// A generator parameter out of its range: the message names the parameter and the range.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct GeneratorError(pub &'static str);
+
 impl Generator {
     /// Checks parameter ranges; the error names the parameter.
-    pub fn validate(&self) -> Result<(), String> {
-        let check = |ok: bool, what: &str| if ok { Ok(()) } else { Err(what.to_string()) };
+    pub fn validate(&self) -> Result<(), GeneratorError> {
+        let check = |ok: bool, what: &'static str| if ok { Ok(()) } else { Err(GeneratorError(what)) };
         match *self {
             Generator::Sphere { subdivisions } => check(
                 subdivisions <= MAX_SUBDIVISIONS,

@@ -160,7 +160,7 @@ pub fn parse(text: &str, origin: &str, base: &Path, reach: Reach) -> Result<Scen
             ambient,
             lights: lights
                 .into_iter()
-                .map(|l| convert_light(l).map_err(&error))
+                .map(|l| convert_light(l).map_err(|e| error(e.to_string())))
                 .collect::<Result<_>>()?,
         },
     };
@@ -214,8 +214,8 @@ fn span_note(text: &str, span: Option<std::ops::Range<usize>>) -> String {
     format!(" (line {line}, column {column})")
 }
 
-fn convert_light(light: LightFile) -> Result<Light, String> {
-    let check = |what: &str, v: [f32; 3]| crate::vector::ensure_finite(what, Vec3::from(v));
+fn convert_light(light: LightFile) -> Result<Light> {
+    let check = |what: &str, v: [f32; 3]| crate::vector::ensure_finite(what, Vec3::from(v)).map_err(invalid);
     Ok(match light {
         LightFile::Directional {
             direction,
@@ -224,7 +224,7 @@ fn convert_light(light: LightFile) -> Result<Light, String> {
         } => {
             let direction = check("light direction", direction)?.normalize_or_zero();
             if direction == Vec3::ZERO {
-                return Err("a directional light has a zero direction".into());
+                return Err(invalid("a directional light has a zero direction"));
             }
             Light::Directional {
                 direction,
@@ -247,50 +247,54 @@ fn convert_light(light: LightFile) -> Result<Light, String> {
 const MAX_COORDINATE: f32 = 1e12;
 
 /// Whether a world-space mesh lies within [`MAX_COORDINATE`] of the origin.
-pub(super) fn check_extent(mesh: &Mesh) -> Result<(), String> {
+pub(super) fn check_extent(mesh: &Mesh) -> Result<()> {
     let bounds = mesh.bounds();
     if bounds.min.abs().max(bounds.max.abs()).max_element() > MAX_COORDINATE {
-        return Err(format!(
+        return Err(invalid(format!(
             "beyond {MAX_COORDINATE:e} m from the origin, past what f32 rendering can hold"
-        ));
+        )));
     }
     Ok(())
 }
 
 /// A light colour: finite and not negative.
-fn check_colour(v: [f32; 3]) -> Result<Vec3, String> {
-    let c = crate::vector::ensure_finite("light color", Vec3::from(v))?;
+fn check_colour(v: [f32; 3]) -> Result<Vec3> {
+    let c = crate::vector::ensure_finite("light color", Vec3::from(v)).map_err(invalid)?;
     if c.min_element() < 0.0 {
-        return Err(format!("light color {c} must not be negative"));
+        return Err(invalid(format!("light color {c} must not be negative")));
     }
     Ok(c)
 }
 
 /// `v`, finite and not negative.
-fn non_negative(what: &str, v: f32) -> Result<f32, String> {
+fn non_negative(what: &str, v: f32) -> Result<f32> {
     match finite_scalar(what, v)? {
         v if v >= 0.0 => Ok(v),
-        v => Err(format!("{what} {v} must not be negative")),
+        v => Err(invalid(format!("{what} {v} must not be negative"))),
     }
 }
 
-fn finite_scalar(what: &str, v: f32) -> Result<f32, String> {
+fn finite_scalar(what: &str, v: f32) -> Result<f32> {
     if v.is_finite() {
         Ok(v)
     } else {
-        Err(format!("{what} {v} is not finite"))
+        Err(invalid(format!("{what} {v} is not finite")))
     }
 }
 
+/// An [`Error::Invalid`] saying `what` is wrong.
+fn invalid(what: impl std::fmt::Display) -> Error {
+    Error::Invalid(what.to_string())
+}
+
 fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<SceneObject> {
-    let invalid = |m: String| Error::Invalid(m);
     let mut mesh: Mesh = match (&o.obj, &o.generator) {
         (Some(path), None) => crate::obj::load_obj(&base.join(path), reach)?,
         (None, Some(generator)) => {
             generator.validate().map_err(invalid)?;
             generator.build()
         }
-        _ => return Err(invalid("give exactly one of `obj` or `generator`".into())),
+        _ => return Err(invalid("give exactly one of `obj` or `generator`")),
     };
     let translate = crate::vector::ensure_finite("translate", Vec3::from(o.translate)).map_err(invalid)?;
     let rotate = crate::vector::ensure_finite("rotate_deg", Vec3::from(o.rotate_deg)).map_err(invalid)?;
@@ -304,10 +308,8 @@ fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<SceneObject>
         }
     }
     let specular = Specular {
-        strength: non_negative("specular", o.specular.unwrap_or(Specular::default().strength))
-            .map_err(invalid)?,
-        shininess: non_negative("shininess", o.shininess.unwrap_or(Specular::default().shininess))
-            .map_err(invalid)?,
+        strength: non_negative("specular", o.specular.unwrap_or(Specular::default().strength))?,
+        shininess: non_negative("shininess", o.shininess.unwrap_or(Specular::default().shininess))?,
     };
     let rotation = Quat::from_euler(
         EulerRot::XYZ,

@@ -48,18 +48,23 @@ pub const MAX_OBJECT_NAME: usize = 64;
 /// Object names become file names (report images, texture directories), so they are
 /// ASCII letters, digits, `-`, `_` and `.`, not starting with `.`, at most
 /// [`MAX_OBJECT_NAME`] long: never a path.
-pub fn check_object_name(name: &str) -> Result<(), String> {
+pub fn check_object_name(name: &str) -> Result<(), BadObjectName> {
     if name.is_empty()
         || name.len() > MAX_OBJECT_NAME
         || name.starts_with('.')
         || !name.chars().all(name_char)
     {
-        return Err(format!(
-            "object name `{name}` must be 1 to {MAX_OBJECT_NAME} ASCII letters, digits, `-`, `_` or `.`, not starting with `.`"
-        ));
+        return Err(BadObjectName(name.to_string()));
     }
     Ok(())
 }
+
+/// An object name [`check_object_name`] refuses.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "object name `{0}` must be 1 to {MAX_OBJECT_NAME} ASCII letters, digits, `-`, `_` or `.`, not starting with `.`"
+)]
+pub struct BadObjectName(pub String);
 
 /// A character an object name may hold ([`check_object_name`]).
 fn name_char(c: char) -> bool {

@@ -1,0 +1,118 @@
+//! `relief bench raytrace`: BVH build time and the primary-ray throughput of a bake, on
+//! one thread and on all.
+
+use anyhow::{Context, Result};
+use clap::Args;
+use glam::Vec3;
+use serde::Serialize;
+
+use relief_core::relief::DepthBits;
+use relief_core::scene::{Scene, SceneObject};
+use relief_trace::bake;
+use relief_trace::bvh::Bvh;
+use relief_trace::tracer::ObjectTracer;
+
+use super::best_ms;
+use crate::{args, progress};
+
+#[derive(Args)]
+pub struct RaytraceArgs {
+    /// Built-in scene name, .toml scene file, or .obj file.
+    #[arg(long, default_value = "default")]
+    scene: String,
+    /// Object to trace (default: the one with the most triangles).
+    #[arg(long)]
+    object: Option<String>,
+    /// Bake size N: N² primary rays per run.
+    #[arg(long, default_value = "256", value_parser = args::texture_size, allow_hyphen_values = true)]
+    size: u32,
+    /// Timed runs per measurement (best is reported), after one warm-up.
+    #[arg(long, default_value = "5", value_parser = clap::value_parser!(u32).range(1..=1000))]
+    runs: u32,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// What `relief bench raytrace --json` prints.
+#[derive(Serialize)]
+struct RaytraceReport {
+    object: String,
+    triangles: usize,
+    bvh_build_ms: f64,
+    bvh_nodes: usize,
+    /// BVH + mesh heap bytes per triangle.
+    bytes_per_triangle: f64,
+    size: u32,
+    bake_ms_1t: f64,
+    bake_ms_mt: f64,
+    rays_per_s_1t: f64,
+    rays_per_s_mt: f64,
+    threads: usize,
+}
+
+pub fn run(args: RaytraceArgs) -> Result<()> {
+    let bar = progress::spinner("loading scene");
+    let scene = Scene::load(&args.scene)?;
+    let object: &SceneObject = match &args.object {
+        Some(name) => scene.object(name)?,
+        None => scene
+            .objects
+            .iter()
+            .max_by_key(|o| o.mesh.triangle_count())
+            .context("the scene has no objects")?,
+    };
+    bar.set_message("building BVH");
+    let mesh = &object.mesh;
+    let bvh_build_ms = best_ms(args.runs.min(3), || drop(Bvh::build(mesh)));
+    let tracer = ObjectTracer::new(object);
+    // A fixed, oblique view from three bounding radii away.
+    let radius = object.bounds.extent().length() * 0.5;
+    let eye = object.bounds.center() + Vec3::new(0.45, 0.35, 0.82).normalize() * radius * 3.0;
+    let bake_once = || bake(&tracer, eye, args.size, DepthBits::Eight).map(drop);
+    bake_once()?;
+    bar.set_message("tracing, all threads");
+    let bake_ms_mt = best_ms(args.runs, || drop(bake_once()));
+    bar.set_message("tracing, one thread");
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .context("creating a one-thread pool")?;
+    let bake_ms_1t = one.install(|| best_ms(args.runs, || drop(bake_once())));
+    bar.finish_and_clear();
+    let rays = args.size as f64 * args.size as f64;
+    let triangles = mesh.triangle_count();
+    let report = RaytraceReport {
+        object: object.name.clone(),
+        triangles,
+        bvh_build_ms,
+        bvh_nodes: tracer.bvh.node_count(),
+        bytes_per_triangle: (tracer.bvh.heap_bytes() + mesh.heap_bytes()) as f64 / triangles as f64,
+        size: args.size,
+        bake_ms_1t,
+        bake_ms_mt,
+        rays_per_s_1t: rays / (bake_ms_1t * 1e-3),
+        rays_per_s_mt: rays / (bake_ms_mt * 1e-3),
+        threads: rayon::current_num_threads(),
+    };
+    if args.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!(
+            "{}: {} triangles, BVH {:.1} ms ({} nodes, {:.1} B/triangle)\n\
+             bake {}²: {:.2} ms on 1 thread ({:.2} Mrays/s), {:.2} ms on {} threads ({:.2} Mrays/s)",
+            report.object,
+            report.triangles,
+            report.bvh_build_ms,
+            report.bvh_nodes,
+            report.bytes_per_triangle,
+            report.size,
+            report.bake_ms_1t,
+            report.rays_per_s_1t / 1e6,
+            report.bake_ms_mt,
+            report.threads,
+            report.rays_per_s_mt / 1e6
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,310 @@
+//! `relief load`: many simulated clients flying the camera path against one server,
+//! for each error tolerance (hence impostor lifetime): how request latency, stalls and
+//! image error move. Writes `load.csv` and plots.
+
+use std::ops::ControlFlow;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, anyhow, bail};
+use clap::Args;
+use serde::Serialize;
+
+use relief_client::flight::Flight;
+use relief_client::manager::{Config, Counters, Manager};
+use relief_client::source::remote_manager;
+use relief_core::scene::Scene;
+use relief_core::stats::{finite_mean, finite_min, percentile};
+use relief_lab::image_error::compare;
+use relief_lab::plot::{Chart, Curve, register_font};
+use relief_proto::bundle::bundle_for;
+use relief_trace::{SceneTracer, render_reference};
+
+use crate::processes::{LocalService, connect_and_upload};
+use crate::{args, progress};
+
+#[derive(Args)]
+pub struct LoadArgs {
+    /// Built-in scene name, .toml scene file, or .obj file.
+    #[arg(long, default_value = "default")]
+    scene: String,
+    /// Simulated clients, each on its own place along the camera path.
+    #[arg(long, default_value = "8", value_parser = clap::value_parser!(u32).range(1..=256))]
+    clients: u32,
+    /// Tolerances (pixels of predicted gap growth) to run, comma-separated.
+    #[arg(long, default_value = "4,8,16,32,64", value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::args::positive)]
+    tolerances: Vec<f32>,
+    /// Path frames each client flies per tolerance (the eye follows the clock, so a slow
+    /// frame skips some).
+    #[arg(long, default_value = "150", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    frames: u32,
+    /// Camera pace.
+    #[arg(long, default_value = "30", value_parser = clap::value_parser!(u32).range(1..=1000))]
+    fps: u32,
+    /// Workers to start for each run.
+    #[arg(long, default_value = "2", value_parser = clap::value_parser!(u32).range(1..=64))]
+    workers: u32,
+    /// Network delay injected on the clients' side, milliseconds.
+    #[arg(long, default_value = "0", value_parser = clap::value_parser!(u64).range(0..=60_000))]
+    rtt_ms: u64,
+    /// Frame size of the image-error samples (client 0 renders and compares).
+    #[arg(long, default_value = "320x180", value_parser = args::frame_size)]
+    size: (u32, u32),
+    /// Client 0 compares with the ray-traced reference every K-th frame.
+    #[arg(long, default_value = "25", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    reference_every: u32,
+    /// Output directory: load.csv, load_latency.png, load_stalls.png.
+    #[arg(long, default_value = "out/load")]
+    out: PathBuf,
+    /// Print the rows as a JSON array.
+    #[arg(long)]
+    json: bool,
+}
+
+/// One tolerance's results: a CSV row.
+#[derive(Serialize, Clone)]
+struct Row {
+    tolerance_px: f32,
+    clients: u32,
+    frames: u64,
+    requests_now: u64,
+    requests_predicted: u64,
+    requests_per_s: f64,
+    latency_ms_p50: f64,
+    latency_ms_p99: f64,
+    /// Fraction of client frames with an impostor beyond tolerance or missing.
+    stall_frac: f64,
+    /// Final textures received per client per second of flight.
+    textures_per_client_s: f64,
+    psnr_db_mean: f64,
+    psnr_db_min: f64,
+}
+
+const HEADER: &str = "tolerance_px,clients,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,stall_frac,textures_per_client_s,psnr_db_mean,psnr_db_min";
+
+impl Row {
+    fn csv(&self) -> String {
+        format!(
+            "{},{},{},{},{},{:.2},{:.2},{:.2},{:.4},{:.3},{:.2},{:.2}",
+            self.tolerance_px,
+            self.clients,
+            self.frames,
+            self.requests_now,
+            self.requests_predicted,
+            self.requests_per_s,
+            self.latency_ms_p50,
+            self.latency_ms_p99,
+            self.stall_frac,
+            self.textures_per_client_s,
+            self.psnr_db_mean,
+            self.psnr_db_min
+        )
+    }
+}
+
+/// What one simulated client brings back.
+struct ClientResult {
+    /// Frames drawn (path frames a slow frame skipped are not).
+    frames: u32,
+    counters: Counters,
+    received: u64,
+    psnr: Vec<f64>,
+}
+
+pub fn run(args: LoadArgs) -> Result<()> {
+    if args.tolerances.is_empty() || args.tolerances.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
+        bail!("--tolerances must be positive numbers of pixels");
+    }
+    let scene = Arc::new(Scene::load(&args.scene)?);
+    let path_frames = scene.path.frame_count().max(1);
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let tracer = Arc::new(SceneTracer::new(&scene));
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let bar = progress::bar(args.tolerances.len() as u64, "load runs");
+    let mut rows = Vec::new();
+    let bundle = bundle_for(&args.scene)?;
+    for &tolerance in &args.tolerances {
+        bar.set_message(format!("tolerance {tolerance} px"));
+        let service = LocalService::start(&args.out, args.workers)?;
+        let (remote, hash) = runtime.block_on(connect_and_upload(
+            &service.url,
+            None,
+            None,
+            "load",
+            &bundle,
+            Some(args.workers),
+        ))?;
+        let started = Instant::now();
+        let handles: Vec<_> = (0..args.clients)
+            .map(|c| {
+                let mut remote = remote.clone();
+                remote.client_id = format!("load-{c}");
+                let config = Config {
+                    tolerance,
+                    ..Config::default()
+                };
+                let mut manager = {
+                    let _guard = runtime.enter();
+                    remote_manager(&scene, config, remote, hash, Duration::from_millis(args.rtt_ms))
+                };
+                let scene = scene.clone();
+                let tracer = tracer.clone();
+                let (frames, fps, size, every) = (args.frames, args.fps, args.size, args.reference_every);
+                let start = c * path_frames / args.clients;
+                std::thread::spawn(move || {
+                    let flight = Flight {
+                        scene: &scene,
+                        size,
+                        fps,
+                        frames,
+                        start,
+                        wrap: true,
+                    };
+                    fly(&flight, &tracer, &mut manager, c, every)
+                })
+            })
+            .collect();
+        let results: Vec<ClientResult> = handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .map_err(|_| anyhow!("a simulated client panicked"))
+                    .and_then(|r| r)
+            })
+            .collect::<Result<_>>()?;
+        let seconds = started.elapsed().as_secs_f64();
+        drop(service);
+        let latencies: Vec<f64> = results
+            .iter()
+            .flat_map(|r| r.counters.latencies_ms.clone())
+            .collect();
+        let psnr: Vec<f64> = results.iter().flat_map(|r| r.psnr.clone()).collect();
+        let sum = |f: &dyn Fn(&ClientResult) -> u64| results.iter().map(f).sum::<u64>();
+        let (now, predicted) = (
+            sum(&|r| r.counters.requests_now),
+            sum(&|r| r.counters.requests_predicted),
+        );
+        let frames = sum(&|r| r.frames as u64);
+        rows.push(Row {
+            tolerance_px: tolerance,
+            clients: args.clients,
+            frames,
+            requests_now: now,
+            requests_predicted: predicted,
+            requests_per_s: (now + predicted) as f64 / seconds,
+            latency_ms_p50: percentile(&latencies, 0.5),
+            latency_ms_p99: percentile(&latencies, 0.99),
+            stall_frac: sum(&|r| r.counters.stale_frames) as f64 / frames as f64,
+            textures_per_client_s: sum(&|r| r.received) as f64 / args.clients as f64 / seconds,
+            // NaN (null in JSON) when no frame was compared.
+            psnr_db_mean: finite_mean(&psnr).unwrap_or(f64::NAN),
+            psnr_db_min: finite_min(&psnr).unwrap_or(f64::NAN),
+        });
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let mut csv = String::from(HEADER) + "\n";
+    for row in &rows {
+        csv += &row.csv();
+        csv.push('\n');
+    }
+    std::fs::write(args.out.join("load.csv"), csv).context("writing load.csv")?;
+    register_font()?;
+    let series = |name: &str, value: &dyn Fn(&Row) -> f64| -> (String, Curve) {
+        let points = rows
+            .iter()
+            .map(|r| {
+                (
+                    (r.tolerance_px * 1000.0) as i64,
+                    (r.tolerance_px as f64, value(r)),
+                )
+            })
+            .filter(|(_, (_, y))| y.is_finite())
+            .collect();
+        (name.to_string(), points)
+    };
+    let title = format!(
+        "{} clients, {} workers, RTT +{} ms",
+        args.clients, args.workers, args.rtt_ms
+    );
+    Chart {
+        title: &format!("Request latency vs tolerance ({title})"),
+        x_desc: "tolerance (pixels of gap growth; larger = longer impostor life, log)",
+        y_desc: "latency (ms)",
+        log_x: true,
+        colour: &|_| None,
+    }
+    .draw(
+        &args.out.join("load_latency.png"),
+        &[
+            series("p50", &|r| r.latency_ms_p50),
+            series("p99", &|r| r.latency_ms_p99),
+        ]
+        .into_iter()
+        .collect(),
+    )?;
+    Chart {
+        title: &format!("Stalls, PSNR and request rate vs tolerance ({title})"),
+        x_desc: "tolerance (pixels of gap growth, log)",
+        y_desc: "% stalled frames · PSNR dB · requests/s",
+        log_x: true,
+        colour: &|_| None,
+    }
+    .draw(
+        &args.out.join("load_stalls.png"),
+        &[
+            series("stalled frames (%)", &|r| 100.0 * r.stall_frac),
+            series("PSNR mean (dB)", &|r| r.psnr_db_mean),
+            series("requests per second", &|r| r.requests_per_s),
+        ]
+        .into_iter()
+        .collect(),
+    )?;
+    if args.json {
+        println!("{}", serde_json::to_string(&rows)?);
+    } else {
+        println!("{HEADER}");
+        for row in &rows {
+            println!("{}", row.csv());
+        }
+    }
+    Ok(())
+}
+
+/// One simulated client: flies `flight`; client 0 also draws every `every`-th frame
+/// and compares it with the ray-traced reference (a slow frame, which skips path frames
+/// as in the demo).
+fn fly(
+    flight: &Flight,
+    tracer: &SceneTracer,
+    manager: &mut Manager,
+    client: u32,
+    every: u32,
+) -> Result<ClientResult> {
+    if flight.camera_at(0.0).is_none() {
+        bail!("the scene has no camera path");
+    }
+    flight.warm_up(manager)?;
+    let mut psnr = Vec::new();
+    let log = flight.fly(
+        manager,
+        |index| client == 0 && index.is_multiple_of(every),
+        |flown| -> Result<ControlFlow<()>> {
+            if let Some(image) = &flown.image {
+                psnr.push(compare(image, &render_reference(tracer, flown.camera, 1), None).psnr_db);
+            }
+            Ok(ControlFlow::Continue(()))
+        },
+    )?;
+    let received = (0..flight.scene.objects.len()).map(|k| manager.received(k)).sum();
+    Ok(ClientResult {
+        frames: log.frames,
+        counters: manager.counters.clone(),
+        received,
+        psnr,
+    })
+}

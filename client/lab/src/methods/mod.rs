@@ -1,0 +1,216 @@
+//! Every display method of the sources, for comparison: the pre-warp's four sampling
+//! variants (the renderer's, [`relief_render::warp`]), texels splatted forward and
+//! reconstructed ([`forward`], with [`pullpush`] or a per-level kernel), per-pixel ray
+//! marching ([`inverse`]), and the sprite. Each writes albedo, normal and depth into
+//! the frame's [`GBuffer`] with a depth test.
+//!
+//! - [`forward`] — texels warped straight to the screen as points, holes filled by
+//!   [`pullpush`] (Marroquim ch. 4) or gathered with a K×K kernel (ch. 6);
+//! - [`inverse`] — per-pixel ray marching of the depth field (Policarpo).
+//!
+//! [`Method`] names them all (as `--method` takes them); [`display`] shows a texture
+//! with one.
+
+pub mod forward;
+pub mod inverse;
+pub mod pullpush;
+
+use std::fmt;
+use std::str::FromStr;
+
+use relief_core::camera::Camera;
+use relief_render::gbuffer::GBuffer;
+use relief_render::impostor::Impostor;
+use relief_render::warp::{Prewarped, Variant, WarpError};
+
+/// Why a method cannot show a texture from an eye.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum DisplayError {
+    /// The texture cannot be warped there (the eye in its plane, or a non-finite input).
+    #[error(transparent)]
+    Warp(#[from] WarpError),
+    /// The sprite method reuses a previous frame, which [`display`] does not have.
+    #[error("the sprite method needs a previous frame")]
+    NeedsPreviousFrame,
+}
+
+/// A display method, selectable by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Method {
+    /// Pre-warp rows then columns, the column pass re-interpolating depth.
+    TwoPass1d,
+    /// Two passes; the row pass stores each texel's final v.
+    TwoPassAsym,
+    /// Two passes with displacement-compensated depth for interpolated texels (eq. 8-1).
+    TwoPassComp,
+    /// One pass: each row sample goes straight into its column (the sources' choice).
+    Interleaved,
+    /// Texels splatted to the screen as points, holes filled by pull–push.
+    ForwardPullPush,
+    /// Texels splatted to the screen as points at a pyramid level by their size,
+    /// gathered per pixel with a `k × k` kernel (Marroquim ch. 6); k = 3 or 5.
+    ForwardKernel(u8),
+    /// Per-pixel march of the depth field with this many linear steps.
+    Inverse(u16),
+    /// The previous frame's impostor pixels, unchanged (needs a previous frame).
+    Sprite,
+}
+
+impl Method {
+    /// Every method, in report order.
+    pub const ALL: [Method; 11] = [
+        Method::Sprite,
+        Method::TwoPass1d,
+        Method::TwoPassAsym,
+        Method::TwoPassComp,
+        Method::Interleaved,
+        Method::ForwardPullPush,
+        Method::ForwardKernel(3),
+        Method::ForwardKernel(5),
+        Method::Inverse(16),
+        Method::Inverse(64),
+        Method::Inverse(128),
+    ];
+
+    /// The method's name, as `--method` takes it.
+    pub fn name(self) -> String {
+        match self {
+            Method::Sprite => "sprite".into(),
+            Method::TwoPass1d => "twopass-1d".into(),
+            Method::TwoPassAsym => "twopass-asym".into(),
+            Method::TwoPassComp => "twopass-comp".into(),
+            Method::Interleaved => "interleaved".into(),
+            Method::ForwardPullPush => "forward-pullpush".into(),
+            Method::ForwardKernel(k) => format!("forward-kernel-{k}"),
+            Method::Inverse(n) => format!("inverse-{n}"),
+        }
+    }
+}
+
+impl Method {
+    /// The pre-warp variant a pre-warp method uses; `None` for the others.
+    pub fn variant(self) -> Option<Variant> {
+        match self {
+            Method::TwoPass1d => Some(Variant::OneD),
+            Method::TwoPassAsym => Some(Variant::Asymmetric),
+            Method::TwoPassComp => Some(Variant::Compensated),
+            Method::Interleaved => Some(Variant::Interleaved),
+            Method::ForwardPullPush | Method::ForwardKernel(_) | Method::Inverse(_) | Method::Sprite => None,
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.name())
+    }
+}
+
+impl FromStr for Method {
+    type Err = String;
+
+    /// Parses a method name; `inverse-N` takes any step count 1..=4096 and
+    /// `forward-kernel-K` an odd K in 1..=9.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if let Some(n) = s.strip_prefix("inverse-")
+            && let Ok(n) = n.parse::<u16>()
+            && (1..=4096).contains(&n)
+        {
+            return Ok(Method::Inverse(n));
+        }
+        if let Some(k) = s.strip_prefix("forward-kernel-")
+            && let Ok(k) = k.parse::<u8>()
+            && k % 2 == 1
+            && k <= 9
+        {
+            return Ok(Method::ForwardKernel(k));
+        }
+        Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
+            let names: Vec<String> = Method::ALL.iter().map(|m| m.name()).collect();
+            format!(
+                "unknown method `{s}` (choose one of: {}; inverse-N, forward-kernel-K)",
+                names.join(", ")
+            )
+        })
+    }
+}
+
+/// Shows `impostor` of scene object `object` from `camera` into `gbuffer` with `method`.
+pub fn display(
+    method: Method,
+    impostor: &Impostor,
+    object: u32,
+    camera: &Camera,
+    gbuffer: &mut GBuffer,
+) -> Result<(), DisplayError> {
+    draw(
+        prepare(method, impostor, camera)?,
+        impostor,
+        object,
+        camera,
+        gbuffer,
+    )
+}
+
+/// The part of a display that does not touch the frame: the pre-warp of the pre-warp
+/// methods (nothing for the others). Several impostors' can run at once, one per core,
+/// before their [`draw`]s (see [`relief_render::warp`]).
+pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<Prepared, DisplayError> {
+    if let Some(variant) = method.variant() {
+        return Ok(Prepared::Prewarped(Prewarped::new(variant, impostor, camera)?));
+    }
+    match method {
+        Method::ForwardPullPush => Ok(Prepared::PullPush),
+        Method::ForwardKernel(k) => Ok(Prepared::Kernel(k)),
+        Method::Inverse(steps) => Ok(Prepared::Inverse(steps)),
+        _ => Err(DisplayError::NeedsPreviousFrame),
+    }
+}
+
+/// What [`prepare`] made, for [`draw`].
+pub enum Prepared {
+    /// The pre-warp methods' pre-warped image.
+    Prewarped(Prewarped),
+    PullPush,
+    Kernel(u8),
+    Inverse(u16),
+}
+
+impl Prepared {
+    /// Texels of `impostor` (the one prepared) this display visits: those a pre-warp
+    /// reached the screen from, or all.
+    pub fn texels_warped(&self, impostor: &Impostor) -> usize {
+        match self {
+            Prepared::Prewarped(prewarped) => prewarped.texels_warped(),
+            _ => impostor.texture.depth.len(),
+        }
+    }
+}
+
+/// Finishes, into `gbuffer`, the display [`prepare`] began for the same impostor and
+/// camera.
+pub fn draw(
+    prepared: Prepared,
+    impostor: &Impostor,
+    object: u32,
+    camera: &Camera,
+    gbuffer: &mut GBuffer,
+) -> Result<(), DisplayError> {
+    match prepared {
+        Prepared::Prewarped(prewarped) => {
+            prewarped.draw(impostor, object, camera, gbuffer);
+            Ok(())
+        }
+        Prepared::PullPush => Ok(forward::display(impostor, object, camera, gbuffer)?),
+        Prepared::Kernel(k) => Ok(forward::display_kernel(
+            impostor, k as usize, object, camera, gbuffer,
+        )?),
+        Prepared::Inverse(steps) => Ok(inverse::display(
+            impostor,
+            steps as usize,
+            object,
+            camera,
+            gbuffer,
+        )?),
+    }
+}

@@ -1,0 +1,291 @@
+//! Stiff and extreme cases: every method returns a finite image or a clear "needs
+//! regeneration / geometry" answer — no NaN or infinity in any buffer, no panic.
+
+use glam::Vec3;
+
+use relief_core::camera::Camera;
+use relief_core::generators::Generator;
+use relief_core::mesh::{Material, Mesh};
+use relief_core::relief::{DepthBits, ReliefTexture, SourceCamera};
+use relief_core::scene::{Scene, SceneObject, default_lighting};
+use relief_core::shading::Specular;
+use relief_lab::methods::{DisplayError, Method, display};
+use relief_render::gbuffer::GBuffer;
+use relief_render::impostor::Impostor;
+use relief_render::warp::WarpError;
+use relief_render::warp::params::WarpParams;
+use relief_render::warp::prewarp::{Variant, prewarp};
+use relief_render::warp::sprite::Sprite;
+use relief_trace::bake;
+use relief_trace::tracer::ObjectTracer;
+
+fn scene_of(mesh: Mesh) -> Scene {
+    let object = SceneObject::new("thing", mesh, Specular::default());
+    let mut scene = Scene {
+        name: "stiff".into(),
+        objects: vec![object],
+        lighting: default_lighting(),
+        background: Vec3::splat(0.5),
+        fov_y_degrees: 50.0,
+        path: Default::default(),
+    };
+    scene.path = scene.default_path();
+    scene
+}
+
+fn sphere(scale: f32) -> Mesh {
+    Generator::Sphere { subdivisions: 3 }
+        .build()
+        .transformed(glam::Affine3A::from_scale(Vec3::splat(scale)))
+}
+
+/// Shows `texture` with every method from `eye` (looking at `target`) and checks the
+/// buffers. Returns how many methods drew something.
+fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, what: &str) -> usize {
+    let up = if (target - eye).normalize_or_zero().dot(Vec3::Y).abs() > 0.99 {
+        Vec3::Z
+    } else {
+        Vec3::Y
+    };
+    let camera = Camera::look_at(eye, target, up, 50.0, 96, 72).expect("test camera");
+    let impostor = Impostor::new(texture);
+    // The pre-warped images themselves hold only finite values.
+    if let Ok(params) = WarpParams::new(&impostor.texture, eye) {
+        assert!(
+            params
+                .add_u
+                .iter()
+                .chain(&params.add_v)
+                .chain(&params.scale)
+                .all(|x| x.is_finite())
+        );
+        for variant in Variant::ALL {
+            let image = prewarp(&impostor, &params, variant);
+            assert!(
+                image.texels.iter().all(|t| t.depth.is_finite()),
+                "{what}, {variant:?}: non-finite pre-warped depth"
+            );
+        }
+    }
+    let mut drew = 0;
+    for method in Method::ALL {
+        let mut gbuffer = GBuffer::new(camera.width, camera.height);
+        match display(method, &impostor, 0, &camera, &mut gbuffer) {
+            Ok(()) => {}
+            Err(DisplayError::Warp(WarpError::EyeInPlane(_)) | DisplayError::NeedsPreviousFrame) => {}
+            Err(e) => panic!("{what}, {method}: unexpected error {e}"),
+        }
+        // (The other planes are integers: only depth can hold NaN or infinity.)
+        for &depth in gbuffer.depths() {
+            assert!(
+                depth.is_finite() && depth > 0.0,
+                "{what}, {method}: depth {depth}"
+            );
+        }
+        drew += (gbuffer.covered() > 0) as usize;
+        let frame = gbuffer.shade(scene, &camera);
+        assert_eq!(frame.color.len(), 96 * 72);
+        // `sprite` redraws a previous frame's impostor: this one's, captured and drawn
+        // again, is the same pixels, as finite.
+        if let Some(sprite) = Sprite::capture(&gbuffer, 0) {
+            let mut again = GBuffer::new(camera.width, camera.height);
+            sprite.draw(&mut again);
+            for (x, y) in (0..camera.height).flat_map(|y| (0..camera.width).map(move |x| (x, y))) {
+                assert_eq!(
+                    again.stored(x, y),
+                    gbuffer.stored(x, y),
+                    "{what}, sprite of {method}"
+                );
+            }
+        }
+    }
+    drew
+}
+
+fn baked(scene: &Scene, eye: Vec3, size: u32, bits: DepthBits) -> ReliefTexture {
+    bake(&ObjectTracer::new(&scene.objects[0]), eye, size, bits).expect("bake")
+}
+
+#[test]
+fn eye_in_near_and_behind_the_texture_plane() {
+    let scene = scene_of(sphere(1.0));
+    let source = Vec3::new(0.0, 0.0, 5.0);
+    let texture = baked(&scene, source, 64, DepthBits::Eight);
+    let c = texture.camera;
+    let in_plane = c.plane_centre() + c.a.normalize() * 3.0;
+    // In the plane: pre-warps refuse, others draw or not, nothing is non-finite.
+    check_all(
+        &scene,
+        texture.clone(),
+        in_plane + Vec3::Y * 1e-3,
+        Vec3::ZERO,
+        "in plane",
+    );
+    // A hair in front of it (k3 huge) and behind it.
+    check_all(
+        &scene,
+        texture.clone(),
+        in_plane - c.f * 1e-5,
+        Vec3::ZERO,
+        "near plane",
+    );
+    check_all(
+        &scene,
+        texture.clone(),
+        in_plane + c.f * 0.5,
+        Vec3::ZERO,
+        "behind plane",
+    );
+    let params = relief_render::warp::params::WarpParams::new(&texture, in_plane);
+    assert!(matches!(params, Err(WarpError::EyeInPlane(_))), "{params:?}");
+}
+
+#[test]
+fn epipole_far_outside_and_inside_the_image_and_grazing_views() {
+    let scene = scene_of(sphere(1.0));
+    let texture = baked(&scene, Vec3::new(0.0, 0.3, 6.0), 64, DepthBits::Eight);
+    // Pure sideways motion, far away: the epipole runs off towards infinity.
+    check_all(
+        &scene,
+        texture.clone(),
+        Vec3::new(4000.0, 0.3, 6.0),
+        Vec3::ZERO,
+        "sideways",
+    );
+    // Straight on: epipole inside the image.
+    assert!(
+        check_all(
+            &scene,
+            texture.clone(),
+            Vec3::new(0.1, 0.2, 4.0),
+            Vec3::ZERO,
+            "head-on"
+        ) >= 8
+    );
+    // Grazing: 89.5° away from the source direction.
+    let grazing = Vec3::new(
+        6.0 * 89.5f32.to_radians().sin(),
+        0.0,
+        6.0 * 89.5f32.to_radians().cos(),
+    );
+    check_all(&scene, texture, grazing, Vec3::ZERO, "grazing");
+}
+
+#[test]
+fn eye_at_the_bounds_edge_and_inside() {
+    let scene = scene_of(sphere(1.0));
+    let texture = baked(&scene, Vec3::new(0.0, 0.0, 5.0), 64, DepthBits::Eight);
+    // At a corner of the bounds, then inside them.
+    check_all(
+        &scene,
+        texture.clone(),
+        Vec3::splat(1.0001),
+        Vec3::ZERO + Vec3::X * 1e-3,
+        "corner",
+    );
+    check_all(
+        &scene,
+        texture.clone(),
+        Vec3::new(0.0, 0.0, 1.0),
+        Vec3::new(0.0, 0.0, -1.0),
+        "inside",
+    );
+    // Baking from inside is refused with the reason.
+    let inside = bake(
+        &ObjectTracer::new(&scene.objects[0]),
+        Vec3::new(0.0, 0.0, 0.5),
+        16,
+        DepthBits::Eight,
+    );
+    assert!(inside.unwrap_err().to_string().contains("geometry"));
+}
+
+#[test]
+fn extreme_scales_and_distances() {
+    for size in [1e-3f32, 1e4] {
+        let scene = scene_of(sphere(size * 0.5));
+        for distance in [2.0 * size, 1e3 * size, 1e6 * size] {
+            let eye = Vec3::new(0.2, 0.3, 1.0).normalize() * distance;
+            let texture = baked(&scene, eye, 32, DepthBits::Sixteen);
+            let turned = glam::Quat::from_rotation_y(0.1) * eye;
+            check_all(
+                &scene,
+                texture,
+                turned,
+                Vec3::ZERO,
+                &format!("size {size} at {distance}"),
+            );
+        }
+        // Near range the impostor is visible and drawn by the warps.
+        let eye = Vec3::new(0.0, 0.0, 3.0 * size);
+        let texture = baked(&scene, eye, 32, DepthBits::Eight);
+        assert!(check_all(&scene, texture, eye, Vec3::ZERO, &format!("size {size} near")) >= 8);
+    }
+}
+
+#[test]
+fn eight_bit_depth_on_a_very_deep_object() {
+    // Two small squares 1000 m apart along the view: one depth level spans ~4 m.
+    let square = |z: f32| {
+        Generator::Plane {
+            size: 1.0,
+            divisions: 2,
+        }
+        .build()
+        .transformed(glam::Affine3A::from_rotation_translation(
+            glam::Quat::from_rotation_x(std::f32::consts::FRAC_PI_2),
+            Vec3::new(0.0, 0.0, z),
+        ))
+    };
+    let mut mesh = square(0.0);
+    mesh.append(square(-1000.0));
+    let scene = scene_of(mesh);
+    let texture = baked(&scene, Vec3::new(0.0, 0.0, 5.0), 64, DepthBits::Eight);
+    assert!(texture.camera.depth_quantum(DepthBits::Eight) > 3.0);
+    for eye in [
+        Vec3::new(0.0, 0.0, 5.0),
+        Vec3::new(2.0, 1.0, 4.0),
+        Vec3::new(300.0, 0.0, 5.0),
+    ] {
+        check_all(&scene, texture.clone(), eye, Vec3::new(0.0, 0.0, -500.0), "deep");
+    }
+}
+
+#[test]
+fn empty_and_one_texel_textures() {
+    let scene = scene_of(sphere(1.0));
+    let bounds = scene.objects[0].bounds;
+    let eye = Vec3::new(0.0, 0.0, 5.0);
+    let empty = ReliefTexture::empty(
+        SourceCamera::facing(eye, &bounds, 16, 16).unwrap(),
+        DepthBits::Eight,
+        eye,
+    );
+    assert_eq!(check_all(&scene, empty, eye, Vec3::ZERO, "empty"), 0);
+    let one = baked(&scene, eye, 1, DepthBits::Eight);
+    assert_eq!(one.covered_texels(), 1);
+    check_all(&scene, one.clone(), eye, Vec3::ZERO, "one texel");
+    check_all(
+        &scene,
+        one,
+        Vec3::new(3.0, 0.0, 4.0),
+        Vec3::ZERO,
+        "one texel, turned",
+    );
+    // A mesh with no material-less surprises: a single triangle.
+    let tri = Mesh {
+        positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+        triangles: vec![[0, 1, 2]],
+        materials: vec![Material::default()],
+        ..Default::default()
+    };
+    let scene = scene_of(tri);
+    let texture = baked(&scene, Vec3::new(0.3, 0.3, 2.0), 8, DepthBits::Eight);
+    check_all(
+        &scene,
+        texture,
+        Vec3::new(0.6, 0.1, 2.0),
+        Vec3::new(0.3, 0.3, 0.0),
+        "flat triangle",
+    );
+}

@@ -1,0 +1,79 @@
+//! A relief texture prepared for display: the texture plus what every warp of it needs
+//! and that does not depend on the eye — computed once when the texture arrives.
+
+use glam::Vec3;
+
+use relief_core::relief::{ReliefTexture, decode_normal_rgb8};
+
+/// A relief texture and its texel connectivity.
+///
+/// Two neighbouring texels belong to one surface when their depth difference is what
+/// their normals' slope allows over one texel (with slack), so the warps interpolate
+/// between them; otherwise there is a depth discontinuity (one surface in front of
+/// another) and nothing is interpolated across it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Impostor {
+    pub texture: ReliefTexture,
+    /// Texel `k` is connected to its right neighbour.
+    pub right: Vec<bool>,
+    /// Texel `k` is connected to the neighbour below.
+    pub down: Vec<bool>,
+    /// Texel `k`'s albedo, encoded normal and depth level packed in one word: all the
+    /// pre-warp reads of a texel, in one load (measured: 8 % of its time).
+    pub packed: Vec<u64>,
+}
+
+/// Slack on the slope test: a surface may bend this much within one texel.
+const SLOPE_SLACK: f32 = 2.0;
+/// Slopes are capped (grazing normals say "any depth change"): steeper than this many
+/// texels of depth per texel is treated as a discontinuity all the same.
+const MAX_SLOPE: f32 = 24.0;
+
+impl Impostor {
+    pub fn new(texture: ReliefTexture) -> Impostor {
+        let c = texture.camera;
+        let (w, h) = (c.width as usize, c.height as usize);
+        let empty = texture.depth_bits.empty();
+        let quantum = c.depth_quantum(texture.depth_bits);
+        let (a_len, b_len) = (c.a.length(), c.b.length());
+        let (a_dir, b_dir) = (c.a / a_len, c.b / b_len);
+        let depth = |k: usize| c.depth_of_level(texture.depth[k], texture.depth_bits);
+        // Depth change per unit move along `axis` that a plane with normal `n` has.
+        let slope = |n: Vec3, axis: Vec3| {
+            let facing = n.dot(c.f).abs();
+            if facing < 1e-6 {
+                MAX_SLOPE
+            } else {
+                (n.dot(axis).abs() / facing).min(MAX_SLOPE)
+            }
+        };
+        let normals: Vec<Vec3> = texture.normal.iter().map(|&n| decode_normal_rgb8(n)).collect();
+        let joined = |k: usize, l: usize, axis: Vec3, step: f32| {
+            if texture.depth[k] == empty || texture.depth[l] == empty {
+                return false;
+            }
+            let allowed = SLOPE_SLACK * step * slope(normals[k], axis).max(slope(normals[l], axis))
+                + step
+                + 2.0 * quantum;
+            (depth(k) - depth(l)).abs() <= allowed
+        };
+        let mut right = vec![false; w * h];
+        let mut down = vec![false; w * h];
+        for j in 0..h {
+            for i in 0..w {
+                let k = j * w + i;
+                right[k] = i + 1 < w && joined(k, k + 1, a_dir, a_len);
+                down[k] = j + 1 < h && joined(k, k + w, b_dir, b_len);
+            }
+        }
+        let packed = (texture.albedo.iter().zip(&texture.normal).zip(&texture.depth))
+            .map(|((&albedo, &normal), &level)| crate::warp::prewarp::pack_texel(albedo, normal, level))
+            .collect();
+        Impostor {
+            texture,
+            right,
+            down,
+            packed,
+        }
+    }
+}

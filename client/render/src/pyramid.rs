@@ -1,0 +1,224 @@
+//! Multi-resolution relief textures (thesis 4.1.1, eq. 4-1/5-1): never warp texels the
+//! screen cannot show. A pyramid of 2×-downsampled copies; each frame warps the
+//! coarsest level whose texel still subtends at most `k` pixels ([`MAX_TEXEL_PIXELS`]
+//! wherever frames are drawn).
+
+use relief_core::camera::Camera;
+use relief_core::relief::{ReliefTexture, SourceCamera};
+
+use crate::impostor::Impostor;
+use crate::validity::schaufler::needs_finer_texture;
+
+/// The angle a texel may span, in pixels' angles, before a finer pyramid level (or a
+/// finer texture) is used: eq. 4-1's `k`. At 1, no texel is larger than a pixel, so
+/// an impostor is as sharp as the frame can show.
+pub const MAX_TEXEL_PIXELS: f32 = 1.0;
+
+/// Pyramids stop at levels this many texels on the shorter side: a coarser level
+/// would save a few hundred texels' warp and show blocks on screen.
+pub const MIN_LEVEL_EDGE: u32 = 16;
+
+/// A relief texture and its downsampled copies, each prepared for display.
+#[derive(Debug, Clone)]
+pub struct Pyramid {
+    /// Level 0 is the full texture; level `l` has `2^l`-times larger texels.
+    pub levels: Vec<Impostor>,
+}
+
+impl Pyramid {
+    /// Builds levels down to `min_size` texels on the shorter side.
+    pub fn new(texture: ReliefTexture, min_size: u32) -> Pyramid {
+        let mut levels = vec![Impostor::new(texture)];
+        loop {
+            let top = &levels[levels.len() - 1].texture;
+            if top.camera.width.min(top.camera.height) / 2 < min_size.max(1) {
+                break;
+            }
+            let next = downsample(top);
+            levels.push(Impostor::new(next));
+        }
+        Pyramid { levels }
+    }
+
+    /// The coarsest level fine enough for `camera` (texel angle ≤ `k` pixel angles),
+    /// or the finest when none is.
+    pub fn level_for(&self, camera: &Camera, k: f32) -> usize {
+        (0..self.levels.len())
+            .rev()
+            .find(|&l| !needs_finer_texture(&self.levels[l].texture.camera, camera, k))
+            .unwrap_or(0)
+    }
+}
+
+/// Halves the resolution: each texel takes the average of the covered texels of its
+/// 2×2 block that lie within two of the block's texel sizes of the front-most one (so
+/// a silhouette keeps its front surface instead of blending with what is behind).
+pub fn downsample(texture: &ReliefTexture) -> ReliefTexture {
+    let c = texture.camera;
+    let (w, h) = (c.width.div_ceil(2), c.height.div_ceil(2));
+    let camera = SourceCamera {
+        width: w,
+        height: h,
+        a: c.a * (c.width as f32 / w as f32),
+        b: c.b * (c.height as f32 / h as f32),
+        ..c
+    };
+    let bits = texture.depth_bits;
+    let empty = bits.empty();
+    let same_surface = 2.0 * camera.a.length().max(camera.b.length());
+    let mut out = ReliefTexture::empty(camera, bits, texture.eye);
+    for j in 0..h {
+        for i in 0..w {
+            let block: Vec<usize> = [(0, 0), (1, 0), (0, 1), (1, 1)]
+                .into_iter()
+                .map(|(di, dj)| (2 * i + di, 2 * j + dj))
+                .filter(|&(x, y)| x < c.width && y < c.height)
+                .map(|(x, y)| texture.index(x, y))
+                .filter(|&k| texture.depth[k] != empty)
+                .collect();
+            let Some(front) = block
+                .iter()
+                .map(|&k| c.depth_of_level(texture.depth[k], bits))
+                .reduce(f32::min)
+            else {
+                continue;
+            };
+            let kept: Vec<usize> = block
+                .into_iter()
+                .filter(|&k| c.depth_of_level(texture.depth[k], bits) <= front + same_surface)
+                .collect();
+            let n = kept.len() as f32;
+            let mean = |f: &dyn Fn(usize) -> f32| kept.iter().map(|&k| f(k)).sum::<f32>() / n;
+            let target = out.index(i, j);
+            out.depth[target] =
+                camera.level_of_depth(mean(&|k| c.depth_of_level(texture.depth[k], bits)), bits);
+            for ch in 0..3 {
+                out.albedo[target][ch] = (mean(&|k| texture.albedo[k][ch] as f32) + 0.5) as u8;
+                out.normal[target][ch] = (mean(&|k| texture.normal[k][ch] as f32) + 0.5) as u8;
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+    use relief_core::bounds::Aabb;
+    use relief_core::relief::DepthBits;
+
+    use super::*;
+
+    /// A `width × height` texture of the unit box seen from +z: texel `(i, j)` holds
+    /// `surface(i, j)` — `None` for empty, else (depth, albedo, encoded normal).
+    fn texture(
+        width: u32,
+        height: u32,
+        surface: impl Fn(u32, u32) -> Option<(f32, [u8; 3], [u8; 3])>,
+    ) -> ReliefTexture {
+        let bounds = Aabb::from_points([Vec3::splat(-0.5), Vec3::splat(0.5)]);
+        let eye = Vec3::new(0.0, 0.0, 4.0);
+        let camera = SourceCamera::facing(eye, &bounds, width, height).expect("faces the box");
+        let bits = DepthBits::Sixteen;
+        let mut t = ReliefTexture::empty(camera, bits, eye);
+        for j in 0..height {
+            for i in 0..width {
+                if let Some((depth, albedo, normal)) = surface(i, j) {
+                    let k = t.index(i, j);
+                    t.depth[k] = camera.level_of_depth(depth, bits);
+                    t.albedo[k] = albedo;
+                    t.normal[k] = normal;
+                }
+            }
+        }
+        t
+    }
+
+    #[test]
+    fn levels_halve_down_to_the_minimum_and_keep_the_quad() {
+        let pyramid = Pyramid::new(texture(64, 48, |_, _| Some((0.5, [9; 3], [128; 3]))), 8);
+        let sizes: Vec<(u32, u32)> = pyramid
+            .levels
+            .iter()
+            .map(|l| (l.texture.camera.width, l.texture.camera.height))
+            .collect();
+        // 48 → 24 → 12; halving 12 would go below 8 texels.
+        assert_eq!(sizes, [(64, 48), (32, 24), (16, 12)]);
+        let quad = |c: &SourceCamera| (c.a * c.width as f32, c.b * c.height as f32, c.origin);
+        let base = quad(&pyramid.levels[0].texture.camera);
+        for level in &pyramid.levels {
+            let (a, b, origin) = quad(&level.texture.camera);
+            assert!(a.abs_diff_eq(base.0, 1e-5) && b.abs_diff_eq(base.1, 1e-5) && origin == base.2);
+        }
+    }
+
+    #[test]
+    fn downsampling_averages_the_front_surface_of_each_block() {
+        // Rows alternate between a near surface and one 0.8 behind it; a few texels
+        // are missing, and the last column's lower half, so two coarse texels are empty.
+        // Odd size: the last blocks are cut in half.
+        let surface = |i: u32, j: u32| match (i, j) {
+            (8, 4..) => None,
+            _ if i % 3 == 2 && j > 4 => None,
+            (_, j) if j % 2 == 0 => Some((0.1 + 0.01 * i as f32, [10 * i as u8, 0, 200], [128, 128, 255])),
+            _ => Some((0.9, [255, 255, 0], [0, 128, 128])),
+        };
+        let fine = texture(9, 7, surface);
+        let coarse = downsample(&fine);
+        let cc = coarse.camera;
+        assert_eq!((cc.width, cc.height), (5, 4));
+        // The two surfaces are 0.72 or more apart, far beyond two coarse texels (0.4):
+        // a block's front group is its near row, never the far one.
+        assert!(2.0 * cc.a.length().max(cc.b.length()) < 0.72);
+        let empty = DepthBits::Sixteen.empty();
+        for j in 0..4 {
+            for i in 0..5 {
+                // By construction: the block's covered texels on its even (near) row.
+                let near: Vec<u32> = (2 * i..(2 * i + 2).min(9))
+                    .filter(|&x| surface(x, 2 * j).is_some())
+                    .collect();
+                let k = coarse.index(i, j);
+                if near.is_empty() {
+                    // (Here only the last column's lower blocks, which hold nothing.)
+                    assert!(i == 4 && j >= 2, "({i}, {j})");
+                    assert_eq!(coarse.depth[k], empty, "({i}, {j}) holds nothing");
+                    continue;
+                }
+                let n = near.len() as f32;
+                let depth = near.iter().map(|&x| 0.1 + 0.01 * x as f32).sum::<f32>() / n;
+                let got = cc.depth_of_level(coarse.depth[k], DepthBits::Sixteen);
+                // (16-bit levels over the box's depth: a quantum is far below 1e-4.)
+                assert!((got - depth).abs() < 1e-4, "({i}, {j}): {got} vs {depth}");
+                let red = near.iter().map(|&x| (10 * x) as f32).sum::<f32>() / n;
+                assert_eq!(coarse.albedo[k], [(red + 0.5) as u8, 0, 200], "({i}, {j})");
+                assert_eq!(coarse.normal[k], [128, 128, 255], "({i}, {j})");
+            }
+        }
+    }
+
+    #[test]
+    fn each_level_is_the_coarsest_the_resolution_test_accepts() {
+        let pyramid = Pyramid::new(texture(256, 256, |_, _| Some((0.5, [9; 3], [128; 3]))), 4);
+        let mut previous = 0;
+        for distance in [2.0f32, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0] {
+            let camera = Camera::look_at(Vec3::new(0.0, 0.0, distance), Vec3::ZERO, Vec3::Y, 40.0, 320, 240)
+                .expect("camera");
+            let level = pyramid.level_for(&camera, 1.0);
+            let fine_enough =
+                |l: usize| !needs_finer_texture(&pyramid.levels[l].texture.camera, &camera, 1.0);
+            // Fine enough (or the finest), and the next coarser one is not.
+            assert!(level == 0 || fine_enough(level), "{distance}: level {level}");
+            assert!(
+                level + 1 == pyramid.levels.len() || !fine_enough(level + 1),
+                "{distance}: level {level}"
+            );
+            // Farther never needs finer texels.
+            assert!(level >= previous, "{distance}: level {level} after {previous}");
+            previous = level;
+        }
+        assert!(
+            previous >= 3,
+            "at 128 m the texture is far coarser: level {previous}"
+        );
+    }
+}

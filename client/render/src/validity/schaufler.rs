@@ -1,0 +1,133 @@
+//! Schaufler's validity tests (thesis ch. 4.1.1, 5.2–5.3): when a sprite may be reused
+//! as it is, when a texture is too coarse for the screen, and the resolution to ask
+//! for.
+
+use glam::Vec3;
+
+use relief_core::bounds::Aabb;
+use relief_core::camera::Camera;
+use relief_core::relief::SourceCamera;
+
+/// β_transP: the largest angle, over the corners of `bounds`, between the directions
+/// to the corner from the old and from the new eye — how far the object's extremes
+/// appear to move.
+pub fn parallax_angle(bounds: &Aabb, old_eye: Vec3, new_eye: Vec3) -> f32 {
+    bounds
+        .corners()
+        .iter()
+        .map(|&p| {
+            let (a, b) = (
+                (p - old_eye).normalize_or_zero(),
+                (p - new_eye).normalize_or_zero(),
+            );
+            a.angle_between(b)
+        })
+        .filter(|a| a.is_finite())
+        .fold(0.0, f32::max)
+}
+
+/// The sprite test: the previous image may be shown unchanged while its extremes have
+/// moved by at most one pixel's angle (β_transP ≤ β_screen).
+pub fn sprite_still_valid(bounds: &Aabb, old_eye: Vec3, camera: &Camera) -> bool {
+    parallax_angle(bounds, old_eye, camera.eye) <= camera.pixel_angle()
+}
+
+/// β_impostor: the angle one texel subtends from `eye`, at the middle of the texture's
+/// volume — where the object's surface lies on average (at the image plane, the
+/// volume's nearest point, it asked for a third more texels per edge for an eye three
+/// radii from a sphere, texels that the surface, mostly deeper, shows smaller).
+pub fn texel_angle(texture: &SourceCamera, eye: Vec3) -> f32 {
+    let centre = volume_centre(texture);
+    let distance = centre.distance(eye).max(f32::MIN_POSITIVE);
+    2.0 * (0.5 * texture.a.length().max(texture.b.length()) / distance).atan()
+}
+
+/// The middle of the texture's volume: its image plane's centre, half-way down its
+/// depth range.
+pub fn volume_centre(texture: &SourceCamera) -> Vec3 {
+    texture.plane_centre() + texture.f * (0.5 * (texture.depth_near + texture.depth_far))
+}
+
+/// The resolution test (eq. 4-1): the texture is too coarse when a texel subtends more
+/// than `k` pixels' angle (`k ≥ 1` tolerates slightly blurry impostors).
+pub fn needs_finer_texture(texture: &SourceCamera, camera: &Camera, k: f32) -> bool {
+    texel_angle(texture, camera.eye) > k * camera.pixel_angle()
+}
+
+/// The texture edge for the object with `bounds` seen from `eye` through `camera`: the
+/// fewest texels whose texture facing `eye` ([`SourceCamera::facing`], the one a bake
+/// makes) passes the resolution test with `k` — eq. 5-1 with the texture's own span,
+/// at the middle of its volume, so that no texel the screen cannot show is made (the
+/// bounds' diagonal, as eq. 5-1 reads literally, asked for up to 1.7× the texels per
+/// edge of a box seen face on). `None` when no texture faces the eye (inside the
+/// bounds, or a non-finite eye or bounds).
+pub fn resolution_for(bounds: &Aabb, eye: Vec3, camera: &Camera, k: f32) -> Option<u32> {
+    let unit = SourceCamera::facing(eye, bounds, 1, 1).ok()?;
+    let span = unit.a.length().max(unit.b.length());
+    let distance = volume_centre(&unit).distance(eye);
+    // texel_angle(N) = 2·atan(span / (2·N·distance)) ≤ k · pixel angle.
+    let edge = 0.5 * span / (distance * (0.5 * k * camera.pixel_angle()).tan());
+    Some(if edge.is_finite() {
+        edge.ceil().clamp(1.0, u32::MAX as f32) as u32
+    } else {
+        u32::MAX
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sprite_test_follows_the_pixel_angle() {
+        let bounds = Aabb {
+            min: Vec3::splat(-1.0),
+            max: Vec3::splat(1.0),
+        };
+        let eye = Vec3::new(0.0, 0.0, 10.0);
+        let camera = Camera::look_at(eye, Vec3::ZERO, Vec3::Y, 60.0, 800, 600).unwrap();
+        assert!(sprite_still_valid(&bounds, eye, &camera));
+        // A sideways step that moves the extremes by less than a pixel's angle …
+        let step = 10.0 * camera.pixel_angle() * 0.5;
+        let near = Camera {
+            eye: eye + Vec3::X * step,
+            ..camera
+        };
+        assert!(sprite_still_valid(&bounds, eye, &near));
+        // … and one that moves them by several.
+        let far = Camera {
+            eye: eye + Vec3::X * step * 8.0,
+            ..camera
+        };
+        assert!(!sprite_still_valid(&bounds, eye, &far));
+    }
+
+    #[test]
+    fn resolution_is_the_fewest_texels_the_resolution_test_accepts() {
+        let bounds = Aabb {
+            min: Vec3::new(-1.0, 0.0, -0.5),
+            max: Vec3::new(1.0, 3.0, 0.5),
+        };
+        for (eye, height) in [
+            (Vec3::new(0.0, 1.0, 10.0), 1000),
+            (Vec3::new(7.0, 6.0, -4.0), 360),
+            (Vec3::new(300.0, 2.0, 1.0), 720),
+            (Vec3::new(0.0, 1.5, 1.2), 300),
+        ] {
+            let camera =
+                Camera::look_at(eye, bounds.center(), Vec3::Y, 60.0, height * 16 / 9, height).unwrap();
+            for k in [1.0, 2.0] {
+                let n = resolution_for(&bounds, eye, &camera, k).unwrap();
+                let texture = |n| SourceCamera::facing(eye, &bounds, n, n).unwrap();
+                assert!(!needs_finer_texture(&texture(n), &camera, k), "{eye} {k}: {n}");
+                assert!(
+                    n == 1 || needs_finer_texture(&texture(n - 1), &camera, k),
+                    "{eye} {k}: {n}"
+                );
+            }
+        }
+        // Seen from inside, no texture faces the eye.
+        let inside = Camera::look_at(Vec3::new(0.0, 1.0, 0.0), Vec3::Z, Vec3::Y, 60.0, 64, 36).unwrap();
+        assert_eq!(resolution_for(&bounds, inside.eye, &inside, 1.0), None);
+    }
+}

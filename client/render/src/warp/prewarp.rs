@@ -1,0 +1,846 @@
+//! The pre-warp (ch. 3.4, 8.2): every texel moved within the source plane to where the
+//! destination eye sees it, holes between neighbours filled by interpolation, texels
+//! visited in occlusion-compatible order so that later writes win.
+//!
+//! Order: the epipole splits rows and columns into halves; each half is visited from the
+//! border towards the epipole. (Each texel moves towards the epipole by `s ∈ (0, 1]`, the
+//! deeper the more, so of two texels landing on one spot the one nearer the epipole in
+//! the source is the nearer surface — it must come last.)
+//!
+//! Filling: consecutive texels A, B of a row (connected — one surface, see
+//! [`Impostor`] — and moving in the visiting direction) produce every pre-warped pixel whose centre lies in
+//! `(A', B']`, interpolated; the first texel of a run produces the pixel it lands in. The
+//! column pass does the same with consecutive samples of a column. The variants differ
+//! in what reaches the column pass (table 8.1):
+//!
+//! - [`Variant::OneD`]: the row pass stores interpolated depth; the column pass computes
+//!   each sample's v' from it — interpolating what was already interpolated.
+//! - [`Variant::Asymmetric`]: the row pass also stores each sample's final v'.
+//! - [`Variant::Compensated`]: as `OneD`, but an interpolated sample takes the depth of
+//!   the point on the 3D segment A–B that pre-warps exactly to its pixel (the purpose of
+//!   eq. 8-1, solved here in closed form) instead of a linear blend.
+//! - [`Variant::Interleaved`]: one pass; each row sample goes straight into its column.
+
+use wide::bytemuck::cast;
+use wide::{i16x8, u8x16, u16x8, u64x2};
+
+use glam::DVec3;
+use relief_core::camera::Camera;
+use relief_core::relief::SourceCamera;
+
+use super::params::WarpParams;
+use crate::EMPTY_DEPTH;
+use crate::impostor::Impostor;
+
+/// Pre-warp sampling variant.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Variant {
+    OneD,
+    Asymmetric,
+    Compensated,
+    Interleaved,
+}
+
+impl Variant {
+    /// Every variant, in table 8.1's order.
+    pub const ALL: [Variant; 4] = [
+        Variant::OneD,
+        Variant::Asymmetric,
+        Variant::Compensated,
+        Variant::Interleaved,
+    ];
+}
+
+/// A pre-warped texel; [`EMPTY_DEPTH`] marks an empty one.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PTexel {
+    /// Displacement along `f` of the surface seen here.
+    pub depth: f32,
+    /// Albedo and encoded normal, packed for blending.
+    pub(crate) attributes: Attributes,
+}
+
+impl PTexel {
+    pub const EMPTY: PTexel = PTexel {
+        depth: EMPTY_DEPTH,
+        attributes: Attributes(0),
+    };
+
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.depth == EMPTY_DEPTH
+    }
+}
+
+/// The pre-warped image: texel `(x, y)` covers source-plane coordinates
+/// `[u0 + x, u0 + x + 1) × [v0 + y, v0 + y + 1)`. It extends past the source quad towards
+/// the epipole, where texels of a turned view land.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PrewarpImage {
+    pub u0: i32,
+    pub v0: i32,
+    pub width: u32,
+    pub height: u32,
+    pub texels: Vec<PTexel>,
+    /// Source texels visited: all of the texture's, or those that can reach a
+    /// [`PlaneWindow`].
+    pub visited: usize,
+}
+
+impl PrewarpImage {
+    /// The texel covering plane coordinates `(u, v)`, if inside.
+    #[inline]
+    pub fn at(&self, u: f32, v: f32) -> Option<&PTexel> {
+        // (Saturating: a coordinate may be infinite, from a ray nearly parallel to
+        // the plane.)
+        let x = (u.floor() as i64).saturating_sub(self.u0 as i64);
+        let y = (v.floor() as i64).saturating_sub(self.v0 as i64);
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
+            return None;
+        }
+        Some(&self.texels[y as usize * self.width as usize + x as usize])
+    }
+}
+
+/// How far past the source quad (in quad sizes) the pre-warped image may reach.
+const MAX_MARGIN: f32 = 1.0;
+
+/// The range of pre-warped coordinates along one axis: texels move from `[0, n]`
+/// towards the epipole `e` by at least the factor `s_min`.
+fn axis_extent(n: f32, e: f32, s_min: f32) -> (i32, i32) {
+    let lo = 0f32.min(e + s_min * (0.0 - e)).max(-MAX_MARGIN * n);
+    let hi = n.max(e + s_min * (n - e)).min((1.0 + MAX_MARGIN) * n);
+    (lo.floor() as i32, hi.ceil() as i32)
+}
+
+/// A texel's albedo and encoded normal: six bytes in the low bytes of a `u64`, so one
+/// interpolation blends all six at once (two multiplies on a vector of 16-bit lanes;
+/// see [`Attributes::lerp`]). The top two
+/// bytes are not read; a source texel keeps its depth level there (see [`pack_texel`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Attributes(u64);
+
+/// A texel as the pre-warp reads it ([`Impostor::packed`]): albedo and encoded normal in
+/// the low six bytes, as [`Attributes`], and the depth level in the top two.
+pub(crate) fn pack_texel(albedo: [u8; 3], normal: [u8; 3], level: u16) -> u64 {
+    let ([r, g, b], [x, y, z], [q0, q1]) = (albedo, normal, level.to_le_bytes());
+    u64::from_le_bytes([r, g, b, x, y, z, q0, q1])
+}
+
+/// The depth level of a [`pack_texel`] texel.
+#[inline(always)]
+fn level_of(texel: u64) -> u16 {
+    (texel >> 48) as u16
+}
+
+/// The eight bytes of `x`, each in a 16-bit lane.
+#[inline(always)]
+fn widen(x: u64) -> u16x8 {
+    // (`splat`, one register move: `new([x, 0])` went through memory and stalled,
+    // its two 8-byte stores read back as one 16-byte load. Only the low half is read.)
+    u16x8::from_u8x16_low(cast::<u64x2, u8x16>(u64x2::splat(x)))
+}
+
+/// The inverse of [`widen`] for lanes below 256.
+#[inline(always)]
+fn narrow(lanes: u16x8) -> u64 {
+    let signed = cast::<u16x8, i16x8>(lanes);
+    cast::<u8x16, u64x2>(u8x16::narrow_i16x8(signed, signed)).to_array()[0]
+}
+
+impl Attributes {
+    /// `self + (other − self)·t/256` per byte, rounded, `t ∈ [0, 256]`: every byte
+    /// widened to a 16-bit lane of one vector, where `a·(256 − t) + b·t + 128 ≤
+    /// 255·256 + 128` fits. (Eight bytes at once: the two unread ones blend along.)
+    #[inline(always)]
+    pub(crate) fn lerp(self, other: Attributes, t: u64) -> Attributes {
+        let t = u16x8::splat(t as u16);
+        let mixed = (widen(self.0) * (u16x8::splat(256) - t) + widen(other.0) * t + u16x8::splat(128)) >> 8;
+        Attributes(narrow(mixed))
+    }
+
+    #[inline(always)]
+    fn texel(self, depth: f32) -> PTexel {
+        PTexel {
+            depth,
+            attributes: self,
+        }
+    }
+
+    #[inline(always)]
+    pub(crate) fn albedo(self) -> [u8; 3] {
+        let [r, g, b, ..] = self.0.to_le_bytes();
+        [r, g, b]
+    }
+
+    #[inline(always)]
+    pub(crate) fn normal(self) -> [u8; 3] {
+        let [_, _, _, x, y, z, ..] = self.0.to_le_bytes();
+        [x, y, z]
+    }
+}
+
+/// A texel in the row pass: its source u, where it lands along the row (u'), and what
+/// goes on to the column pass.
+#[derive(Debug, Clone, Copy)]
+struct RowSample {
+    source: f32,
+    u: f32,
+    cell: Cell,
+}
+
+/// What the column pass reads of a sample: its v' (final, or where its row is before
+/// the column pass), displacement, attributes and link downwards.
+#[derive(Debug, Clone, Copy)]
+struct Cell {
+    v: f32,
+    depth: f32,
+    attributes: Attributes,
+    down: bool,
+}
+
+impl Cell {
+    const START: Cell = Cell {
+        v: 0.0,
+        depth: 0.0,
+        attributes: Attributes(0),
+        down: false,
+    };
+
+    #[inline(always)]
+    fn lerp(&self, other: &Cell, t: f32) -> Cell {
+        Cell {
+            v: self.v + (other.v - self.v) * t,
+            depth: self.depth + (other.depth - self.depth) * t,
+            // (`min`: a NaN `t`, from NaN input, must not underflow the lanes.)
+            attributes: self
+                .attributes
+                .lerp(other.attributes, super::round_small(t * 256.0).min(256) as u64),
+            down: self.down && other.down,
+        }
+    }
+}
+
+/// Along an axis visited forwards (`FORWARDS`: increasing coordinates) or backwards:
+/// when `b` is not behind `a`, calls `each(pixel, t)` for every pixel up to `end` whose
+/// centre lies in `(a, b]`, in visiting order, `t` being the centre's linear position
+/// from `a` to `b`, and returns true; returns false when `b` folds back behind `a` (or
+/// either is NaN). `end` is the image's last pixel along the axis in the
+/// visiting direction, in the signed coordinates below ([`signed_end`]).
+///
+/// A backwards visit runs on negated coordinates, where pixel `x` is pixel `−x − 1`:
+/// one test and one loop serve both directions, and the direction, a const, costs no
+/// branch per sample.
+#[inline(always)]
+fn between<const FORWARDS: bool>(a: f32, b: f32, end: i64, mut each: impl FnMut(i64, f32)) -> bool {
+    let sign = if FORWARDS { 1.0 } else { -1.0 };
+    let (a, b) = (a * sign, b * sign);
+    // (False for NaN too; positions are finite, `WarpParams` sees to that.)
+    let ahead = b >= a;
+    if !ahead {
+        return false;
+    }
+    let (below_a, below_b) = ((a - 0.5).floor(), (b - 0.5).floor());
+    // No pixel centre between them (common where the pre-warp compresses the
+    // surface): no division, no conversions.
+    if below_a == below_b {
+        return true;
+    }
+    // (Finite: samples that coincide have no centre between them, returned above.)
+    let inv = 1.0 / (b - a);
+    // Samples move towards the epipole, which is ahead in the visit: a far one makes
+    // spans run far past the image on that side (never before it), cut at its end.
+    let first = (below_a as i64).saturating_add(1);
+    let last = (below_b as i64).min(end);
+    // (Half-open ranges: `..=` iterates measurably slower here.)
+    for x in first..last + 1 {
+        let t = ((x as f32 + 0.5 - a) * inv).clamp(0.0, 1.0);
+        each(if FORWARDS { x } else { -x - 1 }, t);
+    }
+    true
+}
+
+/// The last pixel of `pixels` met visiting forwards (`FORWARDS`) or backwards, in
+/// [`between`]'s signed coordinates (pixel `x` is `−x − 1` backwards).
+#[inline(always)]
+fn signed_end<const FORWARDS: bool>(pixels: std::ops::Range<i64>) -> i64 {
+    if FORWARDS {
+        pixels.end - 1
+    } else {
+        -pixels.start - 1
+    }
+}
+
+/// The `k`-th of `cells` visited forwards (`FORWARDS`) or backwards.
+#[inline(always)]
+fn visited<const FORWARDS: bool>(cells: &std::ops::Range<usize>, k: usize) -> usize {
+    if FORWARDS {
+        cells.start + k
+    } else {
+        cells.end - 1 - k
+    }
+}
+
+/// The number of cells of `0..n` (centres at `k + 0.5`) before the epipole `e`: the
+/// pre-warp visits those forwards and the others backwards, each half towards the
+/// epipole.
+#[inline]
+fn split_at(n: usize, e: f32) -> usize {
+    (e - 0.5).ceil().clamp(0.0, n as f32) as usize
+}
+
+/// Per-column state of the column pass: the column's last sample, and one past the
+/// number (in visiting order) of the row that produced it — 0 before any.
+#[derive(Clone, Copy)]
+struct Column {
+    last: Cell,
+    next_row: u32,
+}
+
+impl Column {
+    const START: Column = Column {
+        last: Cell::START,
+        next_row: 0,
+    };
+}
+
+/// The rows of the pre-warped image one half of the work writes: all its columns (the
+/// pass's, from the image's first), and plane rows from `v0`.
+struct Output<'a> {
+    texels: &'a mut [PTexel],
+    /// The plane rows `v0..v1` held.
+    v0: i64,
+    v1: i64,
+    width: usize,
+}
+
+impl Output<'_> {
+    /// Writes `cell` at column `xi` of the image (counted from its first, so already
+    /// within it: a column of the pass) and plane row `y`, if that row is held.
+    #[inline(always)]
+    fn put(&mut self, xi: usize, y: i64, cell: &Cell) {
+        let yy = y - self.v0;
+        if yy < 0 {
+            return;
+        }
+        if let Some(t) = self.texels.get_mut(yy as usize * self.width + xi) {
+            *t = cell.attributes.texel(cell.depth);
+        }
+    }
+}
+
+/// Where the row pass's pixels go.
+trait RowSink {
+    /// The row pass made `cell` for pre-warped column `x`.
+    fn emit(&mut self, x: i64, cell: Cell);
+}
+
+/// [`Variant::Interleaved`]: each row sample straight into its column, row number
+/// `seq` of a half visited downwards when `DOWN`.
+struct IntoColumns<'a, 'b, 'o, const DOWN: bool> {
+    job: &'a Job<'a>,
+    columns: &'b mut [Column],
+    out: &'b mut Output<'o>,
+    seq: u32,
+}
+
+impl<const DOWN: bool> RowSink for IntoColumns<'_, '_, '_, DOWN> {
+    #[inline(always)]
+    fn emit(&mut self, x: i64, cell: Cell) {
+        self.job
+            .push_column::<DOWN>(self.columns, self.out, x, cell, self.seq);
+    }
+}
+
+/// The two-pass variants: into one row of the intermediate image (a column's last
+/// sample wins), whose column `k` is pre-warped column `u0 + k`.
+struct IntoRow<'a> {
+    row: &'a mut [Option<Cell>],
+    u0: i64,
+}
+
+impl RowSink for IntoRow<'_> {
+    #[inline(always)]
+    fn emit(&mut self, x: i64, cell: Cell) {
+        let k = x - self.u0;
+        if let Some(slot) = (k >= 0).then(|| self.row.get_mut(k as usize)).flatten() {
+            *slot = Some(cell);
+        }
+    }
+}
+
+/// What both halves of a pre-warp read.
+struct Job<'a> {
+    impostor: &'a Impostor,
+    params: &'a WarpParams,
+    variant: Variant,
+    u0: i64,
+    columns: usize,
+    /// The texels of each row visited: those before the epipole (rightwards), and
+    /// those after it (leftwards) — all, or those that can land where the screen sees.
+    row_halves: [std::ops::Range<usize>; 2],
+}
+
+impl Job<'_> {
+    /// The row pass over source row `j`: `sink.emit(x, cell)` for each pre-warped
+    /// pixel, the texels before the epipole visited rightwards, then the others
+    /// leftwards.
+    #[inline(always)]
+    fn row(
+        &self,
+        j: usize,
+        interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell + Copy,
+        sink: &mut impl RowSink,
+    ) {
+        let [before, after] = &self.row_halves;
+        self.row_half::<true>(j, before.clone(), interpolate, sink);
+        self.row_half::<false>(j, after.clone(), interpolate, sink);
+    }
+
+    /// The texels `texels` of source row `j`, visited rightwards when `RIGHT`:
+    /// consecutive connected texels A, B produce every pixel whose centre lies in
+    /// `(A', B']`, made by `interpolate(a, b, centre, t)`; a texel without a connected
+    /// predecessor (or folding back behind it) produces the pixel it lands in.
+    #[inline(always)]
+    fn row_half<const RIGHT: bool>(
+        &self,
+        j: usize,
+        texels: std::ops::Range<usize>,
+        interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell,
+        sink: &mut impl RowSink,
+    ) {
+        let (impostor, p) = (self.impostor, self.params);
+        let texture = &impostor.texture;
+        let w = texture.camera.width as usize;
+        let row = j * w..(j + 1) * w;
+        let packed = &impostor.packed[row.clone()];
+        let (right, down) = (&impostor.right[row.clone()], &impostor.down[row]);
+        let empty = texture.depth_bits.empty();
+        let v = j as f32 + 0.5;
+        // The previous texel visited, and whether it is there and connected to the next.
+        let mut previous = RowSample {
+            source: 0.0,
+            u: 0.0,
+            cell: Cell::START,
+        };
+        let mut previous_linked = false;
+        let end = signed_end::<RIGHT>(self.u0..self.u0 + self.columns as i64);
+        for step in 0..texels.len() {
+            let i = visited::<RIGHT>(&texels, step);
+            let texel = packed[i];
+            let q = level_of(texel);
+            if q == empty {
+                previous_linked = false;
+                continue;
+            }
+            let q = q as usize;
+            let (scale, source) = (p.scale[q], i as f32 + 0.5);
+            let sample = RowSample {
+                source,
+                u: (source + p.add_u[q]) * scale,
+                cell: Cell {
+                    v: (v + p.add_v[q]) * scale,
+                    depth: p.depth[q],
+                    // (The depth level in the top lanes blends along unread.)
+                    attributes: Attributes(texel),
+                    down: down[i],
+                },
+            };
+            // Visiting rightwards the left texel carries the link; leftwards this one.
+            let spanned = previous_linked
+                && (RIGHT || right[i])
+                && between::<RIGHT>(previous.u, sample.u, end, |x, t| {
+                    sink.emit(x, interpolate(&previous, &sample, x as f32 + 0.5, t))
+                });
+            if !spanned {
+                sink.emit(sample.u.floor() as i64, sample.cell);
+            }
+            previous = sample;
+            previous_linked = !RIGHT || right[i];
+        }
+    }
+
+    /// Feeds `cell`, made by row number `seq` (in visiting order, downwards when
+    /// `DOWN`) for pre-warped column `x`, into that column: every pixel whose centre
+    /// lies between the column's last sample and it when the two are connected rows,
+    /// else the pixel it lands in.
+    #[inline(always)]
+    fn push_column<const DOWN: bool>(
+        &self,
+        columns: &mut [Column],
+        out: &mut Output,
+        x: i64,
+        cell: Cell,
+        seq: u32,
+    ) {
+        let xi = x - self.u0;
+        let Some(column) = (xi >= 0).then(|| columns.get_mut(xi as usize)).flatten() else {
+            return;
+        };
+        // (The image has a column per pass column: this one is within it.)
+        let column_index = xi as usize;
+        // Visiting downwards the previous row's sample carries the link; upwards this one.
+        let last = column.last;
+        let linked = seq != 0 && column.next_row == seq && if DOWN { last.down } else { cell.down };
+        let end = signed_end::<DOWN>(out.v0..out.v1);
+        let spanned = linked
+            && between::<DOWN>(last.v, cell.v, end, |y, t| {
+                out.put(column_index, y, &last.lerp(&cell, t))
+            });
+        if !spanned {
+            out.put(column_index, cell.v.floor() as i64, &cell);
+        }
+        *column = Column {
+            last: cell,
+            next_row: seq + 1,
+        };
+    }
+
+    /// Pre-warps the source rows `rows`, visited downwards when `DOWN` (else upwards),
+    /// into `out`.
+    fn half<const DOWN: bool>(&self, rows: std::ops::Range<usize>, out: &mut Output) {
+        let mut columns = vec![Column::START; self.columns];
+        let linear = |a: &RowSample, b: &RowSample, _, t| a.cell.lerp(&b.cell, t);
+        match self.variant {
+            Variant::Interleaved => {
+                for seq in 0..rows.len() {
+                    let mut sink = IntoColumns::<DOWN> {
+                        job: self,
+                        columns: &mut columns,
+                        out,
+                        seq: seq as u32,
+                    };
+                    self.row(visited::<DOWN>(&rows, seq), linear, &mut sink);
+                }
+            }
+            Variant::Compensated => self.two_pass::<DOWN>(rows, &mut columns, out, |a, b, centre, _| {
+                compensated(a, b, centre, self.params)
+            }),
+            Variant::OneD | Variant::Asymmetric => self.two_pass::<DOWN>(rows, &mut columns, out, linear),
+        }
+    }
+
+    /// [`Job::half`] for the two-pass variants: the rows into an intermediate image,
+    /// then its columns.
+    fn two_pass<const DOWN: bool>(
+        &self,
+        rows: std::ops::Range<usize>,
+        columns: &mut [Column],
+        out: &mut Output,
+        interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell + Copy,
+    ) {
+        let mut intermediate: Vec<Option<Cell>> = vec![None; self.columns * rows.len()];
+        for seq in 0..rows.len() {
+            let mut sink = IntoRow {
+                row: &mut intermediate[seq * self.columns..(seq + 1) * self.columns],
+                u0: self.u0,
+            };
+            self.row(visited::<DOWN>(&rows, seq), interpolate, &mut sink);
+        }
+        for seq in 0..rows.len() {
+            let j = visited::<DOWN>(&rows, seq);
+            for xi in 0..self.columns {
+                let Some(cell) = intermediate[seq * self.columns + xi] else {
+                    continue;
+                };
+                let v = match self.variant {
+                    Variant::Asymmetric => cell.v,
+                    _ => self.params.warp_v(j as f32 + 0.5, cell.depth),
+                };
+                let x = xi as i64 + self.u0;
+                self.push_column::<DOWN>(columns, out, x, Cell { v, ..cell }, seq as u32);
+            }
+        }
+    }
+}
+
+/// Pre-warps `impostor` for the eye of `params`, on the calling thread.
+pub fn prewarp(impostor: &Impostor, params: &WarpParams, variant: Variant) -> PrewarpImage {
+    prewarp_with(impostor, params, variant, None, false)
+}
+
+/// As [`prewarp`], with the halves above and below the epipole on two threads: they
+/// write disjoint rows (texels move towards the epipole, never past it), so each
+/// writes straight into the final image. With `seen` (see [`PlaneWindow::seen_by`]),
+/// only the part of the image a texture mapping through that window reads is made,
+/// from only the texels that can reach it — the same pixels there as without.
+pub fn prewarp_split(
+    impostor: &Impostor,
+    params: &WarpParams,
+    variant: Variant,
+    seen: Option<&PlaneWindow>,
+) -> PrewarpImage {
+    prewarp_with(impostor, params, variant, seen, true)
+}
+
+/// A rectangle of the source plane, in texel coordinates: `u ∈ [u0, u1], v ∈ [v0, v1]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneWindow {
+    pub u0: f32,
+    pub v0: f32,
+    pub u1: f32,
+    pub v1: f32,
+}
+
+impl PlaneWindow {
+    /// The part of the source plane of `c` that the screen of `camera` shows, as far
+    /// as a pre-warped image can reach (one quad size past the quad, see
+    /// [`MAX_MARGIN`]): that plane rectangle clipped to the camera's frustum, whose
+    /// four side planes pass through the eye — exactly the plane points some pixel's
+    /// ray crosses ahead of the eye — and the clipped polygon's bounding box. Empty
+    /// (`u1 < u0`) when the screen shows none of it (or the input is NaN); `None` when
+    /// a clipped corner is not finite (then nothing is left out).
+    pub fn seen_by(camera: &Camera, c: &SourceCamera) -> Option<PlaneWindow> {
+        // (In f64, the eye subtracted too: at large coordinates the points' offsets
+        // from the eye lose f32 bits.)
+        let origin = c.origin.as_dvec3() - camera.eye.as_dvec3();
+        let (a, b) = (c.a.as_dvec3(), c.b.as_dvec3());
+        let (n, m) = (
+            (c.width as f64) * MAX_MARGIN as f64,
+            (c.height as f64) * MAX_MARGIN as f64,
+        );
+        let (w, h) = (c.width as f64, c.height as f64);
+        let mut polygon = vec![(-n, -m), (w + n, -m), (w + n, h + m), (-n, h + m)];
+        let axes = [camera.right, camera.up, camera.forward].map(|d| d.as_dvec3());
+        let view = |(u, v): (f64, f64)| {
+            let p = origin + a * u + b * v;
+            DVec3::new(p.dot(axes[0]), p.dot(axes[1]), p.dot(axes[2]))
+        };
+        // Clipped by the four side planes (through the eye, so the plane facing
+        // forwards adds nothing).
+        for side in 0..4 {
+            let inside = |q: (f64, f64)| camera.frustum_margins(view(q))[side];
+            let mut clipped = Vec::with_capacity(polygon.len() + 1);
+            for (k, &p) in polygon.iter().enumerate() {
+                let q = polygon[(k + 1) % polygon.len()];
+                let (gp, gq) = (inside(p), inside(q));
+                if gp >= 0.0 {
+                    clipped.push(p);
+                }
+                if (gp >= 0.0) != (gq >= 0.0) {
+                    let t = gp / (gp - gq);
+                    clipped.push((p.0 + (q.0 - p.0) * t, p.1 + (q.1 - p.1) * t));
+                }
+            }
+            polygon = clipped;
+        }
+        let mut window = PlaneWindow {
+            u0: f32::INFINITY,
+            v0: f32::INFINITY,
+            u1: f32::NEG_INFINITY,
+            v1: f32::NEG_INFINITY,
+        };
+        for (u, v) in polygon {
+            if !(u.is_finite() && v.is_finite()) {
+                return None;
+            }
+            window = PlaneWindow {
+                u0: window.u0.min(u as f32),
+                v0: window.v0.min(v as f32),
+                u1: window.u1.max(u as f32),
+                v1: window.v1.max(v as f32),
+            };
+        }
+        Some(window)
+    }
+}
+
+/// How far (in texels) the pre-warped image reaches past a [`PlaneWindow`]: the
+/// texture mapping's bilinear footprint of a pixel at the window's edge lies within
+/// it, so the pixels it reads are those it would read in the whole image.
+const WINDOW_MARGIN: i32 = 2;
+
+/// The cells of `cells` — one half of an axis, before the epipole `e` (`before`) or
+/// after it — whose texels can land within `[lo, hi]`, and one more on either side
+/// (the span from the last cell outside to the first inside crosses into it). A texel
+/// at `x` lands at `e + s·(x − e)` for an `s` in `[s_lo, s_hi]` (> 0): a linear bound
+/// each way, so the cells are a range. Cells past it in the visit land beyond `hi`
+/// (or before `lo`) and so do the spans between them.
+fn reaching(
+    cells: std::ops::Range<usize>,
+    before: bool,
+    e: f32,
+    (s_lo, s_hi): (f32, f32),
+    (lo, hi): (f32, f32),
+) -> std::ops::Range<usize> {
+    let (e, lo, hi) = (e as f64, lo as f64, hi as f64);
+    // Before the epipole (x ≤ e) the landing spans [e + s_hi·(x − e), e + s_lo·(x − e)];
+    // after it the reverse.
+    let (for_lo, for_hi) = if before { (s_lo, s_hi) } else { (s_hi, s_lo) };
+    let (x_min, x_max) = (e + (lo - e) / for_lo as f64, e + (hi - e) / for_hi as f64);
+    // Cell k has its centre at k + ½; bounded first so the conversions are exact.
+    let bound = |x: f64| x.clamp(cells.start as f64 - 1.0, cells.end as f64 + 1.0);
+    let first = (bound(x_min - 0.5).ceil() - 1.0).max(cells.start as f64) as usize;
+    let last = (bound(x_max - 0.5).floor() + 1.0).min(cells.end as f64 - 1.0);
+    if last < first as f64 {
+        return first..first;
+    }
+    first..last as usize + 1
+}
+
+fn prewarp_with(
+    impostor: &Impostor,
+    params: &WarpParams,
+    variant: Variant,
+    seen: Option<&PlaneWindow>,
+    parallel: bool,
+) -> PrewarpImage {
+    let c = &impostor.texture.camera;
+    let (w, h) = (c.width as usize, c.height as usize);
+    let s_min = 1.0 / (1.0 + params.k3 * params.max_depth());
+    let (mut u0, mut u1) = axis_extent(w as f32, params.epipole.x, s_min);
+    let (mut v0, mut v1) = axis_extent(h as f32, params.epipole.y, s_min);
+    let (column_split, row_split) = (split_at(w, params.epipole.x), split_at(h, params.epipole.y));
+    let (mut row_halves, mut rows) = ([0..column_split, column_split..w], [0..row_split, row_split..h]);
+    // The scale factors' range: the table's ends (depth is linear in the level).
+    let (first, last) = (params.scale.first().copied(), params.scale.last().copied());
+    let scales = first.zip(last).map(|(a, b)| (a.min(b), a.max(b)));
+    // `reaching` predicts landings exactly; the tables' rounding moves them by about
+    // |e|·s·1e-7 texels, within its one-texel slack unless the epipole is millions of
+    // texels away or s huge (a depth range reaching nearly to the eye): then every
+    // texel is visited.
+    let predictable =
+        |(lo, hi): (f32, f32)| lo > 0.0 && hi <= 4.0 && params.epipole.abs().max_element() < 1e5;
+    if let (Some(seen), Some(scales)) = (seen, scales.filter(|&s| predictable(s))) {
+        // (Saturating: a window may reach far past the image.)
+        u0 = u0.max((seen.u0.floor() as i32).saturating_sub(WINDOW_MARGIN));
+        u1 = u1.min((seen.u1.ceil() as i32).saturating_add(WINDOW_MARGIN));
+        v0 = v0.max((seen.v0.floor() as i32).saturating_sub(WINDOW_MARGIN));
+        v1 = v1.min((seen.v1.ceil() as i32).saturating_add(WINDOW_MARGIN));
+        if u1 <= u0 || v1 <= v0 {
+            // The screen sees none of it.
+            return PrewarpImage {
+                u0,
+                v0,
+                width: 1,
+                height: 1,
+                texels: vec![PTexel::EMPTY],
+                visited: 0,
+            };
+        }
+        let (e, cu, cv) = (params.epipole, (u0 as f32, u1 as f32), (v0 as f32, v1 as f32));
+        row_halves = [
+            reaching(0..column_split, true, e.x, scales, cu),
+            reaching(column_split..w, false, e.x, scales, cu),
+        ];
+        rows = [
+            reaching(0..row_split, true, e.y, scales, cv),
+            reaching(row_split..h, false, e.y, scales, cv),
+        ];
+    }
+    let (width, height) = ((u1 - u0).max(1) as usize, (v1 - v0).max(1) as usize);
+    let mut texels = vec![PTexel::EMPTY; width * height];
+    let job = Job {
+        impostor,
+        params,
+        variant,
+        u0: u0 as i64,
+        columns: width,
+        row_halves,
+    };
+    // Output rows whose centres lie above the epipole belong to the upper half.
+    let split = ((params.epipole.y - 0.5).ceil() as i64 - v0 as i64).clamp(0, height as i64) as usize;
+    let (upper, lower) = texels.split_at_mut(split * width);
+    let mut upper = Output {
+        texels: upper,
+        v0: v0 as i64,
+        v1: v0 as i64 + split as i64,
+        width,
+    };
+    let mut lower = Output {
+        texels: lower,
+        v0: v0 as i64 + split as i64,
+        v1: v0 as i64 + height as i64,
+        width,
+    };
+    let [above, below] = rows;
+    let visited = (job.row_halves[0].len() + job.row_halves[1].len()) * (above.len() + below.len());
+    if parallel {
+        rayon::join(
+            || job.half::<true>(above, &mut upper),
+            || job.half::<false>(below, &mut lower),
+        );
+    } else {
+        job.half::<true>(above, &mut upper);
+        job.half::<false>(below, &mut lower);
+    }
+    PrewarpImage {
+        u0,
+        v0,
+        width: width as u32,
+        height: height as u32,
+        texels,
+        visited,
+    }
+}
+
+/// The sample at pixel centre `centre` between row neighbours `a` and `b`, taken at the
+/// point of the 3D segment between their surface points that pre-warps exactly there:
+/// with `u(t) = u_a + t·Δu`, `d(t) = d_a + t·Δd` in the source, solve
+/// `(u(t) + e1·k3·d(t)) / (1 + k3·d(t)) = centre` for `t`.
+// (Always inlined: called, it returned its cell through memory, and the vector lerp's
+// result read back piecewise stalled every pixel — 2.6× slower.)
+#[inline(always)]
+fn compensated(a: &RowSample, b: &RowSample, centre: f32, p: &WarpParams) -> Cell {
+    let (k3, e1) = (p.k3, p.epipole.x);
+    let (ad, bd) = (a.cell.depth, b.cell.depth);
+    let (du, dd) = (b.source - a.source, bd - ad);
+    let denominator = du + k3 * dd * (e1 - centre);
+    let t = if denominator.abs() > 1e-12 {
+        ((centre * (1.0 + k3 * ad) - a.source - e1 * k3 * ad) / denominator).clamp(0.0, 1.0)
+    } else {
+        0.5
+    };
+    a.cell.lerp(&b.cell, t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn visits<const FORWARDS: bool>(a: f32, b: f32, end: i64) -> (bool, Vec<i64>) {
+        let mut pixels = Vec::new();
+        let spanned = between::<FORWARDS>(a, b, end, |x, t| {
+            assert!((0.0..=1.0).contains(&t), "t = {t}");
+            pixels.push(x);
+        });
+        (spanned, pixels)
+    }
+
+    /// The pixels whose centres lie in `(a, b]`, in visiting order, cut at the image's
+    /// end, for both directions; folds and NaN span nothing.
+    #[test]
+    fn spans_visit_the_centres_between_two_samples() {
+        assert_eq!(visits::<true>(2.2, 5.5, 100), (true, vec![2, 3, 4, 5]));
+        assert_eq!(visits::<true>(2.6, 2.9, 100), (true, vec![]));
+        // Backwards: from u = 5.5 down to 2.2, pixel 5's centre (5.5) excluded.
+        let end = signed_end::<false>(0..100);
+        assert_eq!(visits::<false>(5.5, 2.2, end), (true, vec![4, 3, 2]));
+        assert_eq!(visits::<true>(5.0, 4.0, 100), (false, vec![]));
+        assert_eq!(visits::<true>(f32::NAN, 4.0, 100), (false, vec![]));
+        // A sample a billion pixels away (an epipole far off): cut at the end, 0..=9.
+        assert_eq!(visits::<true>(0.2, 1e9, 9).1, (0..10).collect::<Vec<_>>());
+        let end = signed_end::<false>(-10..50);
+        assert_eq!(
+            visits::<false>(3.7, -1e9, end).1,
+            (-10..4).rev().collect::<Vec<_>>()
+        );
+    }
+
+    /// The packed lerp rounds each byte to nearest, ends exact, on all six lanes.
+    #[test]
+    fn attribute_lerp_rounds_each_byte() {
+        let (a, b) = ([0u8, 10, 255, 100, 3, 254], [255u8, 11, 0, 100, 4, 1]);
+        let pack = |v: [u8; 6]| Attributes(pack_texel([v[0], v[1], v[2]], [v[3], v[4], v[5]], 0));
+        for t in [0u64, 1, 77, 128, 200, 255, 256] {
+            let got = pack(a).lerp(pack(b), t);
+            let bytes: Vec<u8> = got.albedo().into_iter().chain(got.normal()).collect();
+            let expected: Vec<u8> = a
+                .iter()
+                .zip(b)
+                .map(|(&a, b)| ((a as f64 * (256 - t) as f64 + b as f64 * t as f64) / 256.0).round() as u8)
+                .collect();
+            assert_eq!(bytes, expected, "t = {t}");
+        }
+    }
+}

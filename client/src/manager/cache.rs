@@ -1,0 +1,168 @@
+//! The textures held for each object: arrivals taken in (never waiting), each final
+//! one's valid angle probed, the nearest the eye kept.
+
+use glam::Vec3;
+
+use relief_core::camera::Camera;
+use relief_core::relief::ReliefTexture;
+use relief_core::scene::Scene;
+use relief_render::pyramid::Pyramid;
+use relief_render::validity::critical::CriticalPoints;
+use relief_render::warp::params::WarpParams;
+
+use super::Manager;
+use super::choose::{angle_between, growth};
+use super::messages::Arrival;
+use super::policy::{CRITICAL_REGIONS, LATENCY_WINDOW, MIN_LEVEL_EDGE, PROBE_REFINEMENTS, PROBE_START};
+
+/// A texture made ready for the frame loop: its pyramid (with texel connectivity),
+/// critical points and the gaps it shows at its own eye. Building this takes
+/// milliseconds for big textures, so the texture sources do it on their own threads.
+pub struct ReadyTexture {
+    pyramid: Pyramid,
+    critical: CriticalPoints,
+    baseline: Vec<f32>,
+}
+
+impl ReadyTexture {
+    pub fn new(texture: ReliefTexture) -> ReadyTexture {
+        let critical = CriticalPoints::find(&texture, CRITICAL_REGIONS, CRITICAL_REGIONS);
+        let baseline = WarpParams::new(&texture, texture.eye).map_or_else(
+            |_| vec![0.0; critical.pairs.len()],
+            |params| critical.region_gaps(&params),
+        );
+        ReadyTexture {
+            pyramid: Pyramid::new(texture, MIN_LEVEL_EDGE),
+            critical,
+            baseline,
+        }
+    }
+}
+
+impl std::fmt::Debug for ReadyTexture {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let c = &self.pyramid.levels[0].texture.camera;
+        write!(f, "ReadyTexture({}x{})", c.width, c.height)
+    }
+}
+
+/// A texture held for an object.
+pub(super) struct Held {
+    pub(super) pyramid: Pyramid,
+    pub(super) critical: CriticalPoints,
+    /// The regions' gaps at the texture's own eye: what it shows at best.
+    pub(super) baseline: Vec<f32>,
+    pub(super) eye: Vec3,
+    pub(super) is_final: bool,
+}
+
+#[derive(Default)]
+pub(super) struct ObjectState {
+    pub(super) held: Vec<Held>,
+    /// Angle (radians) over which the newest final texture of this object stays valid.
+    pub(super) valid_angle: Option<f32>,
+    /// The last [`LATENCY_WINDOW`] round trips of this object's textures, seconds.
+    pub(super) recent_latencies: Vec<f64>,
+    /// Textures of this object requested.
+    pub(super) requested: u64,
+    /// Final textures of this object received.
+    pub(super) received: u64,
+}
+
+/// How far (radians) around `centre`, turning the texture's eye about the vertical,
+/// `held` stays within `tolerance`: probed at doubling angles, then halved back.
+pub(super) fn probe_valid_angle(held: &Held, centre: Vec3, camera: &Camera, tolerance: f32) -> f32 {
+    let within = |angle: f32| {
+        [angle, -angle].iter().all(|&a| {
+            let eye = centre + glam::Quat::from_rotation_y(a) * (held.eye - centre);
+            growth(held, eye, camera) <= tolerance
+        })
+    };
+    let mut angle = PROBE_START;
+    while angle < std::f32::consts::FRAC_PI_2 && within(angle * 2.0) {
+        angle *= 2.0;
+    }
+    // Refine between `angle` (within) and twice it (not).
+    let (mut lo, mut hi) = (angle, angle * 2.0);
+    for _ in 0..PROBE_REFINEMENTS {
+        let mid = 0.5 * (lo + hi);
+        if within(mid) { lo = mid } else { hi = mid }
+    }
+    lo
+}
+
+impl Manager {
+    /// Takes in what has arrived (never waits).
+    pub(super) fn drain(&mut self, camera: &Camera, scene: &Scene) {
+        let eye = camera.eye;
+        while let Ok(arrival) = self.arrivals.try_recv() {
+            match arrival {
+                Arrival::Texture {
+                    id,
+                    texture,
+                    is_final,
+                } => {
+                    let Some(p) = self.pending.get(&id).copied() else {
+                        continue; // Withdrawn meanwhile.
+                    };
+                    if is_final {
+                        self.pending.remove(&id);
+                        let ms = p.sent.elapsed().as_secs_f64() * 1e3;
+                        self.counters.latencies_ms.push(ms);
+                        tracing::debug!(object = p.object, ms, predicted = p.predicted, "round trip");
+                        for recent in [
+                            &mut self.recent_latencies,
+                            &mut self.objects[p.object].recent_latencies,
+                        ] {
+                            recent.push(ms / 1e3);
+                            if recent.len() > LATENCY_WINDOW {
+                                recent.remove(0);
+                            }
+                        }
+                    }
+                    let ReadyTexture {
+                        pyramid,
+                        critical,
+                        baseline,
+                    } = *texture;
+                    let state = &mut self.objects[p.object];
+                    state.received += is_final as u64;
+                    // A final texture replaces its own preview.
+                    state.held.retain(|h| h.is_final || h.eye != p.eye);
+                    let held = Held {
+                        eye: p.eye,
+                        pyramid,
+                        critical,
+                        baseline,
+                        is_final,
+                    };
+                    if is_final {
+                        let centre = scene.objects[p.object].bounds.center();
+                        let angle = probe_valid_angle(&held, centre, camera, self.config.tolerance);
+                        state.valid_angle = Some(angle);
+                        tracing::debug!(
+                            object = p.object,
+                            valid_deg = angle.to_degrees(),
+                            "texture arrived; its valid angle probed"
+                        );
+                    }
+                    state.held.push(held);
+                    // Keep the textures nearest the eye.
+                    if state.held.len() > self.config.keep {
+                        let centre = scene.objects[p.object].bounds.center();
+                        state.held.sort_by(|a, b| {
+                            angle_between(centre, a.eye, eye).total_cmp(&angle_between(centre, b.eye, eye))
+                        });
+                        state.held.truncate(self.config.keep);
+                    }
+                }
+                Arrival::Failed { id, reason } => {
+                    // (A withdrawn request's end is no news.)
+                    if self.pending.remove(&id).is_some() {
+                        tracing::warn!("texture request {id} failed: {reason}");
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,275 @@
+//! Which held texture an object is shown with, and its partner: each held texture
+//! graded at the eye (the critical-point gap growth, the resolution test), the nearest
+//! within tolerance shown, and a texture from the far side of the eye drawn behind it.
+
+use glam::Vec3;
+
+use relief_core::camera::Camera;
+use relief_core::scene::Scene;
+use relief_render::validity::schaufler::{needs_finer_texture, volume_centre};
+use relief_render::warp::params::WarpParams;
+
+use super::Manager;
+use super::cache::Held;
+use super::policy::{
+    COARSEST_SHOWN, DEFAULT_VALID_ANGLE, LONE_MAX_TURN, MAX_DISTANCE_RATIO, MAX_TEXEL_PIXELS, MAX_TURN,
+    PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PLANNING_MARGIN,
+};
+
+/// How an object is drawn this frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Show {
+    Geometry,
+    /// Held texture `texture`, pyramid level `level`; and a second held texture (with
+    /// its level) drawn behind it, filling what the first cannot show from this eye.
+    Impostor {
+        texture: usize,
+        level: usize,
+        partner: Option<(usize, usize)>,
+    },
+}
+
+/// How well a held texture serves an eye.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Grade {
+    /// Growth of the widest predicted gap, screen pixels.
+    pub(super) growth: f32,
+    /// Too coarse to be shown: its texels would cover more than [`COARSEST_SHOWN`]
+    /// pixels (eq. 4-1).
+    pub(super) too_coarse: bool,
+    /// … and a finer texture can be had (the largest asked for is 512²).
+    pub(super) coarse: bool,
+}
+
+/// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`.
+pub(super) fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
+    let texture = &held.pyramid.levels[0].texture;
+    let c = &texture.camera;
+    let centre = c.plane_centre();
+    let middle = volume_centre(c);
+    if angle_between(middle, held.eye, eye) > MAX_TURN || !similar_distance(middle, eye, held.eye) {
+        return f32::INFINITY;
+    }
+    let Ok(params) = WarpParams::new(texture, eye) else {
+        return f32::INFINITY;
+    };
+    let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
+    // (At the image plane, the nearest the texture's surface comes: where a gap looks
+    // widest.)
+    let pixels_per_texel =
+        c.a.length().max(c.b.length()) * focal / centre.distance(eye).max(f32::MIN_POSITIVE);
+    held.critical.worst_growth(&params, &held.baseline) * pixels_per_texel
+}
+
+/// Which of an object's held textures (graded `grades` at the eye, `turn(i)` radians
+/// round the object from it) is shown: of those fine enough for the screen, the one
+/// nearest the eye within `tolerance`, else the one with the least growth. (The
+/// growth metric sees gaps, not the side of the object a texture from far round
+/// cannot show: a sphere's growth is about 0 from anywhere.)
+pub(super) fn shown_texture(
+    grades: &[Grade],
+    tolerance: f32,
+    turn: impl Fn(usize) -> f32,
+) -> Option<(usize, Grade)> {
+    let tolerated = |g: &Grade| g.growth <= tolerance;
+    grades
+        .iter()
+        .copied()
+        .enumerate()
+        .filter(|(_, g)| !g.too_coarse)
+        .min_by(|(i, a), (j, b)| {
+            tolerated(b).cmp(&tolerated(a)).then_with(|| match tolerated(a) {
+                true => turn(*i).total_cmp(&turn(*j)),
+                false => a.growth.total_cmp(&b.growth),
+            })
+        })
+}
+
+/// Whether one of an object's held textures (`held`: eye and grade at `future`)
+/// covers the eye `future` (all about `centre`), as prediction plans it: within the
+/// planning margin of `tolerance`, not too coarse with a finer one to be had, and
+/// within the planning margin of the turn a texture may be shown alone — or up to
+/// [`MAX_TURN`] with a partner there, held (fine enough to be drawn there, as drawing
+/// requires) or asked for (`asked`).
+pub(super) fn held_covers(
+    centre: Vec3,
+    future: Vec3,
+    held: &[(Vec3, Grade)],
+    asked: &[Vec3],
+    tolerance: f32,
+) -> bool {
+    let partners = held
+        .iter()
+        .filter(|(_, g)| !g.too_coarse)
+        .map(|(eye, _)| *eye)
+        .chain(asked.iter().copied());
+    let partnered = |shown: Vec3| {
+        partners
+            .clone()
+            .any(|other| can_partner(centre, shown, future, other))
+    };
+    held.iter().any(|&(eye, g)| {
+        let turn = angle_between(centre, eye, future);
+        g.growth <= PLANNING_MARGIN * tolerance
+            && !g.coarse
+            && (turn <= PLANNING_MARGIN * LONE_MAX_TURN || (turn <= MAX_TURN && partnered(eye)))
+    })
+}
+
+/// The angle at `centre` between two eyes.
+pub(super) fn angle_between(centre: Vec3, a: Vec3, b: Vec3) -> f32 {
+    (a - centre).angle_between(b - centre)
+}
+
+/// Whether `a` is within [`MAX_DISTANCE_RATIO`] of `b`'s distance from `centre`.
+pub(super) fn similar_distance(centre: Vec3, a: Vec3, b: Vec3) -> bool {
+    let ratio = (a - centre).length() / (b - centre).length();
+    (1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO).contains(&ratio)
+}
+
+/// Whether a texture made from `other` can partner one made from `shown` at `eye`
+/// (all about `centre`): on the far side of the eye, the way it has turned from
+/// `shown`, within [`PARTNER_MAX_TURN`] of the eye and at a similar distance.
+pub(super) fn can_partner(centre: Vec3, shown: Vec3, eye: Vec3, other: Vec3) -> bool {
+    let (from, eye, other) = (shown - centre, eye - centre, other - centre);
+    from.cross(eye).dot(eye.cross(other)) > 0.0
+        && other.angle_between(eye) <= PARTNER_MAX_TURN
+        && similar_distance(Vec3::ZERO, eye, other)
+}
+
+/// `offset` from `centre` turned by `angle` about `axis` (not zero), as a point.
+pub(super) fn turned(centre: Vec3, offset: Vec3, axis: Vec3, angle: f32) -> Vec3 {
+    centre + glam::Quat::from_axis_angle(axis.normalize(), angle) * offset
+}
+
+impl Manager {
+    /// How each held texture of `object` would do warped to `eye`: the growth of its
+    /// widest predicted gap over the gaps it has at its own eye, in screen pixels
+    /// (`INFINITY` when it cannot be warped there), whether it is too coarse to be
+    /// shown, and whether a finer one can be had (eq. 4-1).
+    pub(super) fn grades<'a>(
+        &'a self,
+        scene: &Scene,
+        object: usize,
+        eye: Vec3,
+        camera: &'a Camera,
+    ) -> impl Iterator<Item = Grade> + 'a {
+        let wanted = Self::size_for(&scene.objects[object], eye, camera);
+        let at_eye = Camera { eye, ..*camera };
+        self.objects[object].held.iter().map(move |h| {
+            let texture = &h.pyramid.levels[0].texture.camera;
+            let too_coarse = needs_finer_texture(texture, &at_eye, COARSEST_SHOWN);
+            Grade {
+                growth: growth(h, eye, camera),
+                too_coarse,
+                coarse: too_coarse && texture.width < wanted,
+            }
+        })
+    }
+
+    /// The angle around an object over which its newest texture stays within tolerance.
+    pub(super) fn valid_angle(&self, object: usize) -> f32 {
+        self.objects[object].valid_angle.unwrap_or(DEFAULT_VALID_ANGLE)
+    }
+
+    /// The texture (and its level) to draw behind object `k`'s shown texture `shown`,
+    /// with `grades` at this eye: a held one on the far side of the eye, the way it has
+    /// turned from `shown`'s eye, fine enough, within [`PARTNER_MAX_TURN`] of the eye
+    /// and [`MAX_DISTANCE_RATIO`] of its distance — it holds what the eye has turned to
+    /// see and `shown` cannot. The least growth first, then the nearest (past
+    /// [`MAX_TURN`] every growth is infinite). `None` while the eye is within
+    /// [`PARTNER_FROM`] of `shown`'s.
+    pub(super) fn partner(
+        &self,
+        k: usize,
+        shown: usize,
+        centre: Vec3,
+        camera: &Camera,
+        grades: &[Grade],
+    ) -> Option<(usize, usize)> {
+        let held = &self.objects[k].held;
+        let (from, eye) = (held[shown].eye - centre, camera.eye - centre);
+        if from.angle_between(eye) < PARTNER_FROM {
+            return None;
+        }
+        held.iter()
+            .zip(grades)
+            .enumerate()
+            .filter_map(|(i, (h, g))| {
+                let usable =
+                    i != shown && !g.too_coarse && can_partner(centre, held[shown].eye, camera.eye, h.eye);
+                usable.then_some((i, h, g.growth, (h.eye - centre).angle_between(eye)))
+            })
+            .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
+            .map(|(i, h, _, _)| {
+                let level = h.pyramid.level_for(camera, MAX_TEXEL_PIXELS) + PARTNER_LEVELS_COARSER;
+                (i, level.min(h.pyramid.levels.len() - 1))
+            })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The texture shown among four with these growths, turns 0.7, 0.1, 0.05 and 0.3
+    /// from the eye; the third (the nearest) too coarse to be shown. Tolerance 4.
+    fn shown(growths: [f32; 4]) -> Option<usize> {
+        let turns = [0.7, 0.1, 0.05, 0.3];
+        let mut grades = growths.map(|growth| Grade {
+            growth,
+            too_coarse: false,
+            coarse: false,
+        });
+        grades[2].too_coarse = true;
+        shown_texture(&grades, 4.0, |i| turns[i]).map(|s| s.0)
+    }
+
+    /// Prediction counts a texture 40° from the future eye as covering it only with a
+    /// partner on the far side that could be drawn there: one too coarse at that eye
+    /// does not count (drawing would not use it), one asked for does.
+    #[test]
+    fn a_partner_too_coarse_to_draw_does_not_cover_the_future() {
+        let around = |degrees: f32| {
+            let a = degrees.to_radians();
+            Vec3::new(6.0 * a.cos(), 0.0, 6.0 * a.sin())
+        };
+        // (Too coarse, and a finer one to be had: not shown there either.)
+        let grade = |too_coarse| Grade {
+            growth: 0.0,
+            too_coarse,
+            coarse: too_coarse,
+        };
+        let future = around(40.0);
+        let covers = |partner_too_coarse, asked: &[Vec3]| {
+            let held = [
+                (around(0.0), grade(false)),
+                (around(75.0), grade(partner_too_coarse)),
+            ];
+            held_covers(Vec3::ZERO, future, &held, asked, 4.0)
+        };
+        assert!(covers(false, &[]));
+        assert!(!covers(true, &[]));
+        assert!(covers(true, &[around(60.0)]));
+        // Near a held texture's own eye no partner is needed.
+        let near = [(around(35.0), grade(false))];
+        assert!(held_covers(Vec3::ZERO, future, &near, &[], 4.0));
+    }
+
+    #[test]
+    fn the_texture_shown_is_the_nearest_within_tolerance_else_the_least_grown() {
+        // 1 is nearer than 0, whose growth is less (2 is nearer still, but too coarse).
+        assert_eq!(shown([0.0, 2.0, 0.0, 9.0]), Some(1));
+        // Only 3 within tolerance, though farther than 1.
+        assert_eq!(shown([7.0, 6.0, 0.0, 3.0]), Some(3));
+        // None within: the least grown, wherever it is.
+        assert_eq!(shown([5.0, 8.0, 0.0, f32::INFINITY]), Some(0));
+        // Only a too coarse one: none.
+        let coarse = Grade {
+            growth: 0.0,
+            too_coarse: true,
+            coarse: false,
+        };
+        assert!(shown_texture(&[coarse], 4.0, |_| 0.0).is_none());
+    }
+}

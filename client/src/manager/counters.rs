@@ -1,0 +1,59 @@
+//! What the manager counts for a run's summary: requests, latencies, needs met,
+//! stale frames and why, draws, and where each frame's time went.
+
+/// Counters for the demo's summary.
+#[derive(Debug, Clone, Default)]
+pub struct Counters {
+    /// Impostors redrawn as sprites (no warp) and impostors warped.
+    pub sprites: u64,
+    pub warps: u64,
+    /// Partners warped (second textures drawn behind the shown one).
+    pub partners: u64,
+    /// Texels pre-warped, over all warps and partners (the shown texture at the
+    /// pyramid level the screen needs, a partner one coarser; of those, the ones that
+    /// can reach the screen): what a frame's impostors cost.
+    pub texels_warped: u64,
+    pub requests_now: u64,
+    pub requests_predicted: u64,
+    pub withdrawn: u64,
+    /// Request → final texture, milliseconds.
+    pub latencies_ms: Vec<f64>,
+    /// Frames × objects where a valid texture was needed (impostors that may be on
+    /// screen).
+    pub needs: u64,
+    /// … and one was there or already asked for.
+    pub prediction_hits: u64,
+    /// Frames where some impostor was shown above tolerance, alone too far from its
+    /// eye, or missing.
+    pub stale_frames: u64,
+    /// Why: the object-frames without a valid texture, by cause.
+    pub stale_causes: StaleCauses,
+    /// Where each [`Manager::render`] spent its time.
+    pub render_stages: Vec<RenderStages>,
+}
+
+/// Object-frames without a valid texture, by cause (the first that applies).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct StaleCauses {
+    /// No held texture can be warped to the eye at all: none held yet, or all too far
+    /// round the object (past 60°) or at too different a distance.
+    pub missing: u64,
+    /// Some can, but none within the tolerance.
+    pub beyond_tolerance: u64,
+    /// One within tolerance, but shown alone more than 40° from its eye (no partner
+    /// held to fill the side it misses).
+    pub alone: u64,
+}
+
+/// Where one [`Manager::render`] spent its time, milliseconds.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct RenderStages {
+    /// Deciding which impostors are warped, and their pre-warps (all at once).
+    pub prewarp_ms: f64,
+    /// Impostors drawn: texture mapping of the pre-warps, and sprites redrawn.
+    pub draw_ms: f64,
+    /// Objects drawn as geometry (cheap ones, too-near ones, failed warps).
+    pub geometry_ms: f64,
+    /// Lighting the G-buffer into the frame.
+    pub shade_ms: f64,
+}

@@ -1,0 +1,195 @@
+//! Drawing a frame as the manager decided: each impostor redrawn as last frame's
+//! sprite while Schaufler's test holds, else warped (all the frame's pre-warps at once),
+//! its partner behind it; geometry rasterized; one shading pass.
+
+use std::time::Instant;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use relief_core::camera::Camera;
+use relief_core::frame::Frame;
+use relief_core::scene::{Scene, SceneObject};
+use relief_render::gbuffer::GBuffer;
+use relief_render::geometry::near_plane;
+use relief_render::impostor::Impostor;
+use relief_render::raster::rasterize;
+use relief_render::validity::schaufler::sprite_still_valid;
+use relief_render::warp::sprite::Sprite;
+use relief_render::warp::texmap::volume_rect;
+use relief_render::warp::{Prewarped, Variant};
+
+use super::Manager;
+use super::choose::Show;
+use super::counters::RenderStages;
+use super::policy::PARTNER_BEHIND;
+
+/// The last image of an impostor, kept to be redrawn while the eye stays put.
+pub(super) struct Kept {
+    sprite: Sprite,
+    /// The eye it was drawn from.
+    eye: Vec3,
+    /// Which textures (by their eyes) and pyramid levels it shows.
+    key: ShownKey,
+}
+
+/// The textures an impostor shows, by their eyes, and their pyramid levels: the
+/// first, and the partner behind it.
+type ShownKey = ((Vec3, usize), Option<(Vec3, usize)>);
+
+/// The depth factor (see [`Prewarped::behind`]) that
+/// puts a partner [`PARTNER_BEHIND`] behind, for an object with `bounds` seen from `eye`.
+pub(super) fn partner_depth_factor(bounds: &relief_core::bounds::Aabb, eye: Vec3) -> f32 {
+    let radius = bounds.extent().length() * 0.5;
+    let distance = bounds.center().distance(eye).max(radius).max(f32::MIN_POSITIVE);
+    1.0 + PARTNER_BEHIND * radius / distance
+}
+
+impl Manager {
+    /// Draws a frame as [`Manager::frame`] decided: each impostor redrawn as the
+    /// sprite it was last frame while Schaufler's test holds (no warp), else warped
+    /// (falling back to geometry where a warp is refused); geometry rasterized; one
+    /// shading pass.
+    pub fn render(&mut self, scene: &Scene, shows: &[Show], camera: &Camera, gbuffer: &mut GBuffer) -> Frame {
+        let start = Instant::now();
+        gbuffer.clear();
+        self.sprites.resize_with(scene.objects.len(), || None);
+        // Which impostors are redrawn as sprites and which warped: the warps' pre-warps
+        // all run at once, then everything is drawn in order.
+        let keys: Vec<Option<ShownKey>> = shows
+            .iter()
+            .enumerate()
+            .map(|(k, show)| match *show {
+                Show::Impostor {
+                    texture,
+                    level,
+                    partner,
+                } => {
+                    // (A `Show` from before textures arrived or were dropped names textures
+                    // no longer held: drawn as geometry, or without its partner.)
+                    let held = &self.objects[k].held;
+                    let shown = (held.get(texture)?.eye, level);
+                    Some((shown, partner.and_then(|(p, l)| Some((held.get(p)?.eye, l)))))
+                }
+                Show::Geometry => None,
+            })
+            .collect();
+        let sprite_holds: Vec<bool> = keys
+            .iter()
+            .enumerate()
+            .map(|(k, key)| match (key, &self.sprites[k]) {
+                (Some(key), Some(kept)) => {
+                    kept.key == *key && sprite_still_valid(&scene.objects[k].bounds, kept.eye, camera)
+                }
+                _ => false,
+            })
+            .collect();
+        // The textures to warp: each impostor's, its partner right after it.
+        let mut warps: Vec<(usize, &Impostor, bool)> = Vec::new();
+        for (k, show) in shows.iter().enumerate() {
+            if let Show::Impostor {
+                texture,
+                level,
+                partner,
+            } = *show
+                && !sprite_holds[k]
+            {
+                let at = |(texture, level): (usize, usize)| {
+                    self.objects[k].held.get(texture)?.pyramid.levels.get(level)
+                };
+                let Some(shown) = at((texture, level)) else {
+                    continue;
+                };
+                warps.push((k, shown, false));
+                if let Some(partner) = partner.and_then(at) {
+                    warps.push((k, partner, true));
+                }
+            }
+        }
+        let behind = |k: usize| partner_depth_factor(&scene.objects[k].bounds, camera.eye);
+        let prepared: Vec<_> = warps
+            .par_iter()
+            .map(|&(k, impostor, is_partner)| {
+                let prepared = Prewarped::new(Variant::Interleaved, impostor, camera);
+                if is_partner {
+                    prepared.and_then(|p| p.behind(behind(k)))
+                } else {
+                    prepared
+                }
+            })
+            .collect();
+        let prewarps_done = Instant::now();
+        // (Only those pre-warped: an eye in or behind a texture's plane is refused first.)
+        self.counters.texels_warped += (prepared.iter())
+            .map(|ready| ready.as_ref().map_or(0, |p| p.texels_warped()) as u64)
+            .sum::<u64>();
+        let mut prepared = warps.into_iter().zip(prepared).peekable();
+        let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
+        for (k, key) in keys.into_iter().enumerate() {
+            let Some(key) = key else {
+                self.sprites[k] = None;
+                geometry.push((k as u32, &scene.objects[k]));
+                continue;
+            };
+            if sprite_holds[k]
+                && let Some(kept) = &self.sprites[k]
+            {
+                kept.sprite.draw(gbuffer);
+                self.counters.sprites += 1;
+                continue;
+            }
+            // The impostor's warp, then its partner's (whose failure only leaves out
+            // what it would have filled in).
+            let (mut rect, mut partner_drawn): (Option<(u32, u32, u32, u32)>, bool) = (None, false);
+            while let Some(((_, impostor, is_partner), ready)) = prepared.next_if(|((j, _, _), _)| *j == k) {
+                if is_partner && rect.is_none() {
+                    continue;
+                }
+                if let Ok(prewarped) = ready {
+                    prewarped.draw(impostor, k as u32, camera, gbuffer);
+                    partner_drawn |= is_partner;
+                    self.counters.partners += u64::from(is_partner);
+                    let r = volume_rect(camera, &impostor.texture.camera);
+                    rect = Some(rect.map_or(r, |q| (q.0.min(r.0), q.1.min(r.1), q.2.max(r.2), q.3.max(r.3))));
+                }
+            }
+            // (The sprite says what it shows: without a partner that failed to draw.)
+            let key = (key.0, key.1.filter(|_| partner_drawn));
+            let Some(rect) = rect else {
+                self.sprites[k] = None;
+                geometry.push((k as u32, &scene.objects[k]));
+                continue;
+            };
+            self.counters.warps += 1;
+            // Kept only while the eye moves by less than the sprite test allows
+            // per frame (or has not moved yet): else the next frame warps anyway,
+            // and the copy (1.2 of a flight's 8 ms per frame) is wasted.
+            let bounds = &scene.objects[k].bounds;
+            if self
+                .last_eye
+                .is_some_and(|eye| !sprite_still_valid(bounds, eye, camera))
+            {
+                self.sprites[k] = None;
+                continue;
+            }
+            self.sprites[k] = Sprite::capture_in(gbuffer, k as u32, rect).map(|sprite| Kept {
+                sprite,
+                eye: camera.eye,
+                key,
+            });
+        }
+        self.last_eye = Some(camera.eye);
+        let impostors_done = Instant::now();
+        rasterize(&geometry, camera, near_plane(scene), gbuffer);
+        let geometry_done = Instant::now();
+        let frame = gbuffer.shade(scene, camera);
+        let ms = |from: Instant, to: Instant| (to - from).as_secs_f64() * 1e3;
+        self.counters.render_stages.push(RenderStages {
+            prewarp_ms: ms(start, prewarps_done),
+            draw_ms: ms(prewarps_done, impostors_done),
+            geometry_ms: ms(impostors_done, geometry_done),
+            shade_ms: ms(geometry_done, Instant::now()),
+        });
+        frame
+    }
+}

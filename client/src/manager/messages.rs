@@ -1,0 +1,43 @@
+//! What the manager and its texture source say to each other: requests and
+//! withdrawals go out on one channel, textures and failures come back on another, so
+//! the frame loop never waits.
+
+use glam::Vec3;
+
+use relief_core::relief::DepthBits;
+
+use super::cache::ReadyTexture;
+
+/// A texture the manager wants made.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TextureRequest {
+    pub id: u64,
+    pub object: String,
+    pub eye: Vec3,
+    pub size: u32,
+    pub depth_bits: DepthBits,
+    /// `None`: needed now; `Some(ms)`: expected to be needed in `ms`.
+    pub needed_in_ms: Option<u64>,
+}
+
+/// What the manager sends to whoever makes textures.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Command {
+    Request(TextureRequest),
+    Withdraw(Vec<u64>),
+}
+
+/// What comes back.
+#[derive(Debug)]
+pub enum Arrival {
+    Texture {
+        id: u64,
+        /// Made ready where it arrived ([`ReadyTexture::new`]), not in the frame loop.
+        texture: Box<ReadyTexture>,
+        is_final: bool,
+    },
+    Failed {
+        id: u64,
+        reason: String,
+    },
+}

@@ -1,0 +1,299 @@
+//! The impostor manager: per object and frame, decide geometry or impostor (and which
+//! texture), keep a cache of relief textures, and ask for the textures the eye will
+//! need — predicted ahead of need, early enough to cover the measured round trip —
+//! without ever waiting for the network.
+//!
+//! The principal type is [`Manager`]; every tuning constant it obeys is in [`policy`].
+//!
+//! # Each frame
+//!
+//! [`Manager::frame`] takes in what has arrived ([`cache`]), then for each object
+//! decides a [`Show`]: geometry (cheap objects, an eye too near, nothing held that can
+//! be shown), or a held texture — of those within the tolerance and fine enough for the
+//! screen, the one whose eye is nearest ([`choose`]) — with, once the eye has turned far
+//! enough from it, a *partner* drawn behind it: a texture from the far side of the eye
+//! that fills in the side of the object the first cannot show. It asks for a texture
+//! for now when none is valid, and for the textures the eye will need ([`requests`]).
+//! [`Manager::render`] then draws the frame as decided ([`draw`]).
+//!
+//! # Textures in and out
+//!
+//! Requests and withdrawals go out as [`Command`]s on one channel; textures and
+//! failures come back as [`Arrival`]s on another ([`messages`]) — whoever serves them
+//! (a server over gRPC, or the in-process generator: [`crate::source`]) works on its
+//! own threads. Nothing the manager does waits on them.
+//!
+//! # Counting
+//!
+//! [`Counters`] hold what a run's summary reports: requests, round trips, needs met,
+//! stale frames by cause, draws, and each frame's stage times ([`counters`]).
+//!
+//! # Example
+//!
+//! ```
+//! use std::time::Duration;
+//! use relief_client::manager::{Config, Manager};
+//! use relief_client::source::spawn_local;
+//! use relief_core::scene::Scene;
+//! use relief_render::gbuffer::GBuffer;
+//! use tokio::sync::mpsc::unbounded_channel;
+//!
+//! let scene = std::sync::Arc::new(Scene::load("orbit-sphere")?);
+//! let (commands, requests) = unbounded_channel();
+//! let (arrivals_tx, arrivals) = unbounded_channel();
+//! spawn_local(scene.clone(), requests, arrivals_tx); // textures made in-process
+//! let mut manager = Manager::new(&scene, Config::default(), commands, arrivals);
+//!
+//! let camera = scene.path.pose(0).unwrap().camera(scene.fov_y_degrees, 160, 90)?;
+//! assert!(manager.warm_up(&scene, &camera, Duration::from_secs(30)));
+//! let shows = manager.frame(&scene, &camera, 0.0);
+//! let frame = manager.render(&scene, &shows, &camera, &mut GBuffer::new(160, 90));
+//! assert_eq!(manager.counters.stale_frames, 0);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod cache;
+mod choose;
+mod counters;
+mod draw;
+mod messages;
+pub mod policy;
+mod requests;
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use glam::Vec3;
+use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender};
+
+use relief_core::camera::Camera;
+use relief_core::scene::Scene;
+use relief_render::geometry::{GeometryReason, geometry_reason};
+use relief_render::pyramid::Pyramid;
+
+use crate::predict::Predictor;
+
+pub use cache::ReadyTexture;
+pub use choose::Show;
+pub use counters::{Counters, RenderStages, StaleCauses};
+pub use messages::{Arrival, Command, TextureRequest};
+pub use policy::Config;
+pub use requests::texture_ladder;
+
+use cache::ObjectState;
+use choose::{Grade, angle_between, shown_texture};
+use draw::Kept;
+use policy::{LONE_MAX_TURN, MAX_TEXEL_PIXELS, SHOWN_STALE, WARM_UP_POLL};
+use requests::Pending;
+
+/// The manager of one client.
+pub struct Manager {
+    config: Config,
+    objects: Vec<ObjectState>,
+    predictor: Predictor,
+    pending: HashMap<u64, Pending>,
+    next_id: u64,
+    commands: UnboundedSender<Command>,
+    arrivals: UnboundedReceiver<Arrival>,
+    /// The last [`LATENCY_WINDOW`](policy::LATENCY_WINDOW) round trips (request to final texture), seconds.
+    recent_latencies: Vec<f64>,
+    sprites: Vec<Option<Kept>>,
+    /// The eye of the last frame drawn.
+    last_eye: Option<Vec3>,
+    pub counters: Counters,
+}
+
+impl Manager {
+    pub fn new(
+        scene: &Scene,
+        config: Config,
+        commands: UnboundedSender<Command>,
+        arrivals: UnboundedReceiver<Arrival>,
+    ) -> Self {
+        Manager {
+            recent_latencies: Vec::new(),
+            config,
+            objects: scene.objects.iter().map(|_| ObjectState::default()).collect(),
+            predictor: Predictor::default(),
+            pending: HashMap::new(),
+            next_id: 1,
+            commands,
+            arrivals,
+            sprites: Vec::new(),
+            last_eye: None,
+            counters: Counters::default(),
+        }
+    }
+
+    /// Textures requested per object so far.
+    pub fn requested(&self, object: usize) -> u64 {
+        self.objects.get(object).map_or(0, |o| o.requested)
+    }
+
+    /// Final textures received per object so far: the regenerations.
+    pub fn received(&self, object: usize) -> u64 {
+        self.objects.get(object).map_or(0, |o| o.received)
+    }
+
+    /// Textures held, over all objects: none after a whole run means none ever came.
+    pub fn textures_held(&self) -> usize {
+        self.objects.iter().map(|o| o.held.len()).sum()
+    }
+
+    /// The held texture `texture` of `object`.
+    pub fn pyramid(&self, object: usize, texture: usize) -> &Pyramid {
+        &self.objects[object].held[texture].pyramid
+    }
+
+    /// Before the first frame: asks for the textures `camera` needs and waits (at most
+    /// `limit`) until they are all there, so a flight starts with its impostors ready.
+    /// Returns whether they all arrived. Counters start afresh afterwards.
+    pub fn warm_up(&mut self, scene: &Scene, camera: &Camera, limit: std::time::Duration) -> bool {
+        let start = Instant::now();
+        let ready = loop {
+            let before = self.counters.stale_frames;
+            self.frame(scene, camera, 0.0);
+            // Previews make a frame valid before the final textures are in; a final
+            // arriving after the flight started would count its cold-start round trip
+            // as the flight's and make the predictor plan for it.
+            if self.counters.stale_frames == before && self.pending.is_empty() {
+                break true;
+            }
+            if start.elapsed() > limit {
+                break false;
+            }
+            std::thread::sleep(WARM_UP_POLL);
+        };
+        self.predictor = Predictor::default();
+        self.counters = Counters::default();
+        // The cold start's round trips (scene upload, every object at once) say
+        // little about the flight's.
+        self.recent_latencies.clear();
+        for o in &mut self.objects {
+            o.recent_latencies.clear();
+            o.requested = 0;
+            o.received = 0;
+        }
+        ready
+    }
+
+    /// Decides how each object is drawn from `camera` at time `t` (seconds), asking for
+    /// textures as needed. Never blocks.
+    pub fn frame(&mut self, scene: &Scene, camera: &Camera, t: f64) -> Vec<Show> {
+        self.drain(camera, scene);
+        self.predictor.observe(t, camera.eye);
+        let mut stale = false;
+        let mut shows = Vec::with_capacity(scene.objects.len());
+        for (k, object) in scene.objects.iter().enumerate() {
+            match geometry_reason(object, camera.eye) {
+                Some(GeometryReason::Cheap) => {
+                    shows.push(Show::Geometry);
+                    continue;
+                }
+                Some(GeometryReason::TooNear) => {
+                    // Drawn as geometry while the eye is this near, but the eye will
+                    // leave: have its textures ready by then.
+                    self.predict_for(scene, k, camera);
+                    shows.push(Show::Geometry);
+                    continue;
+                }
+                None => {}
+            }
+            if !camera.may_see(&object.bounds) {
+                // Off screen: nothing shown, so nothing stale and nothing needed now
+                // (drawn as geometry, which the rasterizer leaves out at once); the
+                // textures for where the eye is going are still asked for.
+                self.predict_for(scene, k, camera);
+                shows.push(Show::Geometry);
+                continue;
+            }
+            let centre = object.bounds.center();
+            let grades: Vec<Grade> = self.grades(scene, k, camera.eye, camera).collect();
+            self.counters.needs += 1;
+            let held = &self.objects[k].held;
+            let best = shown_texture(&grades, self.config.tolerance, |i| {
+                angle_between(centre, held[i].eye, camera.eye)
+            });
+            let within =
+                |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= self.config.tolerance);
+            // Valid: some texture is within tolerance (when only one too coarse to be
+            // shown is, a finer one is asked for if it can be had: `coarse`), and the one
+            // shown is not alone too far from its eye — without a partner, a texture
+            // more than [`LONE_MAX_TURN`] from its eye misses the side the eye has
+            // turned to.
+            let shown_turn = best.map(|(i, _)| angle_between(centre, held[i].eye, camera.eye));
+            let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
+            let lone_too_far = partner.is_none() && shown_turn.is_some_and(|turn| turn > LONE_MAX_TURN);
+            let within_any = grades.iter().any(|g| g.growth <= self.config.tolerance);
+            let valid = within_any && !lone_too_far;
+            let coarse = !within(best)
+                && grades
+                    .iter()
+                    .any(|g| g.growth <= self.config.tolerance && g.coarse);
+            let asked_for = self.pending_covers(k, centre, camera.eye);
+            if valid || asked_for {
+                self.counters.prediction_hits += 1;
+            }
+            if !valid {
+                let causes = &mut self.counters.stale_causes;
+                if grades.iter().all(|g| g.growth == f32::INFINITY) {
+                    causes.missing += 1;
+                } else if within(best) {
+                    causes.alone += 1;
+                } else {
+                    causes.beyond_tolerance += 1;
+                }
+                if tracing::enabled!(tracing::Level::DEBUG) {
+                    // What was asked for: (age ms, predicted, degrees from this eye).
+                    let asked: Vec<(u128, bool, f32)> = self
+                        .pending
+                        .values()
+                        .filter(|p| p.object == k)
+                        .map(|p| {
+                            let degrees = angle_between(centre, p.eye, camera.eye).to_degrees();
+                            (p.sent.elapsed().as_millis(), p.predicted, degrees)
+                        })
+                        .collect();
+                    let shown_deg = shown_turn.map(f32::to_degrees);
+                    tracing::debug!(
+                        object = %object.name,
+                        growth = best.map(|b| b.1.growth),
+                        shown_deg,
+                        lone_too_far,
+                        held = self.objects[k].held.len(),
+                        valid_deg = self.valid_angle(k).to_degrees(),
+                        planned_latency_s = self.latency(k),
+                        ?asked,
+                        "stale"
+                    );
+                }
+                stale = true;
+            }
+            // One request for now in flight per object: when textures stay valid for
+            // less than the eye takes to leave them, a request each frame would only
+            // queue textures that are stale on arrival.
+            let asking_now = self.pending.values().any(|p| p.object == k && !p.predicted);
+            if (!valid || coarse) && !asked_for && !asking_now {
+                self.request(scene, k, camera.eye, camera, None);
+            }
+            self.predict_for(scene, k, camera);
+            shows.push(match best {
+                Some((i, g)) if g.growth <= SHOWN_STALE * self.config.tolerance => {
+                    let level = self.objects[k].held[i]
+                        .pyramid
+                        .level_for(camera, MAX_TEXEL_PIXELS);
+                    Show::Impostor {
+                        texture: i,
+                        level,
+                        partner,
+                    }
+                }
+                _ => Show::Geometry,
+            });
+        }
+        if stale {
+            self.counters.stale_frames += 1;
+        }
+        shows
+    }
+}

@@ -1,0 +1,185 @@
+//! Every tuning constant of the impostor manager, in one place, each with why it has
+//! its value. The docs link here rather than restating numbers.
+//!
+//! Thresholds the renderer owns, because frames drawn without a manager (`relief
+//! frame`, the reports) apply them too, are re-exported here so this page lists all the
+//! manager obeys: which objects are drawn as geometry ([`CHEAP_TRIANGLES`],
+//! [`NEAR_MARGIN`]) and how fine a texture must be for the screen
+//! ([`MAX_TEXEL_PIXELS`], [`MIN_LEVEL_EDGE`]), and the critical-point error's regions
+//! ([`CRITICAL_REGIONS`]).
+
+use std::f32::consts::PI;
+use std::time::Duration;
+
+use relief_core::relief::DepthBits;
+
+pub use relief_render::geometry::{CHEAP_TRIANGLES, NEAR_MARGIN};
+pub use relief_render::pyramid::{MAX_TEXEL_PIXELS, MIN_LEVEL_EDGE};
+pub use relief_render::validity::critical::CRITICAL_REGIONS;
+
+/// The manager's settings that a run may choose (`relief demo` flags).
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Largest growth of the predicted gap (worst of [`CRITICAL_REGIONS`]² regions, eq.
+    /// 5-5…5-7, over the gaps at the texture's own eye), in screen pixels, before a
+    /// texture counts as stale and a new one is needed: the impostor-lifetime knob.
+    pub tolerance: f32,
+    /// Ask for predicted textures (off: only when needed now).
+    pub predict: bool,
+    /// Round-trip estimate (seconds) before any request has been measured.
+    pub initial_latency: f64,
+    /// Textures kept per object.
+    pub keep: usize,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Config {
+            tolerance: DEFAULT_TOLERANCE,
+            predict: true,
+            initial_latency: INITIAL_LATENCY_S,
+            keep: TEXTURES_KEPT,
+        }
+    }
+}
+
+// ---- Settings' defaults -------------------------------------------------------------
+
+/// `--tolerance`'s default, pixels of predicted gap growth: the demo's trade of frame
+/// speed and regenerations against image error.
+pub const DEFAULT_TOLERANCE: f32 = 24.0;
+
+/// The round trip planned for before any is measured: a loopback request of a 256²
+/// texture takes 15–21 ms, so this errs towards asking early.
+pub const INITIAL_LATENCY_S: f64 = 0.15;
+
+/// Textures kept per object (the nearest the eye): enough for the pair around the eye
+/// and those the path returns to, at a few MB each.
+pub const TEXTURES_KEPT: usize = 8;
+
+// ---- Which texture is shown ---------------------------------------------------------
+
+/// Beyond this turn around the object a texture is not used whatever the gap metric
+/// says: the metric sees holes between neighbours, not the stretching of a view seen
+/// from far off its axis.
+pub const MAX_TURN: f32 = 60.0 * PI / 180.0;
+
+/// … nor beyond this change of distance from the object (either way), for the same
+/// reason.
+pub const MAX_DISTANCE_RATIO: f32 = 1.6;
+
+/// Beyond this turn a texture drawn without a partner counts as stale (and one for now
+/// is asked for): alone, it misses the side of the object the eye has turned to see.
+pub const LONE_MAX_TURN: f32 = 40.0 * PI / 180.0;
+
+/// A texture whose texels would cover more than this many pixels' angle is not shown:
+/// geometry is drawn instead while a finer texture is on its way (or, near an object
+/// where even the largest texture is that coarse, while the eye stays that near).
+pub const COARSEST_SHOWN: f32 = 2.0 * MAX_TEXEL_PIXELS;
+
+/// A texture this many times over the tolerance is not shown: geometry is drawn until a
+/// better one arrives (the frame still counts as stale).
+pub const SHOWN_STALE: f32 = 2.0;
+
+// ---- Partners: a second texture drawn behind the shown one ----------------------------
+
+/// A partner is drawn once the eye is this far around the object from the shown
+/// texture's eye: nearer, what the texture cannot show is a sliver a pixel or two wide,
+/// not worth a second warp.
+pub const PARTNER_FROM: f32 = 15.0 * PI / 180.0;
+
+/// A partner is at most this far around the object from the eye: it fills in only where
+/// the shown texture has nothing, so the stretching [`MAX_TURN`] guards against shows
+/// only there.
+pub const PARTNER_MAX_TURN: f32 = 2.0 * MAX_TURN;
+
+/// How far behind the shown texture a partner is drawn, as a fraction of the object's
+/// bounding radius: more than two textures of one surface disagree on its depth (depth
+/// quanta, reconstruction), so the partner shows only where the shown one has nothing.
+pub const PARTNER_BEHIND: f32 = 0.05;
+
+/// Pyramid levels a partner is drawn coarser than the screen needs: it shows only
+/// slivers, and its pre-warp costs a quarter.
+pub const PARTNER_LEVELS_COARSER: usize = 1;
+
+// ---- What is asked for, and when ----------------------------------------------------
+
+/// The texture edges asked for: half-octave steps from 32 to 512 (32·√2^k, rounded to
+/// multiples of 8). With power-of-two edges a texture had up to 4× the texels the screen
+/// can show, each warped every frame; with these at most 2.1×.
+pub const TEXTURE_LADDER: [u32; 9] = [32, 48, 64, 88, 128, 184, 256, 360, 512];
+
+/// Depth precision asked for: the thesis' 8 bits, half the bytes of 16 on the wire.
+pub const REQUESTED_DEPTH_BITS: DepthBits = DepthBits::Eight;
+
+/// Predicted textures are asked for once the eye's future leaves this fraction of the
+/// tolerance, so that a late answer or a wrong guess still finds the texture in use
+/// within the tolerance itself.
+pub const PLANNING_MARGIN: f32 = 0.75;
+
+/// How far past the predicted eye, as a fraction of the object's valid angle, predicted
+/// textures are made for: a texture then serves (1 + `LEAD`) valid angles of the
+/// motion instead of one.
+pub const LEAD: f32 = 0.5;
+
+/// Textures are asked for this many valid angles apart along the eye's turn, one ahead
+/// of the eye's future at all times, so that the eye is always between two: the nearer
+/// shown, the other its partner. (Below 2, the middle between two is within
+/// [`PLANNING_MARGIN`] of the tolerance from both, so no request fires there.)
+pub const PAIR_SPACING: f32 = 2.0 * PLANNING_MARGIN;
+
+/// A texture held or asked for up to this many times [`PAIR_SPACING`] valid angles
+/// ahead counts as the one ahead: an eye asked for that far falls a little beyond it as
+/// the future moves on, or as the eye's elevation tilts the turn.
+pub const AHEAD_SLACK: f32 = 1.5;
+
+/// A request already out serves an eye within this fraction of the object's valid
+/// angle of its own eye (a fifth kept for the eye's further motion) …
+pub const PENDING_REACH: f32 = 0.8;
+
+/// … and within this fraction of its distance from the object.
+pub const PENDING_DISTANCE_SLACK: f32 = 0.2;
+
+/// Predictions farther than this many valid angles from both the eye and its future are
+/// withdrawn: the motion has left them behind.
+pub const WITHDRAW_REACH: f32 = 2.0;
+
+/// The valid angle assumed for an object before any of its textures has been probed:
+/// small, so the first predictions come early.
+pub const DEFAULT_VALID_ANGLE: f32 = 4.0 * PI / 180.0;
+
+/// A texture's valid angle is probed from this turn, doubling, …
+pub const PROBE_START: f32 = 0.5 * PI / 180.0;
+
+/// … then refined this many halvings between the last turn within the tolerance and
+/// the first beyond: to 1/16 of the step, finer than the eye moves in a frame.
+pub const PROBE_REFINEMENTS: u32 = 4;
+
+// ---- Round trips ----------------------------------------------------------------------
+
+/// Round trips remembered, overall and per object.
+pub const LATENCY_WINDOW: usize = 16;
+
+/// Round trips of its own an object needs before it plans for them: a heavy object
+/// takes longer to trace than the rest.
+pub const OWN_LATENCIES: usize = 4;
+
+/// The percentile of the remembered round trips planned for: they vary several-fold
+/// with the workers' queue, and planning for a typical one stalls every slower one.
+pub const LATENCY_PERCENTILE: f64 = 0.9;
+
+/// How far past the planned round trip predictions look (`--rtt-ms 100` demos, 4–8 runs
+/// each: ×1.0 9.5 stale frames, ×1.25 7.1, ×1.5 7.5).
+pub const HORIZON_SPARE: f64 = 1.25;
+
+/// … and this much more, seconds: arrivals later than the recent 90th percentile were
+/// most of a flight's stale frames.
+pub const HORIZON_MARGIN_S: f64 = 0.05;
+
+/// The farthest ahead predictions look, seconds: the predictor's quadratic fit of the
+/// recent eyes means little further out.
+pub const MAX_HORIZON_S: f64 = 3.0;
+
+/// How often [`Manager::warm_up`](super::Manager::warm_up) looks for the first
+/// textures.
+pub const WARM_UP_POLL: Duration = Duration::from_millis(5);

@@ -1,0 +1,221 @@
+//! Asking for textures: for now when an object has no valid one, and — predicted from
+//! the eye's motion — ahead of need, early enough to cover the measured round trip;
+//! withdrawing predictions the motion has left behind.
+
+use std::time::Instant;
+
+use glam::Vec3;
+
+use relief_core::camera::Camera;
+use relief_core::scene::{Scene, SceneObject};
+use relief_core::stats::percentile;
+use relief_render::geometry::{GeometryReason, geometry_reason};
+use relief_render::validity::schaufler::resolution_for;
+
+use super::Manager;
+use super::choose::{Grade, angle_between, held_covers, similar_distance, turned};
+use super::messages::{Command, TextureRequest};
+use super::policy::{
+    AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LEAD, MAX_HORIZON_S, MAX_TEXEL_PIXELS,
+    OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK, PENDING_REACH, REQUESTED_DEPTH_BITS, TEXTURE_LADDER,
+    WITHDRAW_REACH,
+};
+
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Pending {
+    pub(super) object: usize,
+    pub(super) eye: Vec3,
+    pub(super) predicted: bool,
+    pub(super) sent: Instant,
+}
+
+/// The smallest edge of the [`TEXTURE_LADDER`] that holds `need` texels, the largest
+/// when `need` is beyond.
+pub fn texture_ladder(need: u32) -> u32 {
+    let largest = TEXTURE_LADDER[TEXTURE_LADDER.len() - 1];
+    TEXTURE_LADDER
+        .into_iter()
+        .find(|&edge| edge >= need)
+        .unwrap_or(largest)
+}
+
+impl Manager {
+    /// The round trip to plan for: the [`LATENCY_PERCENTILE`] of the recent ones (the
+    /// configured estimate before any). Round trips vary several-fold with the
+    /// workers' queue; planning for a typical one would leave every slower one stalled.
+    /// An object with [`OWN_LATENCIES`] round trips of its own plans for those: a heavy
+    /// object takes longer to trace than the rest.
+    pub(super) fn latency(&self, object: usize) -> f64 {
+        let own = &self.objects[object].recent_latencies;
+        let recent = if own.len() >= OWN_LATENCIES {
+            own
+        } else {
+            &self.recent_latencies
+        };
+        if recent.is_empty() {
+            return self.config.initial_latency;
+        }
+        percentile(recent, LATENCY_PERCENTILE)
+    }
+
+    /// Whether a request already out for `object` will serve `eye`.
+    pub(super) fn pending_covers(&self, object: usize, centre: Vec3, eye: Vec3) -> bool {
+        let reach = PENDING_REACH * self.valid_angle(object);
+        self.pending.values().any(|p| {
+            p.object == object
+                && angle_between(centre, p.eye, eye) < reach
+                && ((p.eye - centre).length() / (eye - centre).length() - 1.0).abs() < PENDING_DISTANCE_SLACK
+        })
+    }
+
+    /// The texture edge to ask for: what the screen can show of the object from `eye`
+    /// ([`resolution_for`], eq. 5-1), rounded up to the [`texture_ladder`].
+    pub(super) fn size_for(object: &SceneObject, eye: Vec3, camera: &Camera) -> u32 {
+        texture_ladder(resolution_for(&object.bounds, eye, camera, MAX_TEXEL_PIXELS).unwrap_or(u32::MAX))
+    }
+
+    pub(super) fn request(
+        &mut self,
+        scene: &Scene,
+        object: usize,
+        eye: Vec3,
+        camera: &Camera,
+        needed_in_ms: Option<u64>,
+    ) {
+        let o = &scene.objects[object];
+        let size = Self::size_for(o, eye, camera);
+        let id = self.next_id;
+        self.next_id += 1;
+        let request = TextureRequest {
+            id,
+            object: o.name.clone(),
+            eye,
+            size,
+            depth_bits: REQUESTED_DEPTH_BITS,
+            needed_in_ms,
+        };
+        if self.commands.send(Command::Request(request)).is_err() {
+            return;
+        }
+        self.pending.insert(
+            id,
+            Pending {
+                object,
+                eye,
+                predicted: needed_in_ms.is_some(),
+                sent: Instant::now(),
+            },
+        );
+        self.objects[object].requested += 1;
+        match needed_in_ms {
+            Some(_) => self.counters.requests_predicted += 1,
+            None => self.counters.requests_now += 1,
+        }
+    }
+
+    /// Whether object `k` has a texture held or asked for on the far side of `future`
+    /// (the way the eye turns from `now`), to partner the one shown there — and if not,
+    /// the eye to ask for one at: [`PAIR_SPACING`] valid angles past `future`. `None`
+    /// while the eye is not turning about the object. (This keeps partners coming
+    /// along the motion; [`can_partner`] is the test of one pair of textures at one
+    /// eye, by which side of the eye each is on, whatever the motion.)
+    fn ahead(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Option<Result<(), Vec3>> {
+        let (from, to) = (now - centre, future - centre);
+        let axis = from.cross(to);
+        // (Below ~0.06° of turn per horizon, "ahead" means nothing.)
+        if axis.length() <= 1e-3 * from.length() * to.length() {
+            return None;
+        }
+        let reach = PAIR_SPACING * self.valid_angle(k);
+        // (Held or asked for within half as far again — an eye asked for `reach` ahead
+        // falls a little beyond it as the future moves on, or as the eye's elevation
+        // tilts the turn — and at a distance [`Self::partner`] accepts.)
+        let ahead = |eye: Vec3| {
+            let e = eye - centre;
+            axis.dot(to.cross(e)) > 0.0
+                && to.angle_between(e) <= AHEAD_SLACK * reach
+                && similar_distance(centre, future, eye)
+        };
+        let held = self.objects[k].held.iter().any(|h| ahead(h.eye));
+        let asked = self.pending.values().any(|p| p.object == k && ahead(p.eye));
+        Some(if held || asked {
+            Ok(())
+        } else {
+            Err(turned(centre, to, axis, reach))
+        })
+    }
+
+    /// The eye to make a predicted texture for: `future` turned further about `centre`,
+    /// the way the eye turns from `now`, by [`LEAD`] of the object's valid angle (at
+    /// most the turn from `now` to `future` again). The texture is then first used
+    /// [`LEAD`]·valid behind its own eye and stays in use as far ahead: it serves
+    /// (1 + [`LEAD`]) valid angles of the motion instead of one.
+    fn lead(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Vec3 {
+        let (from, to) = (now - centre, future - centre);
+        let axis = from.cross(to);
+        let turn = from.angle_between(to);
+        let lead = (LEAD * self.valid_angle(k)).min(turn);
+        if turn.is_nan() || lead <= 1e-4 || axis.length_squared() <= f32::MIN_POSITIVE {
+            return future;
+        }
+        turned(centre, to, axis, lead)
+    }
+
+    /// Asks ahead (when predicting) for the texture the eye will need once a request
+    /// for object `k` made now comes back, and withdraws predictions the motion has
+    /// left behind.
+    pub(super) fn predict_for(&mut self, scene: &Scene, k: usize, camera: &Camera) {
+        if !self.config.predict {
+            return;
+        }
+        // The round trip to plan for, with a quarter and 50 ms to spare (arrivals later
+        // than the recent 90th percentile were most of a flight's stale frames), and
+        // the eye then.
+        let horizon = (HORIZON_SPARE * self.latency(k) + HORIZON_MARGIN_S).min(MAX_HORIZON_S);
+        let Some(future) = self.predictor.predict(horizon) else {
+            return;
+        };
+        let object = &scene.objects[k];
+        let centre = object.bounds.center();
+        // Drawn as geometry from there: nothing to ask for.
+        if geometry_reason(object, future) == Some(GeometryReason::TooNear) {
+            return;
+        }
+        let held: Vec<(Vec3, Grade)> = (self.objects[k].held.iter().map(|h| h.eye))
+            .zip(self.grades(scene, k, future, camera))
+            .collect();
+        let asked: Vec<Vec3> = (self.pending.values())
+            .filter(|p| p.object == k)
+            .map(|p| p.eye)
+            .collect();
+        let covered = held_covers(centre, future, &held, &asked, self.config.tolerance)
+            || self.pending_covers(k, centre, future);
+        let ahead = self.ahead(k, centre, camera.eye, future);
+        let deadline = Some((horizon * 1e3) as u64);
+        if !covered {
+            let eye = self.lead(k, centre, camera.eye, future);
+            self.request(scene, k, eye, camera, deadline);
+        } else if let Some(Err(eye)) = ahead {
+            self.request(scene, k, eye, camera, deadline);
+        }
+        // Predictions neither the eye nor its future will meet any more.
+        let reach = WITHDRAW_REACH * self.valid_angle(k);
+        let stale: Vec<u64> = self
+            .pending
+            .iter()
+            .filter(|(_, p)| p.object == k && p.predicted)
+            .filter(|(_, p)| {
+                angle_between(centre, p.eye, camera.eye) > reach
+                    && angle_between(centre, p.eye, future) > reach
+            })
+            .map(|(&id, _)| id)
+            .collect();
+        if !stale.is_empty() {
+            for id in &stale {
+                self.pending.remove(id);
+            }
+            self.counters.withdrawn += stale.len() as u64;
+            let _ = self.commands.send(Command::Withdraw(stale));
+        }
+    }
+}

@@ -1,0 +1,46 @@
+//! Relief's ray tracer, the method's "software shader": it bakes relief textures (for
+//! the workers, and the client's in-process generator) and renders the ray-traced
+//! reference frames every error figure is measured against. No network.
+//!
+//! # Brief overview
+//!
+//! The principal type is [`ObjectTracer`](tracer::ObjectTracer): one object and the
+//! [`Bvh`](bvh::Bvh) over its mesh, ready for rays. [`bake`] casts one orthographic ray
+//! per texel from it into a [`ReliefTexture`](relief_core::relief::ReliefTexture); a
+//! [`SceneTracer`] holds every object of a scene for [`render_reference`], one or
+//! N×N perspective rays per pixel.
+//!
+//! ```
+//! use glam::Vec3;
+//! use relief_core::{camera::Camera, relief::DepthBits, scene::Scene};
+//! use relief_trace::{SceneTracer, bake, render_reference, tracer::ObjectTracer};
+//!
+//! let scene = Scene::load("orbit-sphere")?;
+//! let sphere = scene.object("sphere")?;
+//! let eye = sphere.bounds.center() + Vec3::new(0.0, 1.0, 4.0);
+//! let texture = bake(&ObjectTracer::new(sphere), eye, 64, DepthBits::Eight)?;
+//! assert!(texture.covered_texels() > 64 * 64 / 2);
+//!
+//! let camera = Camera::look_at(eye, sphere.bounds.center(), Vec3::Y, 40.0, 96, 54)?;
+//! let frame = render_reference(&SceneTracer::new(&scene), &camera, 1);
+//! assert_eq!(frame.color.len(), 96 * 54);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! - [`bvh`] — bounding-volume hierarchy over one mesh: binned-SAH build (parallel),
+//!   closest-hit traversal, and the brute-force oracle the tests compare it with.
+//! - [`tracer`] — a scene ready for ray casting: one BVH per object.
+//! - [`tiles`] — the one way images are split across threads.
+//! - [`bake`] — the relief texture of one object for an eye.
+//! - [`reference`] — a full perspective frame of the whole scene, Phong-lit.
+
+pub mod bake;
+pub mod bvh;
+mod prefetch;
+pub mod reference;
+pub mod tiles;
+pub mod tracer;
+
+pub use bake::{BakeError, bake};
+pub use reference::{ANTIALIASED_SAMPLES, render_reference};
+pub use tracer::SceneTracer;
