@@ -1,4 +1,7 @@
-//! `relief`: the client command line.
+//! `relief`: the client command line — glue that brings the renderer, the lab and the
+//! impostor client together, one module per subcommand in `commands/`. The work is in
+//! the libraries; each command parses its flags, calls them, and writes or prints what
+//! they measured.
 //!
 //! Quiet by default (warnings only); `RUST_LOG=info` or `debug` for more. Errors print
 //! one line, `error: …`, and exit non-zero.

@@ -36,7 +36,7 @@ impl Viewer {
     pub fn open(_title: &str, _width: u32, _height: u32) -> Result<Viewer> {
         anyhow::bail!(
             "this relief was built without a window: build it with \
-             `cargo build --release --features relief-client/window`"
+             `cargo build --release --features relief/window`"
         )
     }
 

@@ -13,7 +13,9 @@ use relief_render::warp::params::WarpParams;
 use super::Manager;
 use super::choose::{angle_between, growth};
 use super::messages::Arrival;
-use super::policy::{CRITICAL_REGIONS, LATENCY_WINDOW, MIN_LEVEL_EDGE, PROBE_REFINEMENTS, PROBE_START};
+use super::policy::{
+    CRITICAL_REGIONS, LATENCY_WINDOW, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START,
+};
 
 /// A texture made ready for the frame loop: its pyramid (with texel connectivity),
 /// critical points and the gaps it shows at its own eye. Building this takes
@@ -79,7 +81,7 @@ pub(super) fn probe_valid_angle(held: &Held, centre: Vec3, camera: &Camera, tole
         })
     };
     let mut angle = PROBE_START;
-    while angle < std::f32::consts::FRAC_PI_2 && within(angle * 2.0) {
+    while angle < PROBE_LIMIT && within(angle * 2.0) {
         angle *= 2.0;
     }
     // Refine between `angle` (within) and twice it (not).

@@ -86,24 +86,32 @@ use draw::Kept;
 use policy::{LONE_MAX_TURN, MAX_TEXEL_PIXELS, SHOWN_STALE, WARM_UP_POLL};
 use requests::Pending;
 
-/// The manager of one client.
+/// The manager of one client: what it holds and has asked for per object, where the eye
+/// is going, the channels to its texture source, and what it has counted.
 pub struct Manager {
     config: Config,
+    /// Per scene object: the textures held, its valid angle, its round trips.
     objects: Vec<ObjectState>,
     predictor: Predictor,
+    /// Requests out, by id.
     pending: HashMap<u64, Pending>,
     next_id: u64,
     commands: UnboundedSender<Command>,
     arrivals: UnboundedReceiver<Arrival>,
-    /// The last [`LATENCY_WINDOW`](policy::LATENCY_WINDOW) round trips (request to final texture), seconds.
+    /// The last [`LATENCY_WINDOW`](policy::LATENCY_WINDOW) round trips (request to
+    /// final texture) of all objects, seconds.
     recent_latencies: Vec<f64>,
+    /// Per object, its last image, kept to be redrawn while the sprite test holds.
     sprites: Vec<Option<Kept>>,
     /// The eye of the last frame drawn.
     last_eye: Option<Vec3>,
+    /// What this run counted.
     pub counters: Counters,
 }
 
 impl Manager {
+    /// A manager of `scene`'s objects that asks for textures on `commands` and takes
+    /// them from `arrivals` (both ends served by a [`source`](crate::source)).
     pub fn new(
         scene: &Scene,
         config: Config,

@@ -151,6 +151,10 @@ pub const DEFAULT_VALID_ANGLE: f32 = 4.0 * PI / 180.0;
 /// A texture's valid angle is probed from this turn, doubling, …
 pub const PROBE_START: f32 = 0.5 * PI / 180.0;
 
+/// … while below this: a bound on the probe, since past [`MAX_TURN`] no texture is
+/// within the tolerance anyway.
+pub const PROBE_LIMIT: f32 = 0.5 * PI;
+
 /// … then refined this many halvings between the last turn within the tolerance and
 /// the first beyond: to 1/16 of the step, finer than the eye moves in a frame.
 pub const PROBE_REFINEMENTS: u32 = 4;

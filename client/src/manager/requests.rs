@@ -168,9 +168,7 @@ impl Manager {
         if !self.config.predict {
             return;
         }
-        // The round trip to plan for, with a quarter and 50 ms to spare (arrivals later
-        // than the recent 90th percentile were most of a flight's stale frames), and
-        // the eye then.
+        // The round trip to plan for, with time to spare, and the eye then.
         let horizon = (HORIZON_SPARE * self.latency(k) + HORIZON_MARGIN_S).min(MAX_HORIZON_S);
         let Some(future) = self.predictor.predict(horizon) else {
             return;

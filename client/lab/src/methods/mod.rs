@@ -34,6 +34,14 @@ pub enum DisplayError {
     NeedsPreviousFrame,
 }
 
+/// A name [`Method::from_str`] does not know; the message lists the ones it does.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("unknown method `{name}` (choose one of: {known}; inverse-N, forward-kernel-K)")]
+pub struct UnknownMethod {
+    pub name: String,
+    pub known: String,
+}
+
 /// A display method, selectable by name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Method {
@@ -107,7 +115,7 @@ impl fmt::Display for Method {
 }
 
 impl FromStr for Method {
-    type Err = String;
+    type Err = UnknownMethod;
 
     /// Parses a method name; `inverse-N` takes any step count 1..=4096 and
     /// `forward-kernel-K` an odd K in 1..=9.
@@ -127,10 +135,10 @@ impl FromStr for Method {
         }
         Method::ALL.into_iter().find(|m| m.name() == s).ok_or_else(|| {
             let names: Vec<String> = Method::ALL.iter().map(|m| m.name()).collect();
-            format!(
-                "unknown method `{s}` (choose one of: {}; inverse-N, forward-kernel-K)",
-                names.join(", ")
-            )
+            UnknownMethod {
+                name: s.to_string(),
+                known: names.join(", "),
+            }
         })
     }
 }

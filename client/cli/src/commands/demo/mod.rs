@@ -2,28 +2,28 @@
 //! processes, and this client flying the scene's camera path with impostors,
 //! asking for the textures it will need. Writes frames and `summary.json`.
 
-use std::collections::BTreeMap;
+mod judge;
+mod summary;
+
 use std::ops::ControlFlow;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use serde::Serialize;
 
 use relief_client::flight::{Flight, WARM_UP_LIMIT};
-use relief_client::manager::{Config, RenderStages, StaleCauses};
+use relief_client::manager::Config;
 use relief_client::source::{local_manager, remote_manager};
-use relief_core::camera::Camera;
-use relief_core::frame::Frame;
 use relief_core::scene::Scene;
 use relief_core::stats::{finite_mean, finite_min, median, percentile};
-use relief_lab::image_error::{compare, object_psnr};
 use relief_proto::bundle::bundle_for;
 use relief_render::gbuffer::GBuffer;
-use relief_render::geometry::{is_cheap, render_geometry};
-use relief_trace::{ANTIALIASED_SAMPLES, SceneTracer, render_reference};
+use relief_render::geometry::render_geometry;
+
+use judge::{judge, min_by_object};
+use summary::{FrameStages, Summary};
 
 use crate::processes::{LocalService, connect_and_upload, sibling};
 use crate::window::Viewer;
@@ -87,179 +87,8 @@ pub struct DemoArgs {
     window: bool,
 }
 
-/// The stages of the demo's frames, milliseconds.
-#[derive(Serialize)]
-struct FrameStages {
-    /// The impostor manager's decisions and requests.
-    plan: f64,
-    /// Deciding which impostors are warped (or redrawn as sprites), and their
-    /// pre-warps.
-    prewarp: f64,
-    /// Impostors drawn: pre-warps texture-mapped, sprites redrawn.
-    draw: f64,
-    /// Objects drawn as geometry.
-    geometry: f64,
-    /// Lighting.
-    shade: f64,
-}
-
-impl FrameStages {
-    fn median(plan_ms: &[f64], render: &[RenderStages]) -> FrameStages {
-        let of = |stage: fn(&RenderStages) -> f64| median(render.iter().map(stage).collect());
-        FrameStages {
-            plan: median(plan_ms.to_vec()),
-            prewarp: of(|r| r.prewarp_ms),
-            draw: of(|r| r.draw_ms),
-            geometry: of(|r| r.geometry_ms),
-            shade: of(|r| r.shade_ms),
-        }
-    }
-}
-
-/// What `summary.json` holds.
-#[derive(Serialize)]
-struct Summary {
-    /// Frames rendered (path frames a slow frame skipped are not rendered).
-    frames: u32,
-    /// Path frames flown.
-    path_frames: u32,
-    frame_ms_p50: f64,
-    frame_ms_p95: f64,
-    geometry_frame_ms_p50: f64,
-    /// Where the frame time goes, each stage's median on its own.
-    frame_stages_ms_p50: FrameStages,
-    requests_now: u64,
-    requests_predicted: u64,
-    withdrawn: u64,
-    latency_ms_p50: f64,
-    latency_ms_p99: f64,
-    /// Needed textures already there or in flight, and the needs counted.
-    prediction_hits: u64,
-    needs: u64,
-    stale_frames: u64,
-    /// Object-frames without a valid texture, by cause.
-    stale_causes: StaleCauses,
-    /// Impostors redrawn unchanged while Schaufler's sprite test held, and warped.
-    sprites: u64,
-    warps: u64,
-    partners: u64,
-    /// Texels pre-warped per frame drawn, warps and partners together.
-    texels_warped_per_frame: f64,
-    /// New textures received per full turn for each object orbited by the path.
-    regenerations_per_orbit: BTreeMap<String, f64>,
-    /// Against the point-sampled reference (one ray through each pixel centre);
-    /// `null` when no frame was compared (`--reference-every 0`).
-    psnr_db_mean: Option<f64>,
-    psnr_db_min: Option<f64>,
-    /// Against the anti-aliased reference (3×3 rays per pixel) …
-    psnr_aa_db_mean: Option<f64>,
-    psnr_aa_db_min: Option<f64>,
-    /// … which the same frames drawn all as exact geometry, one sample per pixel, do
-    /// not reach either: the floor that detail finer than a pixel sets.
-    geometry_psnr_aa_db_min: Option<f64>,
-    /// Per object that may be an impostor, the lowest PSNR of its own pixels against
-    /// the anti-aliased reference — wherever either frame shows it, so silhouette
-    /// errors count.
-    psnr_aa_db_min_by_object: BTreeMap<String, f64>,
-    /// … and the floor for it: the object drawn as exact geometry, one sample per
-    /// pixel, against the anti-aliased reference.
-    geometry_psnr_aa_db_min_by_object: BTreeMap<String, f64>,
-    rtt_ms: u64,
-    predict: bool,
-    tolerance: f32,
-    /// Workers started; `None` with `--server` (whose own workers serve) or when no
-    /// server could start (textures made in-process).
-    workers: Option<u32>,
-    source: String,
-}
-
 /// Memory the frames kept for comparison after the flight may take.
 const MAX_COMPARED_BYTES: usize = 256 << 20;
-
-/// The image error of the compared frames, each as drawn and as all geometry.
-#[derive(Default)]
-struct Judged {
-    psnr: Vec<f64>,
-    psnr_aa: Vec<f64>,
-    geometry_psnr_aa: Vec<f64>,
-    /// Per object that may be an impostor: its own PSNR in each frame showing it
-    /// ([`object_psnr`]) against the anti-aliased reference, as drawn and as exact
-    /// geometry.
-    by_object: BTreeMap<String, Vec<f64>>,
-    geometry_by_object: BTreeMap<String, Vec<f64>>,
-}
-
-/// Compares each kept `(path frame, camera, frame)` with the ray-traced references;
-/// writes `psnr.csv` and the worst frame with its reference into `out`.
-fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result<Judged> {
-    let mut judged = Judged::default();
-    if compared.is_empty() {
-        return Ok(judged);
-    }
-    let bar = progress::bar(compared.len() as u64, "comparing with the reference");
-    let tracer = SceneTracer::new(scene);
-    // Objects that may be impostors: each gets its own columns.
-    let candidates: Vec<(u32, &str)> = scene
-        .objects
-        .iter()
-        .enumerate()
-        .filter(|(_, o)| !is_cheap(o))
-        .map(|(k, o)| (k as u32, o.name.as_str()))
-        .collect();
-    // Names become column names: keep the CSV's commas and quotes out of them.
-    let column = |name: &str| name.replace(|c: char| !(c.is_alphanumeric() || c == '_' || c == '-'), "_");
-    let mut log = String::from("frame,psnr_db,psnr_aa_db,geometry_psnr_aa_db");
-    for (_, name) in &candidates {
-        let name = column(name);
-        log.push_str(&format!(",psnr_aa_db_{name},geometry_psnr_aa_db_{name}"));
-    }
-    log.push('\n');
-    let mut worst = f64::INFINITY;
-    for (frame, camera, image) in compared {
-        let reference = render_reference(&tracer, camera, 1);
-        let antialiased = render_reference(&tracer, camera, ANTIALIASED_SAMPLES);
-        let geometry = render_geometry(scene, camera, &mut GBuffer::new(camera.width, camera.height));
-        let p = compare(image, &reference, None).psnr_db;
-        let p_aa = compare(image, &antialiased, None).psnr_db;
-        let floor = compare(&geometry, &antialiased, None).psnr_db;
-        log.push_str(&format!("{frame},{p:.3},{p_aa:.3},{floor:.3}"));
-        for &(k, name) in &candidates {
-            let own = object_psnr(image, &antialiased, k);
-            let own_floor = object_psnr(&geometry, &antialiased, k);
-            for (value, into) in [
-                (own, &mut judged.by_object),
-                (own_floor, &mut judged.geometry_by_object),
-            ] {
-                log.push(',');
-                if let Some(v) = value {
-                    log.push_str(&format!("{v:.3}"));
-                    into.entry(name.to_string()).or_default().push(v);
-                }
-            }
-        }
-        log.push('\n');
-        if p < worst {
-            worst = p;
-            image.save_png(&out.join("worst_frame.png"))?;
-            reference.save_png(&out.join("worst_frame_reference.png"))?;
-        }
-        judged.psnr.push(p);
-        judged.psnr_aa.push(p_aa);
-        judged.geometry_psnr_aa.push(floor);
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
-    std::fs::write(out.join("psnr.csv"), log).context("writing psnr.csv")?;
-    Ok(judged)
-}
-
-/// The finite minimum of each object's values.
-fn min_by_object(values: &BTreeMap<String, Vec<f64>>) -> BTreeMap<String, f64> {
-    values
-        .iter()
-        .filter_map(|(name, values)| Some((name.clone(), finite_min(values)?)))
-        .collect()
-}
 
 pub fn run(args: DemoArgs) -> Result<()> {
     let scene = Arc::new(Scene::load(&args.scene)?);
@@ -416,33 +245,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     if args.json {
         println!("{json}");
     } else {
-        println!(
-            "{} frames ({}x{}) from {}: frame {:.1} ms p50 / {:.1} p95 (all geometry {:.1} ms); \
-             {} requests now, {} predicted, latency {}; {} stale frames; PSNR {} -> {}",
-            summary.frames,
-            w,
-            h,
-            summary.source,
-            summary.frame_ms_p50,
-            summary.frame_ms_p95,
-            summary.geometry_frame_ms_p50,
-            summary.requests_now,
-            summary.requests_predicted,
-            if summary.latency_ms_p50.is_finite() {
-                format!(
-                    "{:.0} ms p50 / {:.0} p99",
-                    summary.latency_ms_p50, summary.latency_ms_p99
-                )
-            } else {
-                "not measured (no texture arrived during the flight)".to_string()
-            },
-            summary.stale_frames,
-            match (summary.psnr_db_mean, summary.psnr_db_min) {
-                (Some(mean), Some(min)) => format!("{mean:.1} dB mean, {min:.1} min"),
-                _ => "not measured".to_string(),
-            },
-            args.out.display()
-        );
+        println!("{}", summary.line(args.size, &args.out));
     }
     drop(service);
     // Every frame drawn as geometry is not a run of the service: say so, and fail.

@@ -1,0 +1,104 @@
+//! The demo's compared frames judged after the flight: each against the ray-traced
+//! references (point-sampled and anti-aliased), as drawn and as exact geometry, whole
+//! and per object; `psnr.csv` and the worst frame written.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use anyhow::{Context, Result};
+
+use relief_core::camera::Camera;
+use relief_core::frame::Frame;
+use relief_core::scene::Scene;
+use relief_core::stats::finite_min;
+use relief_lab::image_error::{compare, object_psnr};
+use relief_render::gbuffer::GBuffer;
+use relief_render::geometry::{is_cheap, render_geometry};
+use relief_trace::{ANTIALIASED_SAMPLES, SceneTracer, render_reference};
+
+use crate::progress;
+
+/// The image error of the compared frames, each as drawn and as all geometry.
+#[derive(Default)]
+pub(super) struct Judged {
+    pub(super) psnr: Vec<f64>,
+    pub(super) psnr_aa: Vec<f64>,
+    pub(super) geometry_psnr_aa: Vec<f64>,
+    /// Per object that may be an impostor: its own PSNR in each frame showing it
+    /// ([`object_psnr`]) against the anti-aliased reference, as drawn and as exact
+    /// geometry.
+    pub(super) by_object: BTreeMap<String, Vec<f64>>,
+    pub(super) geometry_by_object: BTreeMap<String, Vec<f64>>,
+}
+
+/// Compares each kept `(path frame, camera, frame)` with the ray-traced references;
+/// writes `psnr.csv` and the worst frame with its reference into `out`.
+pub(super) fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result<Judged> {
+    let mut judged = Judged::default();
+    if compared.is_empty() {
+        return Ok(judged);
+    }
+    let bar = progress::bar(compared.len() as u64, "comparing with the reference");
+    let tracer = SceneTracer::new(scene);
+    // Objects that may be impostors: each gets its own columns.
+    let candidates: Vec<(u32, &str)> = scene
+        .objects
+        .iter()
+        .enumerate()
+        .filter(|(_, o)| !is_cheap(o))
+        .map(|(k, o)| (k as u32, o.name.as_str()))
+        .collect();
+    // Names become column names: keep the CSV's commas and quotes out of them.
+    let column = |name: &str| name.replace(|c: char| !(c.is_alphanumeric() || c == '_' || c == '-'), "_");
+    let mut log = String::from("frame,psnr_db,psnr_aa_db,geometry_psnr_aa_db");
+    for (_, name) in &candidates {
+        let name = column(name);
+        log.push_str(&format!(",psnr_aa_db_{name},geometry_psnr_aa_db_{name}"));
+    }
+    log.push('\n');
+    let mut worst = f64::INFINITY;
+    for (frame, camera, image) in compared {
+        let reference = render_reference(&tracer, camera, 1);
+        let antialiased = render_reference(&tracer, camera, ANTIALIASED_SAMPLES);
+        let geometry = render_geometry(scene, camera, &mut GBuffer::new(camera.width, camera.height));
+        let p = compare(image, &reference, None).psnr_db;
+        let p_aa = compare(image, &antialiased, None).psnr_db;
+        let floor = compare(&geometry, &antialiased, None).psnr_db;
+        log.push_str(&format!("{frame},{p:.3},{p_aa:.3},{floor:.3}"));
+        for &(k, name) in &candidates {
+            let own = object_psnr(image, &antialiased, k);
+            let own_floor = object_psnr(&geometry, &antialiased, k);
+            for (value, into) in [
+                (own, &mut judged.by_object),
+                (own_floor, &mut judged.geometry_by_object),
+            ] {
+                log.push(',');
+                if let Some(v) = value {
+                    log.push_str(&format!("{v:.3}"));
+                    into.entry(name.to_string()).or_default().push(v);
+                }
+            }
+        }
+        log.push('\n');
+        if p < worst {
+            worst = p;
+            image.save_png(&out.join("worst_frame.png"))?;
+            reference.save_png(&out.join("worst_frame_reference.png"))?;
+        }
+        judged.psnr.push(p);
+        judged.psnr_aa.push(p_aa);
+        judged.geometry_psnr_aa.push(floor);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    std::fs::write(out.join("psnr.csv"), log).context("writing psnr.csv")?;
+    Ok(judged)
+}
+
+/// The finite minimum of each object's values.
+pub(super) fn min_by_object(values: &BTreeMap<String, Vec<f64>>) -> BTreeMap<String, f64> {
+    values
+        .iter()
+        .filter_map(|(name, values)| Some((name.clone(), finite_min(values)?)))
+        .collect()
+}

@@ -1,0 +1,129 @@
+//! What `relief demo` reports: `summary.json`, and the one line it prints.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::Serialize;
+
+use relief_client::manager::{RenderStages, StaleCauses};
+use relief_core::stats::median;
+
+/// The stages of the demo's frames, milliseconds.
+#[derive(Serialize)]
+pub(super) struct FrameStages {
+    /// The impostor manager's decisions and requests.
+    plan: f64,
+    /// Deciding which impostors are warped (or redrawn as sprites), and their
+    /// pre-warps.
+    prewarp: f64,
+    /// Impostors drawn: pre-warps texture-mapped, sprites redrawn.
+    draw: f64,
+    /// Objects drawn as geometry.
+    geometry: f64,
+    /// Lighting.
+    shade: f64,
+}
+
+impl FrameStages {
+    pub(super) fn median(plan_ms: &[f64], render: &[RenderStages]) -> FrameStages {
+        let of = |stage: fn(&RenderStages) -> f64| median(render.iter().map(stage).collect());
+        FrameStages {
+            plan: median(plan_ms.to_vec()),
+            prewarp: of(|r| r.prewarp_ms),
+            draw: of(|r| r.draw_ms),
+            geometry: of(|r| r.geometry_ms),
+            shade: of(|r| r.shade_ms),
+        }
+    }
+}
+
+/// What `summary.json` holds.
+#[derive(Serialize)]
+pub(super) struct Summary {
+    /// Frames rendered (path frames a slow frame skipped are not rendered).
+    pub(super) frames: u32,
+    /// Path frames flown.
+    pub(super) path_frames: u32,
+    pub(super) frame_ms_p50: f64,
+    pub(super) frame_ms_p95: f64,
+    pub(super) geometry_frame_ms_p50: f64,
+    /// Where the frame time goes, each stage's median on its own.
+    pub(super) frame_stages_ms_p50: FrameStages,
+    pub(super) requests_now: u64,
+    pub(super) requests_predicted: u64,
+    pub(super) withdrawn: u64,
+    pub(super) latency_ms_p50: f64,
+    pub(super) latency_ms_p99: f64,
+    /// Needed textures already there or in flight, and the needs counted.
+    pub(super) prediction_hits: u64,
+    pub(super) needs: u64,
+    pub(super) stale_frames: u64,
+    /// Object-frames without a valid texture, by cause.
+    pub(super) stale_causes: StaleCauses,
+    /// Impostors redrawn unchanged while Schaufler's sprite test held, and warped.
+    pub(super) sprites: u64,
+    pub(super) warps: u64,
+    pub(super) partners: u64,
+    /// Texels pre-warped per frame drawn, warps and partners together.
+    pub(super) texels_warped_per_frame: f64,
+    /// New textures received per full turn for each object orbited by the path.
+    pub(super) regenerations_per_orbit: BTreeMap<String, f64>,
+    /// Against the point-sampled reference (one ray through each pixel centre);
+    /// `null` when no frame was compared (`--reference-every 0`).
+    pub(super) psnr_db_mean: Option<f64>,
+    pub(super) psnr_db_min: Option<f64>,
+    /// Against the anti-aliased reference (3×3 rays per pixel) …
+    pub(super) psnr_aa_db_mean: Option<f64>,
+    pub(super) psnr_aa_db_min: Option<f64>,
+    /// … which the same frames drawn all as exact geometry, one sample per pixel, do
+    /// not reach either: the floor that detail finer than a pixel sets.
+    pub(super) geometry_psnr_aa_db_min: Option<f64>,
+    /// Per object that may be an impostor, the lowest PSNR of its own pixels against
+    /// the anti-aliased reference — wherever either frame shows it, so silhouette
+    /// errors count.
+    pub(super) psnr_aa_db_min_by_object: BTreeMap<String, f64>,
+    /// … and the floor for it: the object drawn as exact geometry, one sample per
+    /// pixel, against the anti-aliased reference.
+    pub(super) geometry_psnr_aa_db_min_by_object: BTreeMap<String, f64>,
+    pub(super) rtt_ms: u64,
+    pub(super) predict: bool,
+    pub(super) tolerance: f32,
+    /// Workers started; `None` with `--server` (whose own workers serve) or when no
+    /// server could start (textures made in-process).
+    pub(super) workers: Option<u32>,
+    pub(super) source: String,
+}
+
+impl Summary {
+    /// The one line the demo prints: frames and their time against all geometry,
+    /// requests and their latency, stale frames, image error; where the outputs went.
+    pub(super) fn line(&self, (w, h): (u32, u32), out: &Path) -> String {
+        format!(
+            "{} frames ({}x{}) from {}: frame {:.1} ms p50 / {:.1} p95 (all geometry {:.1} ms); \
+             {} requests now, {} predicted, latency {}; {} stale frames; PSNR {} -> {}",
+            self.frames,
+            w,
+            h,
+            self.source,
+            self.frame_ms_p50,
+            self.frame_ms_p95,
+            self.geometry_frame_ms_p50,
+            self.requests_now,
+            self.requests_predicted,
+            if self.latency_ms_p50.is_finite() {
+                format!(
+                    "{:.0} ms p50 / {:.0} p99",
+                    self.latency_ms_p50, self.latency_ms_p99
+                )
+            } else {
+                "not measured (no texture arrived during the flight)".to_string()
+            },
+            self.stale_frames,
+            match (self.psnr_db_mean, self.psnr_db_min) {
+                (Some(mean), Some(min)) => format!("{mean:.1} dB mean, {min:.1} min"),
+                _ => "not measured".to_string(),
+            },
+            out.display()
+        )
+    }
+}
