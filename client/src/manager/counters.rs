@@ -28,7 +28,7 @@ pub struct Counters {
     pub stale_frames: u64,
     /// Why: the object-frames without a valid texture, by cause.
     pub stale_causes: StaleCauses,
-    /// Where each [`Manager::render`] spent its time.
+    /// Where each [`Manager::render`](super::Manager::render) spent its time.
     pub render_stages: Vec<RenderStages>,
 }
 
@@ -45,7 +45,7 @@ pub struct StaleCauses {
     pub alone: u64,
 }
 
-/// Where one [`Manager::render`] spent its time, milliseconds.
+/// Where one [`Manager::render`](super::Manager::render) spent its time, milliseconds.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct RenderStages {
     /// Deciding which impostors are warped, and their pre-warps (all at once).

@@ -7,26 +7,26 @@
 //!
 //! # Each frame
 //!
-//! [`Manager::frame`] takes in what has arrived ([`cache`]), then for each object
+//! [`Manager::frame`] takes in what has arrived (`cache.rs`), then for each object
 //! decides a [`Show`]: geometry (cheap objects, an eye too near, nothing held that can
 //! be shown), or a held texture — of those within the tolerance and fine enough for the
-//! screen, the one whose eye is nearest ([`choose`]) — with, once the eye has turned far
+//! screen, the one whose eye is nearest (`choose.rs`) — with, once the eye has turned far
 //! enough from it, a *partner* drawn behind it: a texture from the far side of the eye
 //! that fills in the side of the object the first cannot show. It asks for a texture
-//! for now when none is valid, and for the textures the eye will need ([`requests`]).
-//! [`Manager::render`] then draws the frame as decided ([`draw`]).
+//! for now when none is valid, and for the textures the eye will need (`requests.rs`).
+//! [`Manager::render`] then draws the frame as decided (`draw.rs`).
 //!
 //! # Textures in and out
 //!
 //! Requests and withdrawals go out as [`Command`]s on one channel; textures and
-//! failures come back as [`Arrival`]s on another ([`messages`]) — whoever serves them
+//! failures come back as [`Arrival`]s on another (`messages.rs`) — whoever serves them
 //! (a server over gRPC, or the in-process generator: [`crate::source`]) works on its
 //! own threads. Nothing the manager does waits on them.
 //!
 //! # Counting
 //!
 //! [`Counters`] hold what a run's summary reports: requests, round trips, needs met,
-//! stale frames by cause, draws, and each frame's stage times ([`counters`]).
+//! stale frames by cause, draws, and each frame's stage times (`counters.rs`).
 //!
 //! # Example
 //!

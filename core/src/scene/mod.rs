@@ -1,7 +1,7 @@
 //! Scenes: objects placed in the world, lights, and a camera path.
 //!
 //! `--scene` everywhere goes through [`Scene::load`], which accepts a built-in scene
-//! name (see [`builtin_names`]), a TOML scene file (schema in [`file`]) or a bare
+//! name (see [`builtin_names`]), a TOML scene file (schema in [`file`](mod@file)) or a bare
 //! `.obj` file (a one-object scene named after the file).
 
 pub mod file;

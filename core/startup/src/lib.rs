@@ -22,8 +22,8 @@
 use std::io::IsTerminal;
 use std::process::ExitCode;
 
-/// A binary's `main`: parses the arguments ([`parse`]), starts logging, runs `body` and
-/// ends with its outcome ([`finish`]).
+/// A binary's `main`: parses the arguments (`parse`), starts logging, runs `body` and
+/// ends with its outcome (`finish`).
 pub fn run<T: clap::Parser>(body: impl FnOnce(T) -> anyhow::Result<()>) -> ExitCode {
     let args = match parse::<T>() {
         Ok(args) => args,

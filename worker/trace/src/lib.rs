@@ -5,7 +5,7 @@
 //! # Brief overview
 //!
 //! The principal type is [`ObjectTracer`](tracer::ObjectTracer): one object and the
-//! [`Bvh`](bvh::Bvh) over its mesh, ready for rays. [`bake`] casts one orthographic ray
+//! [`Bvh`](bvh::Bvh) over its mesh, ready for rays. [`bake`](fn@bake) casts one orthographic ray
 //! per texel from it into a [`ReliefTexture`](relief_core::relief::ReliefTexture); a
 //! [`SceneTracer`] holds every object of a scene for [`render_reference`], one or
 //! N×N perspective rays per pixel.
@@ -31,8 +31,8 @@
 //!   closest-hit traversal, and the brute-force oracle the tests compare it with.
 //! - [`tracer`] — a scene ready for ray casting: one BVH per object.
 //! - [`tiles`] — the one way images are split across threads.
-//! - [`bake`] — the relief texture of one object for an eye.
-//! - [`reference`] — a full perspective frame of the whole scene, Phong-lit.
+//! - [`bake`](mod@bake) — the relief texture of one object for an eye.
+//! - [`reference`](mod@reference) — a full perspective frame of the whole scene, Phong-lit.
 
 pub mod bake;
 pub mod bvh;

@@ -1,7 +1,7 @@
 //! The software rasterizer: triangles of scene objects into a [`GBuffer`].
 //!
 //! Perspective-correct and z-buffered, sampling pixel centres. Triangles crossing the
-//! near plane are clipped in view space ([`clip`]); the frame is split into bands of
+//! near plane are clipped in view space (`clip.rs`); the frame is split into bands of
 //! [`BAND`] rows rasterized in parallel, each band seeing only the triangles that reach
 //! it. Attributes are not interpolated here: each written pixel records the original
 //! triangle's barycentric coordinates and asks the mesh for its albedo and shading

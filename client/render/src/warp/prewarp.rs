@@ -585,7 +585,7 @@ pub struct PlaneWindow {
 impl PlaneWindow {
     /// The part of the source plane of `c` that the screen of `camera` shows, as far
     /// as a pre-warped image can reach (one quad size past the quad, see
-    /// [`MAX_MARGIN`]): that plane rectangle clipped to the camera's frustum, whose
+    /// `MAX_MARGIN`): that plane rectangle clipped to the camera's frustum, whose
     /// four side planes pass through the eye — exactly the plane points some pixel's
     /// ray crosses ahead of the eye — and the clipped polygon's bounding box. Empty
     /// (`u1 < u0`) when the screen shows none of it (or the input is NaN); `None` when

@@ -1,6 +1,6 @@
 //! A bounding-volume hierarchy over the triangles of one mesh.
 //!
-//! Built as a binary tree with binned SAH ([`build`]), then collapsed into a 4-wide tree
+//! Built as a binary tree with binned SAH (`build.rs`), then collapsed into a 4-wide tree
 //! whose nodes keep their children's boxes in structure-of-arrays form, so one node
 //! visit tests four boxes with SIMD lanes (`glam::Vec4`). Triangles are copied into leaf
 //! order as `(v0, e1, e2)` for the Möller–Trumbore test, with their original index

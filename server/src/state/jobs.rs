@@ -1,0 +1,306 @@
+//! The job queue and a job's life: dispatch to a worker with a free slot, results and
+//! failures, timeouts, and withdrawals by the clients that asked.
+
+use std::collections::HashSet;
+use std::sync::Arc;
+use std::time::Instant;
+
+use tonic::Status;
+
+use relief_core::hash::ContentHash;
+use relief_proto::convert::Request;
+use relief_proto::pb;
+
+use super::{ResultSender, State};
+
+/// Where a texture is made from: the scene, the object and the eye. Textures of one
+/// view differ only in their texel count and depth bits.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub(super) struct View {
+    pub(super) scene: ContentHash,
+    pub(super) object: String,
+    pub(super) eye: [u32; 3],
+}
+
+/// What a job makes, or a request asks for: a view, at a size and depth.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct JobKey {
+    pub(super) view: View,
+    pub(super) size: u32,
+    pub(super) depth_bits: u32,
+}
+
+impl JobKey {
+    pub(super) fn of(r: &Request) -> JobKey {
+        JobKey {
+            view: View {
+                scene: r.scene,
+                object: r.object.clone(),
+                eye: r.eye.to_array().map(f32::to_bits),
+            },
+            size: r.size,
+            depth_bits: r.depth_bits.bits(),
+        }
+    }
+
+    /// Whether the texture made for `self` serves a request for `wanted`: the same
+    /// view, with at least its depth bits and its edge, up to [`MAX_SERVED_RATIO`]
+    /// times it (a client draws the pyramid level its screen needs, so more texels cost
+    /// it bytes on the wire, not warp time).
+    pub(super) fn satisfies(&self, wanted: &JobKey) -> bool {
+        self.view == wanted.view
+            && self.depth_bits >= wanted.depth_bits
+            && (wanted.size..=wanted.size.saturating_mul(MAX_SERVED_RATIO)).contains(&self.size)
+    }
+}
+
+/// How many times a request's edge a texture that serves it may be: 2 (4× the texels).
+/// A far bigger one would cost a small request's client far more bytes — and, still
+/// being made, far more waiting than a bake of its own.
+const MAX_SERVED_RATIO: u32 = 2;
+
+/// Queue order: needed-now first, then nearest deadline, then arrival.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub(super) struct Priority {
+    pub(super) predicted: bool,
+    pub(super) deadline_us: u64,
+    pub(super) id: u64,
+}
+
+#[derive(Debug)]
+pub(super) enum JobState {
+    Queued(Priority),
+    Running { worker: u64 },
+}
+
+#[derive(Debug)]
+pub(super) struct Job {
+    pub(super) key: JobKey,
+    pub(super) spec: pb::Job,
+    pub(super) state: JobState,
+    pub(super) waiters: HashSet<WaiterId>,
+}
+
+/// A client's request: `(client_id, request_id)`.
+pub type WaiterId = (String, u64);
+
+#[derive(Debug)]
+pub(super) struct Waiter {
+    pub(super) job: u64,
+    pub(super) tx: ResultSender,
+    pub(super) arrived: Instant,
+}
+
+impl State {
+    /// Hands queued jobs to workers with free slots, most urgent first. (A job whose
+    /// clients have all gone is withdrawn before it gets here: see the service's
+    /// `ResultStream`.)
+    pub fn dispatch(&mut self) {
+        loop {
+            let Some(&first) = self.queue.first() else {
+                return;
+            };
+            let Some((&worker_id, worker)) = self
+                .workers
+                .iter_mut()
+                .filter(|(_, w)| !w.draining && w.busy() < w.slots)
+                .min_by_key(|(_, w)| w.busy())
+            else {
+                return;
+            };
+            self.queue.remove(&first);
+            let Some(job) = self.jobs.get_mut(&first.id) else {
+                continue;
+            };
+            let message = pb::ServerMessage {
+                kind: Some(pb::server_message::Kind::Job(job.spec.clone())),
+            };
+            if worker.tx.send(Ok(message)).is_err() {
+                // The worker's stream is gone: put the job back and drop the worker.
+                self.queue.insert(first);
+                self.remove_worker(worker_id);
+                continue;
+            }
+            worker.running.insert(first.id);
+            job.state = JobState::Running { worker: worker_id };
+        }
+    }
+
+    /// A worker's result. Previews go to the waiters; the final texture also goes to
+    /// the cache and ends the job.
+    pub fn result(&mut self, job_id: u64, texture: pb::ReliefTexture, is_final: bool, bake_ms: u32) {
+        let Some(job) = self.jobs.get(&job_id) else {
+            // Withdrawn meanwhile (and its worker not told in time, or unable to stop).
+            self.counters.discarded += 1;
+            return;
+        };
+        let texture = Arc::new(texture);
+        for waiter_id in &job.waiters {
+            if let Some(w) = self.waiters.get(waiter_id) {
+                let result = pb::ImpostorResult {
+                    request_id: waiter_id.1,
+                    texture: Some((*texture).clone()),
+                    r#final: is_final,
+                    bake_ms,
+                };
+                let _ = w.tx.send(Ok(result));
+            }
+        }
+        if is_final {
+            let bytes = texture.albedo.len() + texture.normal.len() + texture.depth.len();
+            let key = job.key.clone();
+            self.cache_insert(key, texture, bytes);
+            self.finish(job_id);
+        }
+    }
+
+    /// A worker stopped a cancelled job before finishing it.
+    pub fn stopped(&mut self) {
+        self.counters.stopped += 1;
+    }
+
+    /// A worker could not make a texture: the waiters get the reason.
+    pub fn failed(&mut self, job_id: u64, reason: &str) {
+        if let Some(job) = self.jobs.get(&job_id) {
+            let status = Status::aborted(format!("the worker failed: {reason}"));
+            for waiter_id in &job.waiters {
+                if let Some(w) = self.waiters.get(waiter_id) {
+                    let _ = w.tx.send(Err(status.clone()));
+                }
+            }
+        }
+        self.finish(job_id);
+    }
+
+    /// Tells the worker running job `job_id`, if any, to stop it; its slot stays taken
+    /// until the worker answers for the job ([`State::released`]).
+    pub(super) fn cancel_on_worker(&mut self, job_id: u64) {
+        if let Some(job) = self.jobs.get(&job_id)
+            && let JobState::Running { worker } = job.state
+            && let Some(w) = self.workers.get_mut(&worker)
+        {
+            let cancel = pb::ServerMessage {
+                kind: Some(pb::server_message::Kind::Cancel(pb::CancelJob { job_id })),
+            };
+            let _ = w.tx.send(Ok(cancel));
+            w.stopping.insert(job_id);
+        }
+    }
+
+    /// Requests waiting longer than [`Limits::job_timeout`](super::Limits::job_timeout) end with DEADLINE_EXCEEDED
+    /// (each by its own arrival: one merged into an old job gets the whole time); a
+    /// job nobody waits for any more then ends, stopped on its worker.
+    pub fn expire_jobs(&mut self) {
+        let timeout = self.limits.job_timeout;
+        let expired: Vec<WaiterId> = self
+            .waiters
+            .iter()
+            .filter(|(_, w)| w.arrived.elapsed() > timeout)
+            .map(|(id, _)| id.clone())
+            .collect();
+        let ms = timeout.as_millis();
+        for waiter_id in expired {
+            let running = self
+                .waiters
+                .get(&waiter_id)
+                .and_then(|w| self.jobs.get(&w.job))
+                .is_some_and(|j| matches!(j.state, JobState::Running { .. }));
+            let reason = match running {
+                true => format!("not finished within the job timeout ({ms} ms): a worker is still on it"),
+                false => format!(
+                    "no worker took it within the job timeout ({ms} ms); {} worker(s) connected",
+                    self.workers.len()
+                ),
+            };
+            if self.end_waiter(&waiter_id, Status::deadline_exceeded(reason)) {
+                self.counters.timed_out += 1;
+            }
+        }
+    }
+
+    /// Ends request `waiter_id` before its job is done, with `status`; a job nobody
+    /// waits for any more then ends too, stopped on its worker. Returns whether the
+    /// request was waiting.
+    pub(super) fn end_waiter(&mut self, waiter_id: &WaiterId, status: Status) -> bool {
+        let Some(waiter) = self.waiters.remove(waiter_id) else {
+            return false;
+        };
+        let _ = waiter.tx.send(Err(status));
+        if let Some(job) = self.jobs.get_mut(&waiter.job) {
+            job.waiters.remove(waiter_id);
+            if job.waiters.is_empty() {
+                self.cancel_on_worker(waiter.job);
+                self.finish(waiter.job);
+            }
+        }
+        true
+    }
+
+    /// Ends a job: it leaves the queue or frees its worker's slot, and its waiters'
+    /// streams close (their senders are dropped).
+    pub(super) fn finish(&mut self, job_id: u64) {
+        let Some(job) = self.jobs.remove(&job_id) else {
+            return;
+        };
+        if let Some(ids) = self.by_view.get_mut(&job.key.view) {
+            ids.retain(|&id| id != job_id);
+            if ids.is_empty() {
+                self.by_view.remove(&job.key.view);
+            }
+        }
+        match job.state {
+            JobState::Queued(p) => {
+                self.queue.remove(&p);
+            }
+            JobState::Running { worker } => {
+                if let Some(w) = self.workers.get_mut(&worker) {
+                    w.running.remove(&job_id);
+                }
+            }
+        }
+        for waiter_id in job.waiters {
+            if let Some(w) = self.waiters.remove(&waiter_id) {
+                self.latencies_push(w.arrived.elapsed().as_secs_f32() * 1e3);
+            }
+        }
+    }
+
+    /// Withdraws request `request_id` of `client_id` if its results still go to
+    /// `results`: a stream dropped early withdraws its own request, never another
+    /// that reuses the id. Returns whether it did.
+    pub fn withdraw_own(&mut self, client_id: &str, request_id: u64, results: &ResultSender) -> bool {
+        let own = self
+            .waiters
+            .get(&(client_id.to_string(), request_id))
+            .is_some_and(|w| w.tx.same_channel(results));
+        own && self.withdraw(client_id, &[request_id]) == 1
+    }
+
+    /// Withdraws requests; a job nobody waits for any more is cancelled (on its worker
+    /// too). Returns how many requests were withdrawn.
+    pub fn withdraw(&mut self, client_id: &str, request_ids: &[u64]) -> u32 {
+        let mut withdrawn = 0;
+        for &request_id in request_ids {
+            if self.end_waiter(
+                &(client_id.to_string(), request_id),
+                Status::cancelled("withdrawn"),
+            ) {
+                withdrawn += 1;
+                self.counters.withdrawn += 1;
+            }
+        }
+        withdrawn
+    }
+
+    /// The job whose texture will serve `wanted`: a running one before a queued one
+    /// (it finishes sooner), then the smallest.
+    pub(super) fn job_for(&self, wanted: &JobKey) -> Option<u64> {
+        self.by_view
+            .get(&wanted.view)?
+            .iter()
+            .filter_map(|id| Some((*id, self.jobs.get(id)?)))
+            .filter(|(_, job)| job.key.satisfies(wanted))
+            .min_by_key(|(_, job)| (matches!(job.state, JobState::Queued(_)), job.key.size))
+            .map(|(id, _)| id)
+    }
+}

@@ -1,0 +1,269 @@
+//! The server's state: scenes, jobs, waiters, workers, cache and counters, changed only
+//! under one lock by the methods of [`State`] (no `await` inside), so every rule of the
+//! scheduler lives in this folder, one concern a file:
+//!
+//! - here — scenes, and a request's admission (served from the cache, joined to a job
+//!   that satisfies it, or queued);
+//! - `jobs.rs` — the queue, dispatch to workers, results, failures, timeouts,
+//!   withdrawals;
+//! - `workers.rs` — registration, leases, draining;
+//! - `cache.rs` — finished textures kept for reuse, bounded in bytes, least recently used
+//!   out first;
+//! - `stats.rs` — the counters and latency figures of `Impostors.Stats`.
+
+mod cache;
+mod jobs;
+mod stats;
+mod workers;
+
+#[cfg(test)]
+mod tests;
+
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use tokio::sync::mpsc::UnboundedSender;
+use tonic::Status;
+
+use relief_core::bounds::Aabb;
+use relief_core::hash::ContentHash;
+use relief_core::relief::{FacingError, SourceCamera};
+use relief_proto::convert::{Request, Urgency, vec3_to_pb};
+use relief_proto::pb;
+
+pub use jobs::{JobKey, WaiterId};
+pub use stats::{Counters, LATENCY_BUCKETS_MS};
+
+use cache::Cached;
+use jobs::{Job, JobState, Priority, View, Waiter};
+use workers::Worker;
+
+/// What a waiting client receives: results, or the error that ends its request.
+pub type ResultSender = UnboundedSender<Result<pb::ImpostorResult, Status>>;
+/// What a worker receives.
+pub type JobSender = UnboundedSender<Result<pb::ServerMessage, Status>>;
+
+/// A stored scene: its encoded bundle and the bounds of its objects (enough to check
+/// requests without loading meshes again).
+#[derive(Debug)]
+pub struct StoredScene {
+    pub encoded: Arc<Vec<u8>>,
+    pub objects: HashMap<String, Aabb>,
+}
+
+/// Limits of the server.
+#[derive(Debug, Clone)]
+pub struct Limits {
+    /// Result cache size in bytes.
+    pub cache_bytes: usize,
+    /// A worker silent for this long loses its jobs to others.
+    pub lease: Duration,
+    /// Most requests waiting at once.
+    pub max_waiting: usize,
+    /// A request waiting this long ends with an error: none waits for ever, with no
+    /// worker connected or on one that keeps its lease but never finishes.
+    pub job_timeout: Duration,
+}
+
+/// Everything the server knows.
+pub struct State {
+    limits: Limits,
+    epoch: Instant,
+    scenes: HashMap<ContentHash, Arc<StoredScene>>,
+    jobs: HashMap<u64, Job>,
+    queue: BTreeSet<Priority>,
+    /// The jobs of each view (a few: one per size and depth asked for).
+    by_view: HashMap<View, Vec<u64>>,
+    waiters: HashMap<WaiterId, Waiter>,
+    workers: HashMap<u64, Worker>,
+    /// The cached textures of each view.
+    cache: HashMap<View, Vec<Cached>>,
+    /// The cached textures by their last use (the clock), least recent first: what
+    /// eviction takes, without a scan of the cache.
+    recency: BTreeMap<u64, JobKey>,
+    cache_bytes: usize,
+    next_id: u64,
+    clock: u64,
+    latencies: VecDeque<f32>,
+    /// Every request latency since start, counted in [`LATENCY_BUCKETS_MS`] (the last
+    /// count: above the last bound).
+    latency_counts: [u64; LATENCY_BUCKETS_MS.len() + 1],
+    handling: VecDeque<f32>,
+    pub counters: Counters,
+}
+
+/// How a request was taken in.
+#[derive(Debug)]
+pub enum Admission {
+    /// Served from the cache: this texture, now.
+    Cached(Arc<pb::ReliefTexture>),
+    /// Queued (or merged into a queued or running job); results follow on the sender.
+    Queued,
+}
+
+impl State {
+    pub fn new(limits: Limits) -> State {
+        State {
+            limits,
+            epoch: Instant::now(),
+            scenes: HashMap::new(),
+            jobs: HashMap::new(),
+            queue: BTreeSet::new(),
+            by_view: HashMap::new(),
+            waiters: HashMap::new(),
+            workers: HashMap::new(),
+            cache: HashMap::new(),
+            recency: BTreeMap::new(),
+            cache_bytes: 0,
+            next_id: 1,
+            clock: 0,
+            latencies: VecDeque::new(),
+            latency_counts: [0; LATENCY_BUCKETS_MS.len() + 1],
+            handling: VecDeque::new(),
+            counters: Counters::default(),
+        }
+    }
+
+    fn next(&mut self) -> u64 {
+        self.next_id += 1;
+        self.next_id
+    }
+
+    pub fn add_scene(&mut self, hash: ContentHash, scene: StoredScene) {
+        self.scenes.insert(hash, Arc::new(scene));
+    }
+
+    pub fn scene(&self, hash: &ContentHash) -> Option<Arc<StoredScene>> {
+        self.scenes.get(hash).cloned()
+    }
+
+    /// Takes a validated request in: checks the scene, object and eye, answers from
+    /// the cache, merges it into a job that satisfies it, or queues a new job.
+    pub fn admit(&mut self, request: &Request, tx: ResultSender) -> Result<Admission, Status> {
+        let scene = self.scenes.get(&request.scene).ok_or_else(|| {
+            Status::not_found(format!("no scene with hash {} (upload it first)", request.scene))
+        })?;
+        let bounds = scene.objects.get(&request.object).ok_or_else(|| {
+            Status::not_found(format!("the scene has no object named `{}`", request.object))
+        })?;
+        // The camera a worker would bake with: refused here, naming the field, rather
+        // than failing on a worker.
+        match SourceCamera::facing(request.eye, bounds, request.size, request.size) {
+            Ok(_) => {}
+            Err(FacingError::EyeInsideBounds) => {
+                return Err(Status::failed_precondition(format!(
+                    "the eye is inside the bounds of `{}`: draw it as geometry",
+                    request.object
+                )));
+            }
+            Err(e @ FacingError::NonFiniteEye(_)) => {
+                return Err(Status::invalid_argument(format!("field `eye`: {e}")));
+            }
+            Err(e) => {
+                return Err(Status::invalid_argument(format!(
+                    "field `eye` with object `{}`: {e}",
+                    request.object
+                )));
+            }
+        }
+        self.counters.requests += 1;
+        let key = JobKey::of(request);
+        self.clock += 1;
+        let clock = self.clock;
+        if let Some(hit) = self.cached_for(&key) {
+            let last = std::mem::replace(&mut hit.used, clock);
+            let (texture, hit_key) = (hit.texture.clone(), hit.key.clone());
+            self.recency.remove(&last);
+            self.recency.insert(clock, hit_key);
+            self.counters.cache_hits += 1;
+            self.latencies_push(0.0);
+            return Ok(Admission::Cached(texture));
+        }
+        let waiter_id = (request.client_id.clone(), request.request_id);
+        if self.waiters.contains_key(&waiter_id) {
+            return Err(Status::already_exists(format!(
+                "request {} of client `{}` is already pending",
+                request.request_id, request.client_id
+            )));
+        }
+        if self.waiters.len() >= self.limits.max_waiting {
+            return Err(Status::resource_exhausted(format!(
+                "{} requests already waiting (the server's limit)",
+                self.limits.max_waiting
+            )));
+        }
+        let now = Instant::now();
+        let deadline_us = now.duration_since(self.epoch).as_micros() as u64
+            + match request.urgency {
+                Urgency::Now => 0,
+                Urgency::Predicted { in_ms } => in_ms.saturating_mul(1000),
+            };
+        let predicted = matches!(request.urgency, Urgency::Predicted { .. });
+        let job_id = match self.job_for(&key) {
+            Some(id) => {
+                self.counters.merged += 1;
+                // A more urgent request moves a queued job forward.
+                if let Some(job) = self.jobs.get_mut(&id)
+                    && let JobState::Queued(p) = job.state
+                {
+                    let better = Priority {
+                        predicted: p.predicted && predicted,
+                        deadline_us: p.deadline_us.min(deadline_us),
+                        id,
+                    };
+                    if better != p {
+                        self.queue.remove(&p);
+                        self.queue.insert(better);
+                        job.state = JobState::Queued(better);
+                    }
+                }
+                id
+            }
+            None => {
+                let id = self.next();
+                let priority = Priority {
+                    predicted,
+                    deadline_us,
+                    id,
+                };
+                let spec = pb::Job {
+                    job_id: id,
+                    scene_hash: request.scene.to_string(),
+                    object: request.object.clone(),
+                    eye: Some(vec3_to_pb(request.eye)),
+                    size: request.size,
+                    depth_bits: request.depth_bits.bits(),
+                    progressive: request.progressive,
+                };
+                self.jobs.insert(
+                    id,
+                    Job {
+                        key: key.clone(),
+                        spec,
+                        state: JobState::Queued(priority),
+                        waiters: HashSet::new(),
+                    },
+                );
+                self.queue.insert(priority);
+                self.by_view.entry(key.view).or_default().push(id);
+                id
+            }
+        };
+        if let Some(job) = self.jobs.get_mut(&job_id) {
+            job.waiters.insert(waiter_id.clone());
+            if request.progressive {
+                job.spec.progressive = true;
+            }
+        }
+        self.waiters.insert(
+            waiter_id,
+            Waiter {
+                job: job_id,
+                tx,
+                arrived: now,
+            },
+        );
+        Ok(Admission::Queued)
+    }
+}

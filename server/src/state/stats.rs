@@ -1,0 +1,91 @@
+//! The counters and latency figures the server reports in `Impostors.Stats`.
+
+use std::collections::VecDeque;
+
+use relief_core::stats::sorted_percentile;
+use relief_proto::pb;
+
+use super::State;
+
+/// Counters a person can read (see `Stats` in the protocol).
+#[derive(Debug, Default, Clone)]
+pub struct Counters {
+    pub requests: u64,
+    pub cache_hits: u64,
+    pub merged: u64,
+    pub withdrawn: u64,
+    pub requeued: u64,
+    /// Cancelled jobs their workers stopped before finishing.
+    pub stopped: u64,
+    /// Requests ended by [`Limits::job_timeout`](super::Limits::job_timeout).
+    pub timed_out: u64,
+    /// Results that came for jobs no longer wanted.
+    pub discarded: u64,
+}
+
+/// Upper bounds (ms) of the request latency histogram in [`pb::StatsReply`].
+pub const LATENCY_BUCKETS_MS: [f32; 12] = [
+    1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0, 1000.0, 2000.0, 5000.0,
+];
+
+pub(super) const LATENCY_SAMPLES: usize = 10_000;
+
+/// Appends to a bounded window of recent samples.
+pub(super) fn push_sample(samples: &mut VecDeque<f32>, value: f32) {
+    if samples.len() == LATENCY_SAMPLES {
+        samples.pop_front();
+    }
+    samples.push_back(value);
+}
+
+impl State {
+    pub(super) fn latencies_push(&mut self, ms: f32) {
+        push_sample(&mut self.latencies, ms);
+        let bucket = LATENCY_BUCKETS_MS.partition_point(|&bound| bound < ms);
+        self.latency_counts[bucket] += 1;
+    }
+
+    /// Records the time (µs) the server's code spent on one request or result.
+    pub fn record_handling(&mut self, us: f32) {
+        push_sample(&mut self.handling, us);
+    }
+
+    /// The counters as the protocol's `StatsReply`.
+    pub fn stats(&self) -> pb::StatsReply {
+        let sorted = |samples: &VecDeque<f32>| {
+            let mut v: Vec<f64> = samples.iter().map(|&s| f64::from(s)).collect();
+            v.sort_by(f64::total_cmp);
+            v
+        };
+        let (latencies, handling) = (sorted(&self.latencies), sorted(&self.handling));
+        // (0 before any sample, as the protocol says.)
+        let percentile = |v: &[f64], p: f64| match sorted_percentile(v, p) {
+            q if q.is_nan() => 0.0,
+            q => q as f32,
+        };
+        let queued = |predicted: bool| self.queue.iter().filter(|p| p.predicted == predicted).count() as u32;
+        pb::StatsReply {
+            queue_now: queued(false),
+            queue_predicted: queued(true),
+            jobs_in_flight: self.workers.values().map(|w| w.running.len() as u32).sum(),
+            workers: self.workers.len() as u32,
+            requests: self.counters.requests,
+            cache_hits: self.counters.cache_hits,
+            merged: self.counters.merged,
+            withdrawn: self.counters.withdrawn,
+            requeued: self.counters.requeued,
+            cache_bytes: self.cache_bytes as u64,
+            latency_ms_p50: percentile(&latencies, 0.5),
+            latency_ms_p99: percentile(&latencies, 0.99),
+            handling_us_p50: percentile(&handling, 0.5),
+            handling_us_p99: percentile(&handling, 0.99),
+            jobs_stopped: self.counters.stopped,
+            jobs_timed_out: self.counters.timed_out,
+            latency_bucket_ms: LATENCY_BUCKETS_MS.to_vec(),
+            latency_counts: self.latency_counts.to_vec(),
+            worker_slots: self.workers.values().map(|w| w.slots as u32).sum(),
+            worker_threads: self.workers.values().map(|w| w.threads).sum(),
+            results_discarded: self.counters.discarded,
+        }
+    }
+}

@@ -1,0 +1,331 @@
+//! The scheduler's rules, tested on the plain state (no network).
+
+use super::*;
+use glam::Vec3;
+use relief_core::relief::DepthBits;
+use tokio::sync::mpsc::unbounded_channel;
+
+fn state_with_scene() -> (State, ContentHash) {
+    let mut s = State::new(Limits {
+        cache_bytes: 1 << 20,
+        lease: Duration::from_secs(5),
+        max_waiting: 100,
+        job_timeout: Duration::from_secs(60),
+    });
+    let hash = ContentHash([7; 32]);
+    let bounds = Aabb {
+        min: Vec3::splat(-1.0),
+        max: Vec3::splat(1.0),
+    };
+    s.add_scene(
+        hash,
+        StoredScene {
+            encoded: Arc::new(vec![]),
+            objects: [("ball".to_string(), bounds)].into_iter().collect(),
+        },
+    );
+    (s, hash)
+}
+
+fn request(scene: ContentHash, id: u64, eye: Vec3, urgency: Urgency) -> Request {
+    Request {
+        scene,
+        object: "ball".into(),
+        eye,
+        size: 16,
+        depth_bits: DepthBits::Eight,
+        urgency,
+        client_id: "c".into(),
+        request_id: id,
+        progressive: false,
+    }
+}
+
+/// Admits request `id` of client "c" for `hash`'s ball, needed now, from
+/// `(x, 0, 5)`.
+fn admit_now(s: &mut State, hash: ContentHash, id: u64, x: f32, results: ResultSender) {
+    s.admit(&request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Now), results)
+        .unwrap();
+}
+
+fn next_job(
+    rx: &mut tokio::sync::mpsc::UnboundedReceiver<Result<pb::ServerMessage, Status>>,
+) -> Option<pb::Job> {
+    match rx.try_recv().ok()?.ok()?.kind? {
+        pb::server_message::Kind::Job(j) => Some(j),
+        pb::server_message::Kind::Cancel(_) => None,
+    }
+}
+
+#[test]
+fn now_before_predicted_nearest_deadline_first_and_merging() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    let eye = |x: f32| Vec3::new(x, 0.0, 5.0);
+    s.admit(
+        &request(hash, 1, eye(1.0), Urgency::Predicted { in_ms: 900 }),
+        tx.clone(),
+    )
+    .unwrap();
+    s.admit(
+        &request(hash, 2, eye(2.0), Urgency::Predicted { in_ms: 100 }),
+        tx.clone(),
+    )
+    .unwrap();
+    s.admit(&request(hash, 3, eye(3.0), Urgency::Now), tx.clone())
+        .unwrap();
+    // Same texture as request 2: merged.
+    s.admit(
+        &request(hash, 4, eye(2.0), Urgency::Predicted { in_ms: 50 }),
+        tx.clone(),
+    )
+    .unwrap();
+    assert_eq!(s.counters.merged, 1);
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), 3, 1, wtx);
+    s.dispatch();
+    let order: Vec<f32> = std::iter::from_fn(|| next_job(&mut wrx))
+        .map(|j| j.eye.unwrap().x)
+        .collect();
+    assert_eq!(order, vec![3.0, 2.0, 1.0]);
+}
+
+/// One texture serves every request at its view for no more depth bits and at
+/// least half its edge: smaller requests join a bigger job, queued or running, and
+/// hit a bigger cached texture; a bigger one, one with more depth bits, or one far
+/// smaller gets a job of its own.
+#[test]
+fn a_bigger_texture_serves_smaller_requests() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, mut rx) = unbounded_channel();
+    let sized = |id: u64, size: u32, depth_bits: DepthBits| Request {
+        size,
+        depth_bits,
+        ..request(hash, id, Vec3::new(1.0, 0.0, 5.0), Urgency::Now)
+    };
+    s.admit(&sized(1, 64, DepthBits::Sixteen), tx.clone()).unwrap();
+    s.admit(&sized(2, 32, DepthBits::Eight), tx.clone()).unwrap();
+    s.admit(&sized(3, 128, DepthBits::Eight), tx.clone()).unwrap();
+    assert_eq!((s.counters.merged, s.stats().queue_now), (1, 2));
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), 1, 1, wtx);
+    s.dispatch();
+    let job = next_job(&mut wrx).unwrap();
+    assert_eq!((job.size, job.depth_bits), (64, 16));
+    // While it runs, a smaller request joins it.
+    s.admit(&sized(4, 32, DepthBits::Eight), tx.clone()).unwrap();
+    assert_eq!(s.counters.merged, 2);
+    s.result(job.job_id, pb::ReliefTexture::default(), true, 1);
+    let mut served: Vec<u64> = std::iter::from_fn(|| rx.try_recv().ok())
+        .map(|r| r.unwrap().request_id)
+        .collect();
+    served.sort();
+    assert_eq!(served, vec![1, 2, 4]);
+    // Now cached: a smaller request is a hit, one with more depth bits is not.
+    assert!(matches!(
+        s.admit(&sized(5, 64, DepthBits::Eight), tx.clone()),
+        Ok(Admission::Cached(_))
+    ));
+    s.admit(&sized(6, 128, DepthBits::Sixteen), tx.clone()).unwrap();
+    assert_eq!(s.counters.cache_hits, 1);
+    assert_eq!((s.counters.merged, s.stats().queue_now), (2, 2));
+    // Nothing more than twice its edge serves a request: 16² gets a job of its own.
+    s.admit(&sized(7, 16, DepthBits::Eight), tx.clone()).unwrap();
+    assert_eq!(s.counters.cache_hits, 1);
+    assert_eq!((s.counters.merged, s.stats().queue_now), (2, 3));
+}
+
+/// The cache keeps within its bytes by dropping the least recently used texture:
+/// a hit counts as a use.
+#[test]
+fn the_cache_drops_the_least_recently_used_texture() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), 1, 1, wtx);
+    // 300 kB each: three fit in the 1 MiB cache, four do not.
+    let texture = || pb::ReliefTexture {
+        albedo: vec![0; 300_000],
+        ..Default::default()
+    };
+    let mut id = 0;
+    let mut ask = |s: &mut State, x: f32| {
+        id += 1;
+        s.admit(
+            &request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Now),
+            tx.clone(),
+        )
+        .unwrap()
+    };
+    for x in [1.0, 2.0, 3.0] {
+        ask(&mut s, x);
+        s.dispatch();
+        let job = next_job(&mut wrx).unwrap();
+        s.result(job.job_id, texture(), true, 1);
+    }
+    assert_eq!(s.stats().cache_bytes, 900_000);
+    // Eye 1 used again: eye 2 is now the least recent.
+    assert!(matches!(ask(&mut s, 1.0), Admission::Cached(_)));
+    ask(&mut s, 4.0);
+    s.dispatch();
+    let job = next_job(&mut wrx).unwrap();
+    s.result(job.job_id, texture(), true, 1);
+    assert_eq!(s.stats().cache_bytes, 900_000);
+    for x in [1.0, 3.0, 4.0] {
+        assert!(matches!(ask(&mut s, x), Admission::Cached(_)), "eye {x}");
+    }
+    assert!(!matches!(ask(&mut s, 2.0), Admission::Cached(_)));
+    assert_eq!(s.counters.cache_hits, 4);
+}
+
+#[test]
+fn a_stream_withdraws_only_its_own_request() {
+    let (mut s, hash) = state_with_scene();
+    let (mine, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 7, 0.0, mine.clone());
+    // Another stream that used the same id (answered from the cache, say).
+    let (other, _other_rx) = unbounded_channel();
+    assert!(!s.withdraw_own("c", 7, &other));
+    assert_eq!(s.stats().queue_now, 1);
+    assert!(s.withdraw_own("c", 7, &mine));
+    assert_eq!(s.stats().queue_now, 0);
+}
+
+/// Past the job timeout a queued job (no worker) and a running one (a worker that
+/// never finishes) both end in DEADLINE_EXCEEDED, the running one cancelled on its
+/// worker; a job within the timeout is left alone.
+#[test]
+fn jobs_past_the_timeout_end_in_an_error() {
+    let (mut s, hash) = state_with_scene();
+    let (tx1, mut rx1) = unbounded_channel();
+    let (tx2, mut rx2) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 0.0, tx1);
+    admit_now(&mut s, hash, 2, 1.0, tx2);
+    let (wtx, mut wrx) = unbounded_channel();
+    let w = s.add_worker("w".into(), 1, 1, wtx);
+    s.dispatch();
+    let running = next_job(&mut wrx).unwrap();
+    s.expire_jobs();
+    assert_eq!(s.stats().jobs_timed_out, 0);
+    s.limits.job_timeout = Duration::ZERO;
+    s.expire_jobs();
+    for rx in [&mut rx1, &mut rx2] {
+        let status = rx.try_recv().unwrap().unwrap_err();
+        assert_eq!(status.code(), tonic::Code::DeadlineExceeded, "{status:?}");
+    }
+    match wrx.try_recv().unwrap().unwrap().kind.unwrap() {
+        pb::server_message::Kind::Cancel(c) => assert_eq!(c.job_id, running.job_id),
+        other => panic!("expected a cancel, got {other:?}"),
+    }
+    let stats = s.stats();
+    assert_eq!(
+        (stats.jobs_timed_out, stats.queue_now, stats.jobs_in_flight),
+        (2, 0, 0)
+    );
+    // Each request has the whole timeout: one merged into an old job outlives the
+    // first, and the job goes on for it. (The worker has answered for the first.)
+    s.released(w, running.job_id);
+    s.limits.job_timeout = Duration::from_millis(100);
+    let eye = Vec3::new(2.0, 0.0, 5.0);
+    let (tx3, mut rx3) = unbounded_channel();
+    let (tx4, mut rx4) = unbounded_channel();
+    s.admit(&request(hash, 3, eye, Urgency::Now), tx3).unwrap();
+    s.dispatch();
+    std::thread::sleep(Duration::from_millis(150));
+    s.admit(&request(hash, 4, eye, Urgency::Now), tx4).unwrap();
+    assert_eq!(s.stats().merged, 1);
+    s.expire_jobs();
+    assert_eq!(
+        rx3.try_recv().unwrap().unwrap_err().code(),
+        tonic::Code::DeadlineExceeded
+    );
+    assert!(rx4.try_recv().is_err(), "the later request is still waiting");
+    assert_eq!(s.stats().jobs_in_flight, 1);
+}
+
+/// A latency on a bucket's bound counts in that bucket; above the last, in the
+/// extra one.
+#[test]
+fn the_latency_histogram_counts_bounds_in_their_bucket() {
+    let (mut s, _) = state_with_scene();
+    for ms in [0.5, 1.0, 1.5, 5000.0, 5000.5] {
+        s.latencies_push(ms);
+    }
+    let counts = s.stats().latency_counts;
+    assert_eq!(counts.len(), LATENCY_BUCKETS_MS.len() + 1);
+    assert_eq!((counts[0], counts[1], counts[11], counts[12]), (2, 1, 1, 1));
+    assert_eq!(counts.iter().sum::<u64>(), 5);
+}
+
+/// A cancelled job keeps its worker's slot until the worker answers for it: a
+/// worker that hangs is not handed the next job.
+#[test]
+fn a_cancelled_job_holds_its_slot_until_the_worker_answers() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 0.0, tx.clone());
+    let (wtx, mut wrx) = unbounded_channel();
+    let w = s.add_worker("w".into(), 1, 1, wtx);
+    s.dispatch();
+    let first = next_job(&mut wrx).unwrap();
+    assert_eq!(s.withdraw("c", &[1]), 1);
+    admit_now(&mut s, hash, 2, 1.0, tx);
+    s.dispatch();
+    assert!(matches!(
+        wrx.try_recv().unwrap().unwrap().kind,
+        Some(pb::server_message::Kind::Cancel(_))
+    ));
+    assert!(
+        wrx.try_recv().is_err(),
+        "a job went to a worker still on a cancelled one"
+    );
+    assert_eq!(s.stats().queue_now, 1);
+    s.released(w, first.job_id);
+    s.dispatch();
+    assert!(next_job(&mut wrx).is_some());
+}
+
+#[test]
+fn withdrawal_cancels_queued_and_running_jobs() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 0.0, tx.clone());
+    admit_now(&mut s, hash, 2, 1.0, tx.clone());
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), 1, 1, wtx);
+    s.dispatch();
+    let running = next_job(&mut wrx).unwrap();
+    assert_eq!(s.withdraw("c", &[1, 2, 99]), 2);
+    // The running one is cancelled on the worker; nothing is left queued.
+    match wrx.try_recv().unwrap().unwrap().kind.unwrap() {
+        pb::server_message::Kind::Cancel(c) => assert_eq!(c.job_id, running.job_id),
+        other => panic!("expected a cancel, got {other:?}"),
+    }
+    assert_eq!(s.stats().queue_now, 0);
+    assert_eq!(s.stats().jobs_in_flight, 0);
+}
+
+#[test]
+fn a_vanished_workers_jobs_are_requeued_and_bad_requests_refused() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 0.0, tx.clone());
+    let (wtx, _wrx) = unbounded_channel();
+    let w = s.add_worker("w".into(), 1, 1, wtx);
+    s.dispatch();
+    assert_eq!(s.stats().jobs_in_flight, 1);
+    s.remove_worker(w);
+    assert_eq!((s.stats().queue_now, s.counters.requeued), (1, 1));
+    let inside = s
+        .admit(&request(hash, 2, Vec3::ZERO, Urgency::Now), tx.clone())
+        .unwrap_err();
+    assert_eq!(inside.code(), tonic::Code::FailedPrecondition);
+    let mut unknown = request(hash, 3, Vec3::new(0.0, 0.0, 5.0), Urgency::Now);
+    unknown.object = "cube".into();
+    assert_eq!(
+        s.admit(&unknown, tx.clone()).unwrap_err().code(),
+        tonic::Code::NotFound
+    );
+    unknown.scene = ContentHash([1; 32]);
+    assert_eq!(s.admit(&unknown, tx).unwrap_err().code(), tonic::Code::NotFound);
+}

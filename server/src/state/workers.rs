@@ -1,0 +1,108 @@
+//! Workers: registration, heartbeats and leases (a silent worker's jobs go back to the
+//! queue), draining before a worker stops.
+
+use std::collections::HashSet;
+use std::time::Instant;
+
+use super::jobs::{JobState, Priority};
+use super::{JobSender, State};
+
+#[derive(Debug)]
+pub(super) struct Worker {
+    pub(super) name: String,
+    pub(super) slots: usize,
+    /// Threads each of its jobs bakes on (as it says; for Stats).
+    pub(super) threads: u32,
+    pub(super) running: HashSet<u64>,
+    /// Jobs it was told to stop and has not yet said it stopped (or finished): their
+    /// slots stay taken, so a worker that hangs is not handed job after job.
+    pub(super) stopping: HashSet<u64>,
+    /// It said it is stopping: no new jobs.
+    pub(super) draining: bool,
+    pub(super) tx: JobSender,
+    pub(super) last_seen: Instant,
+}
+
+impl Worker {
+    /// Slots taken: jobs running, and cancelled ones it has not answered for.
+    pub(super) fn busy(&self) -> usize {
+        self.running.len() + self.stopping.len()
+    }
+}
+
+impl State {
+    /// Registers a worker; returns its id.
+    pub fn add_worker(&mut self, name: String, slots: usize, threads: u32, tx: JobSender) -> u64 {
+        let id = self.next();
+        self.workers.insert(
+            id,
+            Worker {
+                name,
+                slots,
+                threads,
+                running: HashSet::new(),
+                stopping: HashSet::new(),
+                draining: false,
+                tx,
+                last_seen: Instant::now(),
+            },
+        );
+        id
+    }
+
+    /// The worker is alive.
+    pub fn touch(&mut self, worker: u64) {
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.last_seen = Instant::now();
+        }
+    }
+
+    /// The worker is gone: its running jobs go back to the queue, first in line.
+    pub fn remove_worker(&mut self, worker: u64) {
+        let Some(w) = self.workers.remove(&worker) else {
+            return;
+        };
+        tracing::info!(worker = %w.name, jobs = w.running.len(), "worker left; re-queueing its jobs");
+        for id in w.running {
+            if let Some(job) = self.jobs.get_mut(&id) {
+                let priority = Priority {
+                    predicted: false,
+                    deadline_us: 0,
+                    id,
+                };
+                job.state = JobState::Queued(priority);
+                self.queue.insert(priority);
+                self.counters.requeued += 1;
+            }
+        }
+    }
+
+    /// Workers silent past their lease are removed (and their jobs re-queued).
+    pub fn expire_leases(&mut self) {
+        let lease = self.limits.lease;
+        let expired: Vec<u64> = self
+            .workers
+            .iter()
+            .filter(|(_, w)| w.last_seen.elapsed() > lease)
+            .map(|(&id, _)| id)
+            .collect();
+        for id in expired {
+            self.remove_worker(id);
+        }
+    }
+
+    /// Worker `worker` is stopping: it gets no new jobs.
+    pub fn draining(&mut self, worker: u64) {
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.draining = true;
+        }
+    }
+
+    /// Worker `worker` is done with job `job_id` (its final result, failure or stop
+    /// came): a slot held for it after a cancel is free again.
+    pub fn released(&mut self, worker: u64, job_id: u64) {
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.stopping.remove(&job_id);
+        }
+    }
+}
