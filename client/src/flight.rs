@@ -37,11 +37,8 @@ use relief_render::geometry::is_cheap;
 
 use crate::manager::Manager;
 
-/// Paces a flight of `frames` path frames at `fps`. The eye follows the clock: it is
-/// where the path is `t·fps` frames in. A frame that takes longer does not slow the eye
-/// down — the next one, drawn at once, shows it further on and the path frames between
-/// are skipped, as in any real-time viewer — so a predictor sees the true motion, and
-/// latency is real.
+/// Paces a flight of `frames` path frames at `fps`, the eye following the clock (see
+/// [the module](self)).
 pub struct FlightClock {
     start: Instant,
     fps: u32,

@@ -20,7 +20,28 @@
 //! - [`flight`] — the real-time flight along a camera path that `relief demo`,
 //!   `render` and `load` share.
 //!
-//! See [`manager`] for an example.
+//! # Example
+//!
+//! A manager of a built-in scene, its textures made by the in-process generator,
+//! deciding and drawing one frame:
+//!
+//! ```
+//! use std::sync::Arc;
+//! use relief_client::manager::{Config, Show};
+//! use relief_client::source::local_manager;
+//! use relief_core::scene::Scene;
+//! use relief_render::gbuffer::GBuffer;
+//!
+//! let scene = Arc::new(Scene::load("orbit-sphere")?);
+//! let mut manager = local_manager(&scene, Config::default());
+//! let camera = scene.path.pose(0).unwrap().camera(scene.fov_y_degrees, 160, 90)?;
+//! assert!(manager.warm_up(&scene, &camera, std::time::Duration::from_secs(30)));
+//! let shows = manager.frame(&scene, &camera, 0.0);
+//! assert!(shows.iter().any(|show| matches!(show, Show::Impostor { .. })));
+//! let frame = manager.render(&scene, &shows, &camera, &mut GBuffer::new(160, 90));
+//! assert_eq!(frame.color.len(), 160 * 90);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 pub mod flight;
 pub mod manager;

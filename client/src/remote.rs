@@ -10,6 +10,7 @@ use relief_core::hash::ContentHash;
 use relief_proto::auth::BearerToken;
 use relief_proto::bundle::Bundle;
 use relief_proto::convert::hash_from_pb;
+use relief_proto::limits::{MAX_TEXTURE_MESSAGE_BYTES, SCENE_CHUNK_BYTES};
 use relief_proto::pb;
 
 type Impostors = pb::impostors_client::ImpostorsClient<InterceptedService<Channel, BearerToken>>;
@@ -47,8 +48,8 @@ pub enum RemoteError {
     },
 }
 
-/// Largest piece of a scene upload.
-const CHUNK: usize = 1 << 20;
+/// How often [`Remote::wait_for_workers`] asks the server.
+const WORKER_POLL: std::time::Duration = std::time::Duration::from_millis(20);
 
 impl Remote {
     /// Connects to `url` (e.g. `http://127.0.0.1:7411`); errors name the problem.
@@ -77,7 +78,7 @@ impl Remote {
             // Requests to Impostors are a few bytes: sent plain; textures come back compressed.
             impostors: pb::impostors_client::ImpostorsClient::with_interceptor(channel, auth)
                 .accept_compressed(CompressionEncoding::Zstd)
-                .max_decoding_message_size(256 << 20),
+                .max_decoding_message_size(MAX_TEXTURE_MESSAGE_BYTES),
             client_id: client_id.to_string(),
         })
     }
@@ -86,7 +87,7 @@ impl Remote {
     pub async fn put_scene(&mut self, bundle: &Bundle) -> Result<ContentHash, Status> {
         let chunks: Vec<pb::SceneChunk> = bundle
             .encoded
-            .chunks(CHUNK)
+            .chunks(SCENE_CHUNK_BYTES)
             .map(|c| pb::SceneChunk { data: c.to_vec() })
             .collect();
         let reply = self
@@ -137,7 +138,7 @@ impl Remote {
                     limit,
                 });
             }
-            tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+            tokio::time::sleep(WORKER_POLL).await;
         }
     }
 

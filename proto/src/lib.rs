@@ -3,7 +3,8 @@
 //! (in [`convert`]) — every message is validated here, where it enters a process — and
 //! scene bundles ([`bundle`]), how scenes travel by content hash; and what the server
 //! and the workers share besides: the bearer token ([`auth`]), endpoints
-//! ([`connect`]) and the shutdown signal ([`shutdown`]).
+//! ([`connect`]), the sizes of what crosses the wire ([`limits`]) and the shutdown
+//! signal ([`shutdown`]).
 //!
 //! # Brief overview
 //!
@@ -29,6 +30,7 @@ pub mod auth;
 pub mod bundle;
 pub mod connect;
 pub mod convert;
+pub mod limits;
 pub mod shutdown;
 
 /// The generated messages, clients and servers of package `relief.v1`.

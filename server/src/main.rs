@@ -18,6 +18,7 @@ use tonic::{Request, Status};
 
 use relief_proto::auth::BearerToken;
 use relief_proto::bundle::SceneDir;
+use relief_proto::limits::{MAX_TEXTURE_MESSAGE_BYTES, MAX_UPLOAD_MESSAGE_BYTES};
 use relief_proto::pb;
 use relief_server::service::{Service, Shared};
 use relief_server::state::{Limits, State};
@@ -108,15 +109,15 @@ async fn serve(args: Args) -> Result<()> {
     let scenes = pb::scenes_server::ScenesServer::new(service.clone())
         .accept_compressed(CompressionEncoding::Zstd)
         .send_compressed(CompressionEncoding::Zstd)
-        .max_decoding_message_size(64 << 20);
+        .max_decoding_message_size(MAX_UPLOAD_MESSAGE_BYTES);
     let impostors = pb::impostors_server::ImpostorsServer::new(service.clone())
         .accept_compressed(CompressionEncoding::Zstd)
         .send_compressed(CompressionEncoding::Zstd)
-        .max_encoding_message_size(256 << 20);
+        .max_encoding_message_size(MAX_TEXTURE_MESSAGE_BYTES);
     let workers = pb::workers_server::WorkersServer::new(service)
         .accept_compressed(CompressionEncoding::Zstd)
         .send_compressed(CompressionEncoding::Zstd)
-        .max_decoding_message_size(256 << 20);
+        .max_decoding_message_size(MAX_TEXTURE_MESSAGE_BYTES);
     let (health, health_service) = tonic_health::server::health_reporter();
     health
         .set_serving::<pb::scenes_server::ScenesServer<Service>>()

@@ -11,12 +11,10 @@ use tonic::{Request, Response, Status, Streaming};
 
 use relief_proto::bundle::{Bundle, MAX_BUNDLE_BYTES};
 use relief_proto::convert::{check_register, check_texture_pb, hash_from_pb, request_from_pb};
+use relief_proto::limits::SCENE_CHUNK_BYTES;
 use relief_proto::pb;
 
 use crate::state::{Admission, State, StoredScene};
-
-/// Pieces of at most this many bytes when sending a scene.
-const CHUNK: usize = 1 << 20;
 
 /// The server: its state under one lock, and where received scenes are unpacked.
 pub struct Shared {
@@ -146,7 +144,7 @@ impl pb::scenes_server::Scenes for Service {
             .ok_or_else(|| Status::not_found(format!("no scene with hash {hash}")))?;
         let encoded = scene.encoded.clone();
         let pieces: Vec<Result<pb::SceneChunk, Status>> = encoded
-            .chunks(CHUNK)
+            .chunks(SCENE_CHUNK_BYTES)
             .map(|c| Ok(pb::SceneChunk { data: c.to_vec() }))
             .collect();
         Ok(Response::new(Box::pin(tokio_stream::iter(pieces))))

@@ -22,6 +22,7 @@ use relief_core::scene::Scene;
 use relief_proto::auth::BearerToken;
 use relief_proto::bundle::Bundle;
 use relief_proto::convert::{depth_bits_from_pb, hash_from_pb, size_from_pb, texture_to_pb, vec3_from_pb};
+use relief_proto::limits::{MAX_SCENE_FETCH_MESSAGE_BYTES, MAX_TEXTURE_MESSAGE_BYTES};
 use relief_proto::pb;
 use relief_trace::bake::bake_unless_cancelled;
 use relief_trace::tracer::ObjectTracer;
@@ -29,6 +30,24 @@ use relief_trace::tracer::ObjectTracer;
 use crate::Args;
 
 type Scenes = pb::scenes_client::ScenesClient<InterceptedService<Channel, BearerToken>>;
+
+/// The first redial after a lost session waits this long, …
+const REDIAL_FIRST: Duration = Duration::from_millis(100);
+/// … each next one twice as long, up to this: a server back after a restart is found
+/// within seconds, and a dead one is not dialled in a loop.
+const REDIAL_MAX: Duration = Duration::from_secs(5);
+/// A session that lasted this long was a good one: the next redial starts again from
+/// [`REDIAL_FIRST`].
+const REDIAL_RESET_AFTER: Duration = Duration::from_secs(10);
+
+/// A draining worker waits at most this long for the server to read its last results.
+const DRAIN_WAIT: Duration = Duration::from_secs(10);
+
+/// A progressive job (one needed now) gets a preview first, this many times smaller in
+/// edge (a sixteenth of the texels: there in a fraction of the time) …
+const PREVIEW_DIVISOR: u32 = 4;
+/// … when the texture is at least this big (below, the final texture is as quick).
+const PREVIEW_MIN_EDGE: u32 = 64;
 
 /// A scene this worker has loaded: every object's tracer, built when the scene is
 /// loaded (a BVH built on a job's demand — a million triangles: a second on a busy
@@ -121,7 +140,7 @@ pub async fn run(args: Args) -> Result<()> {
     });
     let stop = relief_proto::shutdown::watch();
     let loaded = LoadedScenes::default();
-    let mut backoff = Duration::from_millis(100);
+    let mut backoff = REDIAL_FIRST;
     loop {
         if *stop.borrow() {
             return Ok(());
@@ -142,8 +161,8 @@ pub async fn run(args: Args) -> Result<()> {
             // Retrying cannot mend a refused token.
             End::Refused(e) => return Err(e),
             End::Lost(e) => {
-                if started.elapsed() > Duration::from_secs(10) {
-                    backoff = Duration::from_millis(100);
+                if started.elapsed() > REDIAL_RESET_AFTER {
+                    backoff = REDIAL_FIRST;
                 }
                 tracing::warn!(
                     "session with {} ended: {e:#}; retrying in {backoff:?}",
@@ -154,7 +173,7 @@ pub async fn run(args: Args) -> Result<()> {
                     _ = tokio::time::sleep(backoff) => {}
                     _ = stop.changed() => return Ok(()),
                 }
-                backoff = (backoff * 2).min(Duration::from_secs(5));
+                backoff = (backoff * 2).min(REDIAL_MAX);
             }
         }
     }
@@ -177,11 +196,11 @@ async fn session(
     let mut workers = pb::workers_client::WorkersClient::with_interceptor(channel.clone(), auth.clone())
         .send_compressed(CompressionEncoding::Zstd)
         .accept_compressed(CompressionEncoding::Zstd)
-        .max_encoding_message_size(256 << 20);
+        .max_encoding_message_size(MAX_TEXTURE_MESSAGE_BYTES);
     let scenes = pb::scenes_client::ScenesClient::with_interceptor(channel, auth.clone())
         .send_compressed(CompressionEncoding::Zstd)
         .accept_compressed(CompressionEncoding::Zstd)
-        .max_decoding_message_size(1 << 30);
+        .max_decoding_message_size(MAX_SCENE_FETCH_MESSAGE_BYTES);
     let (out, outbound) = mpsc::unbounded_channel();
     let _ = out.send(pb::WorkerMessage {
         kind: Some(pb::worker_message::Kind::Register(pb::Register {
@@ -280,7 +299,7 @@ async fn session(
         // process; jobs the server handed out meanwhile it gives to others.)
         let _ = heartbeat.await;
         drop(context);
-        let _ = tokio::time::timeout(Duration::from_secs(10), async {
+        let _ = tokio::time::timeout(DRAIN_WAIT, async {
             while let Ok(Some(_)) = inbound.message().await {}
         })
         .await;
@@ -326,8 +345,8 @@ async fn bake_job(job: pb::Job, context: &JobContext, cancelled: &Arc<AtomicBool
     let loaded = scene(hash, context).await?;
     let tracer = loaded.tracer(&job.object).map_err(|e| e.to_string())?;
     let mut sizes = vec![size];
-    if job.progressive && size >= 64 {
-        sizes.insert(0, size / 4);
+    if job.progressive && size >= PREVIEW_MIN_EDGE {
+        sizes.insert(0, size / PREVIEW_DIVISOR);
     }
     for (k, edge) in sizes.iter().copied().enumerate() {
         if cancelled.load(Ordering::Relaxed) {

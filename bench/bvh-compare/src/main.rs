@@ -10,7 +10,7 @@ use glam::Vec3;
 use obvhs::{BvhBuildParams, cwbvh::builder::build_cwbvh_from_tris, ray::RayHit, triangle::Triangle};
 use relief_core::relief::SourceCamera;
 use relief_core::scene::Scene;
-use relief_worker::bvh::{Bvh, Hit, Ray};
+use relief_trace::bvh::{Bvh, Hit, Ray};
 
 fn best_of<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
     let mut best = f64::INFINITY;

@@ -19,6 +19,7 @@
 //!   locally, drawn with any method (`relief frame`).
 //! - [`report`] — the error-against-run-time measurement and its pictures.
 //! - [`plot`] — line charts and image strips as PNG.
+//! - [`timing`] — the median (or best) wall time of repeated runs, after a warm-up.
 //!
 //! # Example
 //!
@@ -50,3 +51,4 @@ pub mod methods;
 pub mod plot;
 pub mod report;
 pub mod solo;
+pub mod timing;

@@ -11,11 +11,10 @@ use relief_render::validity::critical::CriticalPoints;
 use relief_render::warp::params::WarpParams;
 
 use super::Manager;
-use super::choose::{angle_between, growth};
+use super::around::angle_between;
+use super::choose::growth;
 use super::messages::Arrival;
-use super::policy::{
-    CRITICAL_REGIONS, LATENCY_WINDOW, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START,
-};
+use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START};
 
 /// A texture made ready for the frame loop: its pyramid (with texel connectivity),
 /// critical points and the gaps it shows at its own eye. Building this takes
@@ -65,8 +64,6 @@ pub(super) struct ObjectState {
     pub(super) valid_angle: Option<f32>,
     /// The last [`LATENCY_WINDOW`] round trips of this object's textures, seconds.
     pub(super) recent_latencies: Vec<f64>,
-    /// Textures of this object requested.
-    pub(super) requested: u64,
     /// Final textures of this object received.
     pub(super) received: u64,
 }
@@ -109,18 +106,7 @@ impl Manager {
                     };
                     if is_final {
                         self.pending.remove(&id);
-                        let ms = p.sent.elapsed().as_secs_f64() * 1e3;
-                        self.counters.latencies_ms.push(ms);
-                        tracing::debug!(object = p.object, ms, predicted = p.predicted, "round trip");
-                        for recent in [
-                            &mut self.recent_latencies,
-                            &mut self.objects[p.object].recent_latencies,
-                        ] {
-                            recent.push(ms / 1e3);
-                            if recent.len() > LATENCY_WINDOW {
-                                recent.remove(0);
-                            }
-                        }
+                        self.record_round_trip(&p);
                     }
                     let ReadyTexture {
                         pyramid,

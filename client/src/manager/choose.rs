@@ -10,10 +10,11 @@ use relief_render::validity::schaufler::{needs_finer_texture, volume_centre};
 use relief_render::warp::params::WarpParams;
 
 use super::Manager;
+use super::around::{angle_between, similar_distance};
 use super::cache::Held;
 use super::policy::{
-    COARSEST_SHOWN, DEFAULT_VALID_ANGLE, LONE_MAX_TURN, MAX_DISTANCE_RATIO, MAX_TEXEL_PIXELS, MAX_TURN,
-    PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PLANNING_MARGIN,
+    COARSEST_SHOWN, DEFAULT_VALID_ANGLE, LONE_MAX_TURN, MAX_TEXEL_PIXELS, MAX_TURN, PARTNER_FROM,
+    PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PLANNING_MARGIN,
 };
 
 /// How an object is drawn this frame.
@@ -37,8 +38,9 @@ pub(super) struct Grade {
     /// Too coarse to be shown: its texels would cover more than [`COARSEST_SHOWN`]
     /// pixels (eq. 4-1).
     pub(super) too_coarse: bool,
-    /// … and a finer texture can be had (the largest asked for is 512²).
-    pub(super) coarse: bool,
+    /// … and a finer texture can be had (the top of the
+    /// [`TEXTURE_LADDER`](super::policy::TEXTURE_LADDER) is finer).
+    pub(super) finer_available: bool,
 }
 
 /// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`.
@@ -111,20 +113,9 @@ pub(super) fn held_covers(
     held.iter().any(|&(eye, g)| {
         let turn = angle_between(centre, eye, future);
         g.growth <= PLANNING_MARGIN * tolerance
-            && !g.coarse
+            && !g.finer_available
             && (turn <= PLANNING_MARGIN * LONE_MAX_TURN || (turn <= MAX_TURN && partnered(eye)))
     })
-}
-
-/// The angle at `centre` between two eyes.
-pub(super) fn angle_between(centre: Vec3, a: Vec3, b: Vec3) -> f32 {
-    (a - centre).angle_between(b - centre)
-}
-
-/// Whether `a` is within [`MAX_DISTANCE_RATIO`] of `b`'s distance from `centre`.
-pub(super) fn similar_distance(centre: Vec3, a: Vec3, b: Vec3) -> bool {
-    let ratio = (a - centre).length() / (b - centre).length();
-    (1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO).contains(&ratio)
 }
 
 /// Whether a texture made from `other` can partner one made from `shown` at `eye`
@@ -135,11 +126,6 @@ pub(super) fn can_partner(centre: Vec3, shown: Vec3, eye: Vec3, other: Vec3) -> 
     from.cross(eye).dot(eye.cross(other)) > 0.0
         && other.angle_between(eye) <= PARTNER_MAX_TURN
         && similar_distance(Vec3::ZERO, eye, other)
-}
-
-/// `offset` from `centre` turned by `angle` about `axis` (not zero), as a point.
-pub(super) fn turned(centre: Vec3, offset: Vec3, axis: Vec3, angle: f32) -> Vec3 {
-    centre + glam::Quat::from_axis_angle(axis.normalize(), angle) * offset
 }
 
 impl Manager {
@@ -162,7 +148,7 @@ impl Manager {
             Grade {
                 growth: growth(h, eye, camera),
                 too_coarse,
-                coarse: too_coarse && texture.width < wanted,
+                finer_available: too_coarse && texture.width < wanted,
             }
         })
     }
@@ -219,7 +205,7 @@ mod tests {
         let mut grades = growths.map(|growth| Grade {
             growth,
             too_coarse: false,
-            coarse: false,
+            finer_available: false,
         });
         grades[2].too_coarse = true;
         shown_texture(&grades, 4.0, |i| turns[i]).map(|s| s.0)
@@ -238,7 +224,7 @@ mod tests {
         let grade = |too_coarse| Grade {
             growth: 0.0,
             too_coarse,
-            coarse: too_coarse,
+            finer_available: too_coarse,
         };
         let future = around(40.0);
         let covers = |partner_too_coarse, asked: &[Vec3]| {
@@ -268,7 +254,7 @@ mod tests {
         let coarse = Grade {
             growth: 0.0,
             too_coarse: true,
-            coarse: false,
+            finer_available: false,
         };
         assert!(shown_texture(&[coarse], 4.0, |_| 0.0).is_none());
     }

@@ -1,7 +1,7 @@
 //! What the manager counts for a run's summary: requests, latencies, needs met,
 //! stale frames and why, draws, and where each frame's time went.
 
-/// Counters for the demo's summary.
+/// What a run counted: the demo's summary and the load test's rows are made of these.
 #[derive(Debug, Clone, Default)]
 pub struct Counters {
     /// Impostors redrawn as sprites (no warp) and impostors warped.
@@ -10,8 +10,8 @@ pub struct Counters {
     /// Partners warped (second textures drawn behind the shown one).
     pub partners: u64,
     /// Texels pre-warped, over all warps and partners (the shown texture at the
-    /// pyramid level the screen needs, a partner one coarser; of those, the ones that
-    /// can reach the screen): what a frame's impostors cost.
+    /// pyramid level the screen needs, a partner coarser; of those, the ones that can
+    /// reach the screen): what a frame's impostors cost.
     pub texels_warped: u64,
     pub requests_now: u64,
     pub requests_predicted: u64,
@@ -36,12 +36,14 @@ pub struct Counters {
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct StaleCauses {
     /// No held texture can be warped to the eye at all: none held yet, or all too far
-    /// round the object (past 60°) or at too different a distance.
+    /// round the object (past [`MAX_TURN`](super::policy::MAX_TURN)) or at too
+    /// different a distance.
     pub missing: u64,
     /// Some can, but none within the tolerance.
     pub beyond_tolerance: u64,
-    /// One within tolerance, but shown alone more than 40° from its eye (no partner
-    /// held to fill the side it misses).
+    /// One within tolerance, but shown alone more than
+    /// [`LONE_MAX_TURN`](super::policy::LONE_MAX_TURN) from its eye (no partner held to
+    /// fill the side it misses).
     pub alone: u64,
 }
 

@@ -107,23 +107,23 @@ impl Manager {
             }
         }
         let behind = |k: usize| partner_depth_factor(&scene.objects[k].bounds, camera.eye);
-        let prepared: Vec<_> = warps
+        let prewarps: Vec<_> = warps
             .par_iter()
             .map(|&(k, impostor, is_partner)| {
-                let prepared = Prewarped::new(Variant::Interleaved, impostor, camera);
+                let prewarped = Prewarped::new(Variant::Interleaved, impostor, camera);
                 if is_partner {
-                    prepared.and_then(|p| p.behind(behind(k)))
+                    prewarped.and_then(|p| p.behind(behind(k)))
                 } else {
-                    prepared
+                    prewarped
                 }
             })
             .collect();
         let prewarps_done = Instant::now();
         // (Only those pre-warped: an eye in or behind a texture's plane is refused first.)
-        self.counters.texels_warped += (prepared.iter())
+        self.counters.texels_warped += (prewarps.iter())
             .map(|ready| ready.as_ref().map_or(0, |p| p.texels_warped()) as u64)
             .sum::<u64>();
-        let mut prepared = warps.into_iter().zip(prepared).peekable();
+        let mut prewarps = warps.into_iter().zip(prewarps).peekable();
         let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
         for (k, key) in keys.into_iter().enumerate() {
             let Some(key) = key else {
@@ -141,7 +141,7 @@ impl Manager {
             // The impostor's warp, then its partner's (whose failure only leaves out
             // what it would have filled in).
             let (mut rect, mut partner_drawn): (Option<(u32, u32, u32, u32)>, bool) = (None, false);
-            while let Some(((_, impostor, is_partner), ready)) = prepared.next_if(|((j, _, _), _)| *j == k) {
+            while let Some(((_, impostor, is_partner), ready)) = prewarps.next_if(|((j, _, _), _)| *j == k) {
                 if is_partner && rect.is_none() {
                     continue;
                 }
@@ -163,7 +163,7 @@ impl Manager {
             self.counters.warps += 1;
             // Kept only while the eye moves by less than the sprite test allows
             // per frame (or has not moved yet): else the next frame warps anyway,
-            // and the copy (1.2 of a flight's 8 ms per frame) is wasted.
+            // and the copy (about a seventh of a frame's time) is wasted.
             let bounds = &scene.objects[k].bounds;
             if self
                 .last_eye

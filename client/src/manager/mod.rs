@@ -28,30 +28,9 @@
 //! [`Counters`] hold what a run's summary reports: requests, round trips, needs met,
 //! stale frames by cause, draws, and each frame's stage times (`counters.rs`).
 //!
-//! # Example
-//!
-//! ```
-//! use std::time::Duration;
-//! use relief_client::manager::{Config, Manager};
-//! use relief_client::source::spawn_local;
-//! use relief_core::scene::Scene;
-//! use relief_render::gbuffer::GBuffer;
-//! use tokio::sync::mpsc::unbounded_channel;
-//!
-//! let scene = std::sync::Arc::new(Scene::load("orbit-sphere")?);
-//! let (commands, requests) = unbounded_channel();
-//! let (arrivals_tx, arrivals) = unbounded_channel();
-//! spawn_local(scene.clone(), requests, arrivals_tx); // textures made in-process
-//! let mut manager = Manager::new(&scene, Config::default(), commands, arrivals);
-//!
-//! let camera = scene.path.pose(0).unwrap().camera(scene.fov_y_degrees, 160, 90)?;
-//! assert!(manager.warm_up(&scene, &camera, Duration::from_secs(30)));
-//! let shows = manager.frame(&scene, &camera, 0.0);
-//! let frame = manager.render(&scene, &shows, &camera, &mut GBuffer::new(160, 90));
-//! assert_eq!(manager.counters.stale_frames, 0);
-//! # Ok::<(), Box<dyn std::error::Error>>(())
-//! ```
+//! The [crate's overview](crate) has an example.
 
+mod around;
 mod cache;
 mod choose;
 mod counters;
@@ -69,7 +48,6 @@ use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender};
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
 use relief_render::geometry::{GeometryReason, geometry_reason};
-use relief_render::pyramid::Pyramid;
 
 use crate::predict::Predictor;
 
@@ -80,8 +58,9 @@ pub use messages::{Arrival, Command, TextureRequest};
 pub use policy::Config;
 pub use requests::texture_ladder;
 
+use around::angle_between;
 use cache::ObjectState;
-use choose::{Grade, angle_between, shown_texture};
+use choose::{Grade, shown_texture};
 use draw::Kept;
 use policy::{LONE_MAX_TURN, MAX_TEXEL_PIXELS, SHOWN_STALE, WARM_UP_POLL};
 use requests::Pending;
@@ -133,11 +112,6 @@ impl Manager {
         }
     }
 
-    /// Textures requested per object so far.
-    pub fn requested(&self, object: usize) -> u64 {
-        self.objects.get(object).map_or(0, |o| o.requested)
-    }
-
     /// Final textures received per object so far: the regenerations.
     pub fn received(&self, object: usize) -> u64 {
         self.objects.get(object).map_or(0, |o| o.received)
@@ -146,11 +120,6 @@ impl Manager {
     /// Textures held, over all objects: none after a whole run means none ever came.
     pub fn textures_held(&self) -> usize {
         self.objects.iter().map(|o| o.held.len()).sum()
-    }
-
-    /// The held texture `texture` of `object`.
-    pub fn pyramid(&self, object: usize, texture: usize) -> &Pyramid {
-        &self.objects[object].held[texture].pyramid
     }
 
     /// Before the first frame: asks for the textures `camera` needs and waits (at most
@@ -179,7 +148,6 @@ impl Manager {
         self.recent_latencies.clear();
         for o in &mut self.objects {
             o.recent_latencies.clear();
-            o.requested = 0;
             o.received = 0;
         }
         ready
@@ -225,7 +193,7 @@ impl Manager {
             let within =
                 |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= self.config.tolerance);
             // Valid: some texture is within tolerance (when only one too coarse to be
-            // shown is, a finer one is asked for if it can be had: `coarse`), and the one
+            // shown is, a finer one is asked for if it can be had: `want_finer`), and the one
             // shown is not alone too far from its eye — without a partner, a texture
             // more than [`LONE_MAX_TURN`] from its eye misses the side the eye has
             // turned to.
@@ -234,10 +202,10 @@ impl Manager {
             let lone_too_far = partner.is_none() && shown_turn.is_some_and(|turn| turn > LONE_MAX_TURN);
             let within_any = grades.iter().any(|g| g.growth <= self.config.tolerance);
             let valid = within_any && !lone_too_far;
-            let coarse = !within(best)
+            let want_finer = !within(best)
                 && grades
                     .iter()
-                    .any(|g| g.growth <= self.config.tolerance && g.coarse);
+                    .any(|g| g.growth <= self.config.tolerance && g.finer_available);
             let asked_for = self.pending_covers(k, centre, camera.eye);
             if valid || asked_for {
                 self.counters.prediction_hits += 1;
@@ -281,7 +249,7 @@ impl Manager {
             // less than the eye takes to leave them, a request each frame would only
             // queue textures that are stale on arrival.
             let asking_now = self.pending.values().any(|p| p.object == k && !p.predicted);
-            if (!valid || coarse) && !asked_for && !asking_now {
+            if (!valid || want_finer) && !asked_for && !asking_now {
                 self.request(scene, k, camera.eye, camera, None);
             }
             self.predict_for(scene, k, camera);

@@ -17,7 +17,8 @@ pub use relief_render::geometry::{CHEAP_TRIANGLES, NEAR_MARGIN};
 pub use relief_render::pyramid::{MAX_TEXEL_PIXELS, MIN_LEVEL_EDGE};
 pub use relief_render::validity::critical::CRITICAL_REGIONS;
 
-/// The manager's settings that a run may choose (`relief demo` flags).
+/// The manager's settings: `tolerance` and `predict` are `relief demo`'s flags; the
+/// others, knobs for tests, default to their constants here.
 #[derive(Debug, Clone)]
 pub struct Config {
     /// Largest growth of the predicted gap (worst of [`CRITICAL_REGIONS`]² regions, eq.
@@ -105,8 +106,8 @@ pub const PARTNER_LEVELS_COARSER: usize = 1;
 // ---- What is asked for, and when ----------------------------------------------------
 
 /// The texture edges asked for: half-octave steps from 32 to 512 (32·√2^k, rounded to
-/// multiples of 8). With power-of-two edges a texture had up to 4× the texels the screen
-/// can show, each warped every frame; with these at most 2.1×.
+/// multiples of 8), so a texture has at most 2.1× the texels the screen can show (with
+/// power-of-two edges, up to 4×), each warped every frame.
 pub const TEXTURE_LADDER: [u32; 9] = [32, 48, 64, 88, 128, 184, 256, 360, 512];
 
 /// Depth precision asked for: the thesis' 8 bits, half the bytes of 16 on the wire.
@@ -132,6 +133,13 @@ pub const PAIR_SPACING: f32 = 2.0 * PLANNING_MARGIN;
 /// ahead counts as the one ahead: an eye asked for that far falls a little beyond it as
 /// the future moves on, or as the eye's elevation tilts the turn.
 pub const AHEAD_SLACK: f32 = 1.5;
+
+/// Below this turn of the eye about an object per planning horizon (as the sine of
+/// it: about 0.06°), the eye is not turning, and no texture is "ahead" of it.
+pub const AHEAD_MIN_TURN: f32 = 1e-3;
+
+/// A lead (radians) below this is none: the texture is made for the future eye itself.
+pub const MIN_LEAD: f32 = 1e-4;
 
 /// A request already out serves an eye within this fraction of the object's valid
 /// angle of its own eye (a fifth kept for the eye's further motion) …
@@ -172,12 +180,12 @@ pub const OWN_LATENCIES: usize = 4;
 /// with the workers' queue, and planning for a typical one stalls every slower one.
 pub const LATENCY_PERCENTILE: f64 = 0.9;
 
-/// How far past the planned round trip predictions look (`--rtt-ms 100` demos, 4–8 runs
-/// each: ×1.0 9.5 stale frames, ×1.25 7.1, ×1.5 7.5).
+/// How far past the planned round trip predictions look: at `--rtt-ms 100` fewer frames
+/// went stale than with ×1 or ×1.5.
 pub const HORIZON_SPARE: f64 = 1.25;
 
-/// … and this much more, seconds: arrivals later than the recent 90th percentile were
-/// most of a flight's stale frames.
+/// … and this much more, seconds: arrivals later than the [`LATENCY_PERCENTILE`] of the
+/// recent ones were most of a flight's stale frames.
 pub const HORIZON_MARGIN_S: f64 = 0.05;
 
 /// The farthest ahead predictions look, seconds: the predictor's quadratic fit of the

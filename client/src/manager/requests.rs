@@ -13,12 +13,13 @@ use relief_render::geometry::{GeometryReason, geometry_reason};
 use relief_render::validity::schaufler::resolution_for;
 
 use super::Manager;
-use super::choose::{Grade, angle_between, held_covers, similar_distance, turned};
+use super::around::{angle_between, similar_distance, turned};
+use super::choose::{Grade, held_covers};
 use super::messages::{Command, TextureRequest};
 use super::policy::{
-    AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LEAD, MAX_HORIZON_S, MAX_TEXEL_PIXELS,
-    OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK, PENDING_REACH, REQUESTED_DEPTH_BITS, TEXTURE_LADDER,
-    WITHDRAW_REACH,
+    AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
+    MAX_HORIZON_S, MAX_TEXEL_PIXELS, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK,
+    PENDING_REACH, REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -27,6 +28,17 @@ pub(super) struct Pending {
     pub(super) eye: Vec3,
     pub(super) predicted: bool,
     pub(super) sent: Instant,
+}
+
+/// Whether an object has a texture ahead of the eye's turn about it (see
+/// [`Manager::ahead`]).
+enum Ahead {
+    /// The eye is not turning about the object: "ahead" means nothing.
+    NotTurning,
+    /// One is held or asked for.
+    Covered,
+    /// None: ask for one at this eye.
+    AskAt(Vec3),
 }
 
 /// The smallest edge of the [`TEXTURE_LADDER`] that holds `need` texels, the largest
@@ -40,6 +52,28 @@ pub fn texture_ladder(need: u32) -> u32 {
 }
 
 impl Manager {
+    /// Records the round trip of `pending`, whose final texture has just arrived: in the
+    /// counters, and in the windows the round trip to plan for is taken from.
+    pub(super) fn record_round_trip(&mut self, pending: &Pending) {
+        let ms = pending.sent.elapsed().as_secs_f64() * 1e3;
+        self.counters.latencies_ms.push(ms);
+        tracing::debug!(
+            object = pending.object,
+            ms,
+            predicted = pending.predicted,
+            "round trip"
+        );
+        for recent in [
+            &mut self.recent_latencies,
+            &mut self.objects[pending.object].recent_latencies,
+        ] {
+            recent.push(ms / 1e3);
+            if recent.len() > LATENCY_WINDOW {
+                recent.remove(0);
+            }
+        }
+    }
+
     /// The round trip to plan for: the [`LATENCY_PERCENTILE`] of the recent ones (the
     /// configured estimate before any). Round trips vary several-fold with the
     /// workers' queue; planning for a typical one would leave every slower one stalled.
@@ -106,7 +140,6 @@ impl Manager {
                 sent: Instant::now(),
             },
         );
-        self.objects[object].requested += 1;
         match needed_in_ms {
             Some(_) => self.counters.requests_predicted += 1,
             None => self.counters.requests_now += 1,
@@ -115,21 +148,19 @@ impl Manager {
 
     /// Whether object `k` has a texture held or asked for on the far side of `future`
     /// (the way the eye turns from `now`), to partner the one shown there — and if not,
-    /// the eye to ask for one at: [`PAIR_SPACING`] valid angles past `future`. `None`
-    /// while the eye is not turning about the object. (This keeps partners coming
-    /// along the motion; [`can_partner`] is the test of one pair of textures at one
-    /// eye, by which side of the eye each is on, whatever the motion.)
-    fn ahead(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Option<Result<(), Vec3>> {
+    /// the eye to ask for one at: [`PAIR_SPACING`] valid angles past `future`. (This
+    /// keeps partners coming along the motion;
+    /// [`can_partner`](super::choose::can_partner) is the test of one pair of textures
+    /// at one eye, by which side of the eye each is on, whatever the motion.)
+    fn ahead(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Ahead {
         let (from, to) = (now - centre, future - centre);
         let axis = from.cross(to);
-        // (Below ~0.06° of turn per horizon, "ahead" means nothing.)
-        if axis.length() <= 1e-3 * from.length() * to.length() {
-            return None;
+        if axis.length() <= AHEAD_MIN_TURN * from.length() * to.length() {
+            return Ahead::NotTurning;
         }
         let reach = PAIR_SPACING * self.valid_angle(k);
-        // (Held or asked for within half as far again — an eye asked for `reach` ahead
-        // falls a little beyond it as the future moves on, or as the eye's elevation
-        // tilts the turn — and at a distance [`Self::partner`] accepts.)
+        // (Held or asked for within [`AHEAD_SLACK`] of `reach`, and at a distance
+        // [`Self::partner`] accepts.)
         let ahead = |eye: Vec3| {
             let e = eye - centre;
             axis.dot(to.cross(e)) > 0.0
@@ -138,11 +169,11 @@ impl Manager {
         };
         let held = self.objects[k].held.iter().any(|h| ahead(h.eye));
         let asked = self.pending.values().any(|p| p.object == k && ahead(p.eye));
-        Some(if held || asked {
-            Ok(())
+        if held || asked {
+            Ahead::Covered
         } else {
-            Err(turned(centre, to, axis, reach))
-        })
+            Ahead::AskAt(turned(centre, to, axis, reach))
+        }
     }
 
     /// The eye to make a predicted texture for: `future` turned further about `centre`,
@@ -155,7 +186,7 @@ impl Manager {
         let axis = from.cross(to);
         let turn = from.angle_between(to);
         let lead = (LEAD * self.valid_angle(k)).min(turn);
-        if turn.is_nan() || lead <= 1e-4 || axis.length_squared() <= f32::MIN_POSITIVE {
+        if turn.is_nan() || lead <= MIN_LEAD || axis.length_squared() <= f32::MIN_POSITIVE {
             return future;
         }
         turned(centre, to, axis, lead)
@@ -193,7 +224,7 @@ impl Manager {
         if !covered {
             let eye = self.lead(k, centre, camera.eye, future);
             self.request(scene, k, eye, camera, deadline);
-        } else if let Some(Err(eye)) = ahead {
+        } else if let Ahead::AskAt(eye) = ahead {
             self.request(scene, k, eye, camera, deadline);
         }
         // Predictions neither the eye nor its future will meet any more.

@@ -2,17 +2,16 @@
 //! away from the eye — and how long it took against the same frame as geometry.
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::{Result, anyhow};
 use clap::Args;
 use serde::Serialize;
 
 use relief_core::relief::DepthBits;
-use relief_core::stats::median;
 use relief_lab::frame_plan::{FramePlan, FrameStats};
 use relief_lab::image_error::compare;
 use relief_lab::methods::Method;
+use relief_lab::timing::{median_ms, median_ms_after};
 use relief_render::gbuffer::GBuffer;
 use relief_render::geometry::render_geometry;
 use relief_trace::{SceneTracer, render_reference};
@@ -69,26 +68,19 @@ pub fn run(args: FrameArgs) -> Result<()> {
     bar.set_message("baking impostors");
     let plan = FramePlan::bake(&scene, &camera, args.source_angle, DepthBits::Eight);
     bar.set_message("rendering");
-    let mut gbuffer = GBuffer::new(w, h);
-    // One untimed frame of each kind first: allocation and caches settle.
-    drop(plan.render(&scene, &camera, args.method, &mut gbuffer));
-    drop(render_geometry(&scene, &camera, &mut gbuffer));
-    let mut frame_times = Vec::new();
-    let mut result = None;
-    for _ in 0..args.runs {
-        let start = Instant::now();
-        result = Some(plan.render(&scene, &camera, args.method, &mut gbuffer));
-        frame_times.push(start.elapsed().as_secs_f64() * 1e3);
-    }
+    let runs = args.runs as usize;
+    let mut drawn = (GBuffer::new(w, h), None);
+    let frame_ms = median_ms_after(
+        runs,
+        &mut drawn,
+        |_| {},
+        |(gbuffer, result)| *result = Some(plan.render(&scene, &camera, args.method, gbuffer)),
+    );
+    let (mut gbuffer, result) = drawn;
     let Some((frame, stats)) = result else {
         return Err(anyhow!("no frame rendered"));
     };
-    let mut geometry_times = Vec::new();
-    for _ in 0..args.runs {
-        let start = Instant::now();
-        drop(render_geometry(&scene, &camera, &mut gbuffer));
-        geometry_times.push(start.elapsed().as_secs_f64() * 1e3);
-    }
+    let geometry_frame_ms = median_ms(runs, || drop(render_geometry(&scene, &camera, &mut gbuffer)));
     let psnr_db = args.compare.then(|| {
         bar.set_message("ray-tracing the reference");
         let reference = render_reference(&SceneTracer::new(&scene), &camera, 1);
@@ -96,7 +88,6 @@ pub fn run(args: FrameArgs) -> Result<()> {
     });
     bar.finish_and_clear();
     frame.save_png(&args.out)?;
-    let (frame_ms, geometry_frame_ms) = (median(frame_times), median(geometry_times));
     let name = |k: u32| scene.objects[k as usize].name.clone();
     let report = FrameReport {
         impostors: plan.impostors.iter().map(|i| name(i.index)).collect(),

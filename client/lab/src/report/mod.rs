@@ -5,15 +5,12 @@
 
 pub mod plots;
 
-use std::time::Instant;
-
 use serde::Serialize;
 
 use relief_core::frame::Frame;
 use relief_core::relief::DepthBits;
 use relief_core::scene::Scene;
 
-use relief_core::stats::median;
 use relief_render::gbuffer::GBuffer;
 use relief_render::geometry::render_geometry;
 use relief_render::impostor::Impostor;
@@ -24,6 +21,7 @@ use relief_trace::ANTIALIASED_SAMPLES;
 
 use crate::methods::{Method, display};
 use crate::solo::{Solo, SoloError};
+use crate::timing::median_ms_after;
 
 /// What to measure.
 #[derive(Debug, Clone)]
@@ -31,7 +29,7 @@ pub struct Options {
     pub sizes: Vec<u32>,
     pub angles: Vec<f32>,
     pub methods: Vec<Method>,
-    /// Timed runs per row (the median is reported).
+    /// Timed runs per row, after a warm-up (the median is reported).
     pub runs: usize,
     /// Edge of the square frames, pixels.
     pub frame_size: u32,
@@ -165,22 +163,24 @@ pub fn error_vs_time(
         // The floor: the object as exact geometry, one sample per pixel.
         for (k, &angle) in options.angles.iter().enumerate() {
             let camera = &cameras[k];
-            let mut gbuffer = GBuffer::new(camera.width, camera.height);
-            let mut frame = Frame::new(1, 1, [0; 3]);
-            let times: Vec<f64> = (0..options.runs.max(1))
-                .map(|_| {
-                    let start = Instant::now();
-                    frame = render_geometry(&solo.scene, camera, &mut gbuffer);
-                    start.elapsed().as_secs_f64() * 1e3
-                })
-                .collect();
+            let mut drawn = (
+                GBuffer::new(camera.width, camera.height),
+                Frame::new(1, 1, [0; 3]),
+            );
+            let ms = median_ms_after(
+                options.runs,
+                &mut drawn,
+                |_| {},
+                |(gbuffer, frame)| *frame = render_geometry(&solo.scene, camera, gbuffer),
+            );
+            let frame = drawn.1;
             let error = solo.error(&frame, &references[k]);
             let row = Row {
                 object: name.clone(),
                 method: GEOMETRY.into(),
                 size: 0,
                 angle_deg: angle,
-                ms: median(times),
+                ms,
                 psnr_db: error.psnr_db,
                 ssim: error.ssim,
                 hole_frac: error.hole_frac,
@@ -210,24 +210,26 @@ pub fn error_vs_time(
                     strip.reference = references[k].clone();
                 }
                 for &method in &options.methods {
-                    let mut times = Vec::with_capacity(options.runs);
-                    let mut gbuffer = GBuffer::new(camera.width, camera.height);
-                    let mut failed = false;
-                    for _ in 0..options.runs.max(1) {
-                        gbuffer.clear();
-                        let start = Instant::now();
-                        let shown = match method {
-                            Method::Sprite => {
-                                if let Some(s) = &sprite {
-                                    s.draw(&mut gbuffer);
+                    // (The G-buffer, and whether the method refused to draw.)
+                    let mut drawn = (GBuffer::new(camera.width, camera.height), false);
+                    let ms = median_ms_after(
+                        options.runs,
+                        &mut drawn,
+                        |(gbuffer, _)| gbuffer.clear(),
+                        |(gbuffer, failed)| {
+                            let shown = match method {
+                                Method::Sprite => {
+                                    if let Some(s) = &sprite {
+                                        s.draw(gbuffer);
+                                    }
+                                    Ok(())
                                 }
-                                Ok(())
-                            }
-                            _ => display(method, &impostor, 0, camera, &mut gbuffer),
-                        };
-                        times.push(start.elapsed().as_secs_f64() * 1e3);
-                        failed |= shown.is_err();
-                    }
+                                _ => display(method, &impostor, 0, camera, gbuffer),
+                            };
+                            *failed |= shown.is_err();
+                        },
+                    );
+                    let (gbuffer, failed) = drawn;
                     let frame = gbuffer.shade(&solo.scene, camera);
                     let error = solo.error(&frame, &references[k]);
                     let row = Row {
@@ -235,7 +237,7 @@ pub fn error_vs_time(
                         method: method.name(),
                         size,
                         angle_deg: angle,
-                        ms: if failed { f64::NAN } else { median(times) },
+                        ms: if failed { f64::NAN } else { ms },
                         psnr_db: error.psnr_db,
                         ssim: error.ssim,
                         hole_frac: error.hole_frac,

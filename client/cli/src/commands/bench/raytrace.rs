@@ -12,8 +12,8 @@ use relief_trace::bake;
 use relief_trace::bvh::Bvh;
 use relief_trace::tracer::ObjectTracer;
 
-use super::best_ms;
 use crate::{args, progress};
+use relief_lab::timing::best_ms;
 
 #[derive(Args)]
 pub struct RaytraceArgs {
@@ -52,6 +52,7 @@ struct RaytraceReport {
 }
 
 pub fn run(args: RaytraceArgs) -> Result<()> {
+    let runs = args.runs as usize;
     let bar = progress::spinner("loading scene");
     let scene = Scene::load(&args.scene)?;
     let object: &SceneObject = match &args.object {
@@ -64,7 +65,7 @@ pub fn run(args: RaytraceArgs) -> Result<()> {
     };
     bar.set_message("building BVH");
     let mesh = &object.mesh;
-    let bvh_build_ms = best_ms(args.runs.min(3), || drop(Bvh::build(mesh)));
+    let bvh_build_ms = best_ms(runs.min(3), || drop(Bvh::build(mesh)));
     let tracer = ObjectTracer::new(object);
     // A fixed, oblique view from three bounding radii away.
     let radius = object.bounds.extent().length() * 0.5;
@@ -72,13 +73,13 @@ pub fn run(args: RaytraceArgs) -> Result<()> {
     let bake_once = || bake(&tracer, eye, args.size, DepthBits::Eight).map(drop);
     bake_once()?;
     bar.set_message("tracing, all threads");
-    let bake_ms_mt = best_ms(args.runs, || drop(bake_once()));
+    let bake_ms_mt = best_ms(runs, || drop(bake_once()));
     bar.set_message("tracing, one thread");
     let one = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .context("creating a one-thread pool")?;
-    let bake_ms_1t = one.install(|| best_ms(args.runs, || drop(bake_once())));
+    let bake_ms_1t = one.install(|| best_ms(runs, || drop(bake_once())));
     bar.finish_and_clear();
     let rays = args.size as f64 * args.size as f64;
     let triangles = mesh.triangle_count();

@@ -18,8 +18,8 @@ use relief_render::warp::params::WarpParams;
 use relief_render::warp::prewarp::{prewarp, prewarp_split};
 use relief_render::warp::sprite::Sprite;
 
-use super::{median_ms, median_ms_after};
 use crate::{args, progress};
+use relief_lab::timing::{median_ms, median_ms_after};
 
 #[derive(Args)]
 pub struct WarpArgs {
@@ -117,6 +117,7 @@ struct MultiRes {
 }
 
 pub fn run(args: WarpArgs) -> Result<()> {
+    let runs = args.runs as usize;
     let bar = progress::spinner("baking");
     let scene = Scene::load(&args.scene)?;
     let solo = Solo::new(&scene, &args.object, 3.0)?;
@@ -133,7 +134,7 @@ pub fn run(args: WarpArgs) -> Result<()> {
         texture.normal.clone(),
         texture.depth.clone(),
     );
-    let memcpy_ms = median_ms(args.runs, || {
+    let memcpy_ms = median_ms(runs, || {
         albedo.copy_from_slice(&texture.albedo);
         normal.copy_from_slice(&texture.normal);
         depth.copy_from_slice(&texture.depth);
@@ -142,7 +143,7 @@ pub fn run(args: WarpArgs) -> Result<()> {
     let mut warped = vec![glam::Vec2::ZERO; texels];
     let c = texture.camera;
     let (w, empty, bits) = (c.width as usize, texture.depth_bits.empty(), texture.depth_bits);
-    let naive_ms = median_ms(args.runs, || {
+    let naive_ms = median_ms(runs, || {
         let cc = c.origin - std::hint::black_box(camera.eye);
         for (k, out) in warped.iter_mut().enumerate() {
             let q = texture.depth[k];
@@ -158,7 +159,7 @@ pub fn run(args: WarpArgs) -> Result<()> {
         }
         std::hint::black_box(&warped);
     });
-    let lut_ms = median_ms(args.runs, || {
+    let lut_ms = median_ms(runs, || {
         for (k, out) in warped.iter_mut().enumerate() {
             let q = texture.depth[k];
             if q != empty {
@@ -175,7 +176,7 @@ pub fn run(args: WarpArgs) -> Result<()> {
     for method in Method::ALL {
         bar.set_message(method.name());
         let ms = median_ms_after(
-            args.runs,
+            runs,
             &mut gbuffer,
             |g| g.clear(),
             |gbuffer| match (method, &sprite) {
@@ -185,12 +186,12 @@ pub fn run(args: WarpArgs) -> Result<()> {
             },
         );
         let prewarp_ms = method.variant().map(|v| {
-            median_ms(args.runs, || {
+            median_ms(runs, || {
                 drop(std::hint::black_box(prewarp(&impostor, &params, v)))
             })
         });
         let prewarp_split_ms = (method == Method::Interleaved).then(|| {
-            median_ms(args.runs, || {
+            median_ms(runs, || {
                 drop(std::hint::black_box(prewarp_split(
                     &impostor,
                     &params,
@@ -201,7 +202,7 @@ pub fn run(args: WarpArgs) -> Result<()> {
         });
         let map_ms = (method == Method::Interleaved).then(|| {
             median_ms_after(
-                args.runs,
+                runs,
                 &mut (GBuffer::new(camera.width, camera.height), None),
                 |(gbuffer, prepared)| {
                     gbuffer.clear();
@@ -233,9 +234,9 @@ pub fn run(args: WarpArgs) -> Result<()> {
         let whole = || prewarp(&impostor, &params, Variant::Interleaved);
         let split = || prewarp_split(&impostor, &params, Variant::Interleaved, None);
         TwoPrewarps {
-            own_threads_ms: median_ms(args.runs, || drop(black_box(rayon::join(whole, whole)))),
-            split_in_turn_ms: median_ms(args.runs, || drop(black_box((split(), split())))),
-            split_at_once_ms: median_ms(args.runs, || drop(black_box(rayon::join(split, split)))),
+            own_threads_ms: median_ms(runs, || drop(black_box(rayon::join(whole, whole)))),
+            split_in_turn_ms: median_ms(runs, || drop(black_box((split(), split())))),
+            split_at_once_ms: median_ms(runs, || drop(black_box(rayon::join(split, split)))),
         }
     };
     bar.set_message("pull-push 1280x720");
@@ -252,7 +253,7 @@ pub fn run(args: WarpArgs) -> Result<()> {
             }
         }
         median_ms_after(
-            args.runs,
+            runs,
             &mut sparse.clone(),
             |layer| layer.pixels.copy_from_slice(&sparse.pixels),
             |layer| {
@@ -275,7 +276,7 @@ pub fn run(args: WarpArgs) -> Result<()> {
         let level = pyramid.level_for(&far, MAX_TEXEL_PIXELS);
         let mut time = |imp: &Impostor| {
             median_ms_after(
-                args.runs,
+                runs,
                 &mut gbuffer,
                 |g| g.clear(),
                 |g| {

@@ -1,0 +1,16 @@
+//! The sizes every process agrees on for what crosses the wire, in one place.
+
+/// Scenes travel in pieces of at most this many bytes (uploads and fetches alike): far
+/// under every message limit below, and a few milliseconds each on a slow link.
+pub const SCENE_CHUNK_BYTES: usize = 1 << 20;
+
+/// The largest message a server takes from an upload (one scene chunk, compressed or
+/// not): room to spare over [`SCENE_CHUNK_BYTES`] for a peer that chunks differently.
+pub const MAX_UPLOAD_MESSAGE_BYTES: usize = 64 << 20;
+
+/// The largest texture message, either way: a 4096² texture with 16-bit depth is 134 MB
+/// before compression.
+pub const MAX_TEXTURE_MESSAGE_BYTES: usize = 256 << 20;
+
+/// The largest scene message a worker takes when it fetches a scene.
+pub const MAX_SCENE_FETCH_MESSAGE_BYTES: usize = 1 << 30;
