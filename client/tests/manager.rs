@@ -346,3 +346,79 @@ fn an_object_off_screen_is_not_needed_now() {
     assert_eq!(now.len(), 1);
     assert_eq!((manager.counters.needs, manager.counters.stale_frames), (1, 1));
 }
+
+/// Latency is counted to a texture's arrival, and the pick-up from there to the frame
+/// that takes it in; a texture's lifetime runs from its arrival to the last frame that
+/// shows it. Known sleeps between request, arrival, take-in and the frames that show it
+/// (or not) give known bounds on each figure.
+#[test]
+fn latency_pickup_and_lifetime_are_counted_from_arrival() {
+    use relief_client::manager::{Arrival, ReadyTexture};
+    use relief_core::relief::DepthBits;
+    use relief_trace::bake;
+    use relief_trace::tracer::ObjectTracer;
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let (commands_tx, mut commands) = unbounded_channel();
+    let (arrivals, arrivals_rx) = unbounded_channel();
+    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let sphere = index(&scene, "sphere");
+    let centre = scene.objects[sphere].bounds.center();
+    let eye = centre + Vec3::new(0.0, 1.0, 4.5);
+    let camera = Camera::look_at(eye, centre, Vec3::Y, 60.0, 160, 90).unwrap();
+    // Made before the request, so that the wait below is all the latency.
+    let texture = bake(
+        &ObjectTracer::new(&scene.objects[sphere]),
+        eye,
+        64,
+        DepthBits::Eight,
+    )
+    .unwrap();
+    manager.frame(&scene, &camera, 0.0);
+    // The request for now the first frame made, answered by hand.
+    let request = std::iter::from_fn(|| commands.try_recv().ok())
+        .find_map(|c| match c {
+            Command::Request(r) if r.needed_in_ms.is_none() => Some(r),
+            _ => None,
+        })
+        .expect("a request for now");
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    let (to_arrival, to_pickup, shown_for) = (
+        Duration::from_millis(60),
+        Duration::from_millis(40),
+        Duration::from_millis(80),
+    );
+    std::thread::sleep(to_arrival);
+    let ready = ReadyTexture::new(texture);
+    std::thread::sleep(to_pickup);
+    arrivals
+        .send(Arrival::Texture {
+            id: request.id,
+            texture: Box::new(ready),
+            is_final: true,
+        })
+        .unwrap();
+    let shows = manager.frame(&scene, &camera, 0.1);
+    assert!(matches!(shows[sphere], Show::Impostor { .. }), "{shows:?}");
+    let latency = manager.counters.latencies_ms[0];
+    let pickup = manager.counters.pickup_ms[0];
+    assert!(latency >= ms(to_arrival), "latency {latency} ms");
+    assert!(pickup >= ms(to_pickup), "pickup {pickup} ms");
+    // (Counted apart: the latency leaves the pick-up out.)
+    assert!(latency < ms(to_arrival + to_pickup) - 5.0, "latency {latency} ms");
+    // Shown again after a while, then not (the eye too near: geometry).
+    std::thread::sleep(shown_for);
+    manager.frame(&scene, &camera, 0.2);
+    let near = Camera::look_at(centre + Vec3::new(0.0, 0.0, 1.1), centre, Vec3::Y, 60.0, 160, 90).unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    assert_eq!(manager.frame(&scene, &near, 0.3)[sphere], Show::Geometry);
+    let (lifetimes, never_shown) = manager.texture_lifetimes();
+    assert_eq!((lifetimes.len(), never_shown), (1, 0), "{lifetimes:?}");
+    let lifetime = lifetimes[0] * 1e3;
+    // From arrival to the last frame that showed it: the pick-up and the wait after,
+    // not the last 300 ms.
+    assert!(
+        lifetime >= ms(to_pickup + shown_for) && lifetime < ms(to_pickup + shown_for) + 250.0,
+        "lifetime {lifetime} ms"
+    );
+}

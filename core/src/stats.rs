@@ -29,6 +29,13 @@ pub fn finite_mean(values: &[f64]) -> Option<f64> {
     (!finite.is_empty()).then(|| finite.iter().sum::<f64>() / finite.len() as f64)
 }
 
+/// The median of the finite values (the upper one for an even count); `None` without
+/// any.
+pub fn finite_median(values: &[f64]) -> Option<f64> {
+    let finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    (!finite.is_empty()).then(|| median(finite))
+}
+
 /// The least of the finite values; `None` without any.
 pub fn finite_min(values: &[f64]) -> Option<f64> {
     values.iter().copied().filter(|v| v.is_finite()).reduce(f64::min)
@@ -50,5 +57,10 @@ mod tests {
         assert_eq!(finite_mean(&[1.0, f64::INFINITY, 3.0]), Some(2.0));
         assert_eq!(finite_min(&[f64::NAN, 4.0, 2.0]), Some(2.0));
         assert_eq!(finite_mean(&[f64::NAN]), None);
+        assert_eq!(
+            finite_median(&[f64::INFINITY, 3.0, f64::NAN, 1.0, 2.0]),
+            Some(2.0)
+        );
+        assert_eq!(finite_median(&[f64::NAN]), None);
     }
 }

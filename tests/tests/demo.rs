@@ -42,6 +42,13 @@ fn the_demo_flies_and_summarises() {
     ] {
         assert!(!summary[key].is_null(), "{key} missing from {summary}");
     }
+    // Latency to arrival, and pick-up from there, both measured; the textures lived
+    // a while (shown over more than three frames, 0.1 s).
+    for key in ["latency_ms_p50", "pickup_ms_p50"] {
+        assert!(summary[key].as_f64().is_some_and(|v| v >= 0.0), "{key}: {summary}");
+    }
+    let lifetime = summary["texture_lifetime_s_p50"].as_f64().unwrap();
+    assert!(lifetime > 0.1, "{summary}");
     // Where the frame time goes: each stage measured, none above the slowest frame;
     // the ground is drawn as geometry in every frame.
     let stages = summary["frame_stages_ms_p50"].as_object().unwrap();
@@ -80,6 +87,8 @@ fn the_demo_flies_and_summarises() {
     for (key, floor) in [
         ("psnr_aa_db_min_by_object", 17.0),
         ("geometry_psnr_aa_db_min_by_object", 28.0),
+        ("psnr_aa_db_median_by_object", 17.0),
+        ("geometry_psnr_aa_db_median_by_object", 28.0),
     ] {
         let by_object = summary[key].as_object().unwrap();
         assert!(!by_object.contains_key("ground"), "{key}: {summary}");

@@ -1,6 +1,8 @@
 //! The textures held for each object: arrivals taken in (never waiting), each final
 //! one's valid angle probed, the nearest the eye kept.
 
+use std::time::Instant;
+
 use glam::Vec3;
 
 use relief_core::camera::Camera;
@@ -10,11 +12,11 @@ use relief_render::pyramid::Pyramid;
 use relief_render::validity::critical::CriticalPoints;
 use relief_render::warp::params::WarpParams;
 
-use super::Manager;
 use super::around::angle_between;
 use super::choose::growth;
 use super::messages::Arrival;
 use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START};
+use super::{Counters, Manager};
 
 /// A texture made ready for the frame loop: its pyramid (with texel connectivity),
 /// critical points and the gaps it shows at its own eye. Building this takes
@@ -23,10 +25,14 @@ pub struct ReadyTexture {
     pyramid: Pyramid,
     critical: CriticalPoints,
     baseline: Vec<f32>,
+    /// When the texture reached the client, before it was made ready.
+    arrived: Instant,
 }
 
 impl ReadyTexture {
+    /// Makes `texture`, which has just reached the client, ready for the frame loop.
     pub fn new(texture: ReliefTexture) -> ReadyTexture {
+        let arrived = Instant::now();
         let critical = CriticalPoints::find(&texture, CRITICAL_REGIONS, CRITICAL_REGIONS);
         let baseline = WarpParams::new(&texture, texture.eye).map_or_else(
             |_| vec![0.0; critical.pairs.len()],
@@ -36,6 +42,7 @@ impl ReadyTexture {
             pyramid: Pyramid::new(texture, MIN_LEVEL_EDGE),
             critical,
             baseline,
+            arrived,
         }
     }
 }
@@ -55,6 +62,10 @@ pub(super) struct Held {
     pub(super) baseline: Vec<f32>,
     pub(super) eye: Vec3,
     pub(super) is_final: bool,
+    /// When it reached the client, and the last frame it was shown in (as the shown
+    /// texture or a partner): its lifetime.
+    pub(super) arrived: Instant,
+    pub(super) last_shown: Option<Instant>,
 }
 
 #[derive(Default)]
@@ -104,15 +115,16 @@ impl Manager {
                     let Some(p) = self.pending.get(&id).copied() else {
                         continue; // Withdrawn meanwhile.
                     };
-                    if is_final {
-                        self.pending.remove(&id);
-                        self.record_round_trip(&p);
-                    }
                     let ReadyTexture {
                         pyramid,
                         critical,
                         baseline,
+                        arrived,
                     } = *texture;
+                    if is_final {
+                        self.pending.remove(&id);
+                        self.record_round_trip(&p, arrived);
+                    }
                     let state = &mut self.objects[p.object];
                     state.received += is_final as u64;
                     // A final texture replaces its own preview.
@@ -123,6 +135,8 @@ impl Manager {
                         critical,
                         baseline,
                         is_final,
+                        arrived,
+                        last_shown: None,
                     };
                     if is_final {
                         let centre = scene.objects[p.object].bounds.center();
@@ -135,13 +149,16 @@ impl Manager {
                         );
                     }
                     state.held.push(held);
+                    let state = &mut self.objects[p.object];
                     // Keep the textures nearest the eye.
                     if state.held.len() > self.config.keep {
                         let centre = scene.objects[p.object].bounds.center();
                         state.held.sort_by(|a, b| {
                             angle_between(centre, a.eye, eye).total_cmp(&angle_between(centre, b.eye, eye))
                         });
-                        state.held.truncate(self.config.keep);
+                        for retired in state.held.split_off(self.config.keep) {
+                            self.counters.retire(&retired);
+                        }
                     }
                 }
                 Arrival::Failed { id, reason } => {
@@ -152,5 +169,22 @@ impl Manager {
                 }
             }
         }
+    }
+}
+
+impl Manager {
+    /// The lifetimes of the run's final textures so far, seconds from each one's arrival
+    /// to the last frame it was shown in — those no longer held, and those held now —
+    /// and how many were never shown.
+    pub fn texture_lifetimes(&self) -> (Vec<f64>, u64) {
+        let mut counted = Counters {
+            lifetimes_s: self.counters.lifetimes_s.clone(),
+            textures_never_shown: self.counters.textures_never_shown,
+            ..Counters::default()
+        };
+        for held in self.objects.iter().flat_map(|o| &o.held) {
+            counted.retire(held);
+        }
+        (counted.lifetimes_s, counted.textures_never_shown)
     }
 }

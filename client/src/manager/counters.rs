@@ -16,8 +16,17 @@ pub struct Counters {
     pub requests_now: u64,
     pub requests_predicted: u64,
     pub withdrawn: u64,
-    /// Request → final texture, milliseconds.
+    /// Request sent → final texture received by the client, milliseconds.
     pub latencies_ms: Vec<f64>,
+    /// Final texture received → taken in by a frame (made ready, and the frame loop
+    /// come round), milliseconds.
+    pub pickup_ms: Vec<f64>,
+    /// Final textures no longer held: seconds from each one's arrival to the last frame
+    /// it was shown in (with those still held:
+    /// [`Manager::texture_lifetimes`](super::Manager::texture_lifetimes)) …
+    pub lifetimes_s: Vec<f64>,
+    /// … and those never shown at all.
+    pub textures_never_shown: u64,
     /// Frames × objects where a valid texture was needed (impostors that may be on
     /// screen).
     pub needs: u64,
@@ -30,6 +39,21 @@ pub struct Counters {
     pub stale_causes: StaleCauses,
     /// Where each [`Manager::render`](super::Manager::render) spent its time.
     pub render_stages: Vec<RenderStages>,
+}
+
+impl Counters {
+    /// Counts the lifetime of a texture no longer held (previews are not counted).
+    pub(super) fn retire(&mut self, held: &super::cache::Held) {
+        if !held.is_final {
+            return;
+        }
+        match held.last_shown {
+            Some(shown) => self
+                .lifetimes_s
+                .push(shown.saturating_duration_since(held.arrived).as_secs_f64()),
+            None => self.textures_never_shown += 1,
+        }
+    }
 }
 
 /// Object-frames without a valid texture, by cause (the first that applies).

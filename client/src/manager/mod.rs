@@ -255,9 +255,13 @@ impl Manager {
             self.predict_for(scene, k, camera);
             shows.push(match best {
                 Some((i, g)) if g.growth <= SHOWN_STALE * self.config.tolerance => {
-                    let level = self.objects[k].held[i]
-                        .pyramid
-                        .level_for(camera, MAX_TEXEL_PIXELS);
+                    let held = &mut self.objects[k].held;
+                    let now = Some(Instant::now());
+                    held[i].last_shown = now;
+                    if let Some((p, _)) = partner {
+                        held[p].last_shown = now;
+                    }
+                    let level = held[i].pyramid.level_for(camera, MAX_TEXEL_PIXELS);
                     Show::Impostor {
                         texture: i,
                         level,

@@ -52,11 +52,16 @@ pub fn texture_ladder(need: u32) -> u32 {
 }
 
 impl Manager {
-    /// Records the round trip of `pending`, whose final texture has just arrived: in the
-    /// counters, and in the windows the round trip to plan for is taken from.
-    pub(super) fn record_round_trip(&mut self, pending: &Pending) {
-        let ms = pending.sent.elapsed().as_secs_f64() * 1e3;
-        self.counters.latencies_ms.push(ms);
+    /// Records the round trip of `pending`, whose final texture reached the client at
+    /// `arrived` and is taken in now: in the counters (latency to its arrival, and the
+    /// pick-up from there to now), and in the windows the round trip to plan for is
+    /// taken from (to now: when the texture can be used).
+    pub(super) fn record_round_trip(&mut self, pending: &Pending, arrived: Instant) {
+        let ms_between = |from: Instant, to: Instant| to.saturating_duration_since(from).as_secs_f64() * 1e3;
+        let now = Instant::now();
+        self.counters.latencies_ms.push(ms_between(pending.sent, arrived));
+        self.counters.pickup_ms.push(ms_between(arrived, now));
+        let ms = ms_between(pending.sent, now);
         tracing::debug!(
             object = pending.object,
             ms,

@@ -77,16 +77,20 @@ struct Row {
     stall_frac: f64,
     /// Final textures received per client per second of flight.
     textures_per_client_s: f64,
+    /// Seconds from a final texture's arrival to the last frame it was shown in, all
+    /// clients: the impostors' lifetime.
+    lifetime_s_p10: f64,
+    lifetime_s_p50: f64,
     psnr_db_mean: f64,
     psnr_db_min: f64,
 }
 
-const HEADER: &str = "tolerance_px,clients,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,stall_frac,textures_per_client_s,psnr_db_mean,psnr_db_min";
+const HEADER: &str = "tolerance_px,clients,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min";
 
 impl Row {
     fn csv(&self) -> String {
         format!(
-            "{},{},{},{},{},{:.2},{:.2},{:.2},{:.4},{:.3},{:.2},{:.2}",
+            "{},{},{},{},{},{:.2},{:.2},{:.2},{:.4},{:.3},{:.3},{:.3},{:.2},{:.2}",
             self.tolerance_px,
             self.clients,
             self.frames,
@@ -97,6 +101,8 @@ impl Row {
             self.latency_ms_p99,
             self.stall_frac,
             self.textures_per_client_s,
+            self.lifetime_s_p10,
+            self.lifetime_s_p50,
             self.psnr_db_mean,
             self.psnr_db_min
         )
@@ -109,6 +115,8 @@ struct ClientResult {
     frames: u32,
     counters: Counters,
     received: u64,
+    /// Its final textures' lifetimes, seconds.
+    lifetimes_s: Vec<f64>,
     psnr: Vec<f64>,
 }
 
@@ -184,6 +192,7 @@ pub fn run(args: LoadArgs) -> Result<()> {
             .flat_map(|r| r.counters.latencies_ms.clone())
             .collect();
         let psnr: Vec<f64> = results.iter().flat_map(|r| r.psnr.clone()).collect();
+        let lifetimes: Vec<f64> = results.iter().flat_map(|r| r.lifetimes_s.clone()).collect();
         let sum = |f: &dyn Fn(&ClientResult) -> u64| results.iter().map(f).sum::<u64>();
         let (now, predicted) = (
             sum(&|r| r.counters.requests_now),
@@ -201,6 +210,8 @@ pub fn run(args: LoadArgs) -> Result<()> {
             latency_ms_p99: percentile(&latencies, 0.99),
             stall_frac: sum(&|r| r.counters.stale_frames) as f64 / frames as f64,
             textures_per_client_s: sum(&|r| r.received) as f64 / args.clients as f64 / seconds,
+            lifetime_s_p10: percentile(&lifetimes, 0.1),
+            lifetime_s_p50: percentile(&lifetimes, 0.5),
             // NaN (null in JSON) when no frame was compared.
             psnr_db_mean: finite_mean(&psnr).unwrap_or(f64::NAN),
             psnr_db_min: finite_min(&psnr).unwrap_or(f64::NAN),
@@ -306,6 +317,7 @@ fn fly(
         frames: log.frames,
         counters: manager.counters.clone(),
         received,
+        lifetimes_s: manager.texture_lifetimes().0,
         psnr,
     })
 }

@@ -10,7 +10,6 @@ use anyhow::{Context, Result};
 use relief_core::camera::Camera;
 use relief_core::frame::Frame;
 use relief_core::scene::Scene;
-use relief_core::stats::finite_min;
 use relief_lab::image_error::{compare, object_psnr};
 use relief_render::gbuffer::GBuffer;
 use relief_render::geometry::{is_cheap, render_geometry};
@@ -95,10 +94,14 @@ pub(super) fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path
     Ok(judged)
 }
 
-/// The finite minimum of each object's values.
-pub(super) fn min_by_object(values: &BTreeMap<String, Vec<f64>>) -> BTreeMap<String, f64> {
+/// `figure` (a finite minimum, median, …) of each object's values, for the objects that
+/// have one.
+pub(super) fn by_object(
+    values: &BTreeMap<String, Vec<f64>>,
+    figure: fn(&[f64]) -> Option<f64>,
+) -> BTreeMap<String, f64> {
     values
         .iter()
-        .filter_map(|(name, values)| Some((name.clone(), finite_min(values)?)))
+        .filter_map(|(name, values)| Some((name.clone(), figure(values)?)))
         .collect()
 }

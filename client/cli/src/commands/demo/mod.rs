@@ -17,12 +17,12 @@ use relief_client::flight::{Flight, WARM_UP_LIMIT};
 use relief_client::manager::Config;
 use relief_client::source::{local_manager, remote_manager};
 use relief_core::scene::Scene;
-use relief_core::stats::{finite_mean, finite_min, median, percentile};
+use relief_core::stats::{finite_mean, finite_median, finite_min, median, percentile};
 use relief_proto::bundle::bundle_for;
 use relief_render::gbuffer::GBuffer;
 use relief_render::geometry::render_geometry;
 
-use judge::{judge, min_by_object};
+use judge::{by_object, judge};
 use summary::{FrameStages, Summary};
 
 use crate::processes::{LocalService, connect_and_upload, sibling};
@@ -206,6 +206,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     bar.finish_and_clear();
     let judged = judge(&scene, &compared, &args.out)?;
     let counters = &manager.counters;
+    let (lifetimes_s, textures_never_shown) = manager.texture_lifetimes();
     let summary = Summary {
         frames: log.frames,
         path_frames: flight.frames,
@@ -218,6 +219,11 @@ pub fn run(args: DemoArgs) -> Result<()> {
         withdrawn: counters.withdrawn,
         latency_ms_p50: percentile(&counters.latencies_ms, 0.5),
         latency_ms_p99: percentile(&counters.latencies_ms, 0.99),
+        pickup_ms_p50: percentile(&counters.pickup_ms, 0.5),
+        pickup_ms_p99: percentile(&counters.pickup_ms, 0.99),
+        texture_lifetime_s_p10: percentile(&lifetimes_s, 0.1),
+        texture_lifetime_s_p50: percentile(&lifetimes_s, 0.5),
+        textures_never_shown,
         prediction_hits: counters.prediction_hits,
         needs: counters.needs,
         stale_frames: counters.stale_frames,
@@ -232,8 +238,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
         psnr_aa_db_mean: finite_mean(&judged.psnr_aa),
         psnr_aa_db_min: finite_min(&judged.psnr_aa),
         geometry_psnr_aa_db_min: finite_min(&judged.geometry_psnr_aa),
-        psnr_aa_db_min_by_object: min_by_object(&judged.by_object),
-        geometry_psnr_aa_db_min_by_object: min_by_object(&judged.geometry_by_object),
+        psnr_aa_db_min_by_object: by_object(&judged.by_object, finite_min),
+        geometry_psnr_aa_db_min_by_object: by_object(&judged.geometry_by_object, finite_min),
+        psnr_aa_db_median_by_object: by_object(&judged.by_object, finite_median),
+        geometry_psnr_aa_db_median_by_object: by_object(&judged.geometry_by_object, finite_median),
         rtt_ms: args.rtt_ms,
         predict: !args.no_predict,
         tolerance: args.tolerance,

@@ -52,8 +52,17 @@ pub(super) struct Summary {
     pub(super) requests_now: u64,
     pub(super) requests_predicted: u64,
     pub(super) withdrawn: u64,
+    /// Request sent → final texture received by the client.
     pub(super) latency_ms_p50: f64,
     pub(super) latency_ms_p99: f64,
+    /// Final texture received → taken in by a frame.
+    pub(super) pickup_ms_p50: f64,
+    pub(super) pickup_ms_p99: f64,
+    /// Seconds from a final texture's arrival to the last frame it was shown in.
+    pub(super) texture_lifetime_s_p10: f64,
+    pub(super) texture_lifetime_s_p50: f64,
+    /// Final textures never shown.
+    pub(super) textures_never_shown: u64,
     /// Needed textures already there or in flight, and the needs counted.
     pub(super) prediction_hits: u64,
     pub(super) needs: u64,
@@ -85,6 +94,9 @@ pub(super) struct Summary {
     /// … and the floor for it: the object drawn as exact geometry, one sample per
     /// pixel, against the anti-aliased reference.
     pub(super) geometry_psnr_aa_db_min_by_object: BTreeMap<String, f64>,
+    /// The median of the same, per object, for the impostor and for exact geometry.
+    pub(super) psnr_aa_db_median_by_object: BTreeMap<String, f64>,
+    pub(super) geometry_psnr_aa_db_median_by_object: BTreeMap<String, f64>,
     pub(super) rtt_ms: u64,
     pub(super) predict: bool,
     pub(super) tolerance: f32,
