@@ -45,7 +45,10 @@ fn the_demo_flies_and_summarises() {
     // Latency to arrival, and pick-up from there, both measured; the textures lived
     // a while (shown over more than three frames, 0.1 s).
     for key in ["latency_ms_p50", "pickup_ms_p50"] {
-        assert!(summary[key].as_f64().is_some_and(|v| v >= 0.0), "{key}: {summary}");
+        assert!(
+            summary[key].as_f64().is_some_and(|v| v >= 0.0),
+            "{key}: {summary}"
+        );
     }
     let lifetime = summary["texture_lifetime_s_p50"].as_f64().unwrap();
     assert!(lifetime > 0.1, "{summary}");
