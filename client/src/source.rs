@@ -12,6 +12,7 @@ use relief_core::hash::ContentHash;
 use relief_core::scene::Scene;
 use relief_proto::convert::{texture_from_pb, vec3_to_pb};
 use relief_proto::pb;
+use relief_render::impostor::Faces;
 use relief_trace::bake;
 use relief_trace::tracer::ObjectTracer;
 
@@ -37,6 +38,15 @@ fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::I
     }
 }
 
+/// What a request to the server is made of besides itself: the scene's hash there, the
+/// faces its object shows, and the half round trip injected each way.
+#[derive(Clone, Copy)]
+struct Served {
+    scene_hash: ContentHash,
+    faces: Faces,
+    half: Duration,
+}
+
 /// Serves `commands` with `remote` on the current tokio runtime; `rtt` is added to
 /// every exchange (half each way). A request the server cannot take (unreachable)
 /// goes to the local generator instead.
@@ -50,10 +60,11 @@ pub fn spawn_remote(
 ) {
     let half = rtt / 2;
     let (local_tx, local_rx) = unbounded_channel();
-    spawn_local(scene, local_rx, arrivals.clone());
+    spawn_local(scene.clone(), local_rx, arrivals.clone());
     tokio::spawn(async move {
         while let Some(command) = commands.recv().await {
             let mut remote = remote.clone();
+            let scene = scene.clone();
             let arrivals = arrivals.clone();
             let local = local_tx.clone();
             tokio::spawn(async move {
@@ -64,7 +75,13 @@ pub fn spawn_remote(
                         let _ = local.send(Command::Withdraw(ids));
                     }
                     Command::Request(request) => {
-                        serve_request(&mut remote, request, scene_hash, &arrivals, &local, half).await;
+                        let faces = scene.object(&request.object).map_or(Faces::Both, Faces::of);
+                        let from = Served {
+                            scene_hash,
+                            faces,
+                            half,
+                        };
+                        serve_request(&mut remote, request, from, &arrivals, &local).await;
                     }
                 }
             });
@@ -78,10 +95,13 @@ pub fn spawn_remote(
 async fn serve_request(
     remote: &mut Remote,
     request: TextureRequest,
-    scene_hash: ContentHash,
+    Served {
+        scene_hash,
+        faces,
+        half,
+    }: Served,
     arrivals: &UnboundedSender<Arrival>,
     local: &UnboundedSender<Command>,
-    half: Duration,
 ) {
     let id = request.id;
     let fail = |reason: String| {
@@ -106,7 +126,7 @@ async fn serve_request(
                     Some(Ok(texture)) => {
                         let _ = arrivals.send(Arrival::Texture {
                             id,
-                            texture: Box::new(ReadyTexture::new(texture)),
+                            texture: Box::new(ReadyTexture::new(texture, faces)),
                             is_final: result.r#final,
                         });
                     }
@@ -182,7 +202,7 @@ pub fn spawn_local(
                         match pool.install(|| bake(tracer, request.eye, request.size, request.depth_bits)) {
                             Ok(texture) => Arrival::Texture {
                                 id: request.id,
-                                texture: Box::new(ReadyTexture::new(texture)),
+                                texture: Box::new(ReadyTexture::new(texture, Faces::of(object))),
                                 is_final: true,
                             },
                             Err(e) => Arrival::Failed {

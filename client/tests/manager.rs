@@ -389,7 +389,7 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
         Duration::from_millis(80),
     );
     std::thread::sleep(to_arrival);
-    let ready = ReadyTexture::new(texture);
+    let ready = ReadyTexture::new(texture, relief_render::impostor::Faces::Front);
     std::thread::sleep(to_pickup);
     arrivals
         .send(Arrival::Texture {

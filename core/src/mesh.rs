@@ -3,6 +3,7 @@
 use std::sync::Arc;
 
 use glam::{Affine3A, Mat3, Vec2, Vec3};
+use rayon::prelude::*;
 
 use crate::bounds::Aabb;
 
@@ -143,6 +144,34 @@ impl Mesh {
             }
         }
         Ok(())
+    }
+
+    /// Whether the mesh is closed: every edge is shared by exactly two triangles, so it
+    /// bounds a solid and no back face of it can show from outside. Vertices within a
+    /// millionth of the mesh's size of one another count as one (a generator's faces
+    /// may each keep their own copy of a seam, a rounding apart); a mesh whose seams do
+    /// not meet counts as open, the safe answer.
+    pub fn is_closed(&self) -> bool {
+        let bounds = self.bounds();
+        let cell = (bounds.extent().length() * 1e-6).max(f32::MIN_POSITIVE);
+        let key = |p: Vec3| ((p - bounds.min) / cell).round().to_array().map(|c| c as i64);
+        let mut canonical: std::collections::HashMap<[i64; 3], u32> =
+            std::collections::HashMap::with_capacity(self.positions.len());
+        let ids: Vec<u32> = self
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(k, &p)| *canonical.entry(key(p)).or_insert(k as u32))
+            .collect();
+        let mut edges: Vec<u64> = self
+            .triangles
+            .iter()
+            .map(|t| t.map(|v| ids.get(v as usize).copied().unwrap_or(v)))
+            .flat_map(|[a, b, c]| [(a, b), (b, c), (c, a)])
+            .map(|(p, q)| (u64::from(p.min(q)) << 32) | u64::from(p.max(q)))
+            .collect();
+        edges.par_sort_unstable();
+        !edges.is_empty() && edges.chunk_by(|x, y| x == y).all(|shared| shared.len() == 2)
     }
 
     /// Bounds of the vertices that triangles use.

@@ -13,7 +13,7 @@ use relief_trace::tracer::ObjectTracer;
 
 use relief_render::gbuffer::GBuffer;
 use relief_render::geometry::{GeometryReason, geometry_reason, near_plane};
-use relief_render::impostor::Impostor;
+use relief_render::impostor::{Faces, Impostor};
 use relief_render::pyramid::{MAX_TEXEL_PIXELS, MIN_LEVEL_EDGE, Pyramid};
 use relief_render::raster::rasterize;
 use relief_render::validity::schaufler::resolution_for;
@@ -78,7 +78,7 @@ impl FramePlan {
                 let texture = bake(&ObjectTracer::new(object), source_eye, size, bits).ok();
                 let impostor = texture.map(|texture| ImpostorObject {
                     index: k as u32,
-                    pyramid: Pyramid::new(texture, MIN_LEVEL_EDGE),
+                    pyramid: Pyramid::new(texture, MIN_LEVEL_EDGE).with_faces(Faces::of(object)),
                     source_eye,
                 });
                 (k, impostor)

@@ -470,3 +470,50 @@ fn a_silhouette_lies_where_its_samples_put_it() {
         );
     }
 }
+
+/// A closed surface shows no back face: the knot's impostor, drawn with only its front
+/// faces, leaves out the texels its texture's eye saw that this eye sees from behind —
+/// which, drawn, landed past the silhouette as fringes (the pixels only the impostor
+/// covers) and showed surfaces turned away from the eye.
+#[test]
+fn a_closed_surface_shows_no_back_face() {
+    use relief_render::gbuffer::GBuffer;
+    use relief_render::impostor::Faces;
+    use relief_render::raster::rasterize;
+    use relief_render::warp::{Variant, display};
+
+    let scene = Scene::load("default").expect("default scene");
+    let solo = Solo::new(&scene, "knot", 3.0).expect("solo");
+    assert!(solo.scene.objects[0].is_closed(), "the knot is a closed tube");
+    let size = 256;
+    let eye = solo.eye(12.0);
+    let camera = solo.camera(eye, size).expect("orbit camera");
+    let texture = solo.bake(solo.eye(0.0), 256, DepthBits::Eight).expect("bake");
+    let mut exact = GBuffer::new(size, size);
+    rasterize(&[(0, &solo.scene.objects[0])], &camera, 0.01, &mut exact);
+    let count = |faces: Faces| {
+        let impostor = Impostor::new(texture.clone()).with_faces(faces);
+        let mut shown = GBuffer::new(size, size);
+        display(Variant::Interleaved, &impostor, 0, &camera, &mut shown).expect("display");
+        let (mut fringe, mut turned_away) = (0, 0);
+        for y in 0..size {
+            for x in 0..size {
+                let pixel = shown.get(x, y);
+                if !pixel.is_covered() {
+                    continue;
+                }
+                fringe += usize::from(!exact.get(x, y).is_covered());
+                let ray = camera.ray(x as f32 + 0.5, y as f32 + 0.5);
+                turned_away += usize::from(pixel.normal.dot(ray) > 0.05 * ray.length());
+            }
+        }
+        (fringe, turned_away)
+    };
+    let (both, front) = (count(Faces::Both), count(Faces::Front));
+    eprintln!("both faces: {both:?} (fringe, turned away); front only: {front:?}");
+    assert!(
+        front.1 * 10 <= both.1 && front.1 <= 20,
+        "turned away: {front:?} vs {both:?}"
+    );
+    assert!(front.0 < both.0, "fringe: {front:?} vs {both:?}");
+}

@@ -5,6 +5,30 @@ use glam::Vec3;
 
 use relief_core::relief::{ReliefTexture, decode_normal_rgb8};
 
+/// Which sides of an object's surfaces can show.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Faces {
+    /// Both: open surfaces (leaves, a plane) show their back from behind.
+    #[default]
+    Both,
+    /// The front only: a closed surface ([`Mesh::is_closed`](relief_core::mesh::Mesh::is_closed))
+    /// hides its back. The pre-warp leaves out texels turned away from the eye — seen
+    /// by the texture's eye, hidden from this one — which would otherwise land past the
+    /// silhouette as fringes.
+    Front,
+}
+
+impl Faces {
+    /// The faces of `object` that can show: the front only for a closed surface.
+    pub fn of(object: &relief_core::scene::SceneObject) -> Faces {
+        if object.is_closed() {
+            Faces::Front
+        } else {
+            Faces::Both
+        }
+    }
+}
+
 /// A relief texture and its texel connectivity.
 ///
 /// Two neighbouring texels belong to one surface when their depth difference is what
@@ -21,6 +45,8 @@ pub struct Impostor {
     /// Texel `k`'s albedo, encoded normal and depth level packed in one word: all the
     /// pre-warp reads of a texel, in one load (measured: 8 % of its time).
     pub packed: Vec<u64>,
+    /// Which sides of the surfaces can show.
+    pub faces: Faces,
 }
 
 /// Slack on the slope test: a surface may bend this much within one texel.
@@ -74,6 +100,12 @@ impl Impostor {
             right,
             down,
             packed,
+            faces: Faces::Both,
         }
+    }
+
+    /// The same impostor, showing `faces`.
+    pub fn with_faces(self, faces: Faces) -> Impostor {
+        Impostor { faces, ..self }
     }
 }

@@ -40,6 +40,17 @@ impl Pyramid {
         Pyramid { levels }
     }
 
+    /// The same pyramid, every level showing `faces` (see [`Impostor::with_faces`]).
+    pub fn with_faces(self, faces: crate::impostor::Faces) -> Pyramid {
+        Pyramid {
+            levels: self
+                .levels
+                .into_iter()
+                .map(|level| level.with_faces(faces))
+                .collect(),
+        }
+    }
+
     /// The coarsest level fine enough for `camera` (texel angle ≤ `k` pixel angles),
     /// or the finest when none is.
     pub fn level_for(&self, camera: &Camera, k: f32) -> usize {

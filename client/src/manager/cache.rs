@@ -8,6 +8,7 @@ use glam::Vec3;
 use relief_core::camera::Camera;
 use relief_core::relief::ReliefTexture;
 use relief_core::scene::Scene;
+use relief_render::impostor::Faces;
 use relief_render::pyramid::Pyramid;
 use relief_render::validity::critical::CriticalPoints;
 use relief_render::warp::params::WarpParams;
@@ -30,8 +31,9 @@ pub struct ReadyTexture {
 }
 
 impl ReadyTexture {
-    /// Makes `texture`, which has just reached the client, ready for the frame loop.
-    pub fn new(texture: ReliefTexture) -> ReadyTexture {
+    /// Makes `texture`, which has just reached the client, ready for the frame loop,
+    /// showing `faces` of its object's surfaces.
+    pub fn new(texture: ReliefTexture, faces: Faces) -> ReadyTexture {
         let arrived = Instant::now();
         let critical = CriticalPoints::find(&texture, CRITICAL_REGIONS, CRITICAL_REGIONS);
         let baseline = WarpParams::new(&texture, texture.eye).map_or_else(
@@ -39,7 +41,7 @@ impl ReadyTexture {
             |params| critical.region_gaps(&params),
         );
         ReadyTexture {
-            pyramid: Pyramid::new(texture, MIN_LEVEL_EDGE),
+            pyramid: Pyramid::new(texture, MIN_LEVEL_EDGE).with_faces(faces),
             critical,
             baseline,
             arrived,

@@ -158,6 +158,14 @@ mod tests {
         assert_eq!(plane.triangle_count(), 18);
         assert_sound(&plane);
         assert!(plane.face_normal(0).abs_diff_eq(glam::Vec3::Y, 1e-6));
+        // Solids are closed (no back face can show); the plane and the tree's leaves
+        // are not.
+        let closed = [&sphere, &rock, &knot, &tree, &plane].map(|m| m.is_closed());
+        assert_eq!(closed, [true, true, true, false, false]);
+        // One triangle fewer opens a solid.
+        let mut holed = sphere.clone();
+        holed.triangles.pop();
+        assert!(!holed.is_closed());
     }
 
     #[test]

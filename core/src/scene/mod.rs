@@ -81,15 +81,25 @@ pub struct SceneObject {
     pub specular: Specular,
     /// Content hash of the world-space mesh.
     pub hash: ContentHash,
+    /// [`SceneObject::is_closed`], found the first time it is asked (only a client
+    /// drawing impostors needs it, and it costs a pass over the mesh).
+    closed: std::sync::OnceLock<bool>,
 }
 
 impl SceneObject {
+    /// Whether the mesh is closed ([`Mesh::is_closed`]): from outside, its back faces
+    /// never show.
+    pub fn is_closed(&self) -> bool {
+        *self.closed.get_or_init(|| self.mesh.is_closed())
+    }
+
     /// Places `mesh` (already in world space) in a scene object.
     pub fn new(name: impl Into<String>, mesh: Mesh, specular: Specular) -> Self {
         SceneObject {
             name: name.into(),
             bounds: mesh.bounds(),
             hash: mesh_hash(&mesh),
+            closed: std::sync::OnceLock::new(),
             mesh: Arc::new(mesh),
             specular,
         }

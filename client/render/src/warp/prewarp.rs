@@ -29,13 +29,13 @@
 use wide::bytemuck::cast;
 use wide::{i16x8, u8x16, u16x8, u64x2};
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use relief_core::camera::Camera;
 use relief_core::relief::SourceCamera;
 
 use super::params::WarpParams;
 use crate::EMPTY_DEPTH;
-use crate::impostor::Impostor;
+use crate::impostor::{Faces, Impostor};
 
 /// Pre-warp sampling variant.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -498,6 +498,21 @@ impl Job<'_> {
         let (right, down) = (&impostor.right[row.clone()], &impostor.down[row]);
         let empty = texture.depth_bits.empty();
         let v = j as f32 + 0.5;
+        // With the back faces hidden, the eye seen from this row's texels (before their
+        // column and depth): a texel is turned away when its normal points away from it.
+        let facing = (impostor.faces == Faces::Front).then(|| {
+            let c = &texture.camera;
+            (p.eye - c.origin - c.b * v, c.a, c.f)
+        });
+        let turned_away = |i: usize, texel: u64, q: u16| {
+            facing.is_some_and(|(row_eye, a, f)| {
+                let to_eye = row_eye - a * (i as f32 + 0.5) - f * p.depth[q as usize];
+                let [_, _, _, x, y, z, ..] = texel.to_le_bytes();
+                // (The encoded normal, `n·127.5 + 127.5`: its direction is enough.)
+                let n = Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5);
+                n.dot(to_eye) < 0.0
+            })
+        };
         // The previous texel visited, and whether it is there and connected to the next.
         let mut previous = RowSample {
             source: 0.0,
@@ -522,7 +537,7 @@ impl Job<'_> {
             let i = visited::<RIGHT>(&texels, step);
             let texel = packed[i];
             let q = level_of(texel);
-            if q == empty {
+            if q == empty || turned_away(i, texel, q) {
                 if in_run {
                     close(&previous, open_start, last_gap, sink);
                     in_run = false;
