@@ -1,14 +1,15 @@
-//! `relief load` on 127.0.0.1: simulated clients per tolerance, a CSV row each, plots.
+//! `relief load` on 127.0.0.1: simulated clients per count and tolerance, a CSV row
+//! each, plots against the impostors' lifetime.
 
 use relief_tests::{relief, scratch};
 
 #[test]
-fn load_runs_write_a_row_per_tolerance_and_plots() {
+fn load_runs_write_a_row_per_client_count_and_tolerance_and_plots() {
     let out = scratch("load");
     let run = relief(&[
         "load",
         "--clients",
-        "2",
+        "1,2",
         "--tolerances",
         "8,64",
         "--frames",
@@ -24,19 +25,22 @@ fn load_runs_write_a_row_per_tolerance_and_plots() {
     assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
     let rows: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
     let rows = rows.as_array().unwrap();
-    assert_eq!(rows.len(), 2);
+    // Each client count in turn, each through the tolerances.
+    assert_eq!(rows.len(), 4);
     let requests = |row: &serde_json::Value| {
         row["requests_now"].as_u64().unwrap() + row["requests_predicted"].as_u64().unwrap()
     };
-    for row in rows {
-        assert_eq!(row["clients"], 2);
-        // Frames drawn by both clients: a slow frame skips path frames.
+    for (row, (clients, tolerance)) in rows.iter().zip([(1, 8.0), (1, 64.0), (2, 8.0), (2, 64.0)]) {
+        assert_eq!(row["clients"], clients, "{row}");
+        assert_eq!(row["tolerance_px"].as_f64(), Some(tolerance), "{row}");
+        // Frames drawn by all the clients: a slow frame skips path frames.
         let frames = row["frames"].as_u64().unwrap();
-        assert!((20..=40).contains(&frames), "{row}");
+        assert!((10 * clients..=20 * clients).contains(&frames), "{row}");
+        assert!(row.get("lifetime_s_p50").is_some(), "{row}");
     }
     // The tight tolerance needs new textures on this path; the loose one lives longer,
     // so it needs no more (on so short a path, often none: then no latency either).
-    let (tight, loose) = (&rows[0], &rows[1]);
+    let (tight, loose) = (&rows[2], &rows[3]);
     assert_eq!(
         (tight["tolerance_px"].as_f64(), loose["tolerance_px"].as_f64()),
         (Some(8.0), Some(64.0))
@@ -45,7 +49,7 @@ fn load_runs_write_a_row_per_tolerance_and_plots() {
     assert!(tight["latency_ms_p50"].as_f64().unwrap() > 0.0, "{tight}");
     assert!(requests(loose) <= requests(tight), "{loose} vs {tight}");
     let csv = std::fs::read_to_string(out.join("load.csv")).unwrap();
-    assert_eq!(csv.lines().count(), 3, "{csv}");
+    assert_eq!(csv.lines().count(), 5, "{csv}");
     assert!(csv.starts_with("tolerance_px,clients,frames,"));
     for plot in ["load_latency.png", "load_stalls.png"] {
         assert!(out.join(plot).is_file(), "{plot} missing");

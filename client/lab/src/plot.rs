@@ -30,17 +30,19 @@ pub fn register_font() -> Result<(), PlotError> {
 
 /// How a chart is laid out: its title, axis names (with units), and whether x is on a
 /// log scale. `colour` picks a series' palette entry by its name (`None`: by position),
-/// so that one series keeps its colour across charts.
+/// so that one series keeps its colour across charts; `point_label` names a point by
+/// its key (`None`: unnamed).
 pub struct Chart<'a> {
     pub title: &'a str,
     pub x_desc: &'a str,
     pub y_desc: &'a str,
     pub log_x: bool,
     pub colour: &'a dyn Fn(&str) -> Option<usize>,
+    pub point_label: &'a dyn Fn(i64) -> Option<String>,
 }
 
-/// Palette entries reserved for series coloured by name (the report's geometry and
-/// eleven methods); the others follow.
+/// Colours reserved for series coloured by name (the report's geometry and eleven
+/// methods); the others take the next.
 pub const NAMED_COLOURS: usize = 12;
 
 impl Chart<'_> {
@@ -92,8 +94,7 @@ impl Chart<'_> {
                         .draw()
                         .map_err(|e| fail(&e))?;
                     for (i, (name, s)) in series.iter().enumerate() {
-                        let colour =
-                            Palette99::pick((self.colour)(name).unwrap_or(NAMED_COLOURS + i)).to_rgba();
+                        let colour = strong_colour((self.colour)(name).unwrap_or(NAMED_COLOURS + i));
                         let pts: Vec<(f64, f64)> = s.values().copied().collect();
                         chart
                             .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
@@ -104,6 +105,14 @@ impl Chart<'_> {
                             });
                         chart
                             .draw_series(pts.iter().map(|&p| Circle::new(p, 3, colour.filled())))
+                            .map_err(|e| fail(&e))?;
+                        let labels = s
+                            .iter()
+                            .filter_map(|(&key, &p)| Some((p, (self.point_label)(key)?)));
+                        chart
+                            .draw_series(labels.map(|(p, text)| {
+                                Text::new(text, p, ("sans-serif", 13).into_font().color(&colour))
+                            }))
                             .map_err(|e| fail(&e))?;
                     }
                     chart
@@ -124,6 +133,33 @@ impl Chart<'_> {
         }
         save(path, &buffer, w, h)
     }
+}
+
+/// Saturated colours, each far from the others and from the white background (the
+/// stock palettes hold pale ones that vanish on white): series get them in turn.
+const STRONG: [(u8, u8, u8); 16] = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (80, 80, 80),
+    (188, 189, 34),
+    (23, 190, 207),
+    (0, 0, 128),
+    (128, 0, 0),
+    (0, 100, 0),
+    (255, 0, 255),
+    (0, 0, 0),
+    (205, 133, 0),
+];
+
+/// The `k`-th of [`STRONG`], round again past the last.
+fn strong_colour(k: usize) -> RGBAColor {
+    let (r, g, b) = STRONG[k % STRONG.len()];
+    RGBColor(r, g, b).to_rgba()
 }
 
 /// Height of a strip's row of column names, pixels.

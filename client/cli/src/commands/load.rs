@@ -2,6 +2,7 @@
 //! for each error tolerance (hence impostor lifetime): how request latency, stalls and
 //! image error move. Writes `load.csv` and plots.
 
+use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -29,9 +30,10 @@ pub struct LoadArgs {
     /// Built-in scene name, .toml scene file, or .obj file.
     #[arg(long, default_value = "default")]
     scene: String,
-    /// Simulated clients, each on its own place along the camera path.
-    #[arg(long, default_value = "8", value_parser = clap::value_parser!(u32).range(1..=256))]
-    clients: u32,
+    /// Simulated clients, each on its own place along the camera path; a list
+    /// (comma-separated) runs each count in turn, to find where the workers saturate.
+    #[arg(long, default_value = "8", value_delimiter = ',', value_parser = clap::value_parser!(u32).range(1..=256))]
+    clients: Vec<u32>,
     /// Tolerances (pixels of predicted gap growth) to run, comma-separated.
     #[arg(long, default_value = "4,8,16,32,64", value_delimiter = ',', allow_hyphen_values = true, value_parser = crate::args::positive)]
     tolerances: Vec<f32>,
@@ -121,34 +123,122 @@ struct ClientResult {
 }
 
 pub fn run(args: LoadArgs) -> Result<()> {
-    // (Each is positive: `args::positive` parsed it.)
-    if args.tolerances.is_empty() {
-        bail!("--tolerances must list at least one number of pixels");
+    // (Each is positive: `args::positive` parsed it, and the counts' parser too.)
+    if args.tolerances.is_empty() || args.clients.is_empty() {
+        bail!("--tolerances and --clients must each list at least one number");
     }
     let scene = Arc::new(Scene::load(&args.scene)?);
-    let path_frames = scene.path.frame_count().max(1);
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-    let tracer = Arc::new(SceneTracer::new(&scene));
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()?;
-    let bar = progress::bar(args.tolerances.len() as u64, "load runs");
+    let setup = Setup {
+        tracer: Arc::new(SceneTracer::new(&scene)),
+        bundle: bundle_for(&args.scene)?,
+        scene,
+        runtime: tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()?,
+        args: &args,
+    };
+    let bar = progress::bar((args.clients.len() * args.tolerances.len()) as u64, "load runs");
     let mut rows = Vec::new();
-    let bundle = bundle_for(&args.scene)?;
-    for &tolerance in &args.tolerances {
-        bar.set_message(format!("tolerance {tolerance} px"));
+    for &clients in &args.clients {
+        for &tolerance in &args.tolerances {
+            bar.set_message(format!("{clients} clients, tolerance {tolerance} px"));
+            rows.push(setup.measure(clients, tolerance)?);
+            bar.inc(1);
+        }
+    }
+    bar.finish_and_clear();
+    let mut csv = String::from(HEADER) + "\n";
+    for row in &rows {
+        csv += &row.csv();
+        csv.push('\n');
+    }
+    std::fs::write(args.out.join("load.csv"), csv).context("writing load.csv")?;
+    register_font()?;
+    // Each curve one client count, through its tolerances (points named by them),
+    // against the impostors' lifetime those tolerances gave.
+    let curves = |value: &dyn Fn(&Row) -> f64, what: &str| -> BTreeMap<String, Curve> {
+        let mut curves: BTreeMap<String, Curve> = BTreeMap::new();
+        for row in &rows {
+            let (x, y) = (row.lifetime_s_p50, value(row));
+            if x.is_finite() && x > 0.0 && y.is_finite() {
+                let name = match row.clients {
+                    1 => format!("  1 client{what}"),
+                    n => format!("{n:>3} clients{what}"),
+                };
+                curves
+                    .entry(name)
+                    .or_default()
+                    .insert((row.tolerance_px * 1000.0) as i64, (x, y));
+            }
+        }
+        curves
+    };
+    let tolerance_label = |key: i64| Some(format!("{} px", key as f64 / 1000.0));
+    let title = format!(
+        "{} workers, RTT +{} ms; points: tolerance",
+        args.workers, args.rtt_ms
+    );
+    let lifetime_axis = "impostor lifetime, p50 (s, log): arrival to the last frame shown";
+    let mut latency = curves(&|r| r.latency_ms_p50, ", p50");
+    latency.extend(curves(&|r| r.latency_ms_p99, ", p99"));
+    Chart {
+        title: &format!("Request latency vs impostor lifetime ({title})"),
+        x_desc: lifetime_axis,
+        y_desc: "request latency (ms)",
+        log_x: true,
+        colour: &|_| None,
+        point_label: &tolerance_label,
+    }
+    .draw(&args.out.join("load_latency.png"), &latency)?;
+    let mut stalls = curves(&|r| 100.0 * r.stall_frac, ": stalled frames (%)");
+    stalls.extend(curves(&|r| r.psnr_db_mean, ": PSNR mean (dB)"));
+    Chart {
+        title: &format!("Stalls and image error vs impostor lifetime ({title})"),
+        x_desc: lifetime_axis,
+        y_desc: "stalled frames (%) · PSNR (dB)",
+        log_x: true,
+        colour: &|_| None,
+        point_label: &tolerance_label,
+    }
+    .draw(&args.out.join("load_stalls.png"), &stalls)?;
+    if args.json {
+        println!("{}", serde_json::to_string(&rows)?);
+    } else {
+        println!("{HEADER}");
+        for row in &rows {
+            println!("{}", row.csv());
+        }
+    }
+    Ok(())
+}
+
+/// What every measured point shares.
+struct Setup<'a> {
+    scene: Arc<Scene>,
+    tracer: Arc<SceneTracer>,
+    bundle: relief_proto::bundle::Bundle,
+    runtime: tokio::runtime::Runtime,
+    args: &'a LoadArgs,
+}
+
+impl Setup<'_> {
+    /// One point: a fresh server and workers, `clients` clients flying at `tolerance`.
+    fn measure(&self, clients: u32, tolerance: f32) -> Result<Row> {
+        let args = self.args;
+        let path_frames = self.scene.path.frame_count().max(1);
         let service = LocalService::start(&args.out, args.workers)?;
-        let (remote, hash) = runtime.block_on(connect_and_upload(
+        let (remote, hash) = self.runtime.block_on(connect_and_upload(
             &service.url,
             None,
             None,
             "load",
-            &bundle,
+            &self.bundle,
             Some(args.workers),
         ))?;
         let started = Instant::now();
-        let handles: Vec<_> = (0..args.clients)
+        let handles: Vec<_> = (0..clients)
             .map(|c| {
                 let mut remote = remote.clone();
                 remote.client_id = format!("load-{c}");
@@ -157,13 +247,19 @@ pub fn run(args: LoadArgs) -> Result<()> {
                     ..Config::default()
                 };
                 let mut manager = {
-                    let _guard = runtime.enter();
-                    remote_manager(&scene, config, remote, hash, Duration::from_millis(args.rtt_ms))
+                    let _guard = self.runtime.enter();
+                    remote_manager(
+                        &self.scene,
+                        config,
+                        remote,
+                        hash,
+                        Duration::from_millis(args.rtt_ms),
+                    )
                 };
-                let scene = scene.clone();
-                let tracer = tracer.clone();
+                let scene = self.scene.clone();
+                let tracer = self.tracer.clone();
                 let (frames, fps, size, every) = (args.frames, args.fps, args.size, args.reference_every);
-                let start = c * path_frames / args.clients;
+                let start = c * path_frames / clients;
                 std::thread::spawn(move || {
                     let flight = Flight {
                         scene: &scene,
@@ -199,9 +295,9 @@ pub fn run(args: LoadArgs) -> Result<()> {
             sum(&|r| r.counters.requests_predicted),
         );
         let frames = sum(&|r| r.frames as u64);
-        rows.push(Row {
+        Ok(Row {
             tolerance_px: tolerance,
-            clients: args.clients,
+            clients,
             frames,
             requests_now: now,
             requests_predicted: predicted,
@@ -209,82 +305,14 @@ pub fn run(args: LoadArgs) -> Result<()> {
             latency_ms_p50: percentile(&latencies, 0.5),
             latency_ms_p99: percentile(&latencies, 0.99),
             stall_frac: sum(&|r| r.counters.stale_frames) as f64 / frames as f64,
-            textures_per_client_s: sum(&|r| r.received) as f64 / args.clients as f64 / seconds,
+            textures_per_client_s: sum(&|r| r.received) as f64 / clients as f64 / seconds,
             lifetime_s_p10: percentile(&lifetimes, 0.1),
             lifetime_s_p50: percentile(&lifetimes, 0.5),
             // NaN (null in JSON) when no frame was compared.
             psnr_db_mean: finite_mean(&psnr).unwrap_or(f64::NAN),
             psnr_db_min: finite_min(&psnr).unwrap_or(f64::NAN),
-        });
-        bar.inc(1);
+        })
     }
-    bar.finish_and_clear();
-    let mut csv = String::from(HEADER) + "\n";
-    for row in &rows {
-        csv += &row.csv();
-        csv.push('\n');
-    }
-    std::fs::write(args.out.join("load.csv"), csv).context("writing load.csv")?;
-    register_font()?;
-    let series = |name: &str, value: &dyn Fn(&Row) -> f64| -> (String, Curve) {
-        let points = rows
-            .iter()
-            .map(|r| {
-                (
-                    (r.tolerance_px * 1000.0) as i64,
-                    (r.tolerance_px as f64, value(r)),
-                )
-            })
-            .filter(|(_, (_, y))| y.is_finite())
-            .collect();
-        (name.to_string(), points)
-    };
-    let title = format!(
-        "{} clients, {} workers, RTT +{} ms",
-        args.clients, args.workers, args.rtt_ms
-    );
-    Chart {
-        title: &format!("Request latency vs tolerance ({title})"),
-        x_desc: "tolerance (pixels of gap growth; larger = longer impostor life, log)",
-        y_desc: "latency (ms)",
-        log_x: true,
-        colour: &|_| None,
-    }
-    .draw(
-        &args.out.join("load_latency.png"),
-        &[
-            series("p50", &|r| r.latency_ms_p50),
-            series("p99", &|r| r.latency_ms_p99),
-        ]
-        .into_iter()
-        .collect(),
-    )?;
-    Chart {
-        title: &format!("Stalls, PSNR and request rate vs tolerance ({title})"),
-        x_desc: "tolerance (pixels of gap growth, log)",
-        y_desc: "% stalled frames · PSNR dB · requests/s",
-        log_x: true,
-        colour: &|_| None,
-    }
-    .draw(
-        &args.out.join("load_stalls.png"),
-        &[
-            series("stalled frames (%)", &|r| 100.0 * r.stall_frac),
-            series("PSNR mean (dB)", &|r| r.psnr_db_mean),
-            series("requests per second", &|r| r.requests_per_s),
-        ]
-        .into_iter()
-        .collect(),
-    )?;
-    if args.json {
-        println!("{}", serde_json::to_string(&rows)?);
-    } else {
-        println!("{HEADER}");
-        for row in &rows {
-            println!("{}", row.csv());
-        }
-    }
-    Ok(())
 }
 
 /// One simulated client: flies `flight`; client 0 also draws every `every`-th frame

@@ -31,6 +31,7 @@ pub fn plot_error_vs_time(rows: &[Row], options: &Options, path: &Path) -> Resul
         y_desc: "PSNR (dB)",
         log_x: true,
         colour: &series_colour,
+        point_label: &|_| None,
     }
     .draw(path, &series)
 }
@@ -50,6 +51,7 @@ pub fn plot_error_vs_angle(rows: &[Row], options: &Options, path: &Path) -> Resu
         y_desc: "PSNR (dB)",
         log_x: false,
         colour: &series_colour,
+        point_label: &|_| None,
     }
     .draw(path, &series)
 }
