@@ -273,47 +273,26 @@ fn half_gap(gap: f32) -> f32 {
     0.5 * gap.clamp(-1.0, 1.0)
 }
 
-/// Ends a run of the row pass whose last sample lands at `u` with `cell`: a run of one
-/// sample (`open_start`) produces the pixel it lands in; a longer one, whose last span
-/// was `last_gap` long, the pixels within half of that ahead of its last sample. (Once a
-/// run, not per texel: kept out of the row pass's inlined code, whose every `emit` is a
-/// column step.)
+/// A run's last sample, landing at `pos`, draws its share ahead of it: with `put(pixel)`,
+/// the pixel it lands in when the run has no span (`last_gap` NaN: the sample is alone),
+/// else the pixels within half of the run's last span, `last_gap`, ahead ([`half_gap`]).
+/// Visited as in [`between`], up to `end`. (Once a run, not per sample: kept out of the
+/// passes' inlined code, whose every pixel is a column step.)
 #[inline(never)]
-fn close_run<const RIGHT: bool>(
-    u: f32,
-    cell: &Cell,
-    open_start: bool,
-    last_gap: f32,
-    end: i64,
-    sink: &mut impl RowSink,
-) {
-    if open_start {
-        sink.emit(u.floor() as i64, *cell);
+fn reach_ahead<const FORWARDS: bool>(pos: f32, last_gap: f32, end: i64, mut put: impl FnMut(i64)) {
+    if last_gap.is_nan() {
+        put(pos.floor() as i64);
         return;
     }
-    between::<RIGHT>(u, u + half_gap(last_gap), end, |x, _| sink.emit(x, *cell));
+    between::<FORWARDS>(pos, pos + half_gap(last_gap), end, |x, _| put(x));
 }
 
-/// The pixels within half of a run's first span `gap` behind its first sample, at `u`
-/// with `cell`: that sample's share (see [`half_gap`]). (Once a run: not inlined.)
+/// A run's first sample, landing at `pos`, draws its share behind it once the run's
+/// first span, `gap`, is known: the pixels within half of it ([`half_gap`]). (Once a
+/// run: not inlined.)
 #[inline(never)]
-fn reach_behind<const RIGHT: bool>(u: f32, cell: &Cell, gap: f32, end: i64, sink: &mut impl RowSink) {
-    between::<RIGHT>(u - half_gap(gap), u, end, |x, _| sink.emit(x, *cell));
-}
-
-/// [`reach_behind`] for a column run's first sample, `last`, into the column
-/// `column_index`.
-#[inline(never)]
-fn column_reach_behind<const DOWN: bool>(
-    column_index: usize,
-    last: &Cell,
-    gap: f32,
-    end: i64,
-    out: &mut Output,
-) {
-    between::<DOWN>(last.v - half_gap(gap), last.v, end, |y, _| {
-        out.put(column_index, y, last)
-    });
+fn reach_behind<const FORWARDS: bool>(pos: f32, gap: f32, end: i64, mut put: impl FnMut(i64)) {
+    between::<FORWARDS>(pos - half_gap(gap), pos, end, |x, _| put(x));
 }
 
 /// The last pixel of `pixels` met visiting forwards (`FORWARDS`) or backwards, in
@@ -365,22 +344,15 @@ impl Column {
         last_gap: f32::NAN,
     };
 
-    /// Draws the end of the column's run, if it has one: see [`close_run`]. (Once a
-    /// run, not per sample: kept out of the column step's inlined code.)
-    #[inline(never)]
+    /// Draws the end of the column's run, if it has one ([`reach_ahead`]).
+    #[inline(always)]
     fn close<const DOWN: bool>(&self, column_index: usize, out: &mut Output) {
         if self.next_row == 0 {
             return;
         }
         let end = signed_end::<DOWN>(out.v0..out.v1);
-        let (last, v) = (self.last, self.last.v);
-        if self.last_gap.is_nan() {
-            out.put(column_index, v.floor() as i64, &last);
-        } else {
-            between::<DOWN>(v, v + half_gap(self.last_gap), end, |y, _| {
-                out.put(column_index, y, &last)
-            });
-        }
+        let last = self.last;
+        reach_ahead::<DOWN>(last.v, self.last_gap, end, |y| out.put(column_index, y, &last));
     }
 }
 
@@ -520,17 +492,15 @@ impl Job<'_> {
             cell: Cell::START,
         };
         let mut previous_linked = false;
-        // The run of connected texels being drawn: whether its first sample still owes
-        // the half of its extent behind it (it began the run, and no span followed yet),
-        // and the length of the run's last span (its last sample's half ahead is as
-        // long as half of that).
-        let mut open_start = false;
-        let mut last_gap = 0.0f32;
+        // The run of connected texels being drawn: the length of its last span, NaN
+        // while it has none (its first sample still owes the half of its extent behind
+        // it; its last sample's half ahead is as long as half of that span).
+        let mut last_gap = f32::NAN;
         let end = signed_end::<RIGHT>(self.u0..self.u0 + self.columns as i64);
-        // Ends the run whose last sample is `previous`: a run of one sample produces
-        // the pixel it lands in; a longer one its last sample's half-span ahead.
-        let close = |previous: &RowSample, open_start: bool, last_gap: f32, sink: &mut _| {
-            close_run::<RIGHT>(previous.u, &previous.cell, open_start, last_gap, end, sink)
+        // Ends the run whose last sample is `previous` ([`reach_ahead`]).
+        let close = |previous: &RowSample, last_gap: f32, sink: &mut _| {
+            let cell = previous.cell;
+            reach_ahead::<RIGHT>(previous.u, last_gap, end, |x| RowSink::emit(sink, x, cell))
         };
         let mut in_run = false;
         for step in 0..texels.len() {
@@ -539,7 +509,7 @@ impl Job<'_> {
             let q = level_of(texel);
             if q == empty || turned_away(i, texel, q) {
                 if in_run {
-                    close(&previous, open_start, last_gap, sink);
+                    close(&previous, last_gap, sink);
                     in_run = false;
                 }
                 previous_linked = false;
@@ -566,25 +536,24 @@ impl Job<'_> {
                 });
             if spanned {
                 let gap = sample.u - previous.u;
-                if open_start {
+                if last_gap.is_nan() {
                     // The run's first sample: the half-span behind it.
-                    reach_behind::<RIGHT>(previous.u, &previous.cell, gap, end, sink);
+                    let cell = previous.cell;
+                    reach_behind::<RIGHT>(previous.u, gap, end, |x| sink.emit(x, cell));
                 }
-                open_start = false;
                 last_gap = gap;
             } else {
                 if in_run {
-                    close(&previous, open_start, last_gap, sink);
+                    close(&previous, last_gap, sink);
                 }
-                open_start = true;
-                last_gap = 0.0;
+                last_gap = f32::NAN;
             }
             in_run = true;
             previous = sample;
             previous_linked = !RIGHT || right[i];
         }
         if in_run {
-            close(&previous, open_start, last_gap, sink);
+            close(&previous, last_gap, sink);
         }
     }
 
@@ -619,7 +588,7 @@ impl Job<'_> {
         let last_gap = if spanned {
             let gap = cell.v - last.v;
             if column.last_gap.is_nan() {
-                column_reach_behind::<DOWN>(column_index, &last, gap, end, out);
+                reach_behind::<DOWN>(last.v, gap, end, |y| out.put(column_index, y, &last));
             }
             gap
         } else {
