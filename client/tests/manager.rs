@@ -412,9 +412,13 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
     let near = Camera::look_at(centre + Vec3::new(0.0, 0.0, 1.1), centre, Vec3::Y, 60.0, 160, 90).unwrap();
     std::thread::sleep(Duration::from_millis(300));
     assert_eq!(manager.frame(&scene, &near, 0.3)[sphere], Show::Geometry);
-    let (lifetimes, never_shown) = manager.texture_lifetimes();
-    assert_eq!((lifetimes.len(), never_shown), (1, 0), "{lifetimes:?}");
-    let lifetime = lifetimes[0] * 1e3;
+    let lifetimes = manager.texture_lifetimes();
+    assert_eq!(
+        (lifetimes.seconds.len(), lifetimes.never_shown),
+        (1, 0),
+        "{lifetimes:?}"
+    );
+    let lifetime = lifetimes.seconds[0] * 1e3;
     // From arrival to the last frame that showed it: the pick-up and the wait after,
     // not the last 300 ms.
     assert!(

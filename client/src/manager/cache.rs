@@ -17,7 +17,7 @@ use super::around::angle_between;
 use super::choose::growth;
 use super::messages::Arrival;
 use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START};
-use super::{Counters, Manager};
+use super::{Manager, TextureLifetimes};
 
 /// A texture made ready for the frame loop: its pyramid (with texel connectivity),
 /// critical points and the gaps it shows at its own eye. Building this takes
@@ -151,7 +151,6 @@ impl Manager {
                         );
                     }
                     state.held.push(held);
-                    let state = &mut self.objects[p.object];
                     // Keep the textures nearest the eye.
                     if state.held.len() > self.config.keep {
                         let centre = scene.objects[p.object].bounds.center();
@@ -159,7 +158,7 @@ impl Manager {
                             angle_between(centre, a.eye, eye).total_cmp(&angle_between(centre, b.eye, eye))
                         });
                         for retired in state.held.split_off(self.config.keep) {
-                            self.counters.retire(&retired);
+                            self.counters.retired.retire(&retired);
                         }
                     }
                 }
@@ -175,18 +174,13 @@ impl Manager {
 }
 
 impl Manager {
-    /// The lifetimes of the run's final textures so far, seconds from each one's arrival
-    /// to the last frame it was shown in — those no longer held, and those held now —
-    /// and how many were never shown.
-    pub fn texture_lifetimes(&self) -> (Vec<f64>, u64) {
-        let mut counted = Counters {
-            lifetimes_s: self.counters.lifetimes_s.clone(),
-            textures_never_shown: self.counters.textures_never_shown,
-            ..Counters::default()
-        };
+    /// The lifetimes of the run's final textures so far: those no longer held, and
+    /// those held now.
+    pub fn texture_lifetimes(&self) -> TextureLifetimes {
+        let mut lifetimes = self.counters.retired.clone();
         for held in self.objects.iter().flat_map(|o| &o.held) {
-            counted.retire(held);
+            lifetimes.retire(held);
         }
-        (counted.lifetimes_s, counted.textures_never_shown)
+        lifetimes
     }
 }

@@ -21,12 +21,9 @@ pub struct Counters {
     /// Final texture received → taken in by a frame (made ready, and the frame loop
     /// come round), milliseconds.
     pub pickup_ms: Vec<f64>,
-    /// Final textures no longer held: seconds from each one's arrival to the last frame
-    /// it was shown in (with those still held:
-    /// [`Manager::texture_lifetimes`](super::Manager::texture_lifetimes)) …
-    pub lifetimes_s: Vec<f64>,
-    /// … and those never shown at all.
-    pub textures_never_shown: u64,
+    /// The lifetimes of the final textures no longer held (with those still held:
+    /// [`Manager::texture_lifetimes`](super::Manager::texture_lifetimes)).
+    pub retired: TextureLifetimes,
     /// Frames × objects where a valid texture was needed (impostors that may be on
     /// screen).
     pub needs: u64,
@@ -41,17 +38,26 @@ pub struct Counters {
     pub render_stages: Vec<RenderStages>,
 }
 
-impl Counters {
-    /// Counts the lifetime of a texture no longer held (previews are not counted).
+/// How long final textures served: seconds from each one's arrival to the last frame
+/// it was shown in, and how many were never shown.
+#[derive(Debug, Clone, Default)]
+pub struct TextureLifetimes {
+    pub seconds: Vec<f64>,
+    pub never_shown: u64,
+}
+
+impl TextureLifetimes {
+    /// Counts the lifetime of `held`, a texture no longer held or counted as such
+    /// (previews are not counted).
     pub(super) fn retire(&mut self, held: &super::cache::Held) {
         if !held.is_final {
             return;
         }
         match held.last_shown {
             Some(shown) => self
-                .lifetimes_s
+                .seconds
                 .push(shown.saturating_duration_since(held.arrived).as_secs_f64()),
-            None => self.textures_never_shown += 1,
+            None => self.never_shown += 1,
         }
     }
 }

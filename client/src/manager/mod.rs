@@ -53,7 +53,7 @@ use crate::predict::Predictor;
 
 pub use cache::ReadyTexture;
 pub use choose::Show;
-pub use counters::{Counters, RenderStages, StaleCauses};
+pub use counters::{Counters, RenderStages, StaleCauses, TextureLifetimes};
 pub use messages::{Arrival, Command, TextureRequest};
 pub use policy::Config;
 pub use requests::texture_ladder;

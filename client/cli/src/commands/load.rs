@@ -345,7 +345,7 @@ fn fly(
         frames: log.frames,
         counters: manager.counters.clone(),
         received,
-        lifetimes_s: manager.texture_lifetimes().0,
+        lifetimes_s: manager.texture_lifetimes().seconds,
         psnr,
     })
 }

@@ -206,7 +206,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     bar.finish_and_clear();
     let judged = judge(&scene, &compared, &args.out)?;
     let counters = &manager.counters;
-    let (lifetimes_s, textures_never_shown) = manager.texture_lifetimes();
+    let lifetimes = manager.texture_lifetimes();
     let summary = Summary {
         frames: log.frames,
         path_frames: flight.frames,
@@ -221,9 +221,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
         latency_ms_p99: percentile(&counters.latencies_ms, 0.99),
         pickup_ms_p50: percentile(&counters.pickup_ms, 0.5),
         pickup_ms_p99: percentile(&counters.pickup_ms, 0.99),
-        texture_lifetime_s_p10: percentile(&lifetimes_s, 0.1),
-        texture_lifetime_s_p50: percentile(&lifetimes_s, 0.5),
-        textures_never_shown,
+        texture_lifetime_s_p10: percentile(&lifetimes.seconds, 0.1),
+        texture_lifetime_s_p50: percentile(&lifetimes.seconds, 0.5),
+        textures_never_shown: lifetimes.never_shown,
         prediction_hits: counters.prediction_hits,
         needs: counters.needs,
         stale_frames: counters.stale_frames,
