@@ -159,6 +159,8 @@ impl Manager {
         self.drain(camera, scene);
         self.predictor.observe(t, camera.eye);
         let mut stale = false;
+        // (When this frame shows its impostors: their textures' last use.)
+        let shown_at = Some(Instant::now());
         let mut shows = Vec::with_capacity(scene.objects.len());
         for (k, object) in scene.objects.iter().enumerate() {
             match geometry_reason(object, camera.eye) {
@@ -256,10 +258,9 @@ impl Manager {
             shows.push(match best {
                 Some((i, g)) if g.growth <= SHOWN_STALE * self.config.tolerance => {
                     let held = &mut self.objects[k].held;
-                    let now = Some(Instant::now());
-                    held[i].last_shown = now;
+                    held[i].last_shown = shown_at;
                     if let Some((p, _)) = partner {
-                        held[p].last_shown = now;
+                        held[p].last_shown = shown_at;
                     }
                     let level = held[i].pyramid.level_for(camera, MAX_TEXEL_PIXELS);
                     Show::Impostor {
