@@ -78,15 +78,20 @@ pub fn ensure_writable(flag: &str, path: &std::path::Path) -> anyhow::Result<()>
         .map_err(|e| anyhow!("{}: {e}", context()))
 }
 
-/// A relief-texture edge in texels: `1 ..= MAX_TEXTURE_SIZE`.
-pub fn texture_size(text: &str) -> Result<u32, String> {
+/// A whole number in `1 ..= max`.
+fn count_up_to(text: &str, max: u32) -> Result<u32, String> {
     let n: u32 = text
         .parse()
         .map_err(|_| format!("`{text}` is not a whole number"))?;
-    if n == 0 || n > MAX_TEXTURE_SIZE {
-        return Err(format!("{n} is out of range: must be 1 ..= {MAX_TEXTURE_SIZE}"));
+    if n == 0 || n > max {
+        return Err(format!("{n} is out of range: must be 1 ..= {max}"));
     }
     Ok(n)
+}
+
+/// A relief-texture edge in texels: `1 ..= MAX_TEXTURE_SIZE`.
+pub fn texture_size(text: &str) -> Result<u32, String> {
+    count_up_to(text, MAX_TEXTURE_SIZE)
 }
 
 /// `WxH` frame size, each in `1 ..= MAX_FRAME_SIZE`.
@@ -99,13 +104,7 @@ pub fn frame_size(text: &str) -> Result<(u32, u32), String> {
 
 /// One frame edge: `1 ..= MAX_FRAME_SIZE`.
 pub fn frame_edge(text: &str) -> Result<u32, String> {
-    let n: u32 = text
-        .parse()
-        .map_err(|_| format!("`{text}` is not a whole number"))?;
-    if n == 0 || n > MAX_FRAME_SIZE {
-        return Err(format!("{n} is out of range: must be 1 ..= {MAX_FRAME_SIZE}"));
-    }
-    Ok(n)
+    count_up_to(text, MAX_FRAME_SIZE)
 }
 
 /// 8 or 16.
