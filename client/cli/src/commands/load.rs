@@ -180,29 +180,33 @@ pub fn run(args: LoadArgs) -> Result<()> {
         "{} workers, RTT +{} ms; points: tolerance",
         args.workers, args.rtt_ms
     );
-    let lifetime_axis = "impostor lifetime, p50 (s, log): arrival to the last frame shown";
+    let draw = |what: &str, y_desc: &str, file: &str, curves: &BTreeMap<String, Curve>| {
+        Chart {
+            title: &format!("{what} vs impostor lifetime ({title})"),
+            x_desc: "impostor lifetime, p50 (s, log): arrival to the last frame shown",
+            y_desc,
+            log_x: true,
+            colour: &|_| None,
+            point_label: &tolerance_label,
+        }
+        .draw(&args.out.join(file), curves)
+    };
     let mut latency = curves(&|r| r.latency_ms_p50, ", p50");
     latency.extend(curves(&|r| r.latency_ms_p99, ", p99"));
-    Chart {
-        title: &format!("Request latency vs impostor lifetime ({title})"),
-        x_desc: lifetime_axis,
-        y_desc: "request latency (ms)",
-        log_x: true,
-        colour: &|_| None,
-        point_label: &tolerance_label,
-    }
-    .draw(&args.out.join("load_latency.png"), &latency)?;
+    draw(
+        "Request latency",
+        "request latency (ms)",
+        "load_latency.png",
+        &latency,
+    )?;
     let mut stalls = curves(&|r| 100.0 * r.stall_frac, ": stalled frames (%)");
     stalls.extend(curves(&|r| r.psnr_db_mean, ": PSNR mean (dB)"));
-    Chart {
-        title: &format!("Stalls and image error vs impostor lifetime ({title})"),
-        x_desc: lifetime_axis,
-        y_desc: "stalled frames (%) · PSNR (dB)",
-        log_x: true,
-        colour: &|_| None,
-        point_label: &tolerance_label,
-    }
-    .draw(&args.out.join("load_stalls.png"), &stalls)?;
+    draw(
+        "Stalls and image error",
+        "stalled frames (%) · PSNR (dB)",
+        "load_stalls.png",
+        &stalls,
+    )?;
     if args.json {
         println!("{}", serde_json::to_string(&rows)?);
     } else {
