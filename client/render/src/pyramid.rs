@@ -18,6 +18,12 @@ pub const MAX_TEXEL_PIXELS: f32 = 1.0;
 /// would save a few hundred texels' warp and show blocks on screen.
 pub const MIN_LEVEL_EDGE: u32 = 16;
 
+/// The share of a coarse texel's area its finer texels must cover, and exceed, for it to
+/// hold a surface ([`downsample`]): half, where a straight silhouette through the
+/// texel's centre puts it. (Keeping exactly half, two of four texels at the first
+/// level, grew silhouettes: the sample then lies on the silhouette and reaches past it.)
+pub const HALF_COVERED: f32 = 0.5;
+
 /// A relief texture and its downsampled copies, each prepared for display.
 #[derive(Debug, Clone)]
 pub struct Pyramid {
@@ -28,13 +34,16 @@ pub struct Pyramid {
 impl Pyramid {
     /// Builds levels down to `min_size` texels on the shorter side.
     pub fn new(texture: ReliefTexture, min_size: u32) -> Pyramid {
+        let empty = texture.depth_bits.empty();
+        let mut coverage: Vec<f32> = texture.depth.iter().map(|&d| (d != empty) as u8 as f32).collect();
         let mut levels = vec![Impostor::new(texture)];
         loop {
             let top = &levels[levels.len() - 1].texture;
             if top.camera.width.min(top.camera.height) / 2 < min_size.max(1) {
                 break;
             }
-            let next = downsample(top);
+            let (next, next_coverage) = downsample(top, &coverage);
+            coverage = next_coverage;
             levels.push(Impostor::new(next));
         }
         Pyramid { levels }
@@ -61,10 +70,17 @@ impl Pyramid {
     }
 }
 
-/// Halves the resolution: each texel takes the average of the covered texels of its
-/// 2×2 block that lie within two of the block's texel sizes of the front-most one (so
-/// a silhouette keeps its front surface instead of blending with what is behind).
-pub fn downsample(texture: &ReliefTexture) -> ReliefTexture {
+/// Halves the resolution of `texture`, whose texels cover the fractions `coverage` of
+/// their area (1 or 0 for a baked texture: a texel holds what its centre's ray hit).
+/// Returns the coarse texture and its texels' coverage, the mean of their blocks'.
+///
+/// A coarse texel holds a surface when its block's coverage exceeds [`HALF_COVERED`]:
+/// so a silhouette stays where it was, as a texel's centre decides it. (Keeping every block with any surface grew silhouettes outwards by a quarter of
+/// a coarse texel, more at each level: a coarse level scored 3 dB worse than a texture
+/// baked at its size.) It takes the average of the covered texels of its 2×2 block that
+/// lie within two of the block's texel sizes of the front-most one (so a silhouette
+/// keeps its front surface instead of blending with what is behind).
+pub fn downsample(texture: &ReliefTexture, coverage: &[f32]) -> (ReliefTexture, Vec<f32>) {
     let c = texture.camera;
     let (w, h) = (c.width.div_ceil(2), c.height.div_ceil(2));
     let camera = SourceCamera {
@@ -78,15 +94,28 @@ pub fn downsample(texture: &ReliefTexture) -> ReliefTexture {
     let empty = bits.empty();
     let same_surface = 2.0 * camera.a.length().max(camera.b.length());
     let mut out = ReliefTexture::empty(camera, bits, texture.eye);
+    let mut out_coverage = vec![0.0; (w * h) as usize];
     for j in 0..h {
         for i in 0..w {
+            // (A block cut by the texture's edge: its missing texels lie outside the
+            // fine quad, where there is nothing.)
             let block: Vec<usize> = [(0, 0), (1, 0), (0, 1), (1, 1)]
                 .into_iter()
                 .map(|(di, dj)| (2 * i + di, 2 * j + dj))
                 .filter(|&(x, y)| x < c.width && y < c.height)
                 .map(|(x, y)| texture.index(x, y))
-                .filter(|&k| texture.depth[k] != empty)
                 .collect();
+            let target = out.index(i, j);
+            let covered = block
+                .iter()
+                .map(|&k| coverage.get(k).copied().unwrap_or(0.0))
+                .sum::<f32>()
+                / 4.0;
+            out_coverage[target] = covered;
+            if covered <= HALF_COVERED {
+                continue;
+            }
+            let block: Vec<usize> = block.into_iter().filter(|&k| texture.depth[k] != empty).collect();
             let Some(front) = block
                 .iter()
                 .map(|&k| c.depth_of_level(texture.depth[k], bits))
@@ -100,7 +129,6 @@ pub fn downsample(texture: &ReliefTexture) -> ReliefTexture {
                 .collect();
             let n = kept.len() as f32;
             let mean = |f: &dyn Fn(usize) -> f32| kept.iter().map(|&k| f(k)).sum::<f32>() / n;
-            let target = out.index(i, j);
             out.depth[target] =
                 camera.level_of_depth(mean(&|k| c.depth_of_level(texture.depth[k], bits)), bits);
             for ch in 0..3 {
@@ -109,7 +137,7 @@ pub fn downsample(texture: &ReliefTexture) -> ReliefTexture {
             }
         }
     }
-    out
+    (out, out_coverage)
 }
 
 #[cfg(test)]
@@ -166,8 +194,8 @@ mod tests {
     #[test]
     fn downsampling_averages_the_front_surface_of_each_block() {
         // Rows alternate between a near surface and one 0.8 behind it; a few texels
-        // are missing, and the last column's lower half, so two coarse texels are empty.
-        // Odd size: the last blocks are cut in half.
+        // are missing, and the last column's lower half. Odd size: the last blocks are
+        // cut in half.
         let surface = |i: u32, j: u32| match (i, j) {
             (8, 4..) => None,
             _ if i % 3 == 2 && j > 4 => None,
@@ -175,7 +203,10 @@ mod tests {
             _ => Some((0.9, [255, 255, 0], [0, 128, 128])),
         };
         let fine = texture(9, 7, surface);
-        let coarse = downsample(&fine);
+        let coverage: Vec<f32> = (0..7)
+            .flat_map(|j| (0..9).map(move |i| surface(i, j).is_some() as u8 as f32))
+            .collect();
+        let (coarse, _) = downsample(&fine, &coverage);
         let cc = coarse.camera;
         assert_eq!((cc.width, cc.height), (5, 4));
         // The two surfaces are 0.72 or more apart, far beyond two coarse texels (0.4):
@@ -189,12 +220,15 @@ mod tests {
                     .filter(|&x| surface(x, 2 * j).is_some())
                     .collect();
                 let k = coarse.index(i, j);
-                if near.is_empty() {
-                    // (Here only the last column's lower blocks, which hold nothing.)
-                    assert!(i == 4 && j >= 2, "({i}, {j})");
-                    assert_eq!(coarse.depth[k], empty, "({i}, {j}) holds nothing");
+                let covered = (2 * j..2 * j + 2)
+                    .flat_map(|y| (2 * i..2 * i + 2).map(move |x| (x, y)))
+                    .filter(|&(x, y)| x < 9 && y < 7 && surface(x, y).is_some())
+                    .count();
+                if covered <= 2 {
+                    assert_eq!(coarse.depth[k], empty, "({i}, {j}) covers {covered} of 4");
                     continue;
                 }
+                assert!(!near.is_empty(), "({i}, {j}): by construction");
                 let n = near.len() as f32;
                 let depth = near.iter().map(|&x| 0.1 + 0.01 * x as f32).sum::<f32>() / n;
                 let got = cc.depth_of_level(coarse.depth[k], DepthBits::Sixteen);
@@ -204,6 +238,34 @@ mod tests {
                 assert_eq!(coarse.albedo[k], [(red + 0.5) as u8, 0, 200], "({i}, {j})");
                 assert_eq!(coarse.normal[k], [128, 128, 255], "({i}, {j})");
             }
+        }
+    }
+
+    #[test]
+    fn coarse_levels_keep_a_silhouette_where_it_is() {
+        // A disc of radius 20 texels in a 64² texture: every level, down to texels a
+        // quarter of its radius, covers the disc's area (in level-0 texels) within
+        // 5 %. (Keeping every block that holds any surface grew it by 7 % at level 1,
+        // more at each level below.)
+        let (centre, radius) = (31.3f32, 20.0f32);
+        let inside = |i: u32, j: u32| {
+            let (x, y) = (i as f32 + 0.5 - centre, j as f32 + 0.5 - centre);
+            x * x + y * y <= radius * radius
+        };
+        let pyramid = Pyramid::new(
+            texture(64, 64, |i, j| inside(i, j).then_some((0.5, [9; 3], [128; 3]))),
+            16,
+        );
+        let area = std::f32::consts::PI * radius * radius;
+        assert_eq!(pyramid.levels.len(), 3);
+        for (l, level) in pyramid.levels.iter().enumerate() {
+            let t = &level.texture;
+            let texels = t.depth.iter().filter(|&&d| d != t.depth_bits.empty()).count();
+            let covered = texels as f32 * 4f32.powi(l as i32);
+            assert!(
+                (covered / area - 1.0).abs() < 0.05,
+                "level {l}: {covered} texels' area against the disc's {area}"
+            );
         }
     }
 
