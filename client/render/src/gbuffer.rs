@@ -3,7 +3,9 @@
 //! Geometry (the rasterizer) and impostors (the warps) write surfaces here with a depth
 //! test, so they occlude each other correctly; [`GBuffer::shade`] then lights every
 //! covered pixel once with [`relief_core::shading::Lighting::shade_lanes`] — the same
-//! model as the ray-traced reference.
+//! model as the ray-traced reference. An impostor's silhouette pixels, which its texels
+//! cover only in part, are kept aside as [`Fragment`]s and blended over what lies
+//! behind them once that is lit.
 //!
 //! The buffer is stored by plane (depth, object, albedo, the normal's three
 //! components), not by pixel: clearing writes only the depth plane (a quarter of the
@@ -17,7 +19,9 @@ use crate::EMPTY_DEPTH;
 use relief_core::camera::Camera;
 use relief_core::frame::{Frame, NO_OBJECT};
 use relief_core::scene::Scene;
-use relief_core::shading::{LANE_INDEX, LANES, SurfaceLanes, Vec3x8, to_rgb8, to_rgb8_lanes};
+use relief_core::shading::{
+    LANE_INDEX, LANES, Specular, SurfaceLanes, SurfacePoint, Vec3x8, to_rgb8, to_rgb8_lanes,
+};
 
 /// One pixel's nearest surface, as writers give it and readers get it back.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -115,6 +119,8 @@ pub struct Rows<'a> {
     object: &'a mut [u32],
     albedo: &'a mut [u32],
     normal: [&'a mut [i16]; 3],
+    /// Partial surfaces written here, for [`GBuffer::add_fragments`].
+    fragments: Vec<Fragment>,
 }
 
 impl Rows<'_> {
@@ -161,6 +167,29 @@ impl Rows<'_> {
             self.set_stored(i, depth, stored);
         }
         written
+    }
+
+    /// Adds a surface covering the fraction `coverage` (in `(0, 1)`) of pixel `i`,
+    /// tested at `tested`, at `depth`, if it is nearer than what the pixel holds now:
+    /// blended over the pixel when the buffer is shaded (see [`Fragment`]). Hand the
+    /// fragments to the buffer with [`Rows::into_fragments`] and
+    /// [`GBuffer::add_fragments`].
+    #[inline]
+    pub fn add_fragment(&mut self, i: usize, tested: f32, depth: f32, coverage: f32, stored: &Stored) {
+        if self.nearer(i, tested) && depth > 0.0 && coverage > 0.0 {
+            self.fragments.push(Fragment {
+                pixel: self.y0 as usize * self.width + i,
+                tested,
+                depth,
+                coverage: coverage.min(1.0),
+                stored: *stored,
+            });
+        }
+    }
+
+    /// The fragments added to these rows ([`Rows::add_fragment`]).
+    pub fn into_fragments(self) -> Vec<Fragment> {
+        self.fragments
     }
 
     /// The one depth test: `depth` positive and nearer than pixel `i`'s (so finite,
@@ -257,6 +286,26 @@ pub struct GBuffer {
     albedo: Vec<u32>,
     /// The normal's x, y, z, each `n · 32767` rounded.
     normal: [Vec<i16>; 3],
+    /// Surfaces covering part of a pixel, blended over it when shaded.
+    fragments: Vec<Fragment>,
+}
+
+/// A surface covering part of one pixel — an impostor's silhouette, where its texels
+/// cover a fraction of the pixel. It is not written into the buffer, so the pixel keeps
+/// what lies behind; [`GBuffer::shade`] lights it and blends it over the pixel's colour
+/// by its coverage, where it is still nearer than the pixel's surface. (Written whole,
+/// at the nearest texel, a silhouette pixel is all surface or all background: off by a
+/// whole pixel's colour wherever the outline falls on the wrong side of its centre.)
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fragment {
+    /// Index in the buffer (`y · width + x`).
+    pixel: usize,
+    /// The depth it is tested at (see [`Rows::keep_nearer_stored_as`]).
+    tested: f32,
+    depth: f32,
+    /// The fraction of the pixel covered, in `(0, 1]`.
+    coverage: f32,
+    stored: Stored,
 }
 
 impl GBuffer {
@@ -270,11 +319,24 @@ impl GBuffer {
             object: vec![NO_OBJECT; n],
             albedo: vec![0; n],
             normal: [vec![0; n], vec![0; n], vec![0; n]],
+            fragments: Vec::new(),
         }
+    }
+
+    /// Takes the fragments writers added to their [`Rows`] (see
+    /// [`Rows::add_fragment`]).
+    pub fn add_fragments(&mut self, fragments: impl IntoIterator<Item = Fragment>) {
+        self.fragments.extend(fragments);
+    }
+
+    /// The fragments of `object` (see [`Fragment`]).
+    pub fn fragments_of(&self, object: u32) -> impl Iterator<Item = &Fragment> {
+        self.fragments.iter().filter(move |f| f.stored.object == object)
     }
 
     /// Empties every pixel, keeping the allocation: only the depth plane is written.
     pub fn clear(&mut self) {
+        self.fragments.clear();
         self.depth
             .par_chunks_mut(CLEAR_CHUNK)
             .for_each(|chunk| chunk.fill(EMPTY_DEPTH));
@@ -363,6 +425,7 @@ impl GBuffer {
             object: &mut self.object,
             albedo: &mut self.albedo,
             normal: [nx, ny, nz],
+            fragments: Vec::new(),
         }
     }
 
@@ -408,6 +471,7 @@ impl GBuffer {
             .zip(frame.object.par_chunks_mut(w.max(1)))
             .enumerate()
             .for_each(|(y, (color, object))| shader.row(y, color, object));
+        shader.blend_fragments(&mut frame);
         frame
     }
 }
@@ -537,6 +601,52 @@ impl<'a> RowShader<'a> {
     }
 }
 
+impl RowShader<'_> {
+    /// Lights the buffer's fragments still in front of their pixels' surfaces and
+    /// blends them over `frame` by their coverage, the farthest first; a pixel more
+    /// than half covered by one is counted as its object's.
+    fn blend_fragments(&self, frame: &mut Frame) {
+        let g = self.gbuffer;
+        let w = (g.width as usize).max(1);
+        let mut shown: Vec<&Fragment> = g
+            .fragments
+            .iter()
+            .filter(|f| f.pixel < g.depth.len() && f.tested < g.depth[f.pixel])
+            .collect();
+        shown.sort_unstable_by(|a, b| a.pixel.cmp(&b.pixel).then(b.depth.total_cmp(&a.depth)));
+        let points: Vec<SurfacePoint> = shown
+            .iter()
+            .map(|f| {
+                let ray = self
+                    .camera
+                    .ray((f.pixel % w) as f32 + 0.5, (f.pixel / w) as f32 + 0.5);
+                let (strength, shininess) = self
+                    .specular
+                    .get(f.stored.object as usize)
+                    .copied()
+                    .unwrap_or_default();
+                let channel = |shift: u32| ((f.stored.albedo >> shift) & 0xff) as f32 / 255.0;
+                SurfacePoint {
+                    albedo: Vec3::new(channel(0), channel(8), channel(16)),
+                    normal: Vec3::from(f.stored.normal.map(f32::from)).normalize_or_zero(),
+                    position: self.camera.eye + ray * f.depth,
+                    towards_eye: -ray,
+                    specular: Specular { strength, shininess },
+                }
+            })
+            .collect();
+        let mut lit = vec![Vec3::ZERO; points.len()];
+        self.lighting.shade_all(&points, &mut lit);
+        for (f, lit) in shown.into_iter().zip(lit) {
+            let under = Vec3::from(frame.color[f.pixel].map(f32::from)) / 255.0;
+            frame.color[f.pixel] = to_rgb8(under.lerp(lit, f.coverage));
+            if f.coverage > 0.5 && (f.stored.object as usize) < self.specular.len() {
+                frame.object[f.pixel] = f.stored.object;
+            }
+        }
+    }
+}
+
 /// The bit mask of all [`LANES`] lanes.
 const ALL_LANES: u32 = (1 << LANES) - 1;
 
@@ -571,6 +681,7 @@ impl<'a> Rows<'a> {
                 object: o0,
                 albedo: a0,
                 normal: [x0, y0, z0],
+                fragments: self.fragments,
             },
             Rows {
                 y0: self.y0 + (at / w.max(1)) as u32,
@@ -579,6 +690,7 @@ impl<'a> Rows<'a> {
                 object: o1,
                 albedo: a1,
                 normal: [x1, y1, z1],
+                fragments: Vec::new(),
             },
         )
     }
@@ -732,6 +844,67 @@ mod tests {
             }
         }
         assert!(lit > 20 && unknown > 2, "{lit} lit, {unknown} unknown");
+    }
+
+    /// A fragment is lit as the same surface written whole would be, and blended over
+    /// what its pixel shows by its coverage, the nearer of two on top; one behind the
+    /// pixel's surface is hidden; a pixel more than half covered is counted as the
+    /// fragment's object.
+    #[test]
+    fn fragments_blend_by_coverage_over_what_lies_behind() {
+        let scene = relief_core::scene::Scene::load("default").unwrap();
+        let camera = Camera::look_at(Vec3::new(0.0, 2.0, 9.0), Vec3::ZERO, Vec3::Y, 60.0, 4, 1).unwrap();
+        let surface = |object: u32, red: u8| Stored::new(object, [red, 90, 40], Vec3::new(0.3, 0.8, 0.5));
+        let (back, front, near, far) = (surface(0, 200), surface(1, 30), surface(2, 120), surface(3, 250));
+        // What each surface looks like written whole at each pixel, at its depth.
+        let whole = |stored: &Stored, depth: f32| {
+            let mut g = GBuffer::new(4, 1);
+            let mut rows = g.all_rows();
+            for i in 0..4 {
+                rows.set_stored(i, depth, stored);
+            }
+            g.shade(&scene, &camera).color
+        };
+        let mut g = GBuffer::new(4, 1);
+        let mut rows = g.all_rows();
+        rows.add_fragment(0, 3.0, 3.0, 0.25, &front);
+        rows.set_stored(1, 5.0, &back);
+        rows.add_fragment(1, 3.0, 3.0, 0.75, &front);
+        // Added before the nearer surface that hides it.
+        rows.add_fragment(2, 3.0, 3.0, 0.75, &front);
+        rows.set_stored(2, 2.0, &back);
+        rows.add_fragment(3, 4.0, 4.0, 0.5, &far);
+        rows.add_fragment(3, 3.0, 3.0, 0.5, &near);
+        let fragments = rows.into_fragments();
+        assert_eq!(fragments.len(), 5);
+        g.add_fragments(fragments);
+        let frame = g.shade(&scene, &camera);
+        let background = Vec3::from(to_rgb8(scene.background).map(f32::from)) / 255.0;
+        let colour = |c: [u8; 3]| Vec3::from(c.map(f32::from)) / 255.0;
+        let over = |under: Vec3, top: [u8; 3], coverage: f32| under.lerp(colour(top), coverage);
+        let expected = [
+            over(background, whole(&front, 3.0)[0], 0.25),
+            over(colour(whole(&back, 5.0)[1]), whole(&front, 3.0)[1], 0.75),
+            colour(whole(&back, 2.0)[2]),
+            over(
+                over(background, whole(&far, 4.0)[3], 0.5),
+                whole(&near, 3.0)[3],
+                0.5,
+            ),
+        ];
+        for (i, expected) in expected.into_iter().enumerate() {
+            let close = frame.color[i]
+                .iter()
+                .zip(to_rgb8(expected))
+                .all(|(&a, b)| a.abs_diff(b) <= 2);
+            assert!(
+                close,
+                "pixel {i}: {:?} vs {:?}",
+                frame.color[i],
+                to_rgb8(expected)
+            );
+        }
+        assert_eq!(frame.object, [NO_OBJECT, 1, 0, NO_OBJECT]);
     }
 
     /// A pixel read in stored form writes back unchanged; stored writes keep the depth

@@ -1,7 +1,7 @@
 //! The sprite stage (Schaufler's stage 1): while the eye has moved less than a pixel's
 //! worth, the last displayed impostor is reused as it is.
 
-use crate::gbuffer::{GBuffer, Stored};
+use crate::gbuffer::{Fragment, GBuffer, Stored};
 
 /// A rectangle of displayed impostor pixels, kept to be drawn again.
 #[derive(Debug, Clone, PartialEq)]
@@ -13,10 +13,14 @@ pub struct Sprite {
     /// Row-major, exactly as the buffer held them (so a redraw is identical); `None`
     /// where the object was not.
     pixels: Vec<Option<(f32, Stored)>>,
+    /// The object's silhouette fragments, and the width of the buffer they index.
+    fragments: Vec<Fragment>,
+    buffer_width: u32,
 }
 
 impl Sprite {
-    /// Keeps the pixels of `object` from `gbuffer` (the bounding rectangle of them).
+    /// Keeps the pixels of `object` from `gbuffer` (the bounding rectangle of them), and
+    /// its fragments.
     pub fn capture(gbuffer: &GBuffer, object: u32) -> Option<Sprite> {
         Self::capture_in(gbuffer, object, (0, 0, gbuffer.width, gbuffer.height))
     }
@@ -31,6 +35,7 @@ impl Sprite {
             (rect.3 as usize).min(gbuffer.height as usize),
         );
         let (mut x0, mut y0, mut x1, mut y1) = (usize::MAX, usize::MAX, 0, 0);
+        let fragments: Vec<Fragment> = gbuffer.fragments_of(object).copied().collect();
         for y in ry0..ry1 {
             for x in rx0..rx1 {
                 if gbuffer.object_at(x as u32, y as u32) == object {
@@ -42,7 +47,10 @@ impl Sprite {
             }
         }
         if x0 == usize::MAX {
-            return None;
+            if fragments.is_empty() {
+                return None;
+            }
+            (x0, y0, x1, y1) = (0, 0, 0, 0);
         }
         let pixels = (y0..y1)
             .flat_map(|y| (x0..x1).map(move |x| (x, y)))
@@ -58,6 +66,8 @@ impl Sprite {
             width: (x1 - x0) as u32,
             height: (y1 - y0) as u32,
             pixels,
+            fragments,
+            buffer_width: gbuffer.width,
         })
     }
 
@@ -71,6 +81,10 @@ impl Sprite {
                 );
                 gbuffer.write_stored(x, y, *depth, stored);
             }
+        }
+        // (A buffer of another width would put them elsewhere.)
+        if gbuffer.width == self.buffer_width {
+            gbuffer.add_fragments(self.fragments.iter().copied());
         }
     }
 }

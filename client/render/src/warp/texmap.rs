@@ -1,7 +1,10 @@
 //! Perspective texture mapping of the pre-warped image onto the source quad: for each
 //! screen pixel the ray through it crosses the source plane at `(u, v)`; the pre-warped
 //! texel there is the surface the pixel sees (that is what the pre-warp arranged), at
-//! view depth `(h + d) / (D·f)` for the ray direction `D` with `D·forward = 1`.
+//! view depth `(h + d) / (D·f)` for the ray direction `D` with `D·forward = 1`. Where
+//! the pixel falls between covered and empty texels (a silhouette), the covered share
+//! of the bilinear weights is its coverage, and the surface is added as a
+//! [`Fragment`], blended by it over what lies behind.
 
 use glam::Vec3;
 use rayon::prelude::*;
@@ -11,9 +14,9 @@ use relief_core::camera::Camera;
 use relief_core::relief::{ReliefTexture, SourceCamera};
 
 use super::params::WarpParams;
-use super::prewarp::{Attributes, PrewarpImage};
+use super::prewarp::{Attributes, PTexel, PrewarpImage};
 use super::round_small;
-use crate::gbuffer::{GBuffer, Stored};
+use crate::gbuffer::{Fragment, GBuffer, Stored};
 use relief_core::shading::{LANE_INDEX, LANES};
 
 /// The screen rectangle `[x0, x1) × [y0, y1)` that the plane region `corners` can
@@ -103,72 +106,84 @@ pub fn map(
     );
     let (u1, v1) = (f32x8::splat(u1), f32x8::splat(v1));
     // Rows are independent (each pixel samples the image and depth-tests its own slot):
-    // split across cores.
-    gbuffer.bands(y0, y1, 1).into_par_iter().for_each(|mut pixels| {
-        let y = pixels.y0();
-        let row = dots(camera.ray(x0 as f32 + 0.5, y as f32 + 0.5));
-        // Eight pixels at once up to the texel look-ups: most of the rectangle is
-        // empty, and a group none of whose footprints holds a texel costs a few vector
-        // operations.
-        for x in (x0 as usize..x1 as usize).step_by(LANES) {
-            let steps = f32x8::splat((x - x0 as usize) as f32) + LANE_INDEX;
-            let along = |start: f32, step: f32| f32x8::splat(start) + f32x8::splat(step) * steps;
-            let towards_plane = along(row.x, x_step.x);
-            let s = f32x8::splat(params.h) / towards_plane;
-            let u = f32x8::splat(params.epipole.x) + s * along(row.y, x_step.y);
-            let v = f32x8::splat(params.epipole.y) + s * along(row.z, x_step.z);
-            let (fu, fv) = (u - corner_u, v - corner_v);
-            // (Every comparison is false for NaN.)
-            let facing = towards_plane.simd_gt(f32x8::ZERO);
-            let inside = facing
-                & fu.simd_ge(f32x8::ZERO)
-                & fv.simd_ge(f32x8::ZERO)
-                & fu.simd_lt(last_x)
-                & fv.simd_lt(last_y);
-            // Within the image but not its footprint: the outermost half texel.
-            let rim = facing
-                & !inside
-                & u.simd_ge(f32x8::splat(u0))
-                & v.simd_ge(f32x8::splat(v0))
-                & u.simd_lt(u1)
-                & v.simd_lt(v1);
-            let n = LANES.min(x1 as usize - x);
-            let lanes_in = (1u32 << n) - 1;
-            let (inside, rim) = (inside.to_bitmask() & lanes_in, rim.to_bitmask() & lanes_in);
-            if inside | rim == 0 {
-                continue;
-            }
-            // Exact: the inside lanes are non-negative and below the image's size.
-            let (xs, ys) = (fu.trunc_int(), fv.trunc_int());
-            let ks = (ys * i32x8::splat(image.width as i32) + xs).to_array();
-            let (xs, ys) = (xs.to_array(), ys.to_array());
-            let (fu, fv, u, v) = (fu.to_array(), fv.to_array(), u.to_array(), v.to_array());
-            let towards_plane = towards_plane.to_array();
-            for l in 0..n {
-                let found = if inside & (1 << l) != 0 {
-                    let k = ks[l] as usize;
-                    if footprints[k] == 0 {
-                        continue;
-                    }
-                    let (tx, ty) = (fu[l] - xs[l] as f32, fv[l] - ys[l] as f32);
-                    sample_inside(image, k, tx, ty)
-                } else if rim & (1 << l) != 0 {
-                    image
-                        .at(u[l], v[l])
-                        .filter(|t| !t.is_empty())
-                        .map(|t| (t.depth, t.attributes))
-                } else {
-                    None
-                };
-                let Some((depth, attributes)) = found else {
+    // split across cores. Silhouette pixels come back as fragments.
+    let fragments: Vec<Vec<Fragment>> = gbuffer
+        .bands(y0, y1, 1)
+        .into_par_iter()
+        .map(|mut pixels| {
+            let y = pixels.y0();
+            let row = dots(camera.ray(x0 as f32 + 0.5, y as f32 + 0.5));
+            // Eight pixels at once up to the texel look-ups: most of the rectangle is
+            // empty, and a group none of whose footprints holds a texel costs a few vector
+            // operations.
+            for x in (x0 as usize..x1 as usize).step_by(LANES) {
+                let steps = f32x8::splat((x - x0 as usize) as f32) + LANE_INDEX;
+                let along = |start: f32, step: f32| f32x8::splat(start) + f32x8::splat(step) * steps;
+                let towards_plane = along(row.x, x_step.x);
+                let s = f32x8::splat(params.h) / towards_plane;
+                let u = f32x8::splat(params.epipole.x) + s * along(row.y, x_step.y);
+                let v = f32x8::splat(params.epipole.y) + s * along(row.z, x_step.z);
+                let (fu, fv) = (u - corner_u, v - corner_v);
+                // (Every comparison is false for NaN.)
+                let facing = towards_plane.simd_gt(f32x8::ZERO);
+                let inside = facing
+                    & fu.simd_ge(f32x8::ZERO)
+                    & fv.simd_ge(f32x8::ZERO)
+                    & fu.simd_lt(last_x)
+                    & fv.simd_lt(last_y);
+                // Within the image but not its footprint: the outermost half texel.
+                let rim = facing
+                    & !inside
+                    & u.simd_ge(f32x8::splat(u0))
+                    & v.simd_ge(f32x8::splat(v0))
+                    & u.simd_lt(u1)
+                    & v.simd_lt(v1);
+                let n = LANES.min(x1 as usize - x);
+                let lanes_in = (1u32 << n) - 1;
+                let (inside, rim) = (inside.to_bitmask() & lanes_in, rim.to_bitmask() & lanes_in);
+                if inside | rim == 0 {
                     continue;
-                };
-                let stored = Stored::with_encoded_normal(object, attributes.albedo(), attributes.normal());
-                let view_depth = (params.h + depth) / towards_plane[l];
-                pixels.keep_nearer_stored_as(x + l, view_depth * depth_scale, view_depth, &stored);
+                }
+                // Exact: the inside lanes are non-negative and below the image's size.
+                let (xs, ys) = (fu.trunc_int(), fv.trunc_int());
+                let ks = (ys * i32x8::splat(image.width as i32) + xs).to_array();
+                let (xs, ys) = (xs.to_array(), ys.to_array());
+                let (fu, fv, u, v) = (fu.to_array(), fv.to_array(), u.to_array(), v.to_array());
+                let towards_plane = towards_plane.to_array();
+                for l in 0..n {
+                    let found = if inside & (1 << l) != 0 {
+                        let k = ks[l] as usize;
+                        if footprints[k] == 0 {
+                            continue;
+                        }
+                        let (tx, ty) = (fu[l] - xs[l] as f32, fv[l] - ys[l] as f32);
+                        sample_inside(image, k, tx, ty)
+                    } else if rim & (1 << l) != 0 {
+                        image
+                            .at(u[l], v[l])
+                            .filter(|t| !t.is_empty())
+                            .map(|t| (t.depth, t.attributes, 1.0))
+                    } else {
+                        None
+                    };
+                    let Some((depth, attributes, coverage)) = found else {
+                        continue;
+                    };
+                    let stored =
+                        Stored::with_encoded_normal(object, attributes.albedo(), attributes.normal());
+                    let view_depth = (params.h + depth) / towards_plane[l];
+                    let tested = view_depth * depth_scale;
+                    if coverage < 1.0 {
+                        pixels.add_fragment(x + l, tested, view_depth, coverage, &stored);
+                    } else {
+                        pixels.keep_nearer_stored_as(x + l, tested, view_depth, &stored);
+                    }
+                }
             }
-        }
-    });
+            pixels.into_fragments()
+        })
+        .collect();
+    gbuffer.add_fragments(fragments.into_iter().flatten());
 }
 
 /// Per texel `k` of `image` (but the last row and column): whether any of the four
@@ -193,26 +208,32 @@ fn footprints(image: &PrewarpImage) -> Vec<u8> {
 }
 
 /// The pre-warped image in the bilinear footprint whose top-left texel is `k`, at
-/// fractions `(tx, ty)` of the way to its bottom-right: bilinear where the four texels
-/// are all covered (inside a surface), nearest at silhouettes (blending with empty
-/// texels would invent colours). Returns the depth and the attributes (albedo and the
-/// encoded normal, blended: the normal may come out shorter than unit, and the shading
-/// normalises it).
+/// fractions `(tx, ty)` of the way to its bottom-right, and the share of the footprint's
+/// bilinear weight on covered texels — the pixel's coverage, about, where texels are
+/// about as large as pixels. Bilinear where the four texels are all covered (inside a
+/// surface); at silhouettes the covered texel of most weight (blending with empty
+/// texels would invent colours), to be blended by the coverage. Returns the depth, the
+/// attributes (albedo and the encoded normal, blended: the normal may come out shorter
+/// than unit, and the shading normalises it) and the coverage.
 #[inline]
-fn sample_inside(image: &PrewarpImage, k: usize, tx: f32, ty: f32) -> Option<(f32, Attributes)> {
+fn sample_inside(image: &PrewarpImage, k: usize, tx: f32, ty: f32) -> Option<(f32, Attributes, f32)> {
     let w = image.width as usize;
     let (top, bottom) = (&image.texels[k..k + 2], &image.texels[k + w..k + w + 2]);
     let [a, b, c, d] = [top[0], top[1], bottom[0], bottom[1]];
     if a.is_empty() || b.is_empty() || c.is_empty() || d.is_empty() {
-        // Nearest: the texel holding the point is the right one of a pair past the
-        // pair's middle, the lower one past the middle of a column pair.
-        let nearest = match (tx >= 0.5, ty >= 0.5) {
-            (false, false) => a,
-            (true, false) => b,
-            (false, true) => c,
-            (true, true) => d,
-        };
-        return (!nearest.is_empty()).then_some((nearest.depth, nearest.attributes));
+        let weights = [(1.0 - tx) * (1.0 - ty), tx * (1.0 - ty), (1.0 - tx) * ty, tx * ty];
+        let (coverage, heaviest) = [a, b, c, d]
+            .into_iter()
+            .zip(weights)
+            .filter(|(t, _)| !t.is_empty())
+            .fold((0.0, None::<(PTexel, f32)>), |(sum, best), (t, w)| {
+                let best = match best {
+                    Some((_, bw)) if bw >= w => best,
+                    _ => Some((t, w)),
+                };
+                (sum + w, best)
+            });
+        return heaviest.map(|(t, _)| (t.depth, t.attributes, coverage.min(1.0)));
     }
     let lerp = |p: f32, q: f32, t: f32| p + (q - p) * t;
     let depth = lerp(lerp(a.depth, b.depth, tx), lerp(c.depth, d.depth, tx), ty);
@@ -223,5 +244,5 @@ fn sample_inside(image: &PrewarpImage, k: usize, tx: f32, ty: f32) -> Option<(f3
     );
     let top = a.attributes.lerp(b.attributes, sx);
     let bottom = c.attributes.lerp(d.attributes, sx);
-    Some((depth, top.lerp(bottom, sy)))
+    Some((depth, top.lerp(bottom, sy), 1.0))
 }
