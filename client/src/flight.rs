@@ -35,7 +35,7 @@ use relief_core::scene::Scene;
 use relief_render::gbuffer::GBuffer;
 use relief_render::geometry::is_cheap;
 
-use crate::manager::Manager;
+use crate::manager::{Manager, ShownTexture};
 
 /// Paces a flight of `frames` path frames at `fps`, the eye following the clock (see
 /// [the module](self)).
@@ -110,6 +110,9 @@ pub struct Flown<'a> {
     pub camera: &'a Camera,
     /// The frame, when it was drawn.
     pub image: Option<Frame>,
+    /// How each object of the scene was drawn (by index): the texture shown, or `None`
+    /// for geometry.
+    pub shown: Vec<Option<ShownTexture>>,
 }
 
 /// What a flight measured.
@@ -223,12 +226,18 @@ impl Flight<'_> {
                 log.frame_ms.push(began.elapsed().as_secs_f64() * 1e3);
                 image
             });
+            let shown = shows
+                .iter()
+                .enumerate()
+                .map(|(k, show)| manager.describe(scene, k, show, &camera))
+                .collect();
             let flown = Flown {
                 index: log.frames,
                 path_frame,
                 t,
                 camera: &camera,
                 image,
+                shown,
             };
             log.frames += 1;
             if each(flown)?.is_break() {

@@ -6,7 +6,7 @@ use glam::Vec3;
 
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
-use relief_render::validity::schaufler::{needs_finer_texture, volume_centre};
+use relief_render::validity::schaufler::{needs_finer_texture, texel_angle, volume_centre};
 use relief_render::warp::params::WarpParams;
 
 use super::Manager;
@@ -28,6 +28,20 @@ pub enum Show {
         level: usize,
         partner: Option<(usize, usize)>,
     },
+}
+
+/// How an impostor was shown, for the record: the texture's turn round the object from
+/// the eye and its distance, the texel size on screen, and its partner's turn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ShownTexture {
+    /// Degrees round the object from the texture's eye to the eye.
+    pub turn_deg: f32,
+    /// The texture's eye's distance from the object over the eye's.
+    pub distance_ratio: f32,
+    /// The level drawn's texel, in pixels' angles.
+    pub texel_pixels: f32,
+    /// The partner's turn from the eye, degrees, when one was drawn.
+    pub partner_turn_deg: Option<f32>,
 }
 
 /// How well a held texture serves an eye.
@@ -150,6 +164,30 @@ impl Manager {
                 too_coarse,
                 finer_available: too_coarse && texture.width < wanted,
             }
+        })
+    }
+
+    /// How `show` draws object `k` from `camera`: `None` for geometry (or a texture no
+    /// longer held).
+    pub fn describe(&self, scene: &Scene, k: usize, show: &Show, camera: &Camera) -> Option<ShownTexture> {
+        let Show::Impostor {
+            texture,
+            level,
+            partner,
+        } = *show
+        else {
+            return None;
+        };
+        let held = &self.objects.get(k)?.held;
+        let centre = scene.objects.get(k)?.bounds.center();
+        let turn = |i: usize| Some(angle_between(centre, held.get(i)?.eye, camera.eye).to_degrees());
+        let shown = held.get(texture)?;
+        let drawn = &shown.pyramid.levels.get(level)?.texture.camera;
+        Some(ShownTexture {
+            turn_deg: turn(texture)?,
+            distance_ratio: (shown.eye - centre).length() / (camera.eye - centre).length(),
+            texel_pixels: texel_angle(drawn, camera.eye) / camera.pixel_angle(),
+            partner_turn_deg: partner.and_then(|(i, _)| turn(i)),
         })
     }
 

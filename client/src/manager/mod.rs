@@ -52,7 +52,7 @@ use relief_render::geometry::{GeometryReason, geometry_reason};
 use crate::predict::Predictor;
 
 pub use cache::ReadyTexture;
-pub use choose::Show;
+pub use choose::{Show, ShownTexture};
 pub use counters::{Counters, RenderStages, StaleCauses, TextureLifetimes};
 pub use messages::{Arrival, Command, TextureRequest};
 pub use policy::Config;

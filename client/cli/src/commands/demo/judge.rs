@@ -7,6 +7,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 
+use relief_client::manager::ShownTexture;
 use relief_core::camera::Camera;
 use relief_core::frame::Frame;
 use relief_core::scene::Scene;
@@ -30,9 +31,20 @@ pub(super) struct Judged {
     pub(super) geometry_by_object: BTreeMap<String, Vec<f64>>,
 }
 
-/// Compares each kept `(path frame, camera, frame)` with the ray-traced references;
-/// writes `psnr.csv` and the worst frame with its reference into `out`.
-pub(super) fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path) -> Result<Judged> {
+/// A frame kept to be judged after the flight.
+pub(super) struct Compared {
+    pub(super) path_frame: u32,
+    pub(super) camera: Camera,
+    pub(super) image: Frame,
+    /// How each object was drawn ([`Flown::shown`](relief_client::flight::Flown::shown)).
+    pub(super) shown: Vec<Option<ShownTexture>>,
+}
+
+/// Compares each kept frame with the ray-traced references; writes `psnr.csv` (with,
+/// per object that may be an impostor, how it was drawn: the texture's turn from the
+/// eye in degrees, its texel in pixels, its partner's turn — empty for geometry) and
+/// the worst frame with its reference into `out`.
+pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<Judged> {
     let mut judged = Judged::default();
     if compared.is_empty() {
         return Ok(judged);
@@ -52,11 +64,19 @@ pub(super) fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path
     let mut log = String::from("frame,psnr_db,psnr_aa_db,geometry_psnr_aa_db");
     for (_, name) in &candidates {
         let name = column(name);
-        log.push_str(&format!(",psnr_aa_db_{name},geometry_psnr_aa_db_{name}"));
+        log.push_str(&format!(
+            ",psnr_aa_db_{name},geometry_psnr_aa_db_{name},turn_deg_{name},texel_px_{name},partner_turn_deg_{name}"
+        ));
     }
     log.push('\n');
     let mut worst = f64::INFINITY;
-    for (frame, camera, image) in compared {
+    for Compared {
+        path_frame: frame,
+        camera,
+        image,
+        shown,
+    } in compared
+    {
         let reference = render_reference(&tracer, camera, 1);
         let antialiased = render_reference(&tracer, camera, ANTIALIASED_SAMPLES);
         let geometry = render_geometry(scene, camera, &mut GBuffer::new(camera.width, camera.height));
@@ -76,6 +96,17 @@ pub(super) fn judge(scene: &Scene, compared: &[(u32, Camera, Frame)], out: &Path
                     log.push_str(&format!("{v:.3}"));
                     into.entry(name.to_string()).or_default().push(v);
                 }
+            }
+            let how = shown.get(k as usize).copied().flatten();
+            let fields = how.map(|s| (s.turn_deg, s.texel_pixels, s.partner_turn_deg));
+            match fields {
+                Some((turn, texel, partner)) => {
+                    log.push_str(&format!(",{turn:.1},{texel:.2},"));
+                    if let Some(p) = partner {
+                        log.push_str(&format!("{p:.1}"));
+                    }
+                }
+                None => log.push_str(",,,"),
             }
         }
         log.push('\n');

@@ -22,7 +22,7 @@ use relief_proto::bundle::bundle_for;
 use relief_render::gbuffer::GBuffer;
 use relief_render::geometry::render_geometry;
 
-use judge::{by_object, judge};
+use judge::{Compared, by_object, judge};
 use summary::{FrameStages, Summary};
 
 use crate::processes::{LocalService, connect_and_upload, sibling};
@@ -183,7 +183,12 @@ pub fn run(args: DemoArgs) -> Result<()> {
                 // Judged after the flight: tracing references here would stall it. A long
                 // flight keeps every other one, comparing half as often, to stay within
                 // the memory budget.
-                compared.push((flown.path_frame, *camera, image));
+                compared.push(Compared {
+                    path_frame: flown.path_frame,
+                    camera: *camera,
+                    image,
+                    shown: flown.shown,
+                });
                 if compared.len() * frame_bytes > MAX_COMPARED_BYTES {
                     let mut k = 0;
                     compared.retain(|_| {
