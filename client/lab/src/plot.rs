@@ -37,6 +37,8 @@ pub struct Chart<'a> {
     pub x_desc: &'a str,
     pub y_desc: &'a str,
     pub log_x: bool,
+    /// A log scale for y: values from milliseconds to seconds on one plot.
+    pub log_y: bool,
     pub colour: &'a dyn Fn(&str) -> Option<usize>,
     pub point_label: &'a dyn Fn(i64) -> Option<String>,
 }
@@ -68,13 +70,19 @@ impl Chart<'_> {
         if !x0.is_finite() {
             (x0, x1, y0, y1) = (0.01, 1.0, 0.0, 60.0);
         }
+        // (Linear: a twentieth of the span each side, so seconds and degrees alike.)
+        let pad = if x1 > x0 { 0.05 * (x1 - x0) } else { 1.0 };
         let x0 = if self.log_x {
             (x0 * 0.8).max(1e-4)
         } else {
-            x0 - 1.0
+            x0 - pad
         };
-        let x1 = if self.log_x { x1 * 1.25 } else { x1 + 1.0 };
-        let (y0, y1) = ((y0 - 2.0).max(0.0), y1 + 2.0);
+        let x1 = if self.log_x { x1 * 1.25 } else { x1 + pad };
+        let (y0, y1) = if self.log_y {
+            ((y0 * 0.8).max(1e-4), y1 * 1.25)
+        } else {
+            ((y0 - 2.0).max(0.0), y1 + 2.0)
+        };
         {
             let root = BitMapBackend::with_buffer(&mut buffer, (w, h)).into_drawing_area();
             root.fill(&WHITE).map_err(|e| fail(&e))?;
@@ -89,6 +97,8 @@ impl Chart<'_> {
                     let mut chart = $chart.map_err(|e| fail(&e))?;
                     chart
                         .configure_mesh()
+                        .x_labels(12)
+                        .y_labels(12)
                         .x_desc(self.x_desc)
                         .y_desc(self.y_desc)
                         .draw()
@@ -124,10 +134,11 @@ impl Chart<'_> {
                         .map_err(|e| fail(&e))?;
                 }};
             }
-            if self.log_x {
-                draw!(builder.build_cartesian_2d((x0..x1).log_scale(), y0..y1));
-            } else {
-                draw!(builder.build_cartesian_2d(x0..x1, y0..y1));
+            match (self.log_x, self.log_y) {
+                (true, true) => draw!(builder.build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())),
+                (true, false) => draw!(builder.build_cartesian_2d((x0..x1).log_scale(), y0..y1)),
+                (false, true) => draw!(builder.build_cartesian_2d(x0..x1, (y0..y1).log_scale())),
+                (false, false) => draw!(builder.build_cartesian_2d(x0..x1, y0..y1)),
             }
             root.present().map_err(|e| fail(&e))?;
         }

@@ -56,6 +56,10 @@ pub struct LoadArgs {
     /// Client 0 compares with the ray-traced reference every K-th frame.
     #[arg(long, default_value = "25", value_parser = clap::value_parser!(u32).range(1..=100_000))]
     reference_every: u32,
+    /// Times each point is measured, each with a fresh server and workers: its figures
+    /// pool them all, and the p99 latency's spread over them says how stable it is.
+    #[arg(long, default_value = "3", value_parser = clap::value_parser!(u32).range(1..=100))]
+    repeats: u32,
     /// Output directory: load.csv, load_latency.png, load_stalls.png.
     #[arg(long, default_value = "out/load")]
     out: PathBuf,
@@ -69,12 +73,18 @@ pub struct LoadArgs {
 struct Row {
     tolerance_px: f32,
     clients: u32,
+    /// Runs pooled into this row.
+    repeats: u32,
     frames: u64,
     requests_now: u64,
     requests_predicted: u64,
     requests_per_s: f64,
     latency_ms_p50: f64,
     latency_ms_p99: f64,
+    /// The least and the greatest p99 latency of one run: how far apart the repeats
+    /// came out.
+    latency_ms_p99_lo: f64,
+    latency_ms_p99_hi: f64,
     /// Fraction of client frames with an impostor beyond tolerance or missing.
     stall_frac: f64,
     /// Final textures received per client per second of flight.
@@ -87,20 +97,23 @@ struct Row {
     psnr_db_min: f64,
 }
 
-const HEADER: &str = "tolerance_px,clients,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min";
+const HEADER: &str = "tolerance_px,clients,repeats,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,latency_ms_p99_lo,latency_ms_p99_hi,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min";
 
 impl Row {
     fn csv(&self) -> String {
         format!(
-            "{},{},{},{},{},{:.2},{:.2},{:.2},{:.4},{:.3},{:.3},{:.3},{:.2},{:.2}",
+            "{},{},{},{},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.3},{:.3},{:.3},{:.2},{:.2}",
             self.tolerance_px,
             self.clients,
+            self.repeats,
             self.frames,
             self.requests_now,
             self.requests_predicted,
             self.requests_per_s,
             self.latency_ms_p50,
             self.latency_ms_p99,
+            self.latency_ms_p99_lo,
+            self.latency_ms_p99_hi,
             self.stall_frac,
             self.textures_per_client_s,
             self.lifetime_s_p10,
@@ -139,13 +152,21 @@ pub fn run(args: LoadArgs) -> Result<()> {
             .build()?,
         args: &args,
     };
-    let bar = progress::bar((args.clients.len() * args.tolerances.len()) as u64, "load runs");
+    let points = args.clients.len() * args.tolerances.len();
+    let bar = progress::bar((points * args.repeats as usize) as u64, "load runs");
     let mut rows = Vec::new();
     for &clients in &args.clients {
         for &tolerance in &args.tolerances {
-            bar.set_message(format!("{clients} clients, tolerance {tolerance} px"));
-            rows.push(setup.measure(clients, tolerance)?);
-            bar.inc(1);
+            let mut runs = Vec::new();
+            for repeat in 1..=args.repeats {
+                bar.set_message(format!(
+                    "{clients} clients, tolerance {tolerance} px, run {repeat} of {}",
+                    args.repeats
+                ));
+                runs.push(setup.measure(clients, tolerance)?);
+                bar.inc(1);
+            }
+            rows.push(pooled(clients, tolerance, &runs));
         }
     }
     bar.finish_and_clear();
@@ -180,12 +201,13 @@ pub fn run(args: LoadArgs) -> Result<()> {
         "{} workers, RTT +{} ms; points: tolerance",
         args.workers, args.rtt_ms
     );
-    let draw = |what: &str, y_desc: &str, file: &str, curves: &BTreeMap<String, Curve>| {
+    let draw = |what: &str, y_desc: &str, file: &str, log_y: bool, curves: &BTreeMap<String, Curve>| {
         Chart {
             title: &format!("{what} vs impostor lifetime ({title})"),
-            x_desc: "impostor lifetime, p50 (s, log): arrival to the last frame shown",
+            x_desc: "impostor lifetime, p50 (s): arrival to the last frame shown",
             y_desc,
-            log_x: true,
+            log_x: false,
+            log_y,
             colour: &|_| None,
             point_label: &tolerance_label,
         }
@@ -195,8 +217,9 @@ pub fn run(args: LoadArgs) -> Result<()> {
     latency.extend(curves(&|r| r.latency_ms_p99, ", p99"));
     draw(
         "Request latency",
-        "request latency (ms)",
+        "request latency (ms, log)",
         "load_latency.png",
+        true,
         &latency,
     )?;
     let mut stalls = curves(&|r| 100.0 * r.stall_frac, ": stalled frames (%)");
@@ -205,6 +228,7 @@ pub fn run(args: LoadArgs) -> Result<()> {
         "Stalls and image error",
         "stalled frames (%) · PSNR (dB)",
         "load_stalls.png",
+        false,
         &stalls,
     )?;
     if args.json {
@@ -228,8 +252,9 @@ struct Setup<'a> {
 }
 
 impl Setup<'_> {
-    /// One point: a fresh server and workers, `clients` clients flying at `tolerance`.
-    fn measure(&self, clients: u32, tolerance: f32) -> Result<Row> {
+    /// One run of a point: a fresh server and workers, `clients` clients flying at
+    /// `tolerance`.
+    fn measure(&self, clients: u32, tolerance: f32) -> Result<Run> {
         let args = self.args;
         let path_frames = self.scene.path.frame_count().max(1);
         let service = LocalService::start(&args.out, args.workers)?;
@@ -287,35 +312,64 @@ impl Setup<'_> {
             .collect::<Result<_>>()?;
         let seconds = started.elapsed().as_secs_f64();
         drop(service);
-        let latencies: Vec<f64> = results
-            .iter()
-            .flat_map(|r| r.counters.latencies_ms.clone())
-            .collect();
-        let psnr: Vec<f64> = results.iter().flat_map(|r| r.psnr.clone()).collect();
-        let lifetimes: Vec<f64> = results.iter().flat_map(|r| r.lifetimes_s.clone()).collect();
-        let sum = |f: &dyn Fn(&ClientResult) -> u64| results.iter().map(f).sum::<u64>();
-        let (now, predicted) = (
-            sum(&|r| r.counters.requests_now),
-            sum(&|r| r.counters.requests_predicted),
-        );
-        let frames = sum(&|r| r.frames as u64);
-        Ok(Row {
-            tolerance_px: tolerance,
-            clients,
-            frames,
-            requests_now: now,
-            requests_predicted: predicted,
-            requests_per_s: (now + predicted) as f64 / seconds,
-            latency_ms_p50: percentile(&latencies, 0.5),
-            latency_ms_p99: percentile(&latencies, 0.99),
-            stall_frac: sum(&|r| r.counters.stale_frames) as f64 / frames as f64,
-            textures_per_client_s: sum(&|r| r.received) as f64 / clients as f64 / seconds,
-            lifetime_s_p10: percentile(&lifetimes, 0.1),
-            lifetime_s_p50: percentile(&lifetimes, 0.5),
-            // NaN (null in JSON) when no frame was compared.
-            psnr_db_mean: finite_mean(&psnr).unwrap_or(f64::NAN),
-            psnr_db_min: finite_min(&psnr).unwrap_or(f64::NAN),
+        Ok(Run { results, seconds })
+    }
+}
+
+/// One run of a point: what each client brought back, and how long the flight took.
+struct Run {
+    results: Vec<ClientResult>,
+    seconds: f64,
+}
+
+/// The row of `clients` clients at `tolerance` from `runs`, pooled: counts summed, rates
+/// over the runs' total time, percentiles over every run's samples.
+fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
+    let results = || runs.iter().flat_map(|run| &run.results);
+    let seconds: f64 = runs.iter().map(|run| run.seconds).sum();
+    let latencies: Vec<f64> = results()
+        .flat_map(|r| r.counters.latencies_ms.iter().copied())
+        .collect();
+    let p99_of_runs: Vec<f64> = runs
+        .iter()
+        .map(|run| {
+            let own: Vec<f64> = run
+                .results
+                .iter()
+                .flat_map(|r| r.counters.latencies_ms.iter().copied())
+                .collect();
+            percentile(&own, 0.99)
         })
+        .filter(|p| p.is_finite())
+        .collect();
+    let psnr: Vec<f64> = results().flat_map(|r| r.psnr.iter().copied()).collect();
+    let lifetimes: Vec<f64> = results().flat_map(|r| r.lifetimes_s.iter().copied()).collect();
+    let sum = |f: &dyn Fn(&ClientResult) -> u64| results().map(f).sum::<u64>();
+    let (now, predicted) = (
+        sum(&|r| r.counters.requests_now),
+        sum(&|r| r.counters.requests_predicted),
+    );
+    let frames = sum(&|r| r.frames as u64);
+    Row {
+        tolerance_px: tolerance,
+        clients,
+        repeats: runs.len() as u32,
+        frames,
+        requests_now: now,
+        requests_predicted: predicted,
+        requests_per_s: (now + predicted) as f64 / seconds,
+        latency_ms_p50: percentile(&latencies, 0.5),
+        latency_ms_p99: percentile(&latencies, 0.99),
+        latency_ms_p99_lo: p99_of_runs.iter().copied().reduce(f64::min).unwrap_or(f64::NAN),
+        latency_ms_p99_hi: p99_of_runs.iter().copied().reduce(f64::max).unwrap_or(f64::NAN),
+        stall_frac: sum(&|r| r.counters.stale_frames) as f64 / frames as f64,
+        // (Each run's clients flew for its time: client-seconds are clients × the total.)
+        textures_per_client_s: sum(&|r| r.received) as f64 / (clients as f64 * seconds),
+        lifetime_s_p10: percentile(&lifetimes, 0.1),
+        lifetime_s_p50: percentile(&lifetimes, 0.5),
+        // NaN (null in JSON) when no frame was compared.
+        psnr_db_mean: finite_mean(&psnr).unwrap_or(f64::NAN),
+        psnr_db_min: finite_min(&psnr).unwrap_or(f64::NAN),
     }
 }
 

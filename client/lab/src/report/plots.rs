@@ -30,6 +30,7 @@ pub fn plot_error_vs_time(rows: &[Row], options: &Options, path: &Path) -> Resul
         x_desc: "display time per frame (ms, log scale)",
         y_desc: "PSNR (dB)",
         log_x: true,
+        log_y: false,
         colour: &series_colour,
         point_label: &|_| None,
     }
@@ -50,6 +51,7 @@ pub fn plot_error_vs_angle(rows: &[Row], options: &Options, path: &Path) -> Resu
         x_desc: "angle between source and destination eye (degrees)",
         y_desc: "PSNR (dB)",
         log_x: false,
+        log_y: false,
         colour: &series_colour,
         point_label: &|_| None,
     }
