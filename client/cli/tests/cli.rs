@@ -374,12 +374,64 @@ fn frame_writes_the_picture_and_the_promised_json() {
             "texels_warped",
             "texels_baked",
             "psnr_db",
+            "psnr_whole_db",
+            "ssim",
         ],
     );
     assert!(missing.is_empty(), "{missing:?} in {stdout}");
     assert_eq!(v["fell_back"].as_u64(), Some(0), "{stdout}");
+    assert_eq!(v["fell_back_why"].as_array().map(Vec::len), Some(0), "{stdout}");
+    // What the PSNR covers: the pixels both show, the fraction only one does, and the
+    // figure over every pixel either shows (never above the first).
+    let hole_frac = v["hole_frac"].as_f64().expect("hole_frac");
+    assert!((0.0..0.1).contains(&hole_frac), "{stdout}");
+    assert_eq!(v["covers_reference"].as_bool(), Some(true), "{stdout}");
+    let (both, whole) = (
+        v["psnr_db"].as_f64().unwrap(),
+        v["psnr_whole_db"].as_f64().unwrap(),
+    );
+    assert!(whole <= both + 1e-9, "{stdout}");
     let picture = image::open(out).expect("the frame is a PNG");
     assert_eq!((picture.width(), picture.height()), (64, 36));
+}
+
+/// At a field of view so narrow that a texel covers many pixels, pull–push would draw
+/// a grid of dots: the objects whose texels are too large are drawn as geometry,
+/// counted and explained, and the frame says so on stderr.
+#[test]
+fn frame_falls_back_where_a_method_cannot_fill_its_texels() {
+    let dir = scratch("frame-narrow");
+    let out = dir.join("frame.png");
+    let (code, stdout, stderr) = relief(&[
+        "frame",
+        "--eye",
+        "3,2,9",
+        "--target",
+        "3,1.3,0",
+        "--fov",
+        "0.3",
+        "--size",
+        "160x90",
+        "--method",
+        "forward-pullpush",
+        "--runs",
+        "1",
+        "--json",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON object");
+    let why: Vec<&str> = v["fell_back_why"]
+        .as_array()
+        .expect("fell_back_why")
+        .iter()
+        .filter_map(|w| w.as_str())
+        .collect();
+    assert!(!why.is_empty(), "{stdout}");
+    assert_eq!(v["fell_back"].as_u64(), Some(why.len() as u64), "{stdout}");
+    assert!(why.iter().all(|w| w.contains("a texel covers")), "{why:?}");
+    assert!(stderr.contains("drawn as geometry instead"), "{stderr}");
 }
 
 #[test]
@@ -409,7 +461,7 @@ fn report_error_vs_time_writes_the_promised_files() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),
-        Some("object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac,psnr_aa_db")
+        Some("object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac,psnr_whole_db,psnr_aa_db")
     );
     // Geometry at each angle, then each method at each size and angle.
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
@@ -432,6 +484,8 @@ fn report_error_vs_time_writes_the_promised_files() {
             (0.0..=1.0).contains(&number(6)) && (0.0..=1.0).contains(&number(7)),
             "{row:?}"
         );
+        // Over every pixel either shows never above over the pixels both show.
+        assert!(number(8) <= number(5) + 1e-9, "{row:?}");
     }
     let json: serde_json::Value = serde_json::from_str(stdout.trim()).expect("a JSON array");
     let json = json.as_array().expect("a JSON array");

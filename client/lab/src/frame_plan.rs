@@ -47,8 +47,11 @@ pub struct FrameStats {
     pub texels_warped: usize,
     /// Texels the full-resolution textures have.
     pub texels_baked: usize,
-    /// Impostors that could not be warped from this eye and were drawn as geometry.
+    /// Impostors that could not be drawn faithfully from this eye and were drawn as
+    /// geometry.
     pub fell_back: usize,
+    /// Why, for each of them: the object's name and the method's reason.
+    pub fell_back_why: Vec<String>,
 }
 
 impl FramePlan {
@@ -126,9 +129,12 @@ impl FramePlan {
             });
             match drawn {
                 Ok(texels) => stats.texels_warped += texels,
-                // (The eye in the texture's plane, or a method that cannot draw here.)
-                Err(_) => {
+                // (The eye in the texture's plane, or a method that cannot draw here
+                // faithfully.)
+                Err(why) => {
                     stats.fell_back += 1;
+                    let name = &scene.objects[imp.index as usize].name;
+                    stats.fell_back_why.push(format!("{name}: {why}"));
                     geometry.push((imp.index, &scene.objects[imp.index as usize]));
                 }
             }

@@ -40,8 +40,9 @@ fn sphere(scale: f32) -> Mesh {
 }
 
 /// Shows `texture` with every method from `eye` (looking at `target`) and checks the
-/// buffers. Returns how many methods drew something.
-fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, what: &str) -> usize {
+/// buffers. Returns how many methods drew something, and how many refused with a
+/// reason.
+fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, what: &str) -> (usize, usize) {
     let up = if (target - eye).normalize_or_zero().dot(Vec3::Y).abs() > 0.99 {
         Vec3::Z
     } else {
@@ -67,12 +68,17 @@ fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, wha
             );
         }
     }
-    let mut drew = 0;
+    let (mut drew, mut refused) = (0, 0);
     for method in Method::ALL {
         let mut gbuffer = GBuffer::new(camera.width, camera.height);
         match display(method, &impostor, 0, &camera, &mut gbuffer) {
             Ok(()) => {}
-            Err(DisplayError::Warp(WarpError::EyeInPlane(_)) | DisplayError::NeedsPreviousFrame) => {}
+            Err(
+                DisplayError::Warp(WarpError::EyeInPlane(_))
+                | DisplayError::NeedsPreviousFrame
+                | DisplayError::FarSide { .. }
+                | DisplayError::TexelsTooLarge { .. },
+            ) => refused += 1,
             Err(e) => panic!("{what}, {method}: unexpected error {e}"),
         }
         // (The other planes are integers: only depth can hold NaN or infinity.)
@@ -82,7 +88,7 @@ fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, wha
                 "{what}, {method}: depth {depth}"
             );
         }
-        drew += (gbuffer.covered() > 0) as usize;
+        drew += (gbuffer.covered() > 0 || gbuffer.fragments_of(0).next().is_some()) as usize;
         let frame = gbuffer.shade(scene, &camera);
         assert_eq!(frame.color.len(), 96 * 72);
         // `sprite` redraws a previous frame's impostor: this one's, captured and drawn
@@ -99,7 +105,7 @@ fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, wha
             }
         }
     }
-    drew
+    (drew, refused)
 }
 
 fn baked(scene: &Scene, eye: Vec3, size: u32, bits: DepthBits) -> ReliefTexture {
@@ -113,14 +119,17 @@ fn eye_in_near_and_behind_the_texture_plane() {
     let texture = baked(&scene, source, 64, DepthBits::Eight);
     let c = texture.camera;
     let in_plane = c.plane_centre() + c.a.normalize() * 3.0;
-    // In the plane: pre-warps refuse, others draw or not, nothing is non-finite.
-    check_all(
+    // In the plane (72° round the sphere from the texture's eye): the four pre-warps
+    // refuse (the eye in the plane) and the sprite (no previous frame); the forward
+    // and inverse methods, which need no plane, draw.
+    let outcome = check_all(
         &scene,
         texture.clone(),
         in_plane + Vec3::Y * 1e-3,
         Vec3::ZERO,
         "in plane",
     );
+    assert_eq!(outcome, (6, 5), "in plane: (drew, refused)");
     // A hair in front of it (k3 huge) and behind it.
     check_all(
         &scene,
@@ -160,7 +169,8 @@ fn epipole_far_outside_and_inside_the_image_and_grazing_views() {
             Vec3::new(0.1, 0.2, 4.0),
             Vec3::ZERO,
             "head-on"
-        ) >= 8
+        )
+        .0 >= 8
     );
     // Grazing: 89.5° away from the source direction.
     let grazing = Vec3::new(
@@ -168,7 +178,16 @@ fn epipole_far_outside_and_inside_the_image_and_grazing_views() {
         0.0,
         6.0 * 89.5f32.to_radians().cos(),
     );
-    check_all(&scene, texture, grazing, Vec3::ZERO, "grazing");
+    check_all(&scene, texture.clone(), grazing, Vec3::ZERO, "grazing");
+    // From the far side (120° round): no method draws the texture's side of the sphere
+    // as if it were this one; each refuses with its reason.
+    let far = Vec3::new(
+        6.0 * 120f32.to_radians().sin(),
+        0.3,
+        6.0 * 120f32.to_radians().cos(),
+    );
+    let outcome = check_all(&scene, texture, far, Vec3::ZERO, "far side");
+    assert_eq!(outcome, (0, Method::ALL.len()), "far side: (drew, refused)");
 }
 
 #[test]
@@ -219,7 +238,7 @@ fn extreme_scales_and_distances() {
         // Near range the impostor is visible and drawn by the warps.
         let eye = Vec3::new(0.0, 0.0, 3.0 * size);
         let texture = baked(&scene, eye, 32, DepthBits::Eight);
-        assert!(check_all(&scene, texture, eye, Vec3::ZERO, &format!("size {size} near")) >= 8);
+        assert!(check_all(&scene, texture, eye, Vec3::ZERO, &format!("size {size} near")).0 >= 8);
     }
 }
 
@@ -261,10 +280,13 @@ fn empty_and_one_texel_textures() {
         DepthBits::Eight,
         eye,
     );
-    assert_eq!(check_all(&scene, empty, eye, Vec3::ZERO, "empty"), 0);
+    assert_eq!(check_all(&scene, empty, eye, Vec3::ZERO, "empty").0, 0);
     let one = baked(&scene, eye, 1, DepthBits::Eight);
     assert_eq!(one.covered_texels(), 1);
-    check_all(&scene, one.clone(), eye, Vec3::ZERO, "one texel");
+    // One texel across 30-odd pixels: the forward methods (three) refuse to draw a dot
+    // for the sphere, as does the sprite.
+    let (_, refused) = check_all(&scene, one.clone(), eye, Vec3::ZERO, "one texel");
+    assert!(refused >= 4, "one texel: {refused} refused");
     check_all(
         &scene,
         one,

@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use relief_core::relief::DepthBits;
 use relief_lab::frame_plan::{FramePlan, FrameStats};
-use relief_lab::image_error::compare;
+use relief_lab::image_error::{MAX_HOLE_FRAC, compare};
 use relief_lab::methods::Method;
 use relief_lab::timing::{median_ms, median_ms_after};
 use relief_render::gbuffer::GBuffer;
@@ -31,7 +31,9 @@ pub struct FrameArgs {
     /// Timed runs of each frame (the median is reported), after one warm-up.
     #[arg(long, default_value = "5", value_parser = clap::value_parser!(u32).range(1..=1000))]
     runs: u32,
-    /// Also ray-trace the reference and report the frame's PSNR against it.
+    /// Also ray-trace the reference and report the frame's error against it: PSNR and
+    /// SSIM over the pixels both show, PSNR over every pixel either shows, and the
+    /// fraction shown by only one.
     #[arg(long)]
     compare: bool,
     /// Output PNG file.
@@ -51,8 +53,24 @@ struct FrameReport {
     speedup: f64,
     #[serde(flatten)]
     stats: FrameStats,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    psnr_db: Option<f64>,
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    error: Option<FrameError>,
+}
+
+/// The frame against the ray-traced reference (`--compare`): see
+/// [`ImageError`](relief_lab::image_error::ImageError).
+#[derive(Serialize)]
+struct FrameError {
+    /// Over the pixels both show.
+    psnr_db: f64,
+    /// Over every pixel either shows: coverage counts.
+    psnr_whole_db: f64,
+    ssim: f64,
+    /// Of the pixels either shows, those only one does.
+    hole_frac: f64,
+    /// `hole_frac` within [`MAX_HOLE_FRAC`]: only then does `psnr_db` speak for the
+    /// frame.
+    covers_reference: bool,
 }
 
 pub fn run(args: FrameArgs) -> Result<()> {
@@ -81,10 +99,17 @@ pub fn run(args: FrameArgs) -> Result<()> {
         return Err(anyhow!("no frame rendered"));
     };
     let geometry_frame_ms = median_ms(runs, || drop(render_geometry(&scene, &camera, &mut gbuffer)));
-    let psnr_db = args.compare.then(|| {
+    let error = args.compare.then(|| {
         bar.set_message("ray-tracing the reference");
         let reference = render_reference(&SceneTracer::new(&scene), &camera, 1);
-        compare(&frame, &reference, None).psnr_db
+        let e = compare(&frame, &reference, None);
+        FrameError {
+            psnr_db: e.psnr_db,
+            psnr_whole_db: e.psnr_whole_db,
+            ssim: e.ssim,
+            hole_frac: e.hole_frac,
+            covers_reference: e.covers_reference(),
+        }
     });
     bar.finish_and_clear();
     frame.save_png(&args.out)?;
@@ -96,8 +121,22 @@ pub fn run(args: FrameArgs) -> Result<()> {
         geometry_frame_ms,
         speedup: geometry_frame_ms / frame_ms,
         stats,
-        psnr_db,
+        error,
     };
+    for why in &report.stats.fell_back_why {
+        eprintln!("warning: drawn as geometry instead: {why}");
+    }
+    if let Some(e) = &report.error
+        && !e.covers_reference
+    {
+        eprintln!(
+            "warning: {:.0} % of the pixels either frame shows are shown by one only (more \
+             than {:.0} %): the PSNR over the pixels both show does not speak for this frame; \
+             read psnr_whole_db",
+            100.0 * e.hole_frac,
+            100.0 * MAX_HOLE_FRAC
+        );
+    }
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
@@ -109,8 +148,13 @@ pub fn run(args: FrameArgs) -> Result<()> {
             frame_ms,
             geometry_frame_ms,
             report.speedup,
-            psnr_db.map_or(String::new(), |p| format!(
-                "; PSNR {p:.1} dB against the reference"
+            report.error.as_ref().map_or(String::new(), |e| format!(
+                "; against the reference: PSNR {:.1} dB and SSIM {:.3} where both show, \
+                 {:.1} dB over every pixel either shows, {:.1} % shown by one only",
+                e.psnr_db,
+                e.ssim,
+                e.psnr_whole_db,
+                100.0 * e.hole_frac
             ))
         );
     }

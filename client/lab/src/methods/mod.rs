@@ -21,6 +21,7 @@ use std::str::FromStr;
 use relief_core::camera::Camera;
 use relief_render::gbuffer::GBuffer;
 use relief_render::impostor::Impostor;
+use relief_render::validity::schaufler::{texel_angle, volume_centre};
 use relief_render::warp::{Prewarped, Variant, WarpError};
 
 /// Why a method cannot show a texture from an eye.
@@ -32,7 +33,30 @@ pub enum DisplayError {
     /// The sprite method reuses a previous frame, which [`display`] does not have.
     #[error("the sprite method needs a previous frame")]
     NeedsPreviousFrame,
+    /// A texel would cover more pixels than the method's reconstruction fills: drawn,
+    /// it would show a grid of dots. Needs a finer texture, or geometry.
+    #[error(
+        "a texel covers {pixels:.1} pixels, more than {method}'s reconstruction fills ({fills}): needs a finer texture or geometry"
+    )]
+    TexelsTooLarge { method: Method, pixels: f32, fills: f32 },
+    /// The eye is so far round the object from the texture's eye that what the method
+    /// would draw is the texture's far side, seen through.
+    #[error(
+        "the eye is {turn_deg:.0}° round the object from the texture's eye, past the {max_deg:.0}° one texture can show: needs a texture from nearer"
+    )]
+    FarSide { turn_deg: f32, max_deg: f32 },
 }
+
+/// The widest turn round an object, from its texture's eye, at which the forward and
+/// inverse methods still draw it: past a right angle a texture shows the far side of
+/// what the eye sees (measured: 9–18 dB at 89–179°). (The pre-warp refuses sooner by
+/// itself, once the eye is behind the texture's plane.)
+pub const MAX_SHOWN_TURN_DEG: f32 = 80.0;
+
+/// The largest texel, in pixels across, that pull–push fills into a surface: past it
+/// the splats are dots too sparse for the pyramid's coarse levels to join (at a 0.3°
+/// field of view they covered 8 % of the object).
+pub const PULLPUSH_MAX_TEXEL_PIXELS: f32 = 4.0;
 
 /// A name [`Method::from_str`] does not know; the message lists the ones it does.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -166,6 +190,34 @@ pub fn display(
 pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<Prepared, DisplayError> {
     if let Some(variant) = method.variant() {
         return Ok(Prepared::Prewarped(Prewarped::new(variant, impostor, camera)?));
+    }
+    let fills = match method {
+        Method::ForwardPullPush => Some(PULLPUSH_MAX_TEXEL_PIXELS),
+        // (A k × k kernel gathers splats up to k − 1 pixels apart.)
+        Method::ForwardKernel(k) => Some(k as f32),
+        Method::Inverse(_) => None,
+        _ => return Err(DisplayError::NeedsPreviousFrame),
+    };
+    let texture = &impostor.texture;
+    let centre = volume_centre(&texture.camera);
+    let turn_deg = (texture.eye - centre)
+        .angle_between(camera.eye - centre)
+        .to_degrees();
+    if turn_deg > MAX_SHOWN_TURN_DEG {
+        return Err(DisplayError::FarSide {
+            turn_deg,
+            max_deg: MAX_SHOWN_TURN_DEG,
+        });
+    }
+    let pixels = texel_angle(&texture.camera, camera.eye) / camera.pixel_angle();
+    if let Some(fills) = fills
+        && pixels > fills
+    {
+        return Err(DisplayError::TexelsTooLarge {
+            method,
+            pixels,
+            fills,
+        });
     }
     match method {
         Method::ForwardPullPush => Ok(Prepared::PullPush),

@@ -54,10 +54,15 @@ pub struct Row {
     /// Median display time (warp + reconstruction into the frame's G-buffer; for
     /// geometry, rasterization and shading), ms.
     pub ms: f64,
-    /// Against the point-sampled reference (one ray through each pixel centre).
+    /// Against the point-sampled reference (one ray through each pixel centre), over
+    /// the pixels both show; `ssim` too. `hole_frac`: of the pixels either shows, those
+    /// only one does; `psnr_whole_db`: over every pixel either shows, so a method that
+    /// leaves the object half empty cannot score as if it had drawn it (see
+    /// [`ImageError`](crate::image_error::ImageError)).
     pub psnr_db: f64,
     pub ssim: f64,
     pub hole_frac: f64,
+    pub psnr_whole_db: f64,
     /// Against the anti-aliased reference ([`ANTIALIASED_SAMPLES`]² rays per pixel).
     /// Exact geometry sampled once per pixel does not reach it either: its
     /// `psnr_aa_db` is the floor that detail finer than a pixel sets for every
@@ -66,11 +71,12 @@ pub struct Row {
 }
 
 impl Row {
-    pub const CSV_HEADER: &'static str = "object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac,psnr_aa_db";
+    pub const CSV_HEADER: &'static str =
+        "object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac,psnr_whole_db,psnr_aa_db";
 
     pub fn csv(&self) -> String {
         format!(
-            "{},{},{},{},{:.4},{:.3},{:.5},{:.5},{:.3}",
+            "{},{},{},{},{:.4},{:.3},{:.5},{:.5},{:.3},{:.3}",
             self.object,
             self.method,
             self.size,
@@ -79,6 +85,7 @@ impl Row {
             self.psnr_db,
             self.ssim,
             self.hole_frac,
+            self.psnr_whole_db,
             self.psnr_aa_db
         )
     }
@@ -184,6 +191,7 @@ pub fn error_vs_time(
                 psnr_db: error.psnr_db,
                 ssim: error.ssim,
                 hole_frac: error.hole_frac,
+                psnr_whole_db: error.psnr_whole_db,
                 psnr_aa_db: solo.error(&frame, &antialiased[k]).psnr_db,
             };
             on_row(&row);
@@ -241,6 +249,7 @@ pub fn error_vs_time(
                         psnr_db: error.psnr_db,
                         ssim: error.ssim,
                         hole_frac: error.hole_frac,
+                        psnr_whole_db: error.psnr_whole_db,
                         psnr_aa_db: solo.error(&frame, &antialiased[k]).psnr_db,
                     };
                     on_row(&row);
