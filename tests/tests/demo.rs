@@ -37,6 +37,8 @@ fn the_demo_flies_and_summarises() {
         "regenerations_per_orbit",
         "psnr_db_mean",
         "psnr_db_min",
+        "psnr_whole_db_min",
+        "hole_frac_max",
         "psnr_aa_db_min",
         "geometry_psnr_aa_db_min",
     ] {

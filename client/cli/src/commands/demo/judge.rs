@@ -21,7 +21,11 @@ use crate::progress;
 /// The image error of the compared frames, each as drawn and as all geometry.
 #[derive(Default)]
 pub(super) struct Judged {
+    /// Against the point-sampled reference, over the pixels both show …
     pub(super) psnr: Vec<f64>,
+    /// … over every pixel either shows, and the fraction only one does.
+    pub(super) psnr_whole: Vec<f64>,
+    pub(super) hole_frac: Vec<f64>,
     pub(super) psnr_aa: Vec<f64>,
     pub(super) geometry_psnr_aa: Vec<f64>,
     /// Per object that may be an impostor: its own PSNR in each frame showing it
@@ -61,7 +65,7 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
         .collect();
     // Names become column names: keep the CSV's commas and quotes out of them.
     let column = |name: &str| name.replace(|c: char| !(c.is_alphanumeric() || c == '_' || c == '-'), "_");
-    let mut log = String::from("frame,psnr_db,psnr_aa_db,geometry_psnr_aa_db");
+    let mut log = String::from("frame,psnr_db,psnr_whole_db,hole_frac,psnr_aa_db,geometry_psnr_aa_db");
     for (_, name) in &candidates {
         let name = column(name);
         log.push_str(&format!(
@@ -80,10 +84,14 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
         let reference = render_reference(&tracer, camera, 1);
         let antialiased = render_reference(&tracer, camera, ANTIALIASED_SAMPLES);
         let geometry = render_geometry(scene, camera, &mut GBuffer::new(camera.width, camera.height));
-        let p = compare(image, &reference, None).psnr_db;
+        let error = compare(image, &reference, None);
+        let p = error.psnr_db;
         let p_aa = compare(image, &antialiased, None).psnr_db;
         let floor = compare(&geometry, &antialiased, None).psnr_db;
-        log.push_str(&format!("{frame},{p:.3},{p_aa:.3},{floor:.3}"));
+        log.push_str(&format!(
+            "{frame},{p:.3},{:.3},{:.5},{p_aa:.3},{floor:.3}",
+            error.psnr_whole_db, error.hole_frac
+        ));
         for &(k, name) in &candidates {
             let own = object_psnr(image, &antialiased, k);
             let own_floor = object_psnr(&geometry, &antialiased, k);
@@ -116,6 +124,8 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
             reference.save_png(&out.join("worst_frame_reference.png"))?;
         }
         judged.psnr.push(p);
+        judged.psnr_whole.push(error.psnr_whole_db);
+        judged.hole_frac.push(error.hole_frac);
         judged.psnr_aa.push(p_aa);
         judged.geometry_psnr_aa.push(floor);
         bar.inc(1);

@@ -240,6 +240,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         regenerations_per_orbit: log.regenerations_per_orbit(),
         psnr_db_mean: finite_mean(&judged.psnr),
         psnr_db_min: finite_min(&judged.psnr),
+        psnr_whole_db_min: finite_min(&judged.psnr_whole),
+        hole_frac_max: judged.hole_frac.iter().copied().reduce(f64::max),
         psnr_aa_db_mean: finite_mean(&judged.psnr_aa),
         psnr_aa_db_min: finite_min(&judged.psnr_aa),
         geometry_psnr_aa_db_min: finite_min(&judged.geometry_psnr_aa),

@@ -79,8 +79,14 @@ pub(super) struct Summary {
     pub(super) regenerations_per_orbit: BTreeMap<String, f64>,
     /// Against the point-sampled reference (one ray through each pixel centre);
     /// `null` when no frame was compared (`--reference-every 0`).
+    /// Over the pixels both show (any object)…
     pub(super) psnr_db_mean: Option<f64>,
     pub(super) psnr_db_min: Option<f64>,
+    /// … over every pixel either shows (what a frame leaves empty or fills wrongly
+    /// counts) …
+    pub(super) psnr_whole_db_min: Option<f64>,
+    /// … and the largest fraction of them only one of the two shows.
+    pub(super) hole_frac_max: Option<f64>,
     /// Against the anti-aliased reference (3×3 rays per pixel) …
     pub(super) psnr_aa_db_mean: Option<f64>,
     pub(super) psnr_aa_db_min: Option<f64>,
