@@ -4,6 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+pub mod oracle;
+
 /// The directory holding the workspace's binaries: the one above this test executable's
 /// `deps/` directory (`target/<profile>/`).
 pub fn bin_dir() -> PathBuf {
@@ -47,10 +49,19 @@ pub fn scratch(tag: &str) -> PathBuf {
     dir
 }
 
-/// The shared real meshes beside the checkout (`../shared/models`), when present.
-pub fn shared_models() -> Option<PathBuf> {
+/// The shared real meshes beside the checkout (`../shared/models`).
+///
+/// # Panics
+/// When they are not there: the tests that need them fail rather than pass without
+/// checking anything (CI runs with `../shared` beside the clone).
+pub fn shared_models() -> PathBuf {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models");
-    dir.is_dir().then_some(dir)
+    assert!(
+        dir.is_dir(),
+        "{} is missing: these tests need the shared meshes beside the checkout",
+        dir.display()
+    );
+    dir
 }
 
 /// A child process killed (not just dropped) when the test is done with it.
