@@ -391,6 +391,9 @@ fn frame_writes_the_picture_and_the_promised_json() {
         v["psnr_whole_db"].as_f64().unwrap(),
     );
     assert!(whole <= both + 1e-9, "{stdout}");
+    // Measured when written: 28.3 dB, SSIM 0.975, 18× faster than all geometry.
+    assert!(both > 24.0 && v["ssim"].as_f64().unwrap() > 0.9, "{stdout}");
+    assert!(v["speedup"].as_f64().unwrap() > 1.0, "{stdout}");
     let picture = image::open(out).expect("the frame is a PNG");
     assert_eq!((picture.width(), picture.height()), (64, 36));
 }
@@ -479,13 +482,30 @@ fn report_error_vs_time_writes_the_promised_files() {
     );
     for row in &rows {
         let number = |k: usize| row[k].parse::<f64>().unwrap_or_else(|_| panic!("{row:?}"));
-        assert!(number(4) > 0.0 && number(5) > 10.0, "{row:?}: time and PSNR");
+        // Exact geometry against the one-sample reference: all but identical (58 dB
+        // when written); an impostor of 16² texels on a 32² frame, far less (22–34).
+        let floor = if row[1] == "geometry" { 50.0 } else { 15.0 };
+        assert!(number(4) > 0.0 && number(5) > floor, "{row:?}: time and PSNR");
         assert!(
             (0.0..=1.0).contains(&number(6)) && (0.0..=1.0).contains(&number(7)),
             "{row:?}"
         );
         // Over every pixel either shows never above over the pixels both show.
         assert!(number(8) <= number(5) + 1e-9, "{row:?}");
+    }
+    // Pull-push leaves 15 % of the sphere's pixels unmatched here, and scores higher
+    // than the pre-warp where both show (34 against 22 dB when written): over every
+    // pixel either shows it ranks below (13 against 18).
+    for angle in ["0", "5"] {
+        let row = |method: &str| {
+            rows.iter()
+                .find(|r| r[1] == method && r[3] == angle)
+                .unwrap_or_else(|| panic!("{method} at {angle}°"))
+        };
+        let (prewarp, pullpush) = (row("interleaved"), row("forward-pullpush"));
+        let whole = |r: &Vec<&str>| r[8].parse::<f64>().unwrap();
+        assert!(pullpush[7].parse::<f64>().unwrap() > 0.1, "{pullpush:?}");
+        assert!(whole(pullpush) < whole(prewarp), "{pullpush:?} vs {prewarp:?}");
     }
     let json: serde_json::Value = serde_json::from_str(stdout.trim()).expect("a JSON array");
     let json = json.as_array().expect("a JSON array");

@@ -191,11 +191,17 @@ impl State {
     /// (each by its own arrival: one merged into an old job gets the whole time); a
     /// job nobody waits for any more then ends, stopped on its worker.
     pub fn expire_jobs(&mut self) {
+        self.expire_jobs_at(Instant::now());
+    }
+
+    /// [`expire_jobs`](Self::expire_jobs) as of `now`: a test can name the instant
+    /// instead of racing the clock.
+    pub(super) fn expire_jobs_at(&mut self, now: Instant) {
         let timeout = self.limits.job_timeout;
         let expired: Vec<WaiterId> = self
             .waiters
             .iter()
-            .filter(|(_, w)| w.arrived.elapsed() > timeout)
+            .filter(|(_, w)| now.saturating_duration_since(w.arrived) > timeout)
             .map(|(id, _)| id.clone())
             .collect();
         let ms = timeout.as_millis();
