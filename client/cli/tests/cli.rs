@@ -464,7 +464,9 @@ fn report_error_vs_time_writes_the_promised_files() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),
-        Some("object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac,psnr_whole_db,psnr_aa_db")
+        Some(
+            "object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac,psnr_whole_db,covers_reference,psnr_aa_db"
+        )
     );
     // Geometry at each angle, then each method at each size and angle.
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
@@ -505,6 +507,7 @@ fn report_error_vs_time_writes_the_promised_files() {
         let (prewarp, pullpush) = (row("interleaved"), row("forward-pullpush"));
         let whole = |r: &Vec<&str>| r[8].parse::<f64>().unwrap();
         assert!(pullpush[7].parse::<f64>().unwrap() > 0.1, "{pullpush:?}");
+        assert_eq!((prewarp[9], pullpush[9]), ("true", "false"), "covers_reference");
         assert!(whole(pullpush) < whole(prewarp), "{pullpush:?} vs {prewarp:?}");
     }
     let json: serde_json::Value = serde_json::from_str(stdout.trim()).expect("a JSON array");

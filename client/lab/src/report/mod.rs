@@ -63,6 +63,9 @@ pub struct Row {
     pub ssim: f64,
     pub hole_frac: f64,
     pub psnr_whole_db: f64,
+    /// `hole_frac` within [`MAX_HOLE_FRAC`](crate::image_error::MAX_HOLE_FRAC): only
+    /// then does `psnr_db` speak for the method.
+    pub covers_reference: bool,
     /// Against the anti-aliased reference ([`ANTIALIASED_SAMPLES`]² rays per pixel).
     /// Exact geometry sampled once per pixel does not reach it either: its
     /// `psnr_aa_db` is the floor that detail finer than a pixel sets for every
@@ -72,11 +75,11 @@ pub struct Row {
 
 impl Row {
     pub const CSV_HEADER: &'static str =
-        "object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac,psnr_whole_db,psnr_aa_db";
+        "object,method,size,angle_deg,ms,psnr_db,ssim,hole_frac,psnr_whole_db,covers_reference,psnr_aa_db";
 
     pub fn csv(&self) -> String {
         format!(
-            "{},{},{},{},{:.4},{:.3},{:.5},{:.5},{:.3},{:.3}",
+            "{},{},{},{},{:.4},{:.3},{:.5},{:.5},{:.3},{},{:.3}",
             self.object,
             self.method,
             self.size,
@@ -86,6 +89,7 @@ impl Row {
             self.ssim,
             self.hole_frac,
             self.psnr_whole_db,
+            self.covers_reference,
             self.psnr_aa_db
         )
     }
@@ -192,6 +196,7 @@ pub fn error_vs_time(
                 ssim: error.ssim,
                 hole_frac: error.hole_frac,
                 psnr_whole_db: error.psnr_whole_db,
+                covers_reference: error.covers_reference(),
                 psnr_aa_db: solo.error(&frame, &antialiased[k]).psnr_db,
             };
             on_row(&row);
@@ -250,6 +255,7 @@ pub fn error_vs_time(
                         ssim: error.ssim,
                         hole_frac: error.hole_frac,
                         psnr_whole_db: error.psnr_whole_db,
+                        covers_reference: error.covers_reference(),
                         psnr_aa_db: solo.error(&frame, &antialiased[k]).psnr_db,
                     };
                     on_row(&row);

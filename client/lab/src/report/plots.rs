@@ -9,7 +9,9 @@ use crate::methods::Method;
 use crate::plot::{Chart, Curve, PlotError, write_strip};
 
 /// PSNR against display time: one curve per method through the texture sizes, at the
-/// measured angle nearest 5°, averaged over objects.
+/// measured angle nearest 5°, averaged over objects. The charts plot `psnr_whole_db`,
+/// over every pixel either image shows: a method that leaves holes cannot rise above
+/// one that fills them.
 pub fn plot_error_vs_time(rows: &[Row], options: &Options, path: &Path) -> Result<(), PlotError> {
     let angle = options
         .angles
@@ -21,14 +23,14 @@ pub fn plot_error_vs_time(rows: &[Row], options: &Options, path: &Path) -> Resul
         rows,
         |r| r.angle_deg == angle,
         |r| r.size as i64,
-        |r| (r.ms, plotted_psnr(r.psnr_db)),
+        |r| (r.ms, plotted_psnr(r.psnr_whole_db)),
     );
     Chart {
         title: &format!(
             "Impostor PSNR vs display time, {angle}° from the source eye (texture sizes; mean over objects)"
         ),
         x_desc: "display time per frame (ms, log scale)",
-        y_desc: "PSNR (dB)",
+        y_desc: "PSNR over every pixel either shows (dB)",
         log_x: true,
         log_y: false,
         colour: &series_colour,
@@ -44,12 +46,12 @@ pub fn plot_error_vs_angle(rows: &[Row], options: &Options, path: &Path) -> Resu
         rows,
         |r| r.size == size,
         |r| (r.angle_deg * 1000.0) as i64,
-        |r| (r.angle_deg as f64, plotted_psnr(r.psnr_db)),
+        |r| (r.angle_deg as f64, plotted_psnr(r.psnr_whole_db)),
     );
     Chart {
         title: &format!("Impostor PSNR vs angle from the source eye ({size}² textures; mean over objects)"),
         x_desc: "angle between source and destination eye (degrees)",
-        y_desc: "PSNR (dB)",
+        y_desc: "PSNR over every pixel either shows (dB)",
         log_x: false,
         log_y: false,
         colour: &series_colour,
