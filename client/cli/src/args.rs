@@ -139,10 +139,20 @@ pub struct View {
     pub size: (u32, u32),
 }
 
+/// Loads the scene `spec` (`--scene`), saying on stderr which of its objects lie too
+/// far from the origin for `f32` to place finely ([`Scene::precision_warnings`]).
+pub fn load_scene(spec: &str) -> anyhow::Result<Scene> {
+    let scene = Scene::load(spec)?;
+    for warning in scene.precision_warnings() {
+        eprintln!("warning: {warning}");
+    }
+    Ok(scene)
+}
+
 impl View {
     /// Loads the scene and makes the camera; errors name the bad argument.
     pub fn load(&self) -> anyhow::Result<(Scene, Camera)> {
-        let scene = Scene::load(&self.scene)?;
+        let scene = load_scene(&self.scene)?;
         let fov = self.fov.unwrap_or(scene.fov_y_degrees);
         let (w, h) = self.size;
         let camera = Camera::look_at(self.eye, self.target, self.up, fov, w, h).map_err(|e| anyhow!(e))?;

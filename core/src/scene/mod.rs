@@ -45,6 +45,12 @@ pub fn builtin_text(name: &str) -> Option<&'static str> {
 /// The longest object name accepted.
 pub const MAX_OBJECT_NAME: usize = 64;
 
+/// The largest `f32` step, as a share of an object's extent, at which it is placed
+/// finely enough: one 16-bit depth level of a texture spanning the object. Past it
+/// (an object 1 m across some 130 m from the origin), depths baked and warped there
+/// are off by whole levels (measured at 10⁵ m: 40–96 levels).
+pub const PRECISION_LIMIT: f32 = 1.0 / 65_534.0;
+
 /// Object names become file names (report images, texture directories), so they are
 /// ASCII letters, digits, `-`, `_` and `.`, not starting with `.`, at most
 /// [`MAX_OBJECT_NAME`] long: never a path.
@@ -185,6 +191,32 @@ impl Scene {
         self.objects.iter().map(|o| o.mesh.triangle_count()).sum()
     }
 
+    /// The objects that lie so far from the origin, for their size, that `f32`
+    /// coordinates cannot place them finely: one step of an `f32` there is more than
+    /// [`PRECISION_LIMIT`] of the object's extent. One sentence each, naming the figures.
+    pub fn precision_warnings(&self) -> Vec<String> {
+        self.objects
+            .iter()
+            .filter_map(|o| {
+                let b = o.bounds;
+                let distance = b.min.abs().max(b.max.abs()).max_element();
+                let extent = b.extent().max_element();
+                // The spacing of f32 values at `distance`.
+                let step = distance * f32::EPSILON;
+                (extent > 0.0 && step > PRECISION_LIMIT * extent).then(|| {
+                    format!(
+                        "object `{}` lies {distance:.3e} m from the origin, where f32 coordinates \
+                         step by {step:.2e} m, {:.4} % of its {extent:.3e} m extent (more than \
+                         one 16-bit depth level): its depths and positions lose precision; move \
+                         the scene towards the origin",
+                        o.name,
+                        100.0 * step / extent
+                    )
+                })
+            })
+            .collect()
+    }
+
     /// The object called `name`.
     pub fn object(&self, name: &str) -> Result<&SceneObject> {
         self.objects
@@ -256,6 +288,25 @@ pub fn default_lighting() -> Lighting {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The default scene's objects lie near the origin: no warning. One sphere moved
+    /// 10⁵ m away is warned about, with its distance; at 100 m it is not.
+    #[test]
+    fn objects_far_from_the_origin_for_their_size_are_warned_about() {
+        assert!(Scene::load("default").unwrap().precision_warnings().is_empty());
+        let at = |x: f64| {
+            let text = format!(
+                "[[objects]]\nname = \"ball\"\ngenerator = {{ kind = \"sphere\", subdivisions = 2 }}\ntranslate = [{x}, 0, 0]\n"
+            );
+            file::parse(&text, "test", Path::new("."), Reach::Anywhere)
+                .unwrap()
+                .precision_warnings()
+        };
+        assert!(at(100.0).is_empty(), "{:?}", at(100.0));
+        let far = at(1e5);
+        assert_eq!(far.len(), 1, "{far:?}");
+        assert!(far[0].contains("`ball`") && far[0].contains("1.000e5"), "{far:?}");
+    }
 
     #[test]
     fn unknown_scene_names_the_choices() {

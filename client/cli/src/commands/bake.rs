@@ -7,7 +7,6 @@ use clap::Args;
 use glam::Vec3;
 
 use relief_core::relief::DepthBits;
-use relief_core::scene::Scene;
 use relief_trace::bake;
 use relief_trace::tracer::ObjectTracer;
 
@@ -38,7 +37,7 @@ pub struct BakeArgs {
 pub fn run(args: BakeArgs) -> Result<()> {
     // The directory first: a bad --out fails before the bake.
     std::fs::create_dir_all(&args.out).with_context(|| format!("--out {}", args.out.display()))?;
-    let scene = Scene::load(&args.scene)?;
+    let scene = crate::args::load_scene(&args.scene)?;
     let object = scene.object_or_only(args.object.as_deref())?;
     let tracer = ObjectTracer::new(object);
     let texture = bake(

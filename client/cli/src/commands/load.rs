@@ -140,7 +140,7 @@ pub fn run(args: LoadArgs) -> Result<()> {
     if args.tolerances.is_empty() || args.clients.is_empty() {
         bail!("--tolerances and --clients must each list at least one number");
     }
-    let scene = Arc::new(Scene::load(&args.scene)?);
+    let scene = Arc::new(crate::args::load_scene(&args.scene)?);
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let setup = Setup {
         tracer: Arc::new(SceneTracer::new(&scene)),

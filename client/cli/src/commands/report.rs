@@ -6,7 +6,6 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, anyhow};
 use clap::{Args, Subcommand};
 
-use relief_core::scene::Scene;
 use relief_lab::methods::Method;
 use relief_lab::plot::register_font;
 use relief_lab::report::plots::{plot_error_vs_angle, plot_error_vs_time, write_method_strip};
@@ -99,7 +98,7 @@ pub fn run(command: ReportCommand) -> Result<()> {
 }
 
 fn error_vs_time(args: ErrorVsTimeArgs) -> Result<()> {
-    let scene = Scene::load(&args.scene)?;
+    let scene = crate::args::load_scene(&args.scene)?;
     let objects: Vec<String> = match &args.object {
         Some(name) => vec![scene.object(name)?.name.clone()],
         None => scene

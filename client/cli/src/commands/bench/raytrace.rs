@@ -7,7 +7,7 @@ use glam::Vec3;
 use serde::Serialize;
 
 use relief_core::relief::DepthBits;
-use relief_core::scene::{Scene, SceneObject};
+use relief_core::scene::SceneObject;
 use relief_trace::bake;
 use relief_trace::bvh::Bvh;
 use relief_trace::tracer::ObjectTracer;
@@ -54,7 +54,7 @@ struct RaytraceReport {
 pub fn run(args: RaytraceArgs) -> Result<()> {
     let runs = args.runs as usize;
     let bar = progress::spinner("loading scene");
-    let scene = Scene::load(&args.scene)?;
+    let scene = crate::args::load_scene(&args.scene)?;
     let object: &SceneObject = match &args.object {
         Some(name) => scene.object(name)?,
         None => scene

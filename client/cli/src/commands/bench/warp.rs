@@ -6,7 +6,6 @@ use clap::Args;
 use serde::Serialize;
 
 use relief_core::relief::DepthBits;
-use relief_core::scene::Scene;
 
 use relief_lab::methods::{Method, display, draw, prepare};
 use relief_lab::solo::Solo;
@@ -119,7 +118,7 @@ struct MultiRes {
 pub fn run(args: WarpArgs) -> Result<()> {
     let runs = args.runs as usize;
     let bar = progress::spinner("baking");
-    let scene = Scene::load(&args.scene)?;
+    let scene = crate::args::load_scene(&args.scene)?;
     let solo = Solo::new(&scene, &args.object, 3.0)?;
     let impostor = Impostor::new(solo.bake(solo.eye(0.0), args.size, DepthBits::Eight)?);
     let camera = solo.camera(solo.eye(args.angle), args.frame_size)?;

@@ -16,7 +16,6 @@ use clap::Args;
 use relief_client::flight::{Flight, WARM_UP_LIMIT};
 use relief_client::manager::Config;
 use relief_client::source::{local_manager, remote_manager};
-use relief_core::scene::Scene;
 use relief_core::stats::{finite_mean, finite_median, finite_min, median, percentile};
 use relief_proto::bundle::bundle_for;
 use relief_render::gbuffer::GBuffer;
@@ -91,7 +90,7 @@ pub struct DemoArgs {
 const MAX_COMPARED_BYTES: usize = 256 << 20;
 
 pub fn run(args: DemoArgs) -> Result<()> {
-    let scene = Arc::new(Scene::load(&args.scene)?);
+    let scene = Arc::new(crate::args::load_scene(&args.scene)?);
     let (w, h) = args.size;
     // First, so that a missing display fails before any process starts.
     let mut viewer = match args.window {
