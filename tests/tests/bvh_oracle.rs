@@ -1,6 +1,7 @@
 //! The tracer's BVH against the independent oracle (`relief_tests::oracle`: every
 //! triangle, f64, signed volumes): the same nearest hit — distance, triangle and
-//! barycentrics — for rays through random and generated meshes. Where two triangles tie
+//! barycentrics — for rays through random meshes (degenerate and edge-sharing
+//! triangles among them) and generated ones. Where two triangles tie
 //! (a shared edge, a coplanar overlap), the one the BVH names must itself be crossed
 //! there, at the barycentrics it reports.
 
@@ -22,13 +23,15 @@ impl Rng {
         ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 40) as f32) / (1u64 << 24) as f32
     }
 
+    /// A point in the cube `[-scale, scale]³`.
     fn vec(&mut self, scale: f32) -> Vec3 {
-        Vec3::new(self.next() - 0.5, self.next() - 0.5, self.next() - 0.5) * scale
+        Vec3::new(self.next(), self.next(), self.next()) * 2.0 * scale - Vec3::splat(scale)
     }
 }
 
-/// Rays that agree, and rays that graze an edge so closely (within `1e-5` of the
-/// triangle's border in barycentrics) that f32 and f64 may answer differently.
+/// Rays tested, rays that hit, and rays that graze an edge (or the end of the ray) so
+/// closely that f32 and f64 may answer differently: within `1e-5` of the triangle's
+/// border in barycentrics, or of `t_max`.
 #[derive(Debug, Default)]
 struct Tally {
     rays: usize,
@@ -36,11 +39,14 @@ struct Tally {
     grazing: usize,
 }
 
-fn check(mesh: &Mesh, bvh: &Bvh, origin: Vec3, direction: Vec3, tally: &mut Tally) {
+fn check(mesh: &Mesh, bvh: &Bvh, origin: Vec3, direction: Vec3, t_max: f32, tally: &mut Tally) {
     tally.rays += 1;
-    let got = bvh.intersect(origin, direction, 0.0, f32::INFINITY);
-    let want = nearest_hit(mesh, origin, direction);
-    let near_border = |u: f64, v: f64| u.min(v).min(1.0 - u - v) < 1e-5;
+    let got = bvh.intersect(origin, direction, 0.0, t_max);
+    let nearest = nearest_hit(mesh, origin, direction);
+    let want = nearest.filter(|h| h.t < t_max as f64);
+    let grazes = |u: f64, v: f64, t: f64| {
+        u.min(v).min(1.0 - u - v) < 1e-5 || (t - t_max as f64).abs() < 1e-5 * t.max(1.0)
+    };
     match (got, want) {
         (None, None) => {}
         (Some(g), Some(w)) => {
@@ -69,22 +75,35 @@ fn check(mesh: &Mesh, bvh: &Bvh, origin: Vec3, direction: Vec3, tally: &mut Tall
                 g.triangle
             );
         }
-        (None, Some(w)) if near_border(w.u, w.v) => tally.grazing += 1,
-        (Some(g), None) if near_border(g.u as f64, g.v as f64) => tally.grazing += 1,
-        _ => panic!("hit/miss differ: BVH {got:?}, oracle {want:?}, ray {origin} {direction}"),
+        (None, Some(w)) if grazes(w.u, w.v, w.t) => tally.grazing += 1,
+        (Some(g), None) if grazes(g.u as f64, g.v as f64, g.t as f64) => tally.grazing += 1,
+        _ => {
+            panic!("hit/miss differ: BVH {got:?}, oracle {nearest:?}, ray {origin} {direction} up to {t_max}")
+        }
     }
 }
 
+/// Random triangles in a cube, some tiny, some degenerate, some sharing corners.
 fn random_mesh(rng: &mut Rng, count: usize) -> Mesh {
     let mut positions = Vec::new();
     let mut triangles = Vec::new();
     for k in 0..count {
-        let centre = rng.vec(8.0);
-        for _ in 0..3 {
-            positions.push(centre + rng.vec(1.5));
+        let centre = rng.vec(1.0);
+        let size = if k % 7 == 0 { 0.01 } else { 0.3 };
+        let a = centre + rng.vec(size);
+        let b = centre + rng.vec(size);
+        let c = match k % 11 {
+            0 => b,                 // degenerate: two equal corners
+            1 => a + (b - a) * 0.5, // degenerate: collinear
+            _ => centre + rng.vec(size),
+        };
+        let base = positions.len() as u32;
+        positions.extend([a, b, c]);
+        triangles.push([base, base + 1, base + 2]);
+        if k % 5 == 0 && k > 0 {
+            // A triangle reusing the previous one's corners (shared edges).
+            triangles.push([base - 1, base, base + 2]);
         }
-        let i = 3 * k as u32;
-        triangles.push([i, i + 1, i + 2]);
     }
     Mesh {
         positions,
@@ -94,47 +113,87 @@ fn random_mesh(rng: &mut Rng, count: usize) -> Mesh {
     }
 }
 
+/// Random meshes of 1 to 3,000 triangles, rays from anywhere (some axis-aligned, whose
+/// inverse direction is infinite; some ending at `t_max` 1.5).
 #[test]
-fn the_bvh_finds_what_the_independent_oracle_finds() {
-    let mut rng = Rng(0x2545_F491_4F6C_DD1D);
-    let meshes = [
-        random_mesh(&mut rng, 300),
-        Generator::Knot {
-            p: 2,
-            q: 3,
-            segments: 96,
-            sides: 12,
-            tube_radius: 0.25,
+fn random_meshes_match_the_oracle() {
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    for count in [1usize, 2, 3, 9, 40, 300, 3000] {
+        let mesh = random_mesh(&mut rng, count);
+        let bvh = Bvh::build(&mesh);
+        let mut tally = Tally::default();
+        for k in 0..2000 {
+            let origin = rng.vec(2.5);
+            let mut direction = (rng.vec(1.0) - origin * 0.3).normalize_or(Vec3::X);
+            if k % 10 == 0 {
+                direction = [Vec3::X, -Vec3::Y, Vec3::Z][k % 3];
+            }
+            let t_max = if k % 4 == 0 { 1.5 } else { f32::INFINITY };
+            check(&mesh, &bvh, origin, direction, t_max, &mut tally);
         }
-        .build(),
-        Generator::Sphere { subdivisions: 3 }.build(),
+        eprintln!("{count} triangles: {tally:?}");
+        if count >= 40 {
+            assert!(
+                tally.hits > 50,
+                "{count} triangles: too few hits to test: {tally:?}"
+            );
+        }
+        assert!(tally.grazing <= tally.rays / 1000, "{count} triangles: {tally:?}");
+    }
+}
+
+/// Generated meshes (a knot, a tree, a sphere): a grid of parallel rays (a bake's), then
+/// rays from random points towards random points near the mesh (a reference's).
+#[test]
+fn generated_meshes_match_the_oracle() {
+    let mut rng = Rng(0x2545_F491_4F6C_DD1D);
+    // Each with the share of rays that must hit for the test to mean something (the
+    // tree's leaves are sparse).
+    let meshes = [
+        (
+            Generator::Knot {
+                p: 2,
+                q: 3,
+                segments: 96,
+                sides: 12,
+                tube_radius: 0.25,
+            }
+            .build(),
+            10,
+        ),
+        (
+            Generator::Tree {
+                seed: 3,
+                depth: 3,
+                leaves: 6,
+            }
+            .build(),
+            20,
+        ),
+        (Generator::Sphere { subdivisions: 3 }.build(), 10),
     ];
-    for mesh in &meshes {
+    for (mesh, hit_share) in &meshes {
         let bvh = Bvh::build(mesh);
         let centre = mesh.bounds().center();
         let radius = mesh.bounds().extent().length();
         let mut tally = Tally::default();
-        // A grid of parallel rays (a bake's), then rays from random points towards
-        // random points near the mesh (a reference's).
         for j in 0..48 {
             for i in 0..48 {
                 let offset = Vec3::new(i as f32 / 24.0 - 1.0, j as f32 / 24.0 - 1.0, 0.0) * radius * 0.6;
-                check(
-                    mesh,
-                    &bvh,
-                    centre + offset + Vec3::Z * radius * 2.0,
-                    -Vec3::Z,
-                    &mut tally,
-                );
+                let origin = centre + offset + Vec3::Z * radius * 2.0;
+                check(mesh, &bvh, origin, -Vec3::Z, f32::INFINITY, &mut tally);
             }
         }
         for _ in 0..2000 {
-            let origin = centre + rng.vec(4.0 * radius);
-            let towards = centre + rng.vec(radius);
-            check(mesh, &bvh, origin, towards - origin, &mut tally);
+            let origin = centre + rng.vec(2.0 * radius);
+            let towards = centre + rng.vec(0.5 * radius);
+            check(mesh, &bvh, origin, towards - origin, f32::INFINITY, &mut tally);
         }
         eprintln!("{tally:?}");
-        assert!(tally.hits > tally.rays / 10, "too few hits to test: {tally:?}");
+        assert!(
+            tally.hits > tally.rays / hit_share,
+            "too few hits to test: {tally:?}"
+        );
         assert!(tally.grazing <= tally.rays / 1000, "{tally:?}");
     }
 }

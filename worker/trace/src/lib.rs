@@ -28,7 +28,8 @@
 //! ```
 //!
 //! - [`bvh`] — bounding-volume hierarchy over one mesh: binned-SAH build (parallel),
-//!   closest-hit traversal, and the brute-force oracle the tests compare it with.
+//!   closest-hit traversal (checked against an independent ray caster in
+//!   `tests/tests/bvh_oracle.rs`).
 //! - [`tracer`] — a scene ready for ray casting: one BVH per object.
 //! - [`tiles`] — the one way images are split across threads.
 //! - [`bake`](mod@bake) — the relief texture of one object for an eye.

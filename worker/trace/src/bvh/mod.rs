@@ -342,29 +342,5 @@ impl Traversal {
     }
 }
 
-/// The closest hit over every triangle, one by one: the oracle for the BVH's tests.
-pub fn intersect_brute_force(
-    mesh: &Mesh,
-    origin: Vec3,
-    direction: Vec3,
-    t_min: f32,
-    t_max: f32,
-) -> Option<Hit> {
-    let mut best: Option<Hit> = None;
-    for tri in 0..mesh.triangle_count() {
-        let [a, b, c] = mesh.corners(tri);
-        let limit = best.map_or(t_max, |h| h.t);
-        if let Some((t, u, v)) = intersect_triangle(origin, direction, a, b - a, c - a, t_min, limit) {
-            best = Some(Hit {
-                t,
-                u,
-                v,
-                triangle: tri as u32,
-            });
-        }
-    }
-    best
-}
-
 #[cfg(test)]
 mod tests;
