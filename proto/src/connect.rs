@@ -26,11 +26,45 @@ pub enum EndpointError {
         path: std::path::PathBuf,
         error: std::io::Error,
     },
+    #[error(
+        "the token would cross the network in clear to `{0}`: use an https:// server \
+         (or --allow-insecure, on a network where every host is trusted)"
+    )]
+    TokenInClear(String),
     #[error("TLS for `{url}`: {error}")]
     Tls {
         url: String,
         error: tonic::transport::Error,
     },
+}
+
+/// Refuses to send a credential unencrypted beyond this machine: with a `token`, an
+/// `http://` `url` must name a loopback address (`localhost`, `127.0.0.0/8`, `::1`)
+/// unless `allow_insecure`. (Anyone on the path could read it and act as its holder.)
+pub fn refuse_token_in_clear(
+    url: &str,
+    token: Option<&str>,
+    allow_insecure: bool,
+) -> Result<(), EndpointError> {
+    let Some(rest) = url.strip_prefix("http://") else {
+        return Ok(());
+    };
+    if token.is_none() || allow_insecure {
+        return Ok(());
+    }
+    let authority = rest.split(['/', '?', '#']).next().unwrap_or_default();
+    let authority = authority.rsplit_once('@').map_or(authority, |(_, host)| host);
+    let host = match authority.strip_prefix('[') {
+        Some(bracketed) => bracketed.split(']').next().unwrap_or_default(),
+        None => authority.split(':').next().unwrap_or_default(),
+    };
+    let loopback = host.eq_ignore_ascii_case("localhost")
+        || host.parse::<std::net::IpAddr>().is_ok_and(|ip| ip.is_loopback());
+    if loopback {
+        Ok(())
+    } else {
+        Err(EndpointError::TokenInClear(url.to_string()))
+    }
 }
 
 /// The endpoint for `url`; `ca` is a PEM file of extra trusted certificates (for a
@@ -65,4 +99,33 @@ pub fn endpoint(url: &str, ca: Option<&Path>) -> Result<Endpoint, EndpointError>
         })?;
     }
     Ok(endpoint)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_token_goes_in_clear_only_to_this_machine() {
+        let sent =
+            |url: &str, token: Option<&str>, allow: bool| refuse_token_in_clear(url, token, allow).is_ok();
+        for url in [
+            "http://127.0.0.1:7411",
+            "http://localhost:7411/",
+            "http://[::1]:7411",
+            "http://127.9.9.9",
+            "https://10.0.0.5:7411",
+        ] {
+            assert!(sent(url, Some("t"), false), "{url}");
+        }
+        for url in [
+            "http://10.0.0.5:7411",
+            "http://relief.example:7411",
+            "http://[2001:db8::1]:1",
+            "http://127.0.0.1.evil.example",
+        ] {
+            assert!(!sent(url, Some("t"), false), "{url}");
+            assert!(sent(url, Some("t"), true) && sent(url, None, false), "{url}");
+        }
+    }
 }

@@ -28,7 +28,10 @@
 //!   identical requests merged, withdrawn ones cancelled), workers with leases (a
 //!   vanished worker's jobs go back to the queue), the result cache bounded in bytes,
 //!   and the counters.
+//! - [`identity`] — who calls: each credential a client's or a worker's, and what it
+//!   owns.
 //! - [`service`] — the gRPC services (`Scenes`, `Impostors`, `Workers`) over it.
 
+pub mod identity;
 pub mod service;
 pub mod state;

@@ -14,12 +14,11 @@ use clap::Parser;
 use tonic::codec::CompressionEncoding;
 use tonic::transport::Server;
 use tonic::transport::server::TcpIncoming;
-use tonic::{Request, Status};
 
-use relief_proto::auth::BearerToken;
 use relief_proto::bundle::SceneDir;
 use relief_proto::limits::{MAX_TEXTURE_MESSAGE_BYTES, MAX_UPLOAD_MESSAGE_BYTES};
 use relief_proto::pb;
+use relief_server::identity::{Credentials, Role, read_tokens_file};
 use relief_server::service::{Service, Shared};
 use relief_server::state::{Limits, State};
 
@@ -33,7 +32,24 @@ struct Args {
     /// Address to listen on (port 0 picks a free port).
     #[arg(long, env = "RELIEF_LISTEN", default_value = "127.0.0.1:7411")]
     listen: SocketAddr,
-    /// Shared secret clients and workers must send (`authorization: Bearer TOKEN`).
+    /// A client's credential (`authorization: Bearer TOKEN`): it may upload scenes and
+    /// ask for textures, and sees only its own. Repeat for each client.
+    #[arg(long = "client-token", value_name = "TOKEN")]
+    client_tokens: Vec<String>,
+    /// A file of client credentials, one a line (`#` comments).
+    #[arg(long, env = "RELIEF_CLIENT_TOKENS_FILE")]
+    client_tokens_file: Option<PathBuf>,
+    /// A worker's credential: it may take jobs and read the scenes of those it holds.
+    /// Repeat for each worker (or pool).
+    #[arg(long = "worker-token", value_name = "TOKEN")]
+    worker_tokens: Vec<String>,
+    /// A file of worker credentials, one a line (`#` comments).
+    #[arg(long, env = "RELIEF_WORKER_TOKENS_FILE")]
+    worker_tokens_file: Option<PathBuf>,
+    /// One secret shared by every client and worker, each able to act as either: only
+    /// where every holder is trusted (else give each its own with --client-token and
+    /// --worker-token). With no credential at all the server is open to anyone who can
+    /// reach it.
     #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
     token: Option<String>,
     /// PEM certificate chain: serve TLS (https://) with it and --tls-key.
@@ -69,6 +85,8 @@ fn main() -> ExitCode {
 }
 
 async fn serve(args: Args) -> Result<()> {
+    // (Bad credentials fail before anything is created.)
+    let credentials = credentials(&args)?;
     // (Held to the end of `serve`: a directory of its own is removed then.)
     let scene_dir = SceneDir::new(args.scene_dir, "relief-server")?;
     std::fs::create_dir_all(scene_dir.path())
@@ -96,15 +114,12 @@ async fn serve(args: Args) -> Result<()> {
             state.dispatch();
         }
     });
-    let token = BearerToken::new(args.token.as_deref()).map_err(|e| anyhow::anyhow!("--token: {e}"))?;
-    let check = move |request: Request<()>| -> Result<Request<()>, Status> {
-        match token.header() {
-            Some(expected) if request.metadata().get("authorization") != Some(expected) => Err(
-                Status::unauthenticated("missing or wrong `authorization: Bearer` token"),
-            ),
-            _ => Ok(request),
-        }
-    };
+    if !credentials.required() && !args.listen.ip().is_loopback() {
+        tracing::warn!(
+            "no credential is asked for on {}: anyone who reaches it may use it",
+            args.listen
+        );
+    }
     let service = Service(shared);
     let scenes = pb::scenes_server::ScenesServer::new(service.clone())
         .accept_compressed(CompressionEncoding::Zstd)
@@ -170,14 +185,15 @@ async fn serve(args: Args) -> Result<()> {
         .add_service(reflection)
         .add_service(tonic::service::interceptor::InterceptedService::new(
             scenes,
-            check.clone(),
+            credentials.interceptor(None),
         ))
         .add_service(tonic::service::interceptor::InterceptedService::new(
             impostors,
-            check.clone(),
+            credentials.interceptor(Some(Role::Client)),
         ))
         .add_service(tonic::service::interceptor::InterceptedService::new(
-            workers, check,
+            workers,
+            credentials.interceptor(Some(Role::Worker)),
         ))
         .serve_with_incoming_shutdown(incoming, stopped(stop));
     tokio::select! {
@@ -185,6 +201,19 @@ async fn serve(args: Args) -> Result<()> {
         () = grace => {}
     }
     Ok(())
+}
+
+/// The credentials of the flags and files.
+fn credentials(args: &Args) -> Result<Credentials> {
+    let mut clients = args.client_tokens.clone();
+    let mut workers = args.worker_tokens.clone();
+    if let Some(path) = &args.client_tokens_file {
+        clients.extend(read_tokens_file(path).context("--client-tokens-file")?);
+    }
+    if let Some(path) = &args.worker_tokens_file {
+        workers.extend(read_tokens_file(path).context("--worker-tokens-file")?);
+    }
+    Ok(Credentials::new(&clients, &workers, args.token.as_deref())?)
 }
 
 /// How long a stopping server waits for calls in flight (worker sessions included)

@@ -14,6 +14,7 @@ use relief_proto::convert::{check_register, check_texture_pb, hash_from_pb, requ
 use relief_proto::limits::SCENE_CHUNK_BYTES;
 use relief_proto::pb;
 
+use crate::identity::{Caller, Role};
 use crate::state::{Admission, State, StoredScene};
 
 /// The server: its state under one lock, and where received scenes are unpacked.
@@ -89,12 +90,20 @@ impl Drop for ResultStream {
     }
 }
 
+/// A client's id as the state keys it: under its credential's name, so that ids chosen
+/// by two credentials never meet.
+fn scoped(caller: &Caller, client_id: &str) -> String {
+    format!("{}/{client_id}", caller.name)
+}
+
 #[tonic::async_trait]
 impl pb::scenes_server::Scenes for Service {
     async fn put_scene(
         &self,
         request: Request<Streaming<pb::SceneChunk>>,
     ) -> Result<Response<pb::SceneRef>, Status> {
+        let caller = Caller::of(&request)?;
+        caller.require(Role::Client)?;
         let mut chunks = request.into_inner();
         let mut encoded = Vec::new();
         while let Some(chunk) = chunks.message().await? {
@@ -108,7 +117,7 @@ impl pb::scenes_server::Scenes for Service {
         let bundle =
             Bundle::decode(encoded).map_err(|e| Status::invalid_argument(format!("field `data`: {e}")))?;
         let hash = bundle.hash;
-        if self.0.state().scene(&hash).is_none() {
+        if !self.0.state().has_scene(&hash) {
             let dir = self.0.scene_dir.clone();
             // The bundle moves to the loading thread and its bytes come back with the
             // scene: no copy of a scene that may be hundreds of megabytes.
@@ -122,8 +131,10 @@ impl pb::scenes_server::Scenes for Service {
                 encoded: Arc::new(encoded),
                 objects,
             };
-            self.0.state().add_scene(hash, stored);
-            tracing::info!(%hash, objects = scene.objects.len(), "scene stored");
+            self.0.state().add_scene(hash, stored, &caller.name);
+            tracing::info!(%hash, objects = scene.objects.len(), client = %caller.name, "scene stored");
+        } else {
+            self.0.state().add_owner(hash, &caller.name);
         }
         Ok(Response::new(pb::SceneRef {
             hash: hash.to_string(),
@@ -136,12 +147,21 @@ impl pb::scenes_server::Scenes for Service {
         &self,
         request: Request<pb::SceneRef>,
     ) -> Result<Response<Self::GetSceneStream>, Status> {
+        let caller = Caller::of(&request)?;
         let hash = hash_from_pb("hash", &request.get_ref().hash)?;
-        let scene = self
-            .0
-            .state()
-            .scene(&hash)
-            .ok_or_else(|| Status::not_found(format!("no scene with hash {hash}")))?;
+        // A client reads the scenes it uploaded; a worker, those it holds a job on. (Not
+        // found either way: another's scene is not said to exist.)
+        let scene = {
+            let state = self.0.state();
+            let as_client = caller
+                .may(Role::Client)
+                .then(|| state.scene_of(&hash, &caller.name));
+            let as_worker = caller
+                .may(Role::Worker)
+                .then(|| state.scene_for_worker(&hash, &caller.name));
+            as_client.flatten().or(as_worker.flatten())
+        }
+        .ok_or_else(|| Status::not_found(format!("no scene with hash {hash} for this credential")))?;
         let encoded = scene.encoded.clone();
         let pieces: Vec<Result<pb::SceneChunk, Status>> = encoded
             .chunks(SCENE_CHUNK_BYTES)
@@ -160,13 +180,16 @@ impl pb::impostors_server::Impostors for Service {
         request: Request<pb::ImpostorRequest>,
     ) -> Result<Response<Self::RequestStream>, Status> {
         let began = std::time::Instant::now();
-        let r = request_from_pb(request.get_ref())?;
+        let caller = Caller::of(&request)?;
+        let mut r = request_from_pb(request.get_ref())?;
+        // Requests are the credential's: another cannot withdraw them by naming the id.
+        r.client_id = scoped(&caller, &r.client_id);
         let span =
             tracing::info_span!("request", client = %r.client_id, id = r.request_id, object = %r.object);
         let _entered = span.enter();
         let (tx, rx) = unbounded_channel();
         let mut state = self.0.state();
-        let admission = state.admit(&r, tx.clone());
+        let admission = state.admit(&r, &caller.name, tx.clone());
         if let Err(e) = &admission {
             tracing::info!(code = ?e.code(), "refused: {}", e.message());
         }
@@ -199,12 +222,13 @@ impl pb::impostors_server::Impostors for Service {
         &self,
         request: Request<pb::WithdrawRequest>,
     ) -> Result<Response<pb::WithdrawReply>, Status> {
+        let caller = Caller::of(&request)?;
         let r = request.get_ref();
         if r.client_id.is_empty() {
             return Err(Status::invalid_argument("field `client_id`: empty"));
         }
         let mut state = self.0.state();
-        let withdrawn = state.withdraw(&r.client_id, &r.request_ids);
+        let withdrawn = state.withdraw(&scoped(&caller, &r.client_id), &r.request_ids);
         state.dispatch();
         Ok(small(pb::WithdrawReply { withdrawn }))
     }
@@ -222,6 +246,7 @@ impl pb::workers_server::Workers for Service {
         &self,
         request: Request<Streaming<pb::WorkerMessage>>,
     ) -> Result<Response<Self::SessionStream>, Status> {
+        let caller = Caller::of(&request)?;
         let mut inbound = request.into_inner();
         let register = match inbound.message().await?.and_then(|m| m.kind) {
             Some(pb::worker_message::Kind::Register(r)) => r,
@@ -237,6 +262,7 @@ impl pb::workers_server::Workers for Service {
             let mut state = self.0.state();
             let id = state.add_worker(
                 register.name.clone(),
+                caller.name.clone(),
                 register.slots as usize,
                 register.threads,
                 tx,
@@ -252,33 +278,51 @@ impl pb::workers_server::Workers for Service {
                 let is_result = matches!(message.kind, Some(pb::worker_message::Kind::Result(_)));
                 // A result's texture is checked before the state's lock is taken: it is
                 // the costliest step here, and needs no state.
-                let rejected = match &message.kind {
-                    Some(pb::worker_message::Kind::Result(r)) => match &r.texture {
-                        Some(t) => check_texture_pb("texture", t)
-                            .err()
-                            .map(|e| format!("invalid texture: {}", e.message())),
-                        None => Some("result without a texture".to_string()),
-                    },
+                let texture = match &message.kind {
+                    Some(pb::worker_message::Kind::Result(r)) => Some(match &r.texture {
+                        Some(t) => check_texture_pb("texture", t).map_err(|e| e.message().to_string()),
+                        None => Err("a result without a texture".to_string()),
+                    }),
                     _ => None,
                 };
                 let mut state = shared.state();
                 state.touch(id);
-                // Which job the worker is now done with, if any (its slot held after a
-                // cancel is free again).
-                let done = match &message.kind {
-                    Some(pb::worker_message::Kind::Result(r)) if r.r#final => Some(r.job_id),
+                // Which job the message answers for, if any.
+                let job = match &message.kind {
+                    Some(pb::worker_message::Kind::Result(r)) => Some(r.job_id),
                     Some(pb::worker_message::Kind::Failed(f)) => Some(f.job_id),
                     Some(pb::worker_message::Kind::Stopped(s)) => Some(s.job_id),
                     _ => None,
                 };
+                // A worker answers only for its own jobs, and with the texture asked for.
+                let forgery = match (job, &message.kind, texture) {
+                    (Some(job_id), _, _) if !state.holds(id, job_id) => {
+                        Some(format!("job {job_id} is not leased to this worker"))
+                    }
+                    (Some(job_id), Some(pb::worker_message::Kind::Result(r)), Some(checked)) => checked
+                        .and_then(|(camera, bits, eye)| {
+                            state.check_result(job_id, &camera, bits, eye, r.r#final)
+                        })
+                        .err(),
+                    _ => None,
+                };
+                if let Some(reason) = forgery {
+                    state.forged(id, Status::permission_denied(reason));
+                    state.dispatch();
+                    return;
+                }
+                // The job the worker is now done with, if any (its slot held after a
+                // cancel is free again).
+                let done = match &message.kind {
+                    Some(pb::worker_message::Kind::Result(r)) if r.r#final => job,
+                    Some(pb::worker_message::Kind::Result(_)) => None,
+                    _ => job,
+                };
                 match message.kind {
-                    Some(pb::worker_message::Kind::Result(r)) => match rejected {
-                        Some(reason) => state.failed(r.job_id, &reason),
-                        None => {
-                            let texture = r.texture.unwrap_or_default();
-                            state.result(r.job_id, texture, r.r#final, r.bake_ms);
-                        }
-                    },
+                    Some(pb::worker_message::Kind::Result(r)) => {
+                        let texture = r.texture.unwrap_or_default();
+                        state.result(r.job_id, texture, r.r#final, r.bake_ms);
+                    }
                     Some(pb::worker_message::Kind::Failed(f)) => state.failed(f.job_id, &f.reason),
                     Some(pb::worker_message::Kind::Stopped(_)) => state.stopped(),
                     Some(pb::worker_message::Kind::Draining(_)) => state.draining(id),

@@ -124,6 +124,8 @@ enum End {
 }
 
 pub async fn run(args: Args) -> Result<()> {
+    relief_proto::connect::refuse_token_in_clear(&args.server, args.token.as_deref(), args.allow_insecure)
+        .map_err(|e| anyhow!("--server/--token: {e}"))?;
     let endpoint = relief_proto::connect::endpoint(&args.server, args.tls_ca.as_deref())
         .map_err(|e| anyhow!("--server/--tls-ca: {e}"))?;
     let auth = BearerToken::new(args.token.as_deref()).map_err(|e| anyhow!("--token: {e}"))?;

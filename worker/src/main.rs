@@ -25,9 +25,13 @@ pub struct Args {
     /// self-signed certificate); the system's roots are trusted too.
     #[arg(long, env = "RELIEF_TLS_CA")]
     tls_ca: Option<PathBuf>,
-    /// Shared secret the server expects.
+    /// This worker's credential (the server's --worker-token, or its shared --token).
     #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
     token: Option<String>,
+    /// Send --token over plain http:// to a host other than this one (else refused:
+    /// anyone on the path could read it).
+    #[arg(long, env = "RELIEF_ALLOW_INSECURE")]
+    allow_insecure: bool,
     /// Jobs baked at once (each uses every core).
     #[arg(long, env = "RELIEF_SLOTS", default_value = "1", value_parser = clap::value_parser!(u32).range(1..=i64::from(MAX_WORKER_SLOTS)))]
     slots: u32,

@@ -7,7 +7,9 @@ use std::time::Instant;
 
 use tonic::Status;
 
+use glam::Vec3;
 use relief_core::hash::ContentHash;
+use relief_core::relief::{DepthBits, SourceCamera};
 use relief_proto::convert::Request;
 use relief_proto::pb;
 
@@ -58,6 +60,12 @@ impl JobKey {
 /// A far bigger one would cost a small request's client far more bytes — and, still
 /// being made, far more waiting than a bake of its own.
 const MAX_SERVED_RATIO: u32 = 2;
+
+/// How far a result's texture camera may stray from the one its job's eye and object
+/// give, relative to the object's size (or, for the texel steps, their length): a
+/// worker on another machine may round differently, a texture made for another eye or
+/// object misses by far more.
+const CAMERA_SLACK: f32 = 1e-4;
 
 /// Queue order: needed-now first, then nearest deadline, then arrival.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
@@ -152,6 +160,64 @@ impl State {
             self.cache_insert(key, texture, bytes);
             self.finish(job_id);
         }
+    }
+
+    /// Whether a result whose texture has `camera`, `bits` and `eye` (checked as a
+    /// texture already) is what job `job_id` asked for: its edge (a preview's at most
+    /// that), depth bits, eye, and the camera the job's object and eye give. A job no
+    /// longer here (cancelled) takes any: its results are discarded.
+    pub fn check_result(
+        &self,
+        job_id: u64,
+        camera: &SourceCamera,
+        bits: DepthBits,
+        eye: Vec3,
+        is_final: bool,
+    ) -> Result<(), String> {
+        let Some(job) = self.jobs.get(&job_id) else {
+            return Ok(());
+        };
+        let spec = &job.spec;
+        let size = spec.size;
+        let (w, h) = (camera.width, camera.height);
+        if w != h || w > size || (is_final && w != size) {
+            return Err(format!(
+                "job {job_id} asked for {size}² texels, the result has {w}×{h}"
+            ));
+        }
+        if bits.bits() != spec.depth_bits {
+            return Err(format!(
+                "job {job_id} asked for {}-bit depth, the result has {}",
+                spec.depth_bits,
+                bits.bits()
+            ));
+        }
+        let asked: [u32; 3] = job.key.view.eye;
+        if eye.to_array().map(f32::to_bits) != asked {
+            return Err(format!(
+                "the result of job {job_id} was made for another eye ({eye})"
+            ));
+        }
+        let Some(bounds) = (self.scenes.get(&job.key.view.scene)).and_then(|s| s.objects.get(&spec.object))
+        else {
+            return Ok(());
+        };
+        let expected = SourceCamera::facing(eye, bounds, w, h).map_err(|e| e.to_string())?;
+        let extent = bounds.extent().length();
+        let near = |a: Vec3, b: Vec3, scale: f32| a.distance(b) <= CAMERA_SLACK * scale;
+        let fits = near(camera.origin, expected.origin, extent)
+            && near(camera.a, expected.a, expected.a.length())
+            && near(camera.b, expected.b, expected.b.length())
+            && near(camera.f, expected.f, 1.0)
+            && (camera.depth_near - expected.depth_near).abs() <= CAMERA_SLACK * extent
+            && (camera.depth_far - expected.depth_far).abs() <= CAMERA_SLACK * extent;
+        if !fits {
+            return Err(format!(
+                "the result of job {job_id} is not framed on object `{}` from the job's eye",
+                spec.object
+            ));
+        }
+        Ok(())
     }
 
     /// A worker stopped a cancelled job before finishing it.

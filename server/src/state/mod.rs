@@ -71,6 +71,9 @@ pub struct State {
     limits: Limits,
     epoch: Instant,
     scenes: HashMap<ContentHash, Arc<StoredScene>>,
+    /// The clients (by [`Caller`](crate::identity::Caller) name) that uploaded each
+    /// scene: only they may read it or ask for its textures.
+    scene_owners: HashMap<ContentHash, HashSet<Arc<str>>>,
     jobs: HashMap<u64, Job>,
     queue: BTreeSet<Priority>,
     /// The jobs of each view (a few: one per size and depth asked for).
@@ -108,6 +111,7 @@ impl State {
             limits,
             epoch: Instant::now(),
             scenes: HashMap::new(),
+            scene_owners: HashMap::new(),
             jobs: HashMap::new(),
             queue: BTreeSet::new(),
             by_view: HashMap::new(),
@@ -130,18 +134,48 @@ impl State {
         self.next_id
     }
 
-    pub fn add_scene(&mut self, hash: ContentHash, scene: StoredScene) {
-        self.scenes.insert(hash, Arc::new(scene));
+    /// Stores a scene `owner` uploaded.
+    pub fn add_scene(&mut self, hash: ContentHash, scene: StoredScene, owner: &Arc<str>) {
+        self.scenes.entry(hash).or_insert_with(|| Arc::new(scene));
+        self.add_owner(hash, owner);
     }
 
-    pub fn scene(&self, hash: &ContentHash) -> Option<Arc<StoredScene>> {
-        self.scenes.get(hash).cloned()
+    /// `owner` uploaded scene `hash`, stored already: having sent the whole content, it
+    /// may read it too.
+    pub fn add_owner(&mut self, hash: ContentHash, owner: &Arc<str>) {
+        if self.scenes.contains_key(&hash) {
+            self.scene_owners.entry(hash).or_default().insert(owner.clone());
+        }
     }
 
-    /// Takes a validated request in: checks the scene, object and eye, answers from
-    /// the cache, merges it into a job that satisfies it, or queues a new job.
-    pub fn admit(&mut self, request: &Request, tx: ResultSender) -> Result<Admission, Status> {
-        let scene = self.scenes.get(&request.scene).ok_or_else(|| {
+    /// Whether scene `hash` is stored (for anyone).
+    pub fn has_scene(&self, hash: &ContentHash) -> bool {
+        self.scenes.contains_key(hash)
+    }
+
+    /// The scene `hash`, if `owner` uploaded it.
+    pub fn scene_of(&self, hash: &ContentHash, owner: &str) -> Option<Arc<StoredScene>> {
+        self.scene_owners
+            .get(hash)?
+            .contains(owner)
+            .then(|| self.scenes.get(hash).cloned())?
+    }
+
+    /// The scene `hash`, if a worker session of `credential` holds a job on it.
+    pub fn scene_for_worker(&self, hash: &ContentHash, credential: &str) -> Option<Arc<StoredScene>> {
+        let holds_job_on_it = (self.workers.values())
+            .filter(|w| &*w.credential == credential)
+            .flat_map(|w| &w.running)
+            .filter_map(|id| self.jobs.get(id))
+            .any(|job| job.key.view.scene == *hash);
+        holds_job_on_it.then(|| self.scenes.get(hash).cloned())?
+    }
+
+    /// Takes a validated request of client `owner` in: checks the scene (one `owner`
+    /// uploaded), object and eye, answers from the cache, merges it into a job that
+    /// satisfies it, or queues a new job.
+    pub fn admit(&mut self, request: &Request, owner: &str, tx: ResultSender) -> Result<Admission, Status> {
+        let scene = self.scene_of(&request.scene, owner).ok_or_else(|| {
             Status::not_found(format!("no scene with hash {} (upload it first)", request.scene))
         })?;
         let bounds = scene.objects.get(&request.object).ok_or_else(|| {

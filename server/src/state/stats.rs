@@ -21,6 +21,9 @@ pub struct Counters {
     pub timed_out: u64,
     /// Results that came for jobs no longer wanted.
     pub discarded: u64,
+    /// Workers dropped for answering for a job not leased to them, or with a texture
+    /// that is not the job's.
+    pub forged: u64,
 }
 
 /// Upper bounds (ms) of the request latency histogram in [`pb::StatsReply`].
@@ -86,6 +89,7 @@ impl State {
             worker_slots: self.workers.values().map(|w| w.slots as u32).sum(),
             worker_threads: self.workers.values().map(|w| w.threads).sum(),
             results_discarded: self.counters.discarded,
+            workers_dropped_forged: self.counters.forged,
         }
     }
 }

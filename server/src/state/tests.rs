@@ -5,6 +5,9 @@ use glam::Vec3;
 use relief_core::relief::DepthBits;
 use tokio::sync::mpsc::unbounded_channel;
 
+/// The client that uploaded the scene and asks for its textures.
+const OWNER: &str = "client-1";
+
 fn state_with_scene() -> (State, ContentHash) {
     let mut s = State::new(Limits {
         cache_bytes: 1 << 20,
@@ -23,6 +26,7 @@ fn state_with_scene() -> (State, ContentHash) {
             encoded: Arc::new(vec![]),
             objects: [("ball".to_string(), bounds)].into_iter().collect(),
         },
+        &OWNER.into(),
     );
     (s, hash)
 }
@@ -44,8 +48,12 @@ fn request(scene: ContentHash, id: u64, eye: Vec3, urgency: Urgency) -> Request 
 /// Admits request `id` of client "c" for `hash`'s ball, needed now, from
 /// `(x, 0, 5)`.
 fn admit_now(s: &mut State, hash: ContentHash, id: u64, x: f32, results: ResultSender) {
-    s.admit(&request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Now), results)
-        .unwrap();
+    s.admit(
+        &request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Now),
+        OWNER,
+        results,
+    )
+    .unwrap();
 }
 
 fn next_job(
@@ -64,25 +72,28 @@ fn now_before_predicted_nearest_deadline_first_and_merging() {
     let eye = |x: f32| Vec3::new(x, 0.0, 5.0);
     s.admit(
         &request(hash, 1, eye(1.0), Urgency::Predicted { in_ms: 900 }),
+        OWNER,
         tx.clone(),
     )
     .unwrap();
     s.admit(
         &request(hash, 2, eye(2.0), Urgency::Predicted { in_ms: 100 }),
+        OWNER,
         tx.clone(),
     )
     .unwrap();
-    s.admit(&request(hash, 3, eye(3.0), Urgency::Now), tx.clone())
+    s.admit(&request(hash, 3, eye(3.0), Urgency::Now), OWNER, tx.clone())
         .unwrap();
     // Same texture as request 2: merged.
     s.admit(
         &request(hash, 4, eye(2.0), Urgency::Predicted { in_ms: 50 }),
+        OWNER,
         tx.clone(),
     )
     .unwrap();
     assert_eq!(s.counters.merged, 1);
     let (wtx, mut wrx) = unbounded_channel();
-    s.add_worker("w".into(), 3, 1, wtx);
+    s.add_worker("w".into(), "worker-1".into(), 3, 1, wtx);
     s.dispatch();
     let order: Vec<f32> = std::iter::from_fn(|| next_job(&mut wrx))
         .map(|j| j.eye.unwrap().x)
@@ -103,17 +114,21 @@ fn a_bigger_texture_serves_smaller_requests() {
         depth_bits,
         ..request(hash, id, Vec3::new(1.0, 0.0, 5.0), Urgency::Now)
     };
-    s.admit(&sized(1, 64, DepthBits::Sixteen), tx.clone()).unwrap();
-    s.admit(&sized(2, 32, DepthBits::Eight), tx.clone()).unwrap();
-    s.admit(&sized(3, 128, DepthBits::Eight), tx.clone()).unwrap();
+    s.admit(&sized(1, 64, DepthBits::Sixteen), OWNER, tx.clone())
+        .unwrap();
+    s.admit(&sized(2, 32, DepthBits::Eight), OWNER, tx.clone())
+        .unwrap();
+    s.admit(&sized(3, 128, DepthBits::Eight), OWNER, tx.clone())
+        .unwrap();
     assert_eq!((s.counters.merged, s.stats().queue_now), (1, 2));
     let (wtx, mut wrx) = unbounded_channel();
-    s.add_worker("w".into(), 1, 1, wtx);
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
     s.dispatch();
     let job = next_job(&mut wrx).unwrap();
     assert_eq!((job.size, job.depth_bits), (64, 16));
     // While it runs, a smaller request joins it.
-    s.admit(&sized(4, 32, DepthBits::Eight), tx.clone()).unwrap();
+    s.admit(&sized(4, 32, DepthBits::Eight), OWNER, tx.clone())
+        .unwrap();
     assert_eq!(s.counters.merged, 2);
     s.result(job.job_id, pb::ReliefTexture::default(), true, 1);
     let mut served: Vec<u64> = std::iter::from_fn(|| rx.try_recv().ok())
@@ -123,14 +138,16 @@ fn a_bigger_texture_serves_smaller_requests() {
     assert_eq!(served, vec![1, 2, 4]);
     // Now cached: a smaller request is a hit, one with more depth bits is not.
     assert!(matches!(
-        s.admit(&sized(5, 64, DepthBits::Eight), tx.clone()),
+        s.admit(&sized(5, 64, DepthBits::Eight), OWNER, tx.clone()),
         Ok(Admission::Cached(_))
     ));
-    s.admit(&sized(6, 128, DepthBits::Sixteen), tx.clone()).unwrap();
+    s.admit(&sized(6, 128, DepthBits::Sixteen), OWNER, tx.clone())
+        .unwrap();
     assert_eq!(s.counters.cache_hits, 1);
     assert_eq!((s.counters.merged, s.stats().queue_now), (2, 2));
     // Nothing more than twice its edge serves a request: 16² gets a job of its own.
-    s.admit(&sized(7, 16, DepthBits::Eight), tx.clone()).unwrap();
+    s.admit(&sized(7, 16, DepthBits::Eight), OWNER, tx.clone())
+        .unwrap();
     assert_eq!(s.counters.cache_hits, 1);
     assert_eq!((s.counters.merged, s.stats().queue_now), (2, 3));
 }
@@ -142,7 +159,7 @@ fn the_cache_drops_the_least_recently_used_texture() {
     let (mut s, hash) = state_with_scene();
     let (tx, _rx) = unbounded_channel();
     let (wtx, mut wrx) = unbounded_channel();
-    s.add_worker("w".into(), 1, 1, wtx);
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
     // 300 kB each: three fit in the 1 MiB cache, four do not.
     let texture = || pb::ReliefTexture {
         albedo: vec![0; 300_000],
@@ -153,6 +170,7 @@ fn the_cache_drops_the_least_recently_used_texture() {
         id += 1;
         s.admit(
             &request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Now),
+            OWNER,
             tx.clone(),
         )
         .unwrap()
@@ -202,7 +220,7 @@ fn jobs_past_the_timeout_end_in_an_error() {
     admit_now(&mut s, hash, 1, 0.0, tx1);
     admit_now(&mut s, hash, 2, 1.0, tx2);
     let (wtx, mut wrx) = unbounded_channel();
-    let w = s.add_worker("w".into(), 1, 1, wtx);
+    let w = s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
     s.dispatch();
     let running = next_job(&mut wrx).unwrap();
     s.expire_jobs();
@@ -229,13 +247,13 @@ fn jobs_past_the_timeout_end_in_an_error() {
     let eye = Vec3::new(2.0, 0.0, 5.0);
     let (tx3, mut rx3) = unbounded_channel();
     let (tx4, mut rx4) = unbounded_channel();
-    s.admit(&request(hash, 3, eye, Urgency::Now), tx3).unwrap();
+    s.admit(&request(hash, 3, eye, Urgency::Now), OWNER, tx3).unwrap();
     s.dispatch();
     std::thread::sleep(Duration::from_millis(150));
     // Judged 60 ms after the second arrived (and so at least 210 ms after the first),
     // however long this thread waits between the lines.
     let before_second = Instant::now();
-    s.admit(&request(hash, 4, eye, Urgency::Now), tx4).unwrap();
+    s.admit(&request(hash, 4, eye, Urgency::Now), OWNER, tx4).unwrap();
     assert_eq!(s.stats().merged, 1);
     s.expire_jobs_at(before_second + Duration::from_millis(60));
     assert_eq!(
@@ -268,7 +286,7 @@ fn a_cancelled_job_holds_its_slot_until_the_worker_answers() {
     let (tx, _rx) = unbounded_channel();
     admit_now(&mut s, hash, 1, 0.0, tx.clone());
     let (wtx, mut wrx) = unbounded_channel();
-    let w = s.add_worker("w".into(), 1, 1, wtx);
+    let w = s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
     s.dispatch();
     let first = next_job(&mut wrx).unwrap();
     assert_eq!(s.withdraw("c", &[1]), 1);
@@ -295,7 +313,7 @@ fn withdrawal_cancels_queued_and_running_jobs() {
     admit_now(&mut s, hash, 1, 0.0, tx.clone());
     admit_now(&mut s, hash, 2, 1.0, tx.clone());
     let (wtx, mut wrx) = unbounded_channel();
-    s.add_worker("w".into(), 1, 1, wtx);
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
     s.dispatch();
     let running = next_job(&mut wrx).unwrap();
     assert_eq!(s.withdraw("c", &[1, 2, 99]), 2);
@@ -314,21 +332,80 @@ fn a_vanished_workers_jobs_are_requeued_and_bad_requests_refused() {
     let (tx, _rx) = unbounded_channel();
     admit_now(&mut s, hash, 1, 0.0, tx.clone());
     let (wtx, _wrx) = unbounded_channel();
-    let w = s.add_worker("w".into(), 1, 1, wtx);
+    let w = s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
     s.dispatch();
     assert_eq!(s.stats().jobs_in_flight, 1);
     s.remove_worker(w);
     assert_eq!((s.stats().queue_now, s.counters.requeued), (1, 1));
     let inside = s
-        .admit(&request(hash, 2, Vec3::ZERO, Urgency::Now), tx.clone())
+        .admit(&request(hash, 2, Vec3::ZERO, Urgency::Now), OWNER, tx.clone())
         .unwrap_err();
     assert_eq!(inside.code(), tonic::Code::FailedPrecondition);
     let mut unknown = request(hash, 3, Vec3::new(0.0, 0.0, 5.0), Urgency::Now);
     unknown.object = "cube".into();
     assert_eq!(
-        s.admit(&unknown, tx.clone()).unwrap_err().code(),
+        s.admit(&unknown, OWNER, tx.clone()).unwrap_err().code(),
         tonic::Code::NotFound
     );
     unknown.scene = ContentHash([1; 32]);
-    assert_eq!(s.admit(&unknown, tx).unwrap_err().code(), tonic::Code::NotFound);
+    assert_eq!(
+        s.admit(&unknown, OWNER, tx).unwrap_err().code(),
+        tonic::Code::NotFound
+    );
+}
+
+/// A result is the job's only with the job's edge (a preview's at most that), depth
+/// bits and eye, framed on the job's object from that eye; a scene and its requests
+/// are its uploader's; a worker reads a scene only while it holds a job on it.
+#[test]
+fn results_must_be_the_jobs_and_scenes_their_owners() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    let refused = s.admit(
+        &request(hash, 1, Vec3::new(1.0, 0.0, 5.0), Urgency::Now),
+        "client-2",
+        tx.clone(),
+    );
+    assert_eq!(refused.unwrap_err().code(), tonic::Code::NotFound);
+    assert!(s.scene_of(&hash, "client-2").is_none() && s.scene_of(&hash, OWNER).is_some());
+    admit_now(&mut s, hash, 1, 1.0, tx);
+    assert!(s.scene_for_worker(&hash, "worker-1").is_none());
+    let (wtx, mut wrx) = unbounded_channel();
+    let worker = s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    s.dispatch();
+    let job = next_job(&mut wrx).unwrap();
+    assert!(s.scene_for_worker(&hash, "worker-1").is_some());
+    assert!(s.scene_for_worker(&hash, "worker-2").is_none());
+    assert!(s.holds(worker, job.job_id) && !s.holds(worker, job.job_id + 1));
+    let eye = Vec3::new(1.0, 0.0, 5.0);
+    let bounds = s.scenes[&hash].objects["ball"];
+    let framed = |edge: u32| SourceCamera::facing(eye, &bounds, edge, edge).unwrap();
+    let check = |camera: &SourceCamera, bits: DepthBits, eye: Vec3, is_final: bool| {
+        s.check_result(job.job_id, camera, bits, eye, is_final)
+    };
+    assert_eq!(check(&framed(16), DepthBits::Eight, eye, true), Ok(()));
+    assert_eq!(check(&framed(4), DepthBits::Eight, eye, false), Ok(()));
+    let refusals = [
+        check(&framed(4), DepthBits::Eight, eye, true),
+        check(&framed(32), DepthBits::Eight, eye, false),
+        check(&framed(16), DepthBits::Sixteen, eye, true),
+        check(&framed(16), DepthBits::Eight, eye + Vec3::X, true),
+        check(
+            &SourceCamera {
+                origin: framed(16).origin + Vec3::splat(0.01),
+                ..framed(16)
+            },
+            DepthBits::Eight,
+            eye,
+            true,
+        ),
+    ];
+    for (k, refusal) in refusals.iter().enumerate() {
+        assert!(refusal.is_err(), "case {k} accepted");
+    }
+    s.forged(worker, Status::permission_denied("forged"));
+    assert_eq!(
+        (s.counters.forged, s.stats().workers, s.stats().queue_now),
+        (1, 0, 1)
+    );
 }

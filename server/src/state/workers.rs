@@ -10,6 +10,9 @@ use super::{JobSender, State};
 #[derive(Debug)]
 pub(super) struct Worker {
     pub(super) name: String,
+    /// The credential it registered with (see [`Caller`](crate::identity::Caller)):
+    /// what it may read goes by it.
+    pub(super) credential: std::sync::Arc<str>,
     pub(super) slots: usize,
     /// Threads each of its jobs bakes on (as it says; for Stats).
     pub(super) threads: u32,
@@ -31,13 +34,21 @@ impl Worker {
 }
 
 impl State {
-    /// Registers a worker; returns its id.
-    pub fn add_worker(&mut self, name: String, slots: usize, threads: u32, tx: JobSender) -> u64 {
+    /// Registers a worker of `credential`; returns its id.
+    pub fn add_worker(
+        &mut self,
+        name: String,
+        credential: std::sync::Arc<str>,
+        slots: usize,
+        threads: u32,
+        tx: JobSender,
+    ) -> u64 {
         let id = self.next();
         self.workers.insert(
             id,
             Worker {
                 name,
+                credential,
                 slots,
                 threads,
                 running: HashSet::new(),
@@ -55,6 +66,26 @@ impl State {
         if let Some(w) = self.workers.get_mut(&worker) {
             w.last_seen = Instant::now();
         }
+    }
+
+    /// Whether job `job_id` is the worker's to answer for: leased to it, or cancelled
+    /// on it and not yet answered for.
+    pub fn holds(&self, worker: u64, job_id: u64) -> bool {
+        self.workers
+            .get(&worker)
+            .is_some_and(|w| w.running.contains(&job_id) || w.stopping.contains(&job_id))
+    }
+
+    /// The worker broke the protocol (answered for a job not its own, or with a
+    /// texture that is not the job's): counted, logged, and dropped — its session ends
+    /// with `status`, its jobs go back to the queue.
+    pub fn forged(&mut self, worker: u64, status: tonic::Status) {
+        self.counters.forged += 1;
+        if let Some(w) = self.workers.get(&worker) {
+            tracing::warn!(worker = %w.name, credential = %w.credential, "dropped: {}", status.message());
+            let _ = w.tx.send(Err(status));
+        }
+        self.remove_worker(worker);
     }
 
     /// The worker is gone: its running jobs go back to the queue, first in line.

@@ -49,9 +49,14 @@ pub struct DemoArgs {
     /// PEM file of certificates to trust for an `https://` --server.
     #[arg(long, env = "RELIEF_TLS_CA")]
     tls_ca: Option<PathBuf>,
-    /// Shared secret of the server given with --server.
+    /// This client's credential for the server given with --server (its
+    /// --client-token, or its shared --token).
     #[arg(long, env = "RELIEF_TOKEN", hide_env_values = true)]
     token: Option<String>,
+    /// Send --token over plain http:// to a host other than this one (else refused:
+    /// anyone on the path could read it).
+    #[arg(long, env = "RELIEF_ALLOW_INSECURE")]
+    allow_insecure: bool,
     /// Network delay injected on the client side (half each way), milliseconds.
     #[arg(long, default_value = "0", value_parser = clap::value_parser!(u64).range(0..=60_000))]
     rtt_ms: u64,
@@ -126,6 +131,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let (mut manager, source) = match &url {
         Some(url) => {
             let _guard = runtime.enter();
+            relief_proto::connect::refuse_token_in_clear(url, args.token.as_deref(), args.allow_insecure)?;
             // Workers we started must have registered; a given server has its own.
             let (remote, hash) = runtime.block_on(connect_and_upload(
                 url,

@@ -1,0 +1,305 @@
+//! The server among callers it cannot trust: a real `relief-server` on 127.0.0.1 with a
+//! credential per client and per worker, and callers that misuse theirs — a worker's
+//! credential asking for textures, a client's opening a worker session, a client
+//! withdrawing another's request or reading its scene, a worker answering for a job
+//! leased to another, or with a texture that is not the job's.
+
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use tokio::sync::mpsc;
+use tokio_stream::wrappers::ReceiverStream;
+use tonic::Code;
+use tonic::service::interceptor::InterceptedService;
+use tonic::transport::Channel;
+
+use relief_client::remote::Remote;
+use relief_core::relief::DepthBits;
+use relief_core::scene::Scene;
+use relief_proto::auth::BearerToken;
+use relief_proto::bundle::bundle_for;
+use relief_proto::convert::{texture_to_pb, vec3_to_pb};
+use relief_proto::pb;
+use relief_tests::{Running, start_server, start_worker, wait_exit, worker_command};
+use relief_trace::bake;
+use relief_trace::tracer::ObjectTracer;
+
+/// The server's credentials: two clients and two workers.
+const SERVER_ARGS: [&str; 8] = [
+    "--client-token",
+    "client-one",
+    "--client-token",
+    "client-two",
+    "--worker-token",
+    "worker-one",
+    "--worker-token",
+    "worker-two",
+];
+
+/// An eye outside the default scene's sphere.
+const EYE: Vec3 = Vec3::new(6.0, 2.5, 4.0);
+
+fn ask(scene: &str, id: u64, size: u32, client_id: &str) -> pb::ImpostorRequest {
+    pb::ImpostorRequest {
+        scene_hash: scene.to_string(),
+        object: "sphere".into(),
+        eye: Some(vec3_to_pb(EYE)),
+        size,
+        depth_bits: 8,
+        urgency: pb::Urgency::Now as i32,
+        needed_in_ms: 0,
+        client_id: client_id.into(),
+        request_id: id,
+        progressive: false,
+    }
+}
+
+async fn channel(url: &str) -> Channel {
+    tonic::transport::Endpoint::from_shared(url.to_string())
+        .expect("url")
+        .connect()
+        .await
+        .expect("connect")
+}
+
+type Scenes = pb::scenes_client::ScenesClient<InterceptedService<Channel, BearerToken>>;
+
+async fn scenes(url: &str, token: &str) -> Scenes {
+    let auth = BearerToken::new(Some(token)).expect("token");
+    pb::scenes_client::ScenesClient::with_interceptor(channel(url).await, auth)
+}
+
+/// Whether the credential may read scene `hash` (its first chunk comes), or the code
+/// it is refused with.
+async fn read_scene(url: &str, token: &str, hash: &str) -> Result<(), Code> {
+    let mut client = scenes(url, token).await;
+    let mut stream = client
+        .get_scene(pb::SceneRef { hash: hash.into() })
+        .await
+        .map_err(|s| s.code())?
+        .into_inner();
+    stream
+        .message()
+        .await
+        .map_err(|s| s.code())?
+        .map(|_| ())
+        .ok_or(Code::Unknown)
+}
+
+/// A worker session driven by hand: what it sends, and what the server sends it.
+struct FakeWorker {
+    out: mpsc::Sender<pb::WorkerMessage>,
+    inbound: tonic::Streaming<pb::ServerMessage>,
+}
+
+impl FakeWorker {
+    async fn register(url: &str, token: &str) -> Result<FakeWorker, tonic::Status> {
+        let auth = BearerToken::new(Some(token)).expect("token");
+        let mut client = pb::workers_client::WorkersClient::with_interceptor(channel(url).await, auth);
+        let (out, rx) = mpsc::channel(16);
+        let register = pb::worker_message::Kind::Register(pb::Register {
+            name: format!("fake-{token}"),
+            slots: 1,
+            threads: 1,
+        });
+        out.send(pb::WorkerMessage { kind: Some(register) })
+            .await
+            .expect("send");
+        let inbound = client.session(ReceiverStream::new(rx)).await?.into_inner();
+        Ok(FakeWorker { out, inbound })
+    }
+
+    /// The next job the server hands it (bounded wait).
+    async fn job(&mut self) -> pb::Job {
+        let message = tokio::time::timeout(Duration::from_secs(20), self.inbound.message())
+            .await
+            .expect("a job within 20 s")
+            .expect("the session is open")
+            .expect("a message");
+        match message.kind {
+            Some(pb::server_message::Kind::Job(job)) => job,
+            other => panic!("expected a job, got {other:?}"),
+        }
+    }
+
+    async fn answer(&self, job_id: u64, texture: pb::ReliefTexture) {
+        let result = pb::worker_message::Kind::Result(pb::JobResult {
+            job_id,
+            texture: Some(texture),
+            r#final: true,
+            bake_ms: 1,
+        });
+        self.out
+            .send(pb::WorkerMessage { kind: Some(result) })
+            .await
+            .expect("send");
+    }
+
+    /// How the server ends the session (bounded wait): the status code.
+    async fn ended(&mut self) -> Code {
+        let deadline = Instant::now() + Duration::from_secs(20);
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match tokio::time::timeout(left, self.inbound.message()).await {
+                Err(_) => panic!("the session was not ended within 20 s"),
+                Ok(Err(status)) => return status.code(),
+                Ok(Ok(None)) => return Code::Ok,
+                Ok(Ok(Some(_))) => continue,
+            }
+        }
+    }
+}
+
+/// A 1×1 texture, well formed, for any job.
+fn tiny_texture() -> pb::ReliefTexture {
+    let v = |x: f32, y: f32, z: f32| Some(pb::Vec3 { x, y, z });
+    pb::ReliefTexture {
+        width: 1,
+        height: 1,
+        origin: v(0.0, 0.0, 0.0),
+        a: v(1.0, 0.0, 0.0),
+        b: v(0.0, -1.0, 0.0),
+        f: v(0.0, 0.0, -1.0),
+        depth_near: 0.0,
+        depth_far: 1.0,
+        depth_bits: 8,
+        eye: Some(vec3_to_pb(EYE)),
+        albedo: vec![255, 0, 0],
+        normal: vec![128, 128, 255],
+        depth: vec![0],
+    }
+}
+
+async fn stats(remote: &mut Remote, what: &str, check: impl Fn(&pb::StatsReply) -> bool) -> pb::StatsReply {
+    let start = Instant::now();
+    loop {
+        let stats = remote.stats().await.expect("stats");
+        if check(&stats) {
+            return stats;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "timed out waiting for {what}: {stats:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// Each credential does its own job only, and a client's requests and scenes are its
+/// own.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn each_credential_may_do_its_own_job_only() {
+    let (_server, url) = start_server(&SERVER_ARGS);
+    // A worker's credential asks for nothing as a client…
+    let mut as_client = Remote::connect(&url, Some("worker-one"), "w")
+        .await
+        .expect("connect");
+    assert_eq!(
+        as_client.stats().await.expect_err("refused").code(),
+        Code::PermissionDenied
+    );
+    let bundle = bundle_for("default").expect("default scene");
+    assert_eq!(
+        as_client.put_scene(&bundle).await.expect_err("refused").code(),
+        Code::PermissionDenied
+    );
+    // … and a client's opens no worker session: the worker process stops, naming it.
+    let worker = worker_command(&url)
+        .args(["--token", "client-one"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("worker");
+    let mut worker = Running(worker);
+    let status = tokio::task::block_in_place(|| wait_exit(&mut worker.0, Duration::from_secs(20)));
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut worker.0.stderr.take().expect("stderr"), &mut stderr).expect("read");
+    assert!(
+        !status.success() && stderr.contains("not a worker"),
+        "{status}: {stderr}"
+    );
+
+    // Client one's scene and request are its own.
+    let mut one = Remote::connect(&url, Some("client-one"), "same-id")
+        .await
+        .expect("connect");
+    let hash = one.put_scene(&bundle).await.expect("upload").to_string();
+    let mut two = Remote::connect(&url, Some("client-two"), "same-id")
+        .await
+        .expect("connect");
+    let refused = two
+        .request(ask(&hash, 1, 32, "same-id"))
+        .await
+        .expect_err("not its scene");
+    assert_eq!(refused.code(), Code::NotFound, "{refused}");
+    assert_eq!(read_scene(&url, "client-two", &hash).await, Err(Code::NotFound));
+    assert_eq!(read_scene(&url, "client-one", &hash).await, Ok(()));
+    // No worker holds a job on it: no worker credential reads it.
+    assert_eq!(read_scene(&url, "worker-one", &hash).await, Err(Code::NotFound));
+    // With no worker, client one's request waits; client two, naming the same client
+    // id and request id, withdraws nothing.
+    let _waiting = one.request(ask(&hash, 7, 32, "same-id")).await.expect("queued");
+    stats(&mut one, "the request to wait", |s| s.queue_now == 1).await;
+    assert_eq!(two.withdraw(&[7]).await.expect("withdraw"), 0);
+    assert_eq!(one.stats().await.expect("stats").queue_now, 1);
+    assert_eq!(one.withdraw(&[7]).await.expect("withdraw"), 1);
+    // A second upload of the same content makes client two an owner too: it sent it all.
+    two.put_scene(&bundle).await.expect("upload");
+    assert_eq!(read_scene(&url, "client-two", &hash).await, Ok(()));
+}
+
+/// A worker answers only for the jobs leased to it, and only with the texture asked
+/// for: a forged answer drops the worker, its job goes to another, and the client gets
+/// the real texture.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_worker_answers_only_for_its_own_jobs_with_the_texture_asked_for() {
+    let (_server, url) = start_server(&SERVER_ARGS);
+    let mut client = Remote::connect(&url, Some("client-one"), "c")
+        .await
+        .expect("connect");
+    let hash = client
+        .put_scene(&bundle_for("default").expect("scene"))
+        .await
+        .expect("upload")
+        .to_string();
+    let mut leased = FakeWorker::register(&url, "worker-one").await.expect("session");
+    stats(&mut client, "the fake worker", |s| s.workers == 1).await;
+    let mut results = client.request(ask(&hash, 1, 64, "c")).await.expect("queued");
+    let job = leased.job().await;
+    assert_eq!(job.size, 64);
+    // The worker that holds the job may read its scene.
+    assert_eq!(read_scene(&url, "worker-one", &job.scene_hash).await, Ok(()));
+
+    // Another worker answers for a job it was never given — with the very texture the
+    // job asks for: dropped all the same.
+    let mut forger = FakeWorker::register(&url, "worker-two").await.expect("session");
+    stats(&mut client, "the second fake worker", |s| s.workers == 2).await;
+    assert_eq!(
+        read_scene(&url, "worker-two", &job.scene_hash).await,
+        Err(Code::NotFound)
+    );
+    let scene = Scene::load("default").expect("default scene");
+    let sphere = ObjectTracer::new(scene.object("sphere").expect("sphere"));
+    let genuine = bake(&sphere, EYE, 64, DepthBits::Eight).expect("bake");
+    forger.answer(job.job_id, texture_to_pb(&genuine)).await;
+    assert_eq!(forger.ended().await, Code::PermissionDenied);
+    let after = stats(&mut client, "the forger dropped", |s| s.workers == 1).await;
+    assert_eq!(after.workers_dropped_forged, 1);
+
+    // The worker holding the job answers with a 1×1 texture for a 64² job: dropped too,
+    // and the job goes back to the queue.
+    leased.answer(job.job_id, tiny_texture()).await;
+    assert_eq!(leased.ended().await, Code::PermissionDenied);
+    let after = stats(&mut client, "the leased worker dropped", |s| s.workers == 0).await;
+    assert_eq!((after.workers_dropped_forged, after.queue_now), (2, 1));
+
+    // A real worker makes the texture, and the client gets it, whole.
+    let _worker = start_worker(&url, &["--token", "worker-one"]);
+    let result = tokio::time::timeout(Duration::from_secs(60), results.message())
+        .await
+        .expect("a result within 60 s")
+        .expect("no error")
+        .expect("a result");
+    let texture = result.texture.expect("texture");
+    assert!(result.r#final);
+    assert_eq!((texture.width, texture.height), (64, 64));
+}
