@@ -200,14 +200,31 @@ pub struct Request {
     pub progressive: bool,
 }
 
+/// A `client_id` is not empty and at most
+/// [`MAX_CLIENT_ID_BYTES`](crate::limits::MAX_CLIENT_ID_BYTES) long.
+pub fn check_client_id(id: &str) -> Result<(), Status> {
+    if id.is_empty() {
+        return Err(invalid("client_id", "empty"));
+    }
+    if id.len() > crate::limits::MAX_CLIENT_ID_BYTES {
+        return Err(invalid(
+            "client_id",
+            format_args!(
+                "{} bytes, at most {}",
+                id.len(),
+                crate::limits::MAX_CLIENT_ID_BYTES
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Checks every field of an impostor request.
 pub fn request_from_pb(r: &pb::ImpostorRequest) -> Result<Request, Status> {
     if r.object.is_empty() {
         return Err(invalid("object", "empty"));
     }
-    if r.client_id.is_empty() {
-        return Err(invalid("client_id", "empty"));
-    }
+    check_client_id(&r.client_id)?;
     let urgency = match pb::Urgency::try_from(r.urgency) {
         Ok(pb::Urgency::Now) => Urgency::Now,
         Ok(pb::Urgency::Predicted) => Urgency::Predicted {

@@ -12,5 +12,12 @@ pub const MAX_UPLOAD_MESSAGE_BYTES: usize = 64 << 20;
 /// before compression.
 pub const MAX_TEXTURE_MESSAGE_BYTES: usize = 256 << 20;
 
+/// The largest message a server takes from a client asking for or withdrawing textures
+/// (a request is about a hundred bytes; a withdrawal of 8,000 ids fits).
+pub const MAX_REQUEST_MESSAGE_BYTES: usize = 64 << 10;
+
+/// The longest `client_id`, bytes: it is kept with every waiting request.
+pub const MAX_CLIENT_ID_BYTES: usize = 256;
+
 /// The largest scene message a worker takes when it fetches a scene.
 pub const MAX_SCENE_FETCH_MESSAGE_BYTES: usize = 1 << 30;

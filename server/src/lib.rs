@@ -17,6 +17,7 @@
 //!     cache_bytes: 64 << 20,
 //!     lease: Duration::from_secs(5),
 //!     max_waiting: 1000,
+//!     max_waiting_per_client: 100,
 //!     job_timeout: Duration::from_secs(60),
 //! });
 //! let stats = state.stats();

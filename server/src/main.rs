@@ -16,7 +16,7 @@ use tonic::transport::Server;
 use tonic::transport::server::TcpIncoming;
 
 use relief_proto::bundle::SceneDir;
-use relief_proto::limits::{MAX_TEXTURE_MESSAGE_BYTES, MAX_UPLOAD_MESSAGE_BYTES};
+use relief_proto::limits::{MAX_REQUEST_MESSAGE_BYTES, MAX_TEXTURE_MESSAGE_BYTES, MAX_UPLOAD_MESSAGE_BYTES};
 use relief_proto::pb;
 use relief_server::identity::{Credentials, Role, read_tokens_file};
 use relief_server::service::{Service, Shared};
@@ -71,6 +71,10 @@ struct Args {
     /// Most requests waiting at once.
     #[arg(long, env = "RELIEF_MAX_WAITING", default_value = "100000", value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
     max_waiting: u64,
+    /// Most requests one client credential has waiting at once: one client's flood
+    /// cannot take every place.
+    #[arg(long, env = "RELIEF_MAX_WAITING_PER_CLIENT", default_value = "2000", value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
+    max_waiting_per_client: u64,
     /// Where received scenes are unpacked (default: a directory under the system's temp dir).
     #[arg(long, env = "RELIEF_SCENE_DIR")]
     scene_dir: Option<PathBuf>,
@@ -98,6 +102,7 @@ async fn serve(args: Args) -> Result<()> {
             cache_bytes: (args.cache_mb as usize) << 20,
             lease,
             max_waiting: args.max_waiting as usize,
+            max_waiting_per_client: args.max_waiting_per_client as usize,
             job_timeout,
         }),
         scene_dir.path().to_path_buf(),
@@ -128,6 +133,7 @@ async fn serve(args: Args) -> Result<()> {
     let impostors = pb::impostors_server::ImpostorsServer::new(service.clone())
         .accept_compressed(CompressionEncoding::Zstd)
         .send_compressed(CompressionEncoding::Zstd)
+        .max_decoding_message_size(MAX_REQUEST_MESSAGE_BYTES)
         .max_encoding_message_size(MAX_TEXTURE_MESSAGE_BYTES);
     let workers = pb::workers_server::WorkersServer::new(service)
         .accept_compressed(CompressionEncoding::Zstd)

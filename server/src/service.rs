@@ -10,7 +10,9 @@ use tokio_stream::wrappers::UnboundedReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
 use relief_proto::bundle::{Bundle, MAX_BUNDLE_BYTES};
-use relief_proto::convert::{check_register, check_texture_pb, hash_from_pb, request_from_pb};
+use relief_proto::convert::{
+    check_client_id, check_register, check_texture_pb, hash_from_pb, request_from_pb,
+};
 use relief_proto::limits::SCENE_CHUNK_BYTES;
 use relief_proto::pb;
 
@@ -224,9 +226,7 @@ impl pb::impostors_server::Impostors for Service {
     ) -> Result<Response<pb::WithdrawReply>, Status> {
         let caller = Caller::of(&request)?;
         let r = request.get_ref();
-        if r.client_id.is_empty() {
-            return Err(Status::invalid_argument("field `client_id`: empty"));
-        }
+        check_client_id(&r.client_id)?;
         let mut state = self.0.state();
         let withdrawn = state.withdraw(&scoped(&caller, &r.client_id), &r.request_ids);
         state.dispatch();

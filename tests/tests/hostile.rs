@@ -242,6 +242,17 @@ async fn each_credential_may_do_its_own_job_only() {
     assert_eq!(two.withdraw(&[7]).await.expect("withdraw"), 0);
     assert_eq!(one.stats().await.expect("stats").queue_now, 1);
     assert_eq!(one.withdraw(&[7]).await.expect("withdraw"), 1);
+    // A client id is short, and a request message small: both refused, naming why.
+    let long = "x".repeat(300);
+    let refused = one.request(ask(&hash, 8, 32, &long)).await.expect_err("too long");
+    assert!(
+        refused.code() == Code::InvalidArgument && refused.message().contains("client_id"),
+        "{refused}"
+    );
+    let huge = "x".repeat(1 << 20);
+    let refused = one.request(ask(&hash, 9, 32, &huge)).await.expect_err("too big");
+    assert_ne!(refused.code(), Code::Ok, "{refused}");
+    assert!(one.stats().await.is_ok(), "the server still serves");
     // A second upload of the same content makes client two an owner too: it sent it all.
     two.put_scene(&bundle).await.expect("upload");
     assert_eq!(read_scene(&url, "client-two", &hash).await, Ok(()));

@@ -94,6 +94,8 @@ pub type WaiterId = (String, u64);
 
 #[derive(Debug)]
 pub(super) struct Waiter {
+    /// The client credential it counts against.
+    pub(super) owner: Arc<str>,
     pub(super) job: u64,
     pub(super) tx: ResultSender,
     pub(super) arrived: Instant,
@@ -297,6 +299,7 @@ impl State {
         let Some(waiter) = self.waiters.remove(waiter_id) else {
             return false;
         };
+        self.no_longer_waiting(&waiter.owner);
         let _ = waiter.tx.send(Err(status));
         if let Some(job) = self.jobs.get_mut(&waiter.job) {
             job.waiters.remove(waiter_id);
@@ -332,7 +335,18 @@ impl State {
         }
         for waiter_id in job.waiters {
             if let Some(w) = self.waiters.remove(&waiter_id) {
+                self.no_longer_waiting(&w.owner);
                 self.latencies_push(w.arrived.elapsed().as_secs_f32() * 1e3);
+            }
+        }
+    }
+
+    /// One request of `owner` has ended.
+    fn no_longer_waiting(&mut self, owner: &Arc<str>) {
+        if let Some(count) = self.waiting_by_owner.get_mut(owner) {
+            *count = count.saturating_sub(1);
+            if *count == 0 {
+                self.waiting_by_owner.remove(owner);
             }
         }
     }

@@ -61,6 +61,8 @@ pub struct Limits {
     pub lease: Duration,
     /// Most requests waiting at once.
     pub max_waiting: usize,
+    /// Most requests one client (credential) has waiting at once.
+    pub max_waiting_per_client: usize,
     /// A request waiting this long ends with an error: none waits for ever, with no
     /// worker connected or on one that keeps its lease but never finishes.
     pub job_timeout: Duration,
@@ -79,6 +81,8 @@ pub struct State {
     /// The jobs of each view (a few: one per size and depth asked for).
     by_view: HashMap<View, Vec<u64>>,
     waiters: HashMap<WaiterId, Waiter>,
+    /// Requests waiting, per client credential (see [`Limits::max_waiting_per_client`]).
+    waiting_by_owner: HashMap<Arc<str>, usize>,
     workers: HashMap<u64, Worker>,
     /// The cached textures of each view.
     cache: HashMap<View, Vec<Cached>>,
@@ -116,6 +120,7 @@ impl State {
             queue: BTreeSet::new(),
             by_view: HashMap::new(),
             waiters: HashMap::new(),
+            waiting_by_owner: HashMap::new(),
             workers: HashMap::new(),
             cache: HashMap::new(),
             recency: BTreeMap::new(),
@@ -227,6 +232,13 @@ impl State {
                 self.limits.max_waiting
             )));
         }
+        let owner: Arc<str> = owner.into();
+        let owned = self.waiting_by_owner.get(&owner).copied().unwrap_or(0);
+        if owned >= self.limits.max_waiting_per_client {
+            return Err(Status::resource_exhausted(format!(
+                "this client already has {owned} requests waiting (the server's --max-waiting-per-client)"
+            )));
+        }
         let now = Instant::now();
         let deadline_us = now.duration_since(self.epoch).as_micros() as u64
             + match request.urgency {
@@ -290,9 +302,11 @@ impl State {
                 job.spec.progressive = true;
             }
         }
+        *self.waiting_by_owner.entry(owner.clone()).or_default() += 1;
         self.waiters.insert(
             waiter_id,
             Waiter {
+                owner,
                 job: job_id,
                 tx,
                 arrived: now,

@@ -13,6 +13,7 @@ fn state_with_scene() -> (State, ContentHash) {
         cache_bytes: 1 << 20,
         lease: Duration::from_secs(5),
         max_waiting: 100,
+        max_waiting_per_client: 100,
         job_timeout: Duration::from_secs(60),
     });
     let hash = ContentHash([7; 32]);
@@ -408,4 +409,39 @@ fn results_must_be_the_jobs_and_scenes_their_owners() {
         (s.counters.forged, s.stats().workers, s.stats().queue_now),
         (1, 0, 1)
     );
+}
+
+/// One client's requests take at most `max_waiting_per_client` places; another's are
+/// still taken in, and a place freed is taken again.
+#[test]
+fn one_client_cannot_take_every_place() {
+    let (mut s, hash) = state_with_scene();
+    s.limits.max_waiting_per_client = 2;
+    s.add_owner(hash, &"client-2".into());
+    let (tx, _rx) = unbounded_channel();
+    let ask = |id: u64| request(hash, id, Vec3::new(id as f32, 0.0, 5.0), Urgency::Now);
+    s.admit(&ask(1), OWNER, tx.clone()).unwrap();
+    s.admit(&ask(2), OWNER, tx.clone()).unwrap();
+    let refused = s.admit(&ask(3), OWNER, tx.clone()).unwrap_err();
+    assert_eq!(refused.code(), tonic::Code::ResourceExhausted);
+    assert!(
+        refused.message().contains("--max-waiting-per-client"),
+        "{}",
+        refused.message()
+    );
+    let other = Request {
+        client_id: "other".into(),
+        ..ask(4)
+    };
+    s.admit(&other, "client-2", tx.clone()).unwrap();
+    assert_eq!(s.withdraw("c", &[1]), 1);
+    s.admit(&ask(3), OWNER, tx.clone()).unwrap();
+    // Ended by a result, a request frees its place too.
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 4, 1, wtx);
+    s.dispatch();
+    while let Some(job) = next_job(&mut wrx) {
+        s.result(job.job_id, pb::ReliefTexture::default(), true, 1);
+    }
+    assert!(s.waiting_by_owner.is_empty(), "{:?}", s.waiting_by_owner);
 }
