@@ -314,3 +314,62 @@ async fn a_worker_answers_only_for_its_own_jobs_with_the_texture_asked_for() {
     assert!(result.r#final);
     assert_eq!((texture.width, texture.height), (64, 64));
 }
+
+/// One client's flood does not starve another's: with one worker busy on a flood of
+/// another client's requests, a second client's single request is baked next, not
+/// after the flood (measured: its latency, against the same request on an idle
+/// server, printed).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_flood_from_one_client_does_not_starve_another() {
+    let (_server, url) = start_server(&SERVER_ARGS);
+    let _worker = start_worker(&url, &["--token", "worker-one"]);
+    let bundle = bundle_for("default").expect("scene");
+    let mut flood = Remote::connect(&url, Some("client-one"), "flood")
+        .await
+        .expect("connect");
+    let hash = flood.put_scene(&bundle).await.expect("upload").to_string();
+    let mut single = Remote::connect(&url, Some("client-two"), "single")
+        .await
+        .expect("connect");
+    single.put_scene(&bundle).await.expect("upload");
+    stats(&mut single, "the worker", |s| s.workers == 1).await;
+    let at = |k: u64| pb::ImpostorRequest {
+        eye: Some(vec3_to_pb(EYE + Vec3::new(0.0, 0.01 * k as f32, 0.0))),
+        ..ask(&hash, k, 32, "single")
+    };
+    let timed = |mut stream: tonic::Streaming<pb::ImpostorResult>| async move {
+        let start = Instant::now();
+        let result = tokio::time::timeout(Duration::from_secs(60), stream.message())
+            .await
+            .expect("a result within 60 s")
+            .expect("no error")
+            .expect("a result");
+        assert!(result.r#final);
+        start.elapsed()
+    };
+    // (The first request loads the scene on the worker.)
+    timed(single.request(at(0)).await.expect("queued")).await;
+    let idle = timed(single.request(at(1)).await.expect("queued")).await;
+    const FLOOD: u64 = 20;
+    let mut flooding = Vec::new();
+    for k in 0..FLOOD {
+        let request = pb::ImpostorRequest {
+            eye: Some(vec3_to_pb(EYE + Vec3::new(0.0, 0.0, 0.01 * k as f32))),
+            ..ask(&hash, 100 + k, 1024, "flood")
+        };
+        flooding.push(flood.request(request).await.expect("queued"));
+    }
+    stats(&mut single, "the flood queued", |s| {
+        s.queue_now as u64 >= FLOOD - 2
+    })
+    .await;
+    let during = timed(single.request(at(2)).await.expect("queued")).await;
+    let left = single.stats().await.expect("stats").queue_now;
+    eprintln!(
+        "the single request: {idle:?} idle, {during:?} during a flood of {FLOOD} 1024² requests ({left} still queued after it)"
+    );
+    assert!(
+        left as u64 >= FLOOD / 2,
+        "the single request waited for the flood: {left} left"
+    );
+}

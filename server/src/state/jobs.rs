@@ -13,6 +13,7 @@ use relief_core::relief::{DepthBits, SourceCamera};
 use relief_proto::convert::Request;
 use relief_proto::pb;
 
+use super::queue::Priority;
 use super::{ResultSender, State};
 
 /// Where a texture is made from: the scene, the object and the eye. Textures of one
@@ -67,14 +68,6 @@ const MAX_SERVED_RATIO: u32 = 2;
 /// object misses by far more.
 const CAMERA_SLACK: f32 = 1e-4;
 
-/// Queue order: needed-now first, then nearest deadline, then arrival.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
-pub(super) struct Priority {
-    pub(super) predicted: bool,
-    pub(super) deadline_us: u64,
-    pub(super) id: u64,
-}
-
 #[derive(Debug)]
 pub(super) enum JobState {
     Queued(Priority),
@@ -83,6 +76,8 @@ pub(super) enum JobState {
 
 #[derive(Debug)]
 pub(super) struct Job {
+    /// The client credential whose request made it: the queue's line it waits in.
+    pub(super) owner: Arc<str>,
     pub(super) key: JobKey,
     pub(super) spec: pb::Job,
     pub(super) state: JobState,
@@ -102,12 +97,12 @@ pub(super) struct Waiter {
 }
 
 impl State {
-    /// Hands queued jobs to workers with free slots, most urgent first. (A job whose
-    /// clients have all gone is withdrawn before it gets here: see the service's
-    /// `ResultStream`.)
+    /// Hands queued jobs to workers with free slots, fairly across clients (see
+    /// `queue.rs`). (A job whose clients have all gone is withdrawn before it gets here:
+    /// see the service's `ResultStream`.)
     pub fn dispatch(&mut self) {
         loop {
-            let Some(&first) = self.queue.first() else {
+            let Some((owner, first)) = self.queue.next() else {
                 return;
             };
             let Some((&worker_id, worker)) = self
@@ -118,7 +113,7 @@ impl State {
             else {
                 return;
             };
-            self.queue.remove(&first);
+            self.queue.remove(&owner, &first);
             let Some(job) = self.jobs.get_mut(&first.id) else {
                 continue;
             };
@@ -127,12 +122,13 @@ impl State {
             };
             if worker.tx.send(Ok(message)).is_err() {
                 // The worker's stream is gone: put the job back and drop the worker.
-                self.queue.insert(first);
+                self.queue.insert(&owner, first);
                 self.remove_worker(worker_id);
                 continue;
             }
             worker.running.insert(first.id);
             job.state = JobState::Running { worker: worker_id };
+            self.queue.started(&owner);
         }
     }
 
@@ -325,9 +321,10 @@ impl State {
         }
         match job.state {
             JobState::Queued(p) => {
-                self.queue.remove(&p);
+                self.queue.remove(&job.owner, &p);
             }
             JobState::Running { worker } => {
+                self.queue.stopped(&job.owner);
                 if let Some(w) = self.workers.get_mut(&worker) {
                     w.running.remove(&job_id);
                 }

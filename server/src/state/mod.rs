@@ -4,7 +4,8 @@
 //!
 //! - here — scenes, and a request's admission (served from the cache, joined to a job
 //!   that satisfies it, or queued);
-//! - `jobs.rs` — the queue, dispatch to workers, results, failures, timeouts,
+//! - `queue.rs` — the jobs waiting, one line per client credential, served fairly;
+//! - `jobs.rs` — dispatch to workers, results, failures, timeouts,
 //!   withdrawals;
 //! - `workers.rs` — registration, leases, draining;
 //! - `cache.rs` — finished textures kept for reuse, bounded in bytes, least recently used
@@ -13,13 +14,14 @@
 
 mod cache;
 mod jobs;
+mod queue;
 mod stats;
 mod workers;
 
 #[cfg(test)]
 mod tests;
 
-use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
+use std::collections::{BTreeMap, HashMap, HashSet, VecDeque};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -36,7 +38,8 @@ pub use jobs::{JobKey, WaiterId};
 pub use stats::{Counters, LATENCY_BUCKETS_MS};
 
 use cache::Cached;
-use jobs::{Job, JobState, Priority, View, Waiter};
+use jobs::{Job, JobState, View, Waiter};
+use queue::{FairQueue, Priority};
 use workers::Worker;
 
 /// What a waiting client receives: results, or the error that ends its request.
@@ -77,7 +80,7 @@ pub struct State {
     /// scene: only they may read it or ask for its textures.
     scene_owners: HashMap<ContentHash, HashSet<Arc<str>>>,
     jobs: HashMap<u64, Job>,
-    queue: BTreeSet<Priority>,
+    queue: FairQueue,
     /// The jobs of each view (a few: one per size and depth asked for).
     by_view: HashMap<View, Vec<u64>>,
     waiters: HashMap<WaiterId, Waiter>,
@@ -117,7 +120,7 @@ impl State {
             scenes: HashMap::new(),
             scene_owners: HashMap::new(),
             jobs: HashMap::new(),
-            queue: BTreeSet::new(),
+            queue: FairQueue::default(),
             by_view: HashMap::new(),
             waiters: HashMap::new(),
             waiting_by_owner: HashMap::new(),
@@ -259,8 +262,8 @@ impl State {
                         id,
                     };
                     if better != p {
-                        self.queue.remove(&p);
-                        self.queue.insert(better);
+                        self.queue.remove(&job.owner, &p);
+                        self.queue.insert(&job.owner, better);
                         job.state = JobState::Queued(better);
                     }
                 }
@@ -285,13 +288,14 @@ impl State {
                 self.jobs.insert(
                     id,
                     Job {
+                        owner: owner.clone(),
                         key: key.clone(),
                         spec,
                         state: JobState::Queued(priority),
                         waiters: HashSet::new(),
                     },
                 );
-                self.queue.insert(priority);
+                self.queue.insert(&owner, priority);
                 self.by_view.entry(key.view).or_default().push(id);
                 id
             }

@@ -66,7 +66,7 @@ impl State {
             q if q.is_nan() => 0.0,
             q => q as f32,
         };
-        let queued = |predicted: bool| self.queue.iter().filter(|p| p.predicted == predicted).count() as u32;
+        let queued = |predicted: bool| self.queue.count(predicted) as u32;
         pb::StatsReply {
             queue_now: queued(false),
             queue_predicted: queued(true),

@@ -445,3 +445,29 @@ fn one_client_cannot_take_every_place() {
     }
     assert!(s.waiting_by_owner.is_empty(), "{:?}", s.waiting_by_owner);
 }
+
+/// A free slot goes to the client with the fewest jobs running: a second client's
+/// request is baked next, ahead of the rest of another's flood.
+#[test]
+fn a_second_client_is_served_between_anothers_flood() {
+    let (mut s, hash) = state_with_scene();
+    s.add_owner(hash, &"client-2".into());
+    let (tx, _rx) = unbounded_channel();
+    for id in 1..=5 {
+        admit_now(&mut s, hash, id, id as f32, tx.clone());
+    }
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    s.dispatch();
+    let first = next_job(&mut wrx).unwrap();
+    let other = Request {
+        client_id: "other".into(),
+        ..request(hash, 9, Vec3::new(9.0, 0.0, 5.0), Urgency::Now)
+    };
+    s.admit(&other, "client-2", tx.clone()).unwrap();
+    s.dispatch();
+    assert!(next_job(&mut wrx).is_none(), "the slot is taken");
+    s.result(first.job_id, pb::ReliefTexture::default(), true, 1);
+    s.dispatch();
+    assert_eq!(next_job(&mut wrx).unwrap().eye.unwrap().x, 9.0);
+}

@@ -4,7 +4,8 @@
 use std::collections::HashSet;
 use std::time::Instant;
 
-use super::jobs::{JobState, Priority};
+use super::jobs::JobState;
+use super::queue::Priority;
 use super::{JobSender, State};
 
 #[derive(Debug)]
@@ -102,7 +103,8 @@ impl State {
                     id,
                 };
                 job.state = JobState::Queued(priority);
-                self.queue.insert(priority);
+                self.queue.stopped(&job.owner);
+                self.queue.insert(&job.owner, priority);
                 self.counters.requeued += 1;
             }
         }
