@@ -32,6 +32,10 @@ pub enum Error {
     /// A relief texture on disk is malformed.
     #[error("relief texture {}: {message}", path.display())]
     Texture { path: PathBuf, message: String },
+    /// A scene that would cost more than its loader allows (see
+    /// [`SceneLimits`](crate::scene::SceneLimits)), found before it is built.
+    #[error("the scene is too large: {0}")]
+    TooCostly(String),
     /// An argument is out of range or not finite.
     #[error("{0}")]
     Invalid(String),

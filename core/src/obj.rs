@@ -164,6 +164,31 @@ pub fn load_texture(path: &Path) -> Result<TextureImage> {
     })
 }
 
+/// The triangles [`load_obj`] would make of `path` (each face of `n` corners gives
+/// `n − 2`), read from its face lines without building anything; `path` must lie
+/// within `reach`.
+pub fn count_triangles(path: &Path, reach: Reach) -> Result<u64> {
+    use std::io::BufRead;
+    let opened = reach.check(path)?;
+    let file = std::fs::File::open(opened).map_err(|e| Error::io(path, e))?;
+    let mut reader = std::io::BufReader::new(file);
+    let (mut line, mut triangles) = (Vec::new(), 0u64);
+    loop {
+        line.clear();
+        if reader
+            .read_until(b'\n', &mut line)
+            .map_err(|e| Error::io(path, e))?
+            == 0
+        {
+            return Ok(triangles);
+        }
+        let mut words = line.split(|b| b.is_ascii_whitespace()).filter(|w| !w.is_empty());
+        if words.next() == Some(b"f".as_slice()) {
+            triangles = triangles.saturating_add((words.count() as u64).saturating_sub(2));
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -7,7 +7,7 @@ use prost::Message;
 
 use relief_core::hash::ContentHash;
 use relief_core::reach::Reach;
-use relief_core::scene::Scene;
+use relief_core::scene::{Scene, SceneLimits};
 use relief_core::{Error, Result};
 
 use crate::convert::bundle_hash;
@@ -69,8 +69,9 @@ impl Bundle {
 
     /// Writes the files under `dir/<hash>/` and loads the scene from there, reading
     /// no file outside it: the server loads bundles from anyone who can reach it, and
-    /// an absolute or `..` path in a scene, OBJ or MTL must not read its own disk.
-    pub fn load(&self, dir: &Path) -> Result<Scene> {
+    /// an absolute or `..` path in a scene, OBJ or MTL must not read its own disk; nor
+    /// may a few bytes of scene build more than `limits` allow.
+    pub fn load(&self, dir: &Path, limits: &SceneLimits) -> Result<Scene> {
         let root = dir.join(self.hash.to_string());
         // A root that is a link (planted by someone who can write `dir`) would move
         // the confinement wherever it points.
@@ -87,7 +88,7 @@ impl Bundle {
             std::fs::write(&path, &f.data).map_err(|e| Error::io(&path, e))?;
         }
         let scene_path = root.join(&self.bundle.root);
-        Scene::load_within(&scene_path.to_string_lossy(), Reach::Within(&root))
+        Scene::load_within(&scene_path.to_string_lossy(), Reach::Within(&root), limits)
     }
 }
 
@@ -277,7 +278,7 @@ mod tests {
         assert_eq!(bundle_for("default").unwrap().hash, b.hash, "stable hash");
         // (Removed when the test ends.)
         let dir = private_scene_dir("relief-bundle-test").unwrap();
-        let scene = again.load(dir.path()).unwrap();
+        let scene = again.load(dir.path(), &SceneLimits::default()).unwrap();
         assert!(scene.object("knot").is_ok());
     }
 
@@ -300,7 +301,7 @@ mod tests {
             };
             Bundle::decode(bundle.encode_to_vec())
                 .unwrap()
-                .load(&dir.join("bundles"))
+                .load(&dir.join("bundles"), &SceneLimits::default())
         };
         let obj = |text: String| file("t.obj", text.into_bytes());
         // A scene whose OBJ is in the bundle loads.

@@ -15,6 +15,7 @@ use tonic::codec::CompressionEncoding;
 use tonic::transport::Server;
 use tonic::transport::server::TcpIncoming;
 
+use relief_core::scene::SceneLimits;
 use relief_proto::bundle::SceneDir;
 use relief_proto::limits::{MAX_REQUEST_MESSAGE_BYTES, MAX_TEXTURE_MESSAGE_BYTES, MAX_UPLOAD_MESSAGE_BYTES};
 use relief_proto::pb;
@@ -75,6 +76,13 @@ struct Args {
     /// cannot take every place.
     #[arg(long, env = "RELIEF_MAX_WAITING_PER_CLIENT", default_value = "2000", value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
     max_waiting_per_client: u64,
+    /// Most triangles an uploaded scene may have over all its objects, counted from its
+    /// files before it is built (generators from their parameters).
+    #[arg(long, env = "RELIEF_MAX_SCENE_TRIANGLES", default_value = "8000000", value_parser = clap::value_parser!(u64).range(1..))]
+    max_scene_triangles: u64,
+    /// Most objects an uploaded scene may have.
+    #[arg(long, env = "RELIEF_MAX_SCENE_OBJECTS", default_value = "10000", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    max_scene_objects: u64,
     /// Where received scenes are unpacked (default: a directory under the system's temp dir).
     #[arg(long, env = "RELIEF_SCENE_DIR")]
     scene_dir: Option<PathBuf>,
@@ -106,6 +114,10 @@ async fn serve(args: Args) -> Result<()> {
             job_timeout,
         }),
         scene_dir.path().to_path_buf(),
+        SceneLimits {
+            max_triangles: args.max_scene_triangles,
+            max_objects: args.max_scene_objects as usize,
+        },
     );
     // Leases: a silent worker's jobs go back to the queue; jobs past the timeout end.
     let watched = shared.clone();

@@ -9,6 +9,7 @@ use tokio_stream::Stream;
 use tokio_stream::wrappers::UnboundedReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
+use relief_core::scene::SceneLimits;
 use relief_proto::bundle::{Bundle, MAX_BUNDLE_BYTES};
 use relief_proto::convert::{
     check_client_id, check_register, check_texture_pb, hash_from_pb, request_from_pb,
@@ -23,13 +24,16 @@ use crate::state::{Admission, State, StoredScene};
 pub struct Shared {
     state: Mutex<State>,
     scene_dir: PathBuf,
+    /// What an uploaded scene may cost, checked before it is built.
+    scene_limits: SceneLimits,
 }
 
 impl Shared {
-    pub fn new(state: State, scene_dir: PathBuf) -> Arc<Shared> {
+    pub fn new(state: State, scene_dir: PathBuf, scene_limits: SceneLimits) -> Arc<Shared> {
         Arc::new(Shared {
             state: Mutex::new(state),
             scene_dir,
+            scene_limits,
         })
     }
 
@@ -120,14 +124,23 @@ impl pb::scenes_server::Scenes for Service {
             Bundle::decode(encoded).map_err(|e| Status::invalid_argument(format!("field `data`: {e}")))?;
         let hash = bundle.hash;
         if !self.0.state().has_scene(&hash) {
-            let dir = self.0.scene_dir.clone();
+            let (dir, limits) = (self.0.scene_dir.clone(), self.0.scene_limits);
+            let shown_dir = dir.clone();
             // The bundle moves to the loading thread and its bytes come back with the
             // scene: no copy of a scene that may be hundreds of megabytes.
-            let (scene, encoded) =
-                tokio::task::spawn_blocking(move || bundle.load(&dir).map(|scene| (scene, bundle.encoded)))
-                    .await
-                    .map_err(|e| Status::internal(format!("loading the scene: {e}")))?
-                    .map_err(|e| Status::invalid_argument(format!("the scene does not load: {e}")))?;
+            let (scene, encoded) = tokio::task::spawn_blocking(move || {
+                bundle.load(&dir, &limits).map(|scene| (scene, bundle.encoded))
+            })
+            .await
+            .map_err(|e| Status::internal(format!("loading the scene: {e}")))?
+            .map_err(|e| {
+                // (Paths as the bundle names them: where the server keeps
+                // scenes is none of the caller's business.)
+                let message = e
+                    .to_string()
+                    .replace(&format!("{}/{hash}/", shown_dir.display()), "");
+                Status::invalid_argument(format!("the scene does not load: {message}"))
+            })?;
             let objects = scene.objects.iter().map(|o| (o.name.clone(), o.bounds)).collect();
             let stored = StoredScene {
                 encoded: Arc::new(encoded),

@@ -373,3 +373,52 @@ async fn a_flood_from_one_client_does_not_starve_another() {
         "the single request waited for the flood: {left} left"
     );
 }
+
+/// A server's peak resident memory (`VmHWM`), MiB.
+fn peak_rss_mib(pid: u32) -> f64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).expect("/proc status");
+    let kib: f64 = status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+        .expect("VmHWM");
+    kib / 1024.0
+}
+
+/// A scene file of a hundred bytes that names ten million triangles is refused before
+/// anything is built: the server's memory does not move.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_scene_too_costly_is_refused_before_it_is_built() {
+    let (server, url) = start_server(&SERVER_ARGS);
+    let dir = relief_tests::scratch("costly-scene");
+    let path = dir.join("tree.toml");
+    let text =
+        "[[objects]]\nname = \"t\"\ngenerator = { kind = \"tree\", seed = 1, depth = 9, leaves = 256 }\n";
+    std::fs::write(&path, text).expect("scene file");
+    let bundle = relief_proto::bundle::bundle_for(path.to_str().expect("utf-8")).expect("bundle");
+    let mut client = Remote::connect(&url, Some("client-one"), "c")
+        .await
+        .expect("connect");
+    let before = peak_rss_mib(server.0.id());
+    let start = Instant::now();
+    let refused = client.put_scene(&bundle).await.expect_err("too costly");
+    let took = start.elapsed();
+    let after = peak_rss_mib(server.0.id());
+    eprintln!(
+        "refused in {took:?}; server peak RSS {before:.0} → {after:.0} MiB: {}",
+        refused.message()
+    );
+    assert!(
+        refused.code() == Code::InvalidArgument && refused.message().contains("too large"),
+        "{refused}"
+    );
+    assert!(
+        refused.message().contains("scene tree.toml:") && !refused.message().contains("relief-server-"),
+        "the error shows the server's own paths: {refused}"
+    );
+    assert!(
+        after < before + 64.0,
+        "the server's peak memory grew from {before:.0} to {after:.0} MiB"
+    );
+    assert!(client.stats().await.is_ok(), "the server still serves");
+}

@@ -18,7 +18,7 @@ use tonic::transport::{Channel, Endpoint};
 use tracing::Instrument;
 
 use relief_core::hash::ContentHash;
-use relief_core::scene::Scene;
+use relief_core::scene::{Scene, SceneLimits};
 use relief_proto::auth::BearerToken;
 use relief_proto::bundle::Bundle;
 use relief_proto::convert::{depth_bits_from_pb, hash_from_pb, size_from_pb, texture_to_pb, vec3_from_pb};
@@ -407,10 +407,11 @@ async fn fetch_and_load(hash: ContentHash, context: &JobContext) -> Result<Arc<L
     }
     let bundle = Bundle::decode(encoded).map_err(|e| e.to_string())?;
     let dir = context.scene_dir.clone();
-    let loaded = tokio::task::spawn_blocking(move || bundle.load(&dir).map(Loaded::new))
-        .await
-        .map_err(|e| e.to_string())?
-        .map_err(|e| format!("loading scene {hash}: {e}"))?;
+    let loaded =
+        tokio::task::spawn_blocking(move || bundle.load(&dir, &SceneLimits::default()).map(Loaded::new))
+            .await
+            .map_err(|e| e.to_string())?
+            .map_err(|e| format!("loading scene {hash}: {e}"))?;
     Ok(Arc::new(loaded))
 }
 

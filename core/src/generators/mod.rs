@@ -93,6 +93,19 @@ impl Generator {
     }
 
     /// Builds the mesh in object space. Call [`Generator::validate`] first.
+    /// The triangles [`Generator::build`] makes, worked out from the parameters alone:
+    /// what a scene costs is known before it is built.
+    pub fn triangles(&self) -> u64 {
+        let u = u64::from;
+        match *self {
+            Generator::Sphere { subdivisions } => 20 * 4u64.saturating_pow(subdivisions),
+            Generator::Knot { segments, sides, .. } => 2 * u(segments) * u(sides),
+            Generator::Tree { depth, leaves, .. } => tree::triangles(depth, leaves),
+            Generator::Rock { resolution, .. } => 12 * u(resolution) * u(resolution),
+            Generator::Plane { divisions, .. } => 2 * u(divisions) * u(divisions),
+        }
+    }
+
     pub fn build(&self) -> Mesh {
         match *self {
             Generator::Sphere { subdivisions } => sphere::icosphere(subdivisions),
@@ -118,6 +131,46 @@ mod tests {
         mesh.validate().unwrap();
         let normals = mesh.normals.as_ref().unwrap();
         assert!(normals.iter().all(|n| (n.length() - 1.0).abs() < 1e-3));
+    }
+
+    /// The count worked out from the parameters is the count built, for every kind.
+    #[test]
+    fn triangles_are_known_before_building() {
+        let generators = [
+            Generator::Sphere { subdivisions: 3 },
+            Generator::Knot {
+                p: 2,
+                q: 3,
+                segments: 40,
+                sides: 7,
+                tube_radius: 0.2,
+            },
+            Generator::Tree {
+                seed: 4,
+                depth: 3,
+                leaves: 5,
+            },
+            Generator::Tree {
+                seed: 4,
+                depth: 0,
+                leaves: 0,
+            },
+            Generator::Rock {
+                resolution: 9,
+                seed: 1,
+            },
+            Generator::Plane {
+                size: 2.0,
+                divisions: 5,
+            },
+        ];
+        for generator in generators {
+            assert_eq!(
+                generator.triangles(),
+                generator.build().triangle_count() as u64,
+                "{generator:?}"
+            );
+        }
     }
 
     #[test]

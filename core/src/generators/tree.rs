@@ -96,6 +96,15 @@ impl Builder {
     }
 }
 
+/// The triangles [`tree`] makes: a cylinder per branch ([`BRANCHES`] children each,
+/// `depth` levels below the trunk), two per leaf, `leaves_per_twig` on each twig.
+pub(super) fn triangles(depth: u32, leaves_per_twig: u32) -> u64 {
+    let branches = BRANCHES as u64;
+    let twigs = branches.saturating_pow(depth);
+    let all_branches = (0..=depth).map(|d| branches.saturating_pow(d)).sum::<u64>();
+    all_branches * 2 * SIDES as u64 + twigs * 2 * u64::from(leaves_per_twig)
+}
+
 pub(super) fn tree(seed: u64, depth: u32, leaves_per_twig: u32) -> Mesh {
     let material = |name: &str, diffuse: Vec3| Material {
         name: name.into(),

@@ -39,7 +39,7 @@ use glam::{Affine3A, EulerRot, Quat, Vec3};
 use rayon::prelude::*;
 use serde::Deserialize;
 
-use super::{Scene, SceneObject, default_lighting};
+use super::{Scene, SceneLimits, SceneObject, default_lighting};
 use crate::camera::{CameraPath, PathSegment};
 use crate::error::{Error, Result};
 use crate::generators::Generator;
@@ -115,11 +115,12 @@ struct ObjectFile {
     shininess: Option<f32>,
 }
 
-/// Loads a scene file from disk; its OBJ files must lie within `reach`.
-pub fn load_file(path: &Path, reach: Reach) -> Result<Scene> {
+/// Loads a scene file from disk; its OBJ files must lie within `reach`, and its cost
+/// within `limits`.
+pub fn load_file(path: &Path, reach: Reach, limits: &SceneLimits) -> Result<Scene> {
     let text = std::fs::read_to_string(reach.check(path)?).map_err(|e| Error::io(path, e))?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let mut scene = parse(&text, &path.display().to_string(), base, reach)?;
+    let mut scene = parse(&text, &path.display().to_string(), base, reach, limits)?;
     if scene.name.is_empty() {
         scene.name = path
             .file_stem()
@@ -129,8 +130,9 @@ pub fn load_file(path: &Path, reach: Reach) -> Result<Scene> {
 }
 
 /// Parses scene-file text; `origin` names it in errors, `base` resolves relative paths,
-/// and the OBJ files named must lie within `reach`.
-pub fn parse(text: &str, origin: &str, base: &Path, reach: Reach) -> Result<Scene> {
+/// the OBJ files named must lie within `reach`, and the scene's cost (objects and
+/// triangles, counted before anything is built) within `limits`.
+pub fn parse(text: &str, origin: &str, base: &Path, reach: Reach, limits: &SceneLimits) -> Result<Scene> {
     let error = |message: String| Error::Scene {
         origin: origin.to_string(),
         message,
@@ -167,15 +169,39 @@ pub fn parse(text: &str, origin: &str, base: &Path, reach: Reach) -> Result<Scen
     if file.objects.is_empty() {
         return Err(error("the scene has no objects".into()));
     }
+    limits
+        .check(0, file.objects.len())
+        .map_err(|e| error(e.to_string()))?;
+    let mut names = std::collections::HashSet::with_capacity(file.objects.len());
     for (k, o) in file.objects.iter().enumerate() {
         if o.name.trim().is_empty() {
             return Err(error(format!("object {} has an empty name", k + 1)));
         }
         super::check_object_name(&o.name).map_err(|m| error(format!("object {}: {m}", k + 1)))?;
-        if file.objects[..k].iter().any(|p| p.name == o.name) {
+        if !names.insert(o.name.as_str()) {
             return Err(error(format!("two objects are named `{}`", o.name)));
         }
     }
+    // The cost, before anything is built (a generator's parameters out of range are
+    // refused by name first).
+    let mut triangles = 0u64;
+    for o in &file.objects {
+        let named = |e: Error| match e {
+            Error::Invalid(m) => error(format!("object `{}`: {m}", o.name)),
+            other => other,
+        };
+        triangles = triangles.saturating_add(match (&o.obj, &o.generator) {
+            (Some(path), None) => crate::obj::count_triangles(&base.join(path), reach)?,
+            (None, Some(generator)) => {
+                generator.validate().map_err(|e| named(invalid(e)))?;
+                generator.triangles()
+            }
+            _ => 0,
+        });
+    }
+    limits
+        .check(triangles, file.objects.len())
+        .map_err(|e| error(e.to_string()))?;
     let objects = file
         .objects
         .into_par_iter()
@@ -329,7 +355,64 @@ mod tests {
     use super::*;
 
     fn parse_str(text: &str) -> Result<Scene> {
-        parse(text, "test", Path::new("."), Reach::Anywhere)
+        parse(
+            text,
+            "test",
+            Path::new("."),
+            Reach::Anywhere,
+            &SceneLimits::default(),
+        )
+    }
+
+    /// A scene's cost is counted from its file — generators from their parameters, OBJ
+    /// files from their face lines — and one past the limits is refused before it is
+    /// built, naming the limit; many objects are checked in linear time.
+    #[test]
+    fn a_scene_past_its_limits_is_refused_before_it_is_built() {
+        let limits = SceneLimits {
+            max_triangles: 2_000,
+            max_objects: 3,
+        };
+        let within = |text: &str| parse(text, "test", Path::new("."), Reach::Anywhere, &limits);
+        let sphere = |name: &str, subdivisions: u32| {
+            format!(
+                "[[objects]]\nname = \"{name}\"\ngenerator = {{ kind = \"sphere\", subdivisions = {subdivisions} }}\n"
+            )
+        };
+        // 1,280 + 320 triangles: within.
+        assert!(within(&(sphere("a", 3) + &sphere("b", 2))).is_ok());
+        // 1,280 + 1,280: past it. (A tree of depth 9 with 256 leaves a twig, ten
+        // million triangles, is refused as quickly: nothing is built.)
+        let err = within(&(sphere("a", 3) + &sphere("b", 3)))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("2560 triangles") && err.contains("2000"), "{err}");
+        let tree =
+            "[[objects]]\nname = \"t\"\ngenerator = { kind = \"tree\", seed = 1, depth = 9, leaves = 256 }\n";
+        assert!(within(tree).unwrap_err().to_string().contains("triangles"));
+        let four: String = ["a", "b", "c", "d"].iter().map(|n| sphere(n, 0)).collect();
+        assert!(within(&four).unwrap_err().to_string().contains("4 objects"));
+        // An OBJ file's faces: a triangle and a quad, 3 triangles.
+        let dir = std::env::temp_dir().join(crate::scratch::unique_name("relief-obj-count"));
+        std::fs::create_dir_all(&dir).unwrap();
+        let obj = dir.join("q.obj");
+        std::fs::write(
+            &obj,
+            "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 2 3 4\n# f 1 2 3\n",
+        )
+        .unwrap();
+        assert_eq!(crate::obj::count_triangles(&obj, Reach::Anywhere).unwrap(), 3);
+        std::fs::remove_dir_all(&dir).unwrap();
+        // 20,001 objects, one name twice: found by a set, not by comparing every pair
+        // (which took 30 s at 10⁵ objects).
+        let many: String = (0..20_000).map(|k| sphere(&format!("o{k}"), 0)).collect();
+        let wide = SceneLimits {
+            max_triangles: u64::MAX,
+            max_objects: 20_001,
+        };
+        let doubled = many + &sphere("o7", 0);
+        let err = parse(&doubled, "test", Path::new("."), Reach::Anywhere, &wide).unwrap_err();
+        assert!(err.to_string().contains("two objects are named `o7`"), "{err}");
     }
 
     #[test]

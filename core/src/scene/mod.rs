@@ -45,6 +45,46 @@ pub fn builtin_text(name: &str) -> Option<&'static str> {
 /// The longest object name accepted.
 pub const MAX_OBJECT_NAME: usize = 64;
 
+/// What a scene may cost, checked from its files before anything is built: a few
+/// bytes of scene file can name a generator of billions of triangles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SceneLimits {
+    /// Triangles over every object (generators' counts from their parameters, OBJ
+    /// files' from their face lines).
+    pub max_triangles: u64,
+    pub max_objects: usize,
+}
+
+impl Default for SceneLimits {
+    /// For scenes the user names: about 6 GB of meshes at most, far past any scene
+    /// the project ships (the largest scanned mesh has 69,451 triangles).
+    fn default() -> Self {
+        SceneLimits {
+            max_triangles: 64_000_000,
+            max_objects: 100_000,
+        }
+    }
+}
+
+impl SceneLimits {
+    /// An error naming the limit when `triangles` over `objects` objects exceed it.
+    pub fn check(&self, triangles: u64, objects: usize) -> Result<()> {
+        if objects > self.max_objects {
+            return Err(Error::TooCostly(format!(
+                "{objects} objects; at most {} are allowed here",
+                self.max_objects
+            )));
+        }
+        if triangles > self.max_triangles {
+            return Err(Error::TooCostly(format!(
+                "{triangles} triangles; at most {} are allowed here",
+                self.max_triangles
+            )));
+        }
+        Ok(())
+    }
+}
+
 /// The largest `f32` step, as a share of an object's extent, at which it is placed
 /// finely enough: one 16-bit depth level of a texture spanning the object. Past it
 /// (an object 1 m across some 130 m from the origin), depths baked and warped there
@@ -126,29 +166,34 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Loads a built-in scene by name, a `.toml` scene file or a bare `.obj` file.
+    /// Loads a built-in scene by name, a `.toml` scene file or a bare `.obj` file,
+    /// within the [default](SceneLimits::default) limits.
     pub fn load(spec: &str) -> Result<Scene> {
-        Self::load_within(spec, Reach::Anywhere)
+        Self::load_within(spec, Reach::Anywhere, &SceneLimits::default())
     }
 
     /// As [`Scene::load`], reading only files within `reach` (the built-in scenes
-    /// read none).
-    pub fn load_within(spec: &str, reach: Reach) -> Result<Scene> {
+    /// read none), and refusing, before building it, a scene past `limits`.
+    pub fn load_within(spec: &str, reach: Reach, limits: &SceneLimits) -> Result<Scene> {
         let path = Path::new(spec);
         let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
         match extension.as_deref() {
-            Some("obj") => Self::from_obj(path, reach),
-            Some("toml") => file::load_file(path, reach),
+            Some("obj") => Self::from_obj(path, reach, limits),
+            Some("toml") => file::load_file(path, reach, limits),
             _ => match BUILTINS.iter().find(|(name, _)| *name == spec) {
-                Some((name, text)) => file::parse(text, &format!("built-in `{name}`"), Path::new("."), reach),
+                Some((name, text)) => {
+                    file::parse(text, &format!("built-in `{name}`"), Path::new("."), reach, limits)
+                }
                 None => Err(Error::UnknownScene(spec.to_string())),
             },
         }
     }
 
     /// A one-object scene from an OBJ file (and the MTL files and textures it names,
-    /// within `reach`), with default lights and an orbit path.
-    pub fn from_obj(path: &Path, reach: Reach) -> Result<Scene> {
+    /// within `reach`), with default lights and an orbit path; refused, before it is
+    /// read whole, past `limits`.
+    pub fn from_obj(path: &Path, reach: Reach, limits: &SceneLimits) -> Result<Scene> {
+        limits.check(crate::obj::count_triangles(path, reach)?, 1)?;
         let mesh = crate::obj::load_obj(path, reach)?;
         file::check_extent(&mesh).map_err(|m| Error::Obj {
             path: path.to_path_buf(),
@@ -298,9 +343,15 @@ mod tests {
             let text = format!(
                 "[[objects]]\nname = \"ball\"\ngenerator = {{ kind = \"sphere\", subdivisions = 2 }}\ntranslate = [{x}, 0, 0]\n"
             );
-            file::parse(&text, "test", Path::new("."), Reach::Anywhere)
-                .unwrap()
-                .precision_warnings()
+            file::parse(
+                &text,
+                "test",
+                Path::new("."),
+                Reach::Anywhere,
+                &SceneLimits::default(),
+            )
+            .unwrap()
+            .precision_warnings()
         };
         assert!(at(100.0).is_empty(), "{:?}", at(100.0));
         let far = at(1e5);
