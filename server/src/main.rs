@@ -92,7 +92,11 @@ fn main() -> ExitCode {
     relief_startup::run(|args: Args| {
         let runtime =
             tokio::runtime::Runtime::new().map_err(|e| anyhow::anyhow!("starting the async runtime: {e}"))?;
-        runtime.block_on(serve(args))
+        let served = runtime.block_on(serve(args));
+        // A blocking task still running (a scene still loading) must not hold the
+        // exit past the grace: nothing it would produce is wanted any more.
+        runtime.shutdown_background();
+        served
     })
 }
 
