@@ -20,7 +20,7 @@ use relief_proto::bundle::SceneDir;
 use relief_proto::limits::{MAX_REQUEST_MESSAGE_BYTES, MAX_TEXTURE_MESSAGE_BYTES, MAX_UPLOAD_MESSAGE_BYTES};
 use relief_proto::pb;
 use relief_server::identity::{Credentials, Role, read_tokens_file};
-use relief_server::service::{Service, Shared};
+use relief_server::service::{Service, Shared, Uploads};
 use relief_server::state::{Limits, State};
 
 #[derive(Parser)]
@@ -83,6 +83,20 @@ struct Args {
     /// Most objects an uploaded scene may have.
     #[arg(long, env = "RELIEF_MAX_SCENE_OBJECTS", default_value = "10000", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     max_scene_objects: u64,
+    /// Largest scene upload, MiB, counted decompressed (at most the bundle format's
+    /// 512).
+    #[arg(long, env = "RELIEF_MAX_UPLOAD_MB", default_value = "128", value_parser = clap::value_parser!(u64).range(1..=512))]
+    max_upload_mb: u64,
+    /// An upload still arriving after this long (ms) is refused.
+    #[arg(long, env = "RELIEF_UPLOAD_TIMEOUT_MS", default_value = "120000", value_parser = clap::value_parser!(u64).range(100..=3_600_000))]
+    upload_timeout_ms: u64,
+    /// Uploads received at once (each holds up to --max-upload-mb in memory).
+    #[arg(long, env = "RELIEF_MAX_UPLOADS", default_value = "4", value_parser = clap::value_parser!(u64).range(1..=1024))]
+    max_uploads: u64,
+    /// Scenes kept, MiB of their bundles (in memory and again on disk): past it the
+    /// least recently used scene no job needs is evicted.
+    #[arg(long, env = "RELIEF_SCENE_STORE_MB", default_value = "1024", value_parser = clap::value_parser!(u64).range(1..=1 << 20))]
+    scene_store_mb: u64,
     /// Where received scenes are unpacked (default: a directory under the system's temp dir).
     #[arg(long, env = "RELIEF_SCENE_DIR")]
     scene_dir: Option<PathBuf>,
@@ -115,6 +129,7 @@ async fn serve(args: Args) -> Result<()> {
             lease,
             max_waiting: args.max_waiting as usize,
             max_waiting_per_client: args.max_waiting_per_client as usize,
+            scene_store_bytes: (args.scene_store_mb as usize) << 20,
             job_timeout,
         }),
         scene_dir.path().to_path_buf(),
@@ -122,6 +137,11 @@ async fn serve(args: Args) -> Result<()> {
             max_triangles: args.max_scene_triangles,
             max_objects: args.max_scene_objects as usize,
         },
+        Uploads::new(
+            (args.max_upload_mb as usize) << 20,
+            Duration::from_millis(args.upload_timeout_ms),
+            args.max_uploads as usize,
+        ),
     );
     // Leases: a silent worker's jobs go back to the queue; jobs past the timeout end.
     let watched = shared.clone();

@@ -10,7 +10,7 @@ use tokio_stream::wrappers::UnboundedReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
 use relief_core::scene::SceneLimits;
-use relief_proto::bundle::{Bundle, MAX_BUNDLE_BYTES};
+use relief_proto::bundle::Bundle;
 use relief_proto::convert::{
     check_client_id, check_register, check_texture_pb, hash_from_pb, request_from_pb,
 };
@@ -26,14 +26,16 @@ pub struct Shared {
     scene_dir: PathBuf,
     /// What an uploaded scene may cost, checked before it is built.
     scene_limits: SceneLimits,
+    uploads: Uploads,
 }
 
 impl Shared {
-    pub fn new(state: State, scene_dir: PathBuf, scene_limits: SceneLimits) -> Arc<Shared> {
+    pub fn new(state: State, scene_dir: PathBuf, scene_limits: SceneLimits, uploads: Uploads) -> Arc<Shared> {
         Arc::new(Shared {
             state: Mutex::new(state),
             scene_dir,
             scene_limits,
+            uploads,
         })
     }
 
@@ -96,6 +98,57 @@ impl Drop for ResultStream {
     }
 }
 
+/// How uploads are bounded: bytes (decompressed) of one, time, and how many at once.
+pub struct Uploads {
+    pub max_bytes: usize,
+    pub timeout: std::time::Duration,
+    pub at_once: usize,
+    slots: tokio::sync::Semaphore,
+}
+
+impl Uploads {
+    pub fn new(max_bytes: usize, timeout: std::time::Duration, at_once: usize) -> Uploads {
+        Uploads {
+            max_bytes,
+            timeout,
+            at_once,
+            slots: tokio::sync::Semaphore::new(at_once),
+        }
+    }
+}
+
+/// An upload's chunks, joined: an error as soon as they pass `max_bytes` (counted as
+/// decoded, after decompression — a few compressed bytes can be a great many).
+async fn receive(mut chunks: Streaming<pb::SceneChunk>, max_bytes: usize) -> Result<Vec<u8>, Status> {
+    let mut encoded = Vec::new();
+    while let Some(chunk) = chunks.message().await? {
+        if encoded.len() + chunk.data.len() > max_bytes {
+            return Err(Status::resource_exhausted(format!(
+                "field `data`: the scene exceeds {max_bytes} bytes (the server's --max-upload-mb)"
+            )));
+        }
+        encoded.extend_from_slice(&chunk.data);
+    }
+    Ok(encoded)
+}
+
+/// Removes scenes' unpacked files, off the async threads; a failure is logged (the
+/// directory is the server's own, removed whole when it exits).
+fn remove_scene_files(dirs: Vec<PathBuf>) {
+    if dirs.is_empty() {
+        return;
+    }
+    tokio::task::spawn_blocking(move || {
+        for dir in dirs {
+            if let Err(e) = std::fs::remove_dir_all(&dir)
+                && e.kind() != std::io::ErrorKind::NotFound
+            {
+                tracing::warn!(dir = %dir.display(), "removing a scene's files: {e}");
+            }
+        }
+    });
+}
+
 /// A client's id as the state keys it: under its credential's name, so that ids chosen
 /// by two credentials never meet.
 fn scoped(caller: &Caller, client_id: &str) -> String {
@@ -110,46 +163,72 @@ impl pb::scenes_server::Scenes for Service {
     ) -> Result<Response<pb::SceneRef>, Status> {
         let caller = Caller::of(&request)?;
         caller.require(Role::Client)?;
-        let mut chunks = request.into_inner();
-        let mut encoded = Vec::new();
-        while let Some(chunk) = chunks.message().await? {
-            if encoded.len() + chunk.data.len() > MAX_BUNDLE_BYTES {
-                return Err(Status::invalid_argument(format!(
-                    "field `data`: the scene exceeds {MAX_BUNDLE_BYTES} bytes"
-                )));
-            }
-            encoded.extend_from_slice(&chunk.data);
-        }
+        let uploads = &self.0.uploads;
+        // (Each upload holds up to its bytes in memory: so many at once, no more.)
+        let _slot = uploads.slots.try_acquire().map_err(|_| {
+            Status::resource_exhausted(format!(
+                "{} uploads are already in progress (the server's --max-uploads)",
+                uploads.at_once
+            ))
+        })?;
+        let encoded = tokio::time::timeout(uploads.timeout, receive(request.into_inner(), uploads.max_bytes))
+            .await
+            .map_err(|_| {
+                Status::deadline_exceeded(format!(
+                    "the upload took longer than {} ms (the server's --upload-timeout-ms)",
+                    uploads.timeout.as_millis()
+                ))
+            })??;
         let bundle =
             Bundle::decode(encoded).map_err(|e| Status::invalid_argument(format!("field `data`: {e}")))?;
         let hash = bundle.hash;
-        if !self.0.state().has_scene(&hash) {
-            let (dir, limits) = (self.0.scene_dir.clone(), self.0.scene_limits);
-            let shown_dir = dir.clone();
-            // The bundle moves to the loading thread and its bytes come back with the
-            // scene: no copy of a scene that may be hundreds of megabytes.
-            let (scene, encoded) = tokio::task::spawn_blocking(move || {
-                bundle.load(&dir, &limits).map(|scene| (scene, bundle.encoded))
-            })
-            .await
-            .map_err(|e| Status::internal(format!("loading the scene: {e}")))?
-            .map_err(|e| {
-                // (Paths as the bundle names them: where the server keeps
-                // scenes is none of the caller's business.)
-                let message = e
-                    .to_string()
-                    .replace(&format!("{}/{hash}/", shown_dir.display()), "");
-                Status::invalid_argument(format!("the scene does not load: {message}"))
-            })?;
-            let objects = scene.objects.iter().map(|o| (o.name.clone(), o.bounds)).collect();
-            let stored = StoredScene {
-                encoded: Arc::new(encoded),
-                objects,
-            };
-            self.0.state().add_scene(hash, stored, &caller.name);
-            tracing::info!(%hash, objects = scene.objects.len(), client = %caller.name, "scene stored");
-        } else {
+        if self.0.state().has_scene(&hash) {
             self.0.state().add_owner(hash, &caller.name);
+            return Ok(Response::new(pb::SceneRef {
+                hash: hash.to_string(),
+            }));
+        }
+        let (dir, limits) = (self.0.scene_dir.clone(), self.0.scene_limits);
+        let unpacked = dir.join(hash.to_string());
+        // The bundle moves to the loading thread and its bytes come back with the
+        // scene: no copy of a scene that may be hundreds of megabytes.
+        let loaded = tokio::task::spawn_blocking(move || {
+            bundle.load(&dir, &limits).map(|scene| (scene, bundle.encoded))
+        })
+        .await
+        .map_err(|e| Status::internal(format!("loading the scene: {e}")))?;
+        let (scene, encoded) = match loaded {
+            Ok(loaded) => loaded,
+            Err(e) => {
+                remove_scene_files(vec![unpacked.clone()]);
+                // (Paths as the bundle names them: where the server keeps scenes is
+                // none of the caller's business.)
+                let message = e.to_string().replace(&format!("{}/", unpacked.display()), "");
+                return Err(Status::invalid_argument(format!(
+                    "the scene does not load: {message}"
+                )));
+            }
+        };
+        let objects = scene.objects.iter().map(|o| (o.name.clone(), o.bounds)).collect();
+        let stored = StoredScene {
+            encoded: Arc::new(encoded),
+            objects,
+        };
+        let added = self.0.state().add_scene(hash, stored, &caller.name);
+        match added {
+            Ok(evicted) => {
+                tracing::info!(%hash, objects = scene.objects.len(), client = %caller.name, evicted = evicted.len(), "scene stored");
+                remove_scene_files(
+                    evicted
+                        .iter()
+                        .map(|h| self.0.scene_dir.join(h.to_string()))
+                        .collect(),
+                );
+            }
+            Err(refusal) => {
+                remove_scene_files(vec![unpacked]);
+                return Err(Status::resource_exhausted(refusal.to_string()));
+            }
         }
         Ok(Response::new(pb::SceneRef {
             hash: hash.to_string(),
@@ -167,14 +246,16 @@ impl pb::scenes_server::Scenes for Service {
         // A client reads the scenes it uploaded; a worker, those it holds a job on. (Not
         // found either way: another's scene is not said to exist.)
         let scene = {
-            let state = self.0.state();
-            let as_client = caller
-                .may(Role::Client)
-                .then(|| state.scene_of(&hash, &caller.name));
-            let as_worker = caller
-                .may(Role::Worker)
-                .then(|| state.scene_for_worker(&hash, &caller.name));
-            as_client.flatten().or(as_worker.flatten())
+            let mut state = self.0.state();
+            let as_client = match caller.may(Role::Client) {
+                true => state.scene_of(&hash, &caller.name),
+                false => None,
+            };
+            match (as_client, caller.may(Role::Worker)) {
+                (Some(scene), _) => Some(scene),
+                (None, true) => state.scene_for_worker(&hash, &caller.name),
+                (None, false) => None,
+            }
         }
         .ok_or_else(|| Status::not_found(format!("no scene with hash {hash} for this credential")))?;
         let encoded = scene.encoded.clone();

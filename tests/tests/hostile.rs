@@ -64,15 +64,16 @@ async fn channel(url: &str) -> Channel {
 
 type Scenes = pb::scenes_client::ScenesClient<InterceptedService<Channel, BearerToken>>;
 
-async fn scenes(url: &str, token: &str) -> Scenes {
+async fn scenes_client(url: &str, token: &str) -> Scenes {
     let auth = BearerToken::new(Some(token)).expect("token");
     pb::scenes_client::ScenesClient::with_interceptor(channel(url).await, auth)
+        .send_compressed(tonic::codec::CompressionEncoding::Zstd)
 }
 
 /// Whether the credential may read scene `hash` (its first chunk comes), or the code
 /// it is refused with.
 async fn read_scene(url: &str, token: &str, hash: &str) -> Result<(), Code> {
-    let mut client = scenes(url, token).await;
+    let mut client = scenes_client(url, token).await;
     let mut stream = client
         .get_scene(pb::SceneRef { hash: hash.into() })
         .await
@@ -421,4 +422,79 @@ async fn a_scene_too_costly_is_refused_before_it_is_built() {
         "the server's peak memory grew from {before:.0} to {after:.0} MiB"
     );
     assert!(client.stats().await.is_ok(), "the server still serves");
+}
+
+/// A few compressed kilobytes that decompress to 200 MiB are refused at the server's
+/// upload bound, with its memory bounded by it; a scene that fails to load leaves no
+/// files; scenes past the store's bytes are evicted, least recently used first, files
+/// and all.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn uploads_and_stored_scenes_are_bounded() {
+    let dir = relief_tests::scratch("bounded-uploads");
+    let scenes = dir.join("scenes");
+    let mut args: Vec<&str> = SERVER_ARGS.to_vec();
+    args.extend(["--max-upload-mb", "16", "--scene-store-mb", "3", "--scene-dir"]);
+    args.push(scenes.to_str().expect("utf-8"));
+    let (server, url) = start_server(&args);
+    let before = peak_rss_mib(server.0.id());
+
+    // The bomb: 200 chunks of a MiB of zeros, zstd-compressed on the wire.
+    let mut raw = scenes_client(&url, "client-one").await;
+    let zeros = vec![0u8; 1 << 20];
+    let chunks: Vec<pb::SceneChunk> = (0..200).map(|_| pb::SceneChunk { data: zeros.clone() }).collect();
+    let refused = raw
+        .put_scene(tokio_stream::iter(chunks))
+        .await
+        .expect_err("too big");
+    let after = peak_rss_mib(server.0.id());
+    eprintln!("bomb refused: {refused}; server peak RSS {before:.0} → {after:.0} MiB");
+    assert!(
+        refused.code() == Code::ResourceExhausted && refused.message().contains("--max-upload-mb"),
+        "{refused}"
+    );
+    assert!(
+        after < before + 3.0 * 16.0 + 32.0,
+        "peak RSS {before:.0} → {after:.0} MiB"
+    );
+
+    // A scene that does not load leaves nothing behind.
+    let bad = dir.join("bad.toml");
+    std::fs::write(
+        &bad,
+        "[[objects]]\nname = \"a\"\ngenerator = { kind = \"sphere\", subdivisions = 99 }\n",
+    )
+    .expect("scene file");
+    let mut client = Remote::connect(&url, Some("client-one"), "c")
+        .await
+        .expect("connect");
+    let bundle = relief_proto::bundle::bundle_for(bad.to_str().expect("utf-8")).expect("bundle");
+    assert_eq!(
+        client.put_scene(&bundle).await.expect_err("does not load").code(),
+        Code::InvalidArgument
+    );
+    let unpacked = || std::fs::read_dir(&scenes).expect("scene dir").count();
+    assert_eq!(unpacked(), 0, "a failed load left files");
+
+    // 2.4 MB, then 0.9 MB more in three scenes: past 3 MiB, the first goes, files too.
+    let models = relief_tests::shared_models();
+    let mut hashes = Vec::new();
+    for model in ["stanford-bunny.obj", "fandisk.obj", "spot.obj", "teapot.obj"] {
+        let bundle =
+            relief_proto::bundle::bundle_for(models.join(model).to_str().expect("utf-8")).expect("bundle");
+        hashes.push(client.put_scene(&bundle).await.expect("upload").to_string());
+    }
+    let stats = client.stats().await.expect("stats");
+    assert_eq!(stats.scenes_evicted, 1, "{stats:?}");
+    assert!(stats.scene_bytes <= 3 << 20, "{stats:?}");
+    assert_eq!(
+        read_scene(&url, "client-one", &hashes[0]).await,
+        Err(Code::NotFound)
+    );
+    assert_eq!(read_scene(&url, "client-one", &hashes[3]).await, Ok(()));
+    // (Removed off the request's thread: give it a moment.)
+    let start = Instant::now();
+    while unpacked() != 3 && start.elapsed() < Duration::from_secs(10) {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert_eq!(unpacked(), 3, "the evicted scene's files are left");
 }

@@ -196,11 +196,10 @@ impl State {
                 "the result of job {job_id} was made for another eye ({eye})"
             ));
         }
-        let Some(bounds) = (self.scenes.get(&job.key.view.scene)).and_then(|s| s.objects.get(&spec.object))
-        else {
+        let Some(bounds) = self.object_bounds(&job.key.view.scene, &spec.object) else {
             return Ok(());
         };
-        let expected = SourceCamera::facing(eye, bounds, w, h).map_err(|e| e.to_string())?;
+        let expected = SourceCamera::facing(eye, &bounds, w, h).map_err(|e| e.to_string())?;
         let extent = bounds.extent().length();
         let near = |a: Vec3, b: Vec3, scale: f32| a.distance(b) <= CAMERA_SLACK * scale;
         let fits = near(camera.origin, expected.origin, extent)

@@ -2,8 +2,9 @@
 //! under one lock by the methods of [`State`] (no `await` inside), so every rule of the
 //! scheduler lives in this folder, one concern a file:
 //!
-//! - here — scenes, and a request's admission (served from the cache, joined to a job
-//!   that satisfies it, or queued);
+//! - here — a request's admission (served from the cache, joined to a job that
+//!   satisfies it, or queued);
+//! - `scenes.rs` — the scenes stored, who uploaded each, bounded in bytes;
 //! - `queue.rs` — the jobs waiting, one line per client credential, served fairly;
 //! - `jobs.rs` — dispatch to workers, results, failures, timeouts,
 //!   withdrawals;
@@ -15,6 +16,7 @@
 mod cache;
 mod jobs;
 mod queue;
+mod scenes;
 mod stats;
 mod workers;
 
@@ -28,8 +30,6 @@ use std::time::{Duration, Instant};
 use tokio::sync::mpsc::UnboundedSender;
 use tonic::Status;
 
-use relief_core::bounds::Aabb;
-use relief_core::hash::ContentHash;
 use relief_core::relief::{FacingError, SourceCamera};
 use relief_proto::convert::{Request, Urgency, vec3_to_pb};
 use relief_proto::pb;
@@ -40,20 +40,14 @@ pub use stats::{Counters, LATENCY_BUCKETS_MS};
 use cache::Cached;
 use jobs::{Job, JobState, View, Waiter};
 use queue::{FairQueue, Priority};
+use scenes::Scenes;
+pub use scenes::{SceneRefusal, StoredScene};
 use workers::Worker;
 
 /// What a waiting client receives: results, or the error that ends its request.
 pub type ResultSender = UnboundedSender<Result<pb::ImpostorResult, Status>>;
 /// What a worker receives.
 pub type JobSender = UnboundedSender<Result<pb::ServerMessage, Status>>;
-
-/// A stored scene: its encoded bundle and the bounds of its objects (enough to check
-/// requests without loading meshes again).
-#[derive(Debug)]
-pub struct StoredScene {
-    pub encoded: Arc<Vec<u8>>,
-    pub objects: HashMap<String, Aabb>,
-}
 
 /// Limits of the server.
 #[derive(Debug, Clone)]
@@ -66,6 +60,9 @@ pub struct Limits {
     pub max_waiting: usize,
     /// Most requests one client (credential) has waiting at once.
     pub max_waiting_per_client: usize,
+    /// Scenes stored, bytes of their bundles: past it the least recently used scene
+    /// no job needs is evicted.
+    pub scene_store_bytes: usize,
     /// A request waiting this long ends with an error: none waits for ever, with no
     /// worker connected or on one that keeps its lease but never finishes.
     pub job_timeout: Duration,
@@ -75,10 +72,7 @@ pub struct Limits {
 pub struct State {
     limits: Limits,
     epoch: Instant,
-    scenes: HashMap<ContentHash, Arc<StoredScene>>,
-    /// The clients (by [`Caller`](crate::identity::Caller) name) that uploaded each
-    /// scene: only they may read it or ask for its textures.
-    scene_owners: HashMap<ContentHash, HashSet<Arc<str>>>,
+    scenes: Scenes,
     jobs: HashMap<u64, Job>,
     queue: FairQueue,
     /// The jobs of each view (a few: one per size and depth asked for).
@@ -117,8 +111,7 @@ impl State {
         State {
             limits,
             epoch: Instant::now(),
-            scenes: HashMap::new(),
-            scene_owners: HashMap::new(),
+            scenes: Scenes::default(),
             jobs: HashMap::new(),
             queue: FairQueue::default(),
             by_view: HashMap::new(),
@@ -140,43 +133,6 @@ impl State {
     fn next(&mut self) -> u64 {
         self.next_id += 1;
         self.next_id
-    }
-
-    /// Stores a scene `owner` uploaded.
-    pub fn add_scene(&mut self, hash: ContentHash, scene: StoredScene, owner: &Arc<str>) {
-        self.scenes.entry(hash).or_insert_with(|| Arc::new(scene));
-        self.add_owner(hash, owner);
-    }
-
-    /// `owner` uploaded scene `hash`, stored already: having sent the whole content, it
-    /// may read it too.
-    pub fn add_owner(&mut self, hash: ContentHash, owner: &Arc<str>) {
-        if self.scenes.contains_key(&hash) {
-            self.scene_owners.entry(hash).or_default().insert(owner.clone());
-        }
-    }
-
-    /// Whether scene `hash` is stored (for anyone).
-    pub fn has_scene(&self, hash: &ContentHash) -> bool {
-        self.scenes.contains_key(hash)
-    }
-
-    /// The scene `hash`, if `owner` uploaded it.
-    pub fn scene_of(&self, hash: &ContentHash, owner: &str) -> Option<Arc<StoredScene>> {
-        self.scene_owners
-            .get(hash)?
-            .contains(owner)
-            .then(|| self.scenes.get(hash).cloned())?
-    }
-
-    /// The scene `hash`, if a worker session of `credential` holds a job on it.
-    pub fn scene_for_worker(&self, hash: &ContentHash, credential: &str) -> Option<Arc<StoredScene>> {
-        let holds_job_on_it = (self.workers.values())
-            .filter(|w| &*w.credential == credential)
-            .flat_map(|w| &w.running)
-            .filter_map(|id| self.jobs.get(id))
-            .any(|job| job.key.view.scene == *hash);
-        holds_job_on_it.then(|| self.scenes.get(hash).cloned())?
     }
 
     /// Takes a validated request of client `owner` in: checks the scene (one `owner`

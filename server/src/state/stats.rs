@@ -24,6 +24,8 @@ pub struct Counters {
     /// Workers dropped for answering for a job not leased to them, or with a texture
     /// that is not the job's.
     pub forged: u64,
+    /// Scenes evicted from the store to make room for others.
+    pub scenes_evicted: u64,
 }
 
 /// Upper bounds (ms) of the request latency histogram in [`pb::StatsReply`].
@@ -90,6 +92,8 @@ impl State {
             worker_threads: self.workers.values().map(|w| w.threads).sum(),
             results_discarded: self.counters.discarded,
             workers_dropped_forged: self.counters.forged,
+            scenes_evicted: self.counters.scenes_evicted,
+            scene_bytes: self.scene_bytes() as u64,
         }
     }
 }

@@ -2,6 +2,8 @@
 
 use super::*;
 use glam::Vec3;
+use relief_core::bounds::Aabb;
+use relief_core::hash::ContentHash;
 use relief_core::relief::DepthBits;
 use tokio::sync::mpsc::unbounded_channel;
 
@@ -14,6 +16,7 @@ fn state_with_scene() -> (State, ContentHash) {
         lease: Duration::from_secs(5),
         max_waiting: 100,
         max_waiting_per_client: 100,
+        scene_store_bytes: 1 << 20,
         job_timeout: Duration::from_secs(60),
     });
     let hash = ContentHash([7; 32]);
@@ -28,7 +31,8 @@ fn state_with_scene() -> (State, ContentHash) {
             objects: [("ball".to_string(), bounds)].into_iter().collect(),
         },
         &OWNER.into(),
-    );
+    )
+    .unwrap();
     (s, hash)
 }
 
@@ -379,7 +383,7 @@ fn results_must_be_the_jobs_and_scenes_their_owners() {
     assert!(s.scene_for_worker(&hash, "worker-2").is_none());
     assert!(s.holds(worker, job.job_id) && !s.holds(worker, job.job_id + 1));
     let eye = Vec3::new(1.0, 0.0, 5.0);
-    let bounds = s.scenes[&hash].objects["ball"];
+    let bounds = s.object_bounds(&hash, "ball").unwrap();
     let framed = |edge: u32| SourceCamera::facing(eye, &bounds, edge, edge).unwrap();
     let check = |camera: &SourceCamera, bits: DepthBits, eye: Vec3, is_final: bool| {
         s.check_result(job.job_id, camera, bits, eye, is_final)
@@ -470,4 +474,62 @@ fn a_second_client_is_served_between_anothers_flood() {
     s.result(first.job_id, pb::ReliefTexture::default(), true, 1);
     s.dispatch();
     assert_eq!(next_job(&mut wrx).unwrap().eye.unwrap().x, 9.0);
+}
+
+/// The scene store keeps within its bytes: the least recently used scene no job needs
+/// goes first; a scene larger than the store, or one only needed scenes keep out, is
+/// refused without evicting anything.
+#[test]
+fn the_scene_store_evicts_the_least_recently_used_scene_no_job_needs() {
+    let (mut s, ball) = state_with_scene();
+    s.limits.scene_store_bytes = 100;
+    let scene = |bytes: usize| StoredScene {
+        encoded: Arc::new(vec![0; bytes]),
+        objects: [(
+            "ball".to_string(),
+            Aabb {
+                min: Vec3::splat(-1.0),
+                max: Vec3::splat(1.0),
+            },
+        )]
+        .into_iter()
+        .collect(),
+    };
+    let owner: Arc<str> = OWNER.into();
+    let (a, b, c, d) = (
+        ContentHash([1; 32]),
+        ContentHash([2; 32]),
+        ContentHash([3; 32]),
+        ContentHash([4; 32]),
+    );
+    assert_eq!(s.add_scene(a, scene(40), &owner), Ok(vec![]));
+    assert_eq!(s.add_scene(b, scene(40), &owner), Ok(vec![]));
+    // `a` is used after `b`: `ball` (stored first, no bytes), then `b`, are the least
+    // recently used.
+    assert!(s.scene_of(&a, OWNER).is_some());
+    assert_eq!(s.add_scene(c, scene(40), &owner), Ok(vec![ball, b]));
+    assert_eq!((s.scene_bytes(), s.counters.scenes_evicted), (80, 2));
+    assert!(s.scene_of(&b, OWNER).is_none());
+    // A job on `a` and one on `c` keep them: nothing can make room.
+    let (tx, _rx) = unbounded_channel();
+    for (k, hash) in [a, c].into_iter().enumerate() {
+        s.admit(
+            &request(hash, k as u64 + 1, Vec3::new(0.0, 0.0, 5.0), Urgency::Now),
+            OWNER,
+            tx.clone(),
+        )
+        .unwrap();
+    }
+    assert_eq!(
+        s.add_scene(d, scene(40), &owner),
+        Err(SceneRefusal::Full { limit: 100 })
+    );
+    assert_eq!(
+        s.add_scene(d, scene(101), &owner),
+        Err(SceneRefusal::TooLarge {
+            bytes: 101,
+            limit: 100
+        })
+    );
+    assert_eq!(s.scene_bytes(), 80);
 }
