@@ -19,6 +19,7 @@
 //!     max_waiting: 1000,
 //!     max_waiting_per_client: 100,
 //!     scene_store_bytes: 256 << 20,
+//!     job_progress: Duration::from_secs(30),
 //!     job_timeout: Duration::from_secs(60),
 //! });
 //! let stats = state.stats();

@@ -69,6 +69,10 @@ struct Args {
     /// for any more is stopped on its worker).
     #[arg(long, env = "RELIEF_JOB_TIMEOUT_MS", default_value = "60000", value_parser = clap::value_parser!(u64).range(100..=86_400_000))]
     job_timeout_ms: u64,
+    /// A job whose worker shows no progress (a preview or the final texture) for this
+    /// long (ms) is taken back and queued for another worker.
+    #[arg(long, env = "RELIEF_JOB_PROGRESS_MS", default_value = "30000", value_parser = clap::value_parser!(u64).range(100..=86_400_000))]
+    job_progress_ms: u64,
     /// Most requests waiting at once.
     #[arg(long, env = "RELIEF_MAX_WAITING", default_value = "100000", value_parser = clap::value_parser!(u64).range(1..=10_000_000))]
     max_waiting: u64,
@@ -130,6 +134,7 @@ async fn serve(args: Args) -> Result<()> {
             max_waiting: args.max_waiting as usize,
             max_waiting_per_client: args.max_waiting_per_client as usize,
             scene_store_bytes: (args.scene_store_mb as usize) << 20,
+            job_progress: Duration::from_millis(args.job_progress_ms),
             job_timeout,
         }),
         scene_dir.path().to_path_buf(),
@@ -143,15 +148,18 @@ async fn serve(args: Args) -> Result<()> {
             args.max_uploads as usize,
         ),
     );
-    // Leases: a silent worker's jobs go back to the queue; jobs past the timeout end.
+    // Leases: a silent worker's jobs go back to the queue; jobs past the timeout end;
+    // stalled jobs are taken back.
     let watched = shared.clone();
+    let progress = Duration::from_millis(args.job_progress_ms);
     tokio::spawn(async move {
-        let mut tick = tokio::time::interval(lease.min(job_timeout) / 4);
+        let mut tick = tokio::time::interval(lease.min(job_timeout).min(progress) / 4);
         loop {
             tick.tick().await;
             let mut state = watched.state();
             state.expire_leases();
             state.expire_jobs();
+            state.expire_stalled_jobs();
             state.dispatch();
         }
     });

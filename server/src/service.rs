@@ -138,15 +138,16 @@ fn remove_scene_files(dirs: Vec<PathBuf>) {
     if dirs.is_empty() {
         return;
     }
-    tokio::task::spawn_blocking(move || {
-        for dir in dirs {
-            if let Err(e) = std::fs::remove_dir_all(&dir)
-                && e.kind() != std::io::ErrorKind::NotFound
-            {
-                tracing::warn!(dir = %dir.display(), "removing a scene's files: {e}");
-            }
-        }
-    });
+    tokio::task::spawn_blocking(move || dirs.iter().for_each(|dir| remove_dir(dir)));
+}
+
+/// Removes one scene's unpacked files (none there is no error).
+fn remove_dir(dir: &std::path::Path) {
+    if let Err(e) = std::fs::remove_dir_all(dir)
+        && e.kind() != std::io::ErrorKind::NotFound
+    {
+        tracing::warn!(dir = %dir.display(), "removing a scene's files: {e}");
+    }
 }
 
 /// A client's id as the state keys it: under its credential's name, so that ids chosen
@@ -192,15 +193,20 @@ impl pb::scenes_server::Scenes for Service {
         let unpacked = dir.join(hash.to_string());
         // The bundle moves to the loading thread and its bytes come back with the
         // scene: no copy of a scene that may be hundreds of megabytes.
+        let files = unpacked.clone();
         let loaded = tokio::task::spawn_blocking(move || {
-            bundle.load(&dir, &limits).map(|scene| (scene, bundle.encoded))
+            let loaded = bundle.load(&dir, &limits);
+            if loaded.is_err() {
+                // (Before answering: a failed load leaves nothing behind.)
+                remove_dir(&files);
+            }
+            loaded.map(|scene| (scene, bundle.encoded))
         })
         .await
         .map_err(|e| Status::internal(format!("loading the scene: {e}")))?;
         let (scene, encoded) = match loaded {
             Ok(loaded) => loaded,
             Err(e) => {
-                remove_scene_files(vec![unpacked.clone()]);
                 // (Paths as the bundle names them: where the server keeps scenes is
                 // none of the caller's business.)
                 let message = e.to_string().replace(&format!("{}/", unpacked.display()), "");

@@ -498,3 +498,58 @@ async fn uploads_and_stored_scenes_are_bounded() {
     }
     assert_eq!(unpacked(), 3, "the evicted scene's files are left");
 }
+
+/// A worker that takes a job and never answers (while keeping its session alive) loses
+/// it to another within the server's progress limit, and is told to stop it; the
+/// client gets its texture.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_worker_that_never_answers_loses_its_job_to_another() {
+    let mut args: Vec<&str> = SERVER_ARGS.to_vec();
+    args.extend(["--job-progress-ms", "500"]);
+    let (_server, url) = start_server(&args);
+    let mut client = Remote::connect(&url, Some("client-one"), "c")
+        .await
+        .expect("connect");
+    let hash = client
+        .put_scene(&bundle_for("default").expect("scene"))
+        .await
+        .expect("upload")
+        .to_string();
+    let mut hung = FakeWorker::register(&url, "worker-one").await.expect("session");
+    stats(&mut client, "the hung worker", |s| s.workers == 1).await;
+    let mut results = client.request(ask(&hash, 1, 64, "c")).await.expect("queued");
+    let job = hung.job().await;
+    // It heartbeats (keeps its lease) but never answers; a real worker joins.
+    let beating = hung.out.clone();
+    let heartbeats = tokio::spawn(async move {
+        let beat = || pb::WorkerMessage {
+            kind: Some(pb::worker_message::Kind::Heartbeat(pb::Heartbeat {})),
+        };
+        while beating.send(beat()).await.is_ok() {
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    });
+    let _worker = start_worker(&url, &["--token", "worker-two"]);
+    let start = Instant::now();
+    let result = tokio::time::timeout(Duration::from_secs(30), results.message())
+        .await
+        .expect("a result within 30 s")
+        .expect("no error")
+        .expect("a result");
+    eprintln!("served {:?} after the hung worker took the job", start.elapsed());
+    assert!(result.r#final);
+    let cancel = tokio::time::timeout(Duration::from_secs(5), hung.inbound.message())
+        .await
+        .expect("a message within 5 s")
+        .expect("the session is open")
+        .expect("a message");
+    match cancel.kind {
+        Some(pb::server_message::Kind::Cancel(c)) => assert_eq!(c.job_id, job.job_id),
+        other => panic!("expected the hung worker to be told to stop, got {other:?}"),
+    }
+    // (The fresh worker's first job waits for the scene to load, which may pass the
+    // short limit set here too: at least the hung worker's counts.)
+    let stats = client.stats().await.expect("stats");
+    assert!(stats.jobs_stalled >= 1 && stats.workers == 2, "{stats:?}");
+    heartbeats.abort();
+}

@@ -71,7 +71,12 @@ const CAMERA_SLACK: f32 = 1e-4;
 #[derive(Debug)]
 pub(super) enum JobState {
     Queued(Priority),
-    Running { worker: u64 },
+    /// On `worker`, which last showed progress on it (took it, or sent a preview) at
+    /// `progress`.
+    Running {
+        worker: u64,
+        progress: Instant,
+    },
 }
 
 #[derive(Debug)]
@@ -127,7 +132,10 @@ impl State {
                 continue;
             }
             worker.running.insert(first.id);
-            job.state = JobState::Running { worker: worker_id };
+            job.state = JobState::Running {
+                worker: worker_id,
+                progress: Instant::now(),
+            };
             self.queue.started(&owner);
         }
     }
@@ -135,11 +143,15 @@ impl State {
     /// A worker's result. Previews go to the waiters; the final texture also goes to
     /// the cache and ends the job.
     pub fn result(&mut self, job_id: u64, texture: pb::ReliefTexture, is_final: bool, bake_ms: u32) {
-        let Some(job) = self.jobs.get(&job_id) else {
+        let Some(job) = self.jobs.get_mut(&job_id) else {
             // Withdrawn meanwhile (and its worker not told in time, or unable to stop).
             self.counters.discarded += 1;
             return;
         };
+        if let JobState::Running { progress, .. } = &mut job.state {
+            *progress = Instant::now();
+        }
+        let job = &*job;
         let texture = Arc::new(texture);
         for waiter_id in &job.waiters {
             if let Some(w) = self.waiters.get(waiter_id) {
@@ -239,7 +251,7 @@ impl State {
     /// until the worker answers for the job ([`State::released`]).
     pub(super) fn cancel_on_worker(&mut self, job_id: u64) {
         if let Some(job) = self.jobs.get(&job_id)
-            && let JobState::Running { worker } = job.state
+            && let JobState::Running { worker, .. } = job.state
             && let Some(w) = self.workers.get_mut(&worker)
         {
             let cancel = pb::ServerMessage {
@@ -247,6 +259,47 @@ impl State {
             };
             let _ = w.tx.send(Ok(cancel));
             w.stopping.insert(job_id);
+        }
+    }
+
+    /// Jobs whose worker has shown no progress (taken them, or sent a preview) for
+    /// [`Limits::job_progress`](super::Limits::job_progress) are taken back: stopped on
+    /// that worker — whose slot stays taken until it answers, so a worker that hangs
+    /// gets no more — and queued first for another.
+    pub fn expire_stalled_jobs(&mut self) {
+        self.expire_stalled_jobs_at(Instant::now());
+    }
+
+    /// [`expire_stalled_jobs`](Self::expire_stalled_jobs) as of `now`.
+    pub(super) fn expire_stalled_jobs_at(&mut self, now: Instant) {
+        let limit = self.limits.job_progress;
+        let stalled: Vec<u64> = (self.jobs.iter())
+            .filter(|(_, job)| match job.state {
+                JobState::Running { progress, .. } => now.saturating_duration_since(progress) > limit,
+                JobState::Queued(_) => false,
+            })
+            .map(|(&id, _)| id)
+            .collect();
+        for id in stalled {
+            self.cancel_on_worker(id);
+            let Some(job) = self.jobs.get_mut(&id) else {
+                continue;
+            };
+            if let JobState::Running { worker, .. } = job.state {
+                if let Some(w) = self.workers.get_mut(&worker) {
+                    w.running.remove(&id);
+                    tracing::warn!(worker = %w.name, job = id, "no progress within {limit:?}: job taken back");
+                }
+                let priority = Priority {
+                    predicted: false,
+                    deadline_us: 0,
+                    id,
+                };
+                job.state = JobState::Queued(priority);
+                self.queue.stopped(&job.owner);
+                self.queue.insert(&job.owner, priority);
+                self.counters.stalled += 1;
+            }
         }
     }
 
@@ -322,7 +375,7 @@ impl State {
             JobState::Queued(p) => {
                 self.queue.remove(&job.owner, &p);
             }
-            JobState::Running { worker } => {
+            JobState::Running { worker, .. } => {
                 self.queue.stopped(&job.owner);
                 if let Some(w) = self.workers.get_mut(&worker) {
                     w.running.remove(&job_id);

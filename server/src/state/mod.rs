@@ -60,6 +60,9 @@ pub struct Limits {
     pub max_waiting: usize,
     /// Most requests one client (credential) has waiting at once.
     pub max_waiting_per_client: usize,
+    /// A job whose worker shows no progress (a preview or the final texture) for this
+    /// long is taken back and queued for another.
+    pub job_progress: Duration,
     /// Scenes stored, bytes of their bundles: past it the least recently used scene
     /// no job needs is evicted.
     pub scene_store_bytes: usize,

@@ -26,6 +26,8 @@ pub struct Counters {
     pub forged: u64,
     /// Scenes evicted from the store to make room for others.
     pub scenes_evicted: u64,
+    /// Jobs taken back from a worker that showed no progress on them.
+    pub stalled: u64,
 }
 
 /// Upper bounds (ms) of the request latency histogram in [`pb::StatsReply`].
@@ -93,6 +95,7 @@ impl State {
             results_discarded: self.counters.discarded,
             workers_dropped_forged: self.counters.forged,
             scenes_evicted: self.counters.scenes_evicted,
+            jobs_stalled: self.counters.stalled,
             scene_bytes: self.scene_bytes() as u64,
         }
     }

@@ -17,6 +17,7 @@ fn state_with_scene() -> (State, ContentHash) {
         max_waiting: 100,
         max_waiting_per_client: 100,
         scene_store_bytes: 1 << 20,
+        job_progress: Duration::from_secs(30),
         job_timeout: Duration::from_secs(60),
     });
     let hash = ContentHash([7; 32]);
@@ -532,4 +533,43 @@ fn the_scene_store_evicts_the_least_recently_used_scene_no_job_needs() {
         })
     );
     assert_eq!(s.scene_bytes(), 80);
+}
+
+/// A worker that takes a job and shows no progress loses it: the job is stopped there
+/// (its slot stays taken, so it gets no more) and goes to another worker; a preview
+/// counts as progress.
+#[test]
+fn a_stalled_job_is_taken_back_and_given_to_another_worker() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 1.0, tx.clone());
+    let (hung_tx, mut hung_rx) = unbounded_channel();
+    let hung = s.add_worker("hung".into(), "worker-1".into(), 1, 1, hung_tx);
+    let progress = s.limits.job_progress;
+    let dispatched = Instant::now();
+    s.dispatch();
+    let job = next_job(&mut hung_rx).unwrap();
+    s.expire_stalled_jobs_at(dispatched + progress);
+    assert_eq!(s.stats().jobs_stalled, 0);
+    // A preview is progress: the clock starts again (a little later than it did).
+    std::thread::sleep(Duration::from_millis(2));
+    let previewed = Instant::now();
+    s.result(job.job_id, pb::ReliefTexture::default(), false, 1);
+    s.expire_stalled_jobs_at(previewed + progress);
+    assert_eq!(s.stats().jobs_stalled, 0);
+    s.expire_stalled_jobs_at(Instant::now() + progress + Duration::from_millis(1));
+    assert_eq!((s.stats().jobs_stalled, s.stats().queue_now), (1, 1));
+    match hung_rx.try_recv().unwrap().unwrap().kind {
+        Some(pb::server_message::Kind::Cancel(c)) => assert_eq!(c.job_id, job.job_id),
+        other => panic!("expected a cancel, got {other:?}"),
+    }
+    let (ok_tx, mut ok_rx) = unbounded_channel();
+    s.add_worker("ok".into(), "worker-1".into(), 1, 1, ok_tx);
+    s.dispatch();
+    assert_eq!(next_job(&mut ok_rx).unwrap().job_id, job.job_id);
+    assert!(
+        next_job(&mut hung_rx).is_none(),
+        "the hung worker got another job"
+    );
+    assert!(s.holds(hung, job.job_id), "its late answer may still come");
 }
