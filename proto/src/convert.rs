@@ -278,7 +278,7 @@ mod tests {
             let wire = texture_to_pb(&t);
             assert_eq!(texture_from_pb("texture", &wire).unwrap(), t);
             let mut bad = wire.clone();
-            bad.albedo.pop();
+            bad.albedo.truncate(bad.albedo.len() - 1);
             let e = texture_from_pb("texture", &bad).unwrap_err();
             assert_eq!(e.code(), tonic::Code::InvalidArgument);
             assert!(e.message().contains("texture.albedo"), "{}", e.message());

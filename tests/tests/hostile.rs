@@ -165,9 +165,9 @@ fn tiny_texture() -> pb::ReliefTexture {
         depth_far: 1.0,
         depth_bits: 8,
         eye: Some(vec3_to_pb(EYE)),
-        albedo: vec![255, 0, 0],
-        normal: vec![128, 128, 255],
-        depth: vec![0],
+        albedo: vec![255, 0, 0].into(),
+        normal: vec![128, 128, 255].into(),
+        depth: vec![0].into(),
     }
 }
 

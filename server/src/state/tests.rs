@@ -168,7 +168,7 @@ fn the_cache_drops_the_least_recently_used_texture() {
     s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
     // 300 kB each: three fit in the 1 MiB cache, four do not.
     let texture = || pb::ReliefTexture {
-        albedo: vec![0; 300_000],
+        albedo: vec![0; 300_000].into(),
         ..Default::default()
     };
     let mut id = 0;
@@ -572,4 +572,43 @@ fn a_stalled_job_is_taken_back_and_given_to_another_worker() {
         "the hung worker got another job"
     );
     assert!(s.holds(hung, job.job_id), "its late answer may still come");
+}
+
+/// Every client waiting for a texture, and every later one served from the cache, is
+/// sent the one texture the worker made, not a copy each.
+#[test]
+fn waiters_and_cache_hits_share_one_texture() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, mut rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 1.0, tx.clone());
+    let merged = Request {
+        client_id: "other".into(),
+        ..request(hash, 2, Vec3::new(1.0, 0.0, 5.0), Urgency::Now)
+    };
+    s.admit(&merged, OWNER, tx.clone()).unwrap();
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    s.dispatch();
+    let job = next_job(&mut wrx).unwrap();
+    let texture = pb::ReliefTexture {
+        albedo: vec![7; 3 * 16 * 16].into(),
+        ..Default::default()
+    };
+    let made = texture.albedo.as_ptr();
+    s.result(job.job_id, texture, true, 1);
+    let served: Vec<_> = std::iter::from_fn(|| rx.try_recv().ok())
+        .map(|r| r.unwrap().texture.unwrap())
+        .collect();
+    assert_eq!(served.len(), 2);
+    let hit = match s.admit(
+        &request(hash, 3, Vec3::new(1.0, 0.0, 5.0), Urgency::Now),
+        OWNER,
+        tx,
+    ) {
+        Ok(Admission::Cached(texture)) => texture,
+        other => panic!("expected a cache hit, got {other:?}"),
+    };
+    for t in served.iter().chain([&*hit]) {
+        assert_eq!(t.albedo.as_ptr(), made, "a copy was made");
+    }
 }
