@@ -31,10 +31,13 @@
 //!   identical requests merged, withdrawn ones cancelled), workers with leases (a
 //!   vanished worker's jobs go back to the queue), the result cache bounded in bytes,
 //!   and the counters.
+//! - [`connections`] — accepting connections within bounds (how many open, how soon
+//!   each must speak), backing off when out of descriptors.
 //! - [`identity`] — who calls: each credential a client's or a worker's, and what it
 //!   owns.
 //! - [`service`] — the gRPC services (`Scenes`, `Impostors`, `Workers`) over it.
 
+pub mod connections;
 pub mod identity;
 pub mod service;
 pub mod state;

@@ -13,12 +13,12 @@ use anyhow::{Context, Result};
 use clap::Parser;
 use tonic::codec::CompressionEncoding;
 use tonic::transport::Server;
-use tonic::transport::server::TcpIncoming;
 
 use relief_core::scene::SceneLimits;
 use relief_proto::bundle::SceneDir;
 use relief_proto::limits::{MAX_REQUEST_MESSAGE_BYTES, MAX_TEXTURE_MESSAGE_BYTES, MAX_UPLOAD_MESSAGE_BYTES};
 use relief_proto::pb;
+use relief_server::connections::{Bounds, accept_within};
 use relief_server::identity::{Credentials, Role, read_tokens_file};
 use relief_server::service::{Service, Shared, Uploads};
 use relief_server::state::{Limits, State};
@@ -101,6 +101,17 @@ struct Args {
     /// least recently used scene no job needs is evicted.
     #[arg(long, env = "RELIEF_SCENE_STORE_MB", default_value = "1024", value_parser = clap::value_parser!(u64).range(1..=1 << 20))]
     scene_store_mb: u64,
+    /// Connections open at once (more wait in the kernel's backlog); keep it below the
+    /// process's file-descriptor limit.
+    #[arg(long, env = "RELIEF_MAX_CONNECTIONS", default_value = "512", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    max_connections: u64,
+    /// A connection that has sent nothing (no HTTP/2 preface, no TLS hello) after this
+    /// long (ms) is closed.
+    #[arg(long, env = "RELIEF_FIRST_BYTES_MS", default_value = "5000", value_parser = clap::value_parser!(u64).range(100..=600_000))]
+    first_bytes_ms: u64,
+    /// Calls open at once on one connection.
+    #[arg(long, env = "RELIEF_MAX_STREAMS", default_value = "256", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    max_streams: u32,
     /// Where received scenes are unpacked (default: a directory under the system's temp dir).
     #[arg(long, env = "RELIEF_SCENE_DIR")]
     scene_dir: Option<PathBuf>,
@@ -199,7 +210,7 @@ async fn serve(args: Args) -> Result<()> {
         .context("building the reflection service")?;
     // TLS first: a certificate that does not load must fail before the server says
     // it is listening.
-    let mut builder = Server::builder();
+    let mut builder = Server::builder().max_concurrent_streams(Some(args.max_streams));
     if let (Some(cert), Some(key)) = (&args.tls_cert, &args.tls_key) {
         let read =
             |flag: &str, p: &PathBuf| std::fs::read(p).with_context(|| format!("{flag} {}", p.display()));
@@ -215,7 +226,13 @@ async fn serve(args: Args) -> Result<()> {
     let address = listener.local_addr()?;
     let scheme = if args.tls_cert.is_some() { "https" } else { "http" };
     println!("relief-server listening on {scheme}://{address}");
-    let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
+    let incoming = accept_within(
+        listener,
+        Bounds {
+            max_open: args.max_connections as usize,
+            first_bytes_within: Duration::from_millis(args.first_bytes_ms),
+        },
+    );
     // On SIGINT/SIGTERM: stop taking connections and let calls in flight end, but not
     // for ever — a worker's session stream lasts as long as the worker.
     let stop = relief_proto::shutdown::watch();

@@ -553,3 +553,52 @@ async fn a_worker_that_never_answers_loses_its_job_to_another() {
     assert!(stats.jobs_stalled >= 1 && stats.workers == 2, "{stats:?}");
     heartbeats.abort();
 }
+
+/// Idle TCP connections that never speak cannot lock other clients out: with the
+/// server limited to 128 file descriptors, 300 of them are held to the server's
+/// `--max-connections` and closed after `--first-bytes-ms`, and a client's call still
+/// succeeds. (Before, the server ran out of descriptors, its accept loop spun, and
+/// every other call timed out.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn idle_connections_cannot_lock_clients_out() {
+    let mut server = std::process::Command::new("bash");
+    let binary = relief_tests::bin_dir().join("relief-server");
+    server.args([
+        "-c",
+        "ulimit -n 128 && exec \"$0\" --listen 127.0.0.1:0 --max-connections 64 --first-bytes-ms 500",
+        binary.to_str().expect("utf-8"),
+    ]);
+    let (server, url) = relief_tests::spawn_server(server);
+    let address = url.trim_start_matches("http://").to_string();
+    let idle: Vec<std::net::TcpStream> = tokio::task::block_in_place(|| {
+        (0..300)
+            .filter_map(|_| {
+                std::net::TcpStream::connect_timeout(
+                    &address.parse().expect("address"),
+                    Duration::from_secs(2),
+                )
+                .ok()
+            })
+            .collect()
+    });
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let start = Instant::now();
+    let answered = tokio::time::timeout(Duration::from_secs(20), async {
+        let mut client = Remote::connect(&url, None, "c").await.expect("connect");
+        client.stats().await
+    })
+    .await;
+    let fds = std::fs::read_dir(format!("/proc/{}/fd", server.0.id()))
+        .map(|d| d.count())
+        .unwrap_or(0);
+    eprintln!(
+        "{} idle connections open; a client's call answered after {:?}; server holds {fds} descriptors",
+        idle.len(),
+        start.elapsed()
+    );
+    assert!(
+        matches!(answered, Ok(Ok(_))),
+        "the client's call failed: {answered:?}"
+    );
+    drop(idle);
+}
