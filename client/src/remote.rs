@@ -30,7 +30,7 @@ pub struct Remote {
 pub enum RemoteError {
     #[error(transparent)]
     Endpoint(#[from] relief_proto::connect::EndpointError),
-    #[error("connecting to {url}: {error}")]
+    #[error("connecting to {url}: {}", relief_proto::connect::explain(error))]
     Connect {
         url: String,
         error: tonic::transport::Error,

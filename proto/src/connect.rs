@@ -38,6 +38,44 @@ pub enum EndpointError {
     },
 }
 
+/// What went wrong reaching a server, in full: a transport error's own message is
+/// only "transport error", and the cause — a refused connection, a certificate the
+/// TLS layer rejects and why — lies down its chain of sources. A certificate problem
+/// gets a line on what to do about it.
+pub fn explain(error: &(dyn std::error::Error + 'static)) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    let mut next = Some(error);
+    while let Some(e) = next {
+        let text = e.to_string();
+        if !parts.iter().any(|p| p.contains(&text)) {
+            parts.push(text);
+        }
+        next = e.source();
+    }
+    let mut message = parts.join(": ");
+    let hints = [
+        (
+            "CaUsedAsEndEntity",
+            "the server's certificate is marked as a CA (basicConstraints CA:TRUE): give the server a leaf certificate (CA:FALSE), signed by that CA or self-signed",
+        ),
+        (
+            "UnknownIssuer",
+            "the server's certificate is signed by no CA this side trusts: pass it (or its CA) with --tls-ca",
+        ),
+        (
+            "NotValidForName",
+            "the server's certificate does not name the host in the URL: use a name or address it lists (subjectAltName)",
+        ),
+        ("Expired", "the server's certificate has expired"),
+    ];
+    for (symptom, hint) in hints {
+        if message.contains(symptom) {
+            message = format!("{message} — {hint}");
+        }
+    }
+    message
+}
+
 /// Refuses to send a credential unencrypted beyond this machine: with a `token`, an
 /// `http://` `url` must name a loopback address (`localhost`, `127.0.0.0/8`, `::1`)
 /// unless `allow_insecure`. (Anyone on the path could read it and act as its holder.)

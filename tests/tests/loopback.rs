@@ -537,3 +537,33 @@ async fn tls_with_a_self_signed_certificate() {
     };
     assert!(untrusting.stats().await.is_err());
 }
+
+/// A server whose certificate is marked as a CA is refused by the TLS layer; the error
+/// says so and what to do, not only "transport error".
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_certificate_the_tls_layer_refuses_is_named() {
+    let dir = relief_tests::scratch("tls-ca-flag");
+    let key = rcgen::KeyPair::generate().unwrap();
+    let mut params =
+        rcgen::CertificateParams::new(vec!["localhost".to_string(), "127.0.0.1".to_string()]).unwrap();
+    params.is_ca = rcgen::IsCa::Ca(rcgen::BasicConstraints::Unconstrained);
+    let issued = params.self_signed(&key).unwrap();
+    let (cert, key_file) = (dir.join("cert.pem"), dir.join("key.pem"));
+    std::fs::write(&cert, issued.pem()).unwrap();
+    std::fs::write(&key_file, key.serialize_pem()).unwrap();
+    let (_server, url) = start_server(&[
+        "--tls-cert",
+        cert.to_str().unwrap(),
+        "--tls-key",
+        key_file.to_str().unwrap(),
+    ]);
+    let refused = match Remote::connect_with(&url, None, Some(&cert), "test").await {
+        Err(e) => e.to_string(),
+        Ok(_) => panic!("connected to a server whose certificate is a CA's"),
+    };
+    eprintln!("{refused}");
+    assert!(
+        refused.contains("marked as a CA") && refused.contains("leaf certificate"),
+        "{refused}"
+    );
+}

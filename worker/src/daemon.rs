@@ -193,7 +193,7 @@ async fn session(
 ) -> End {
     let channel = match endpoint.connect().await {
         Ok(c) => c,
-        Err(e) => return End::Lost(anyhow!("connecting: {e}")),
+        Err(e) => return End::Lost(anyhow!("connecting: {}", relief_proto::connect::explain(&e))),
     };
     let mut workers = pb::workers_client::WorkersClient::with_interceptor(channel.clone(), auth.clone())
         .send_compressed(CompressionEncoding::Zstd)
