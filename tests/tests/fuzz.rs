@@ -1,0 +1,143 @@
+//! Bounded fuzzing of everything that arrives from someone else: wire messages (a
+//! scene bundle, an impostor request, a relief texture, a worker's registration) and
+//! the files a bundle carries (scene TOML, OBJ). Random bytes, and valid inputs with
+//! random edits, must give an answer — a value or an error naming the problem — never
+//! a panic or a hang.
+//!
+//! Each property runs [`CASES`] cases (seconds in all; `RELIEF_FUZZ_CASES=N` for a
+//! longer run); failing seeds are kept in `tests/proptest-regressions/` and replayed
+//! first.
+
+use std::path::Path;
+
+use proptest::prelude::*;
+use prost::Message;
+
+use relief_core::obj::{count_triangles, load_obj};
+use relief_core::reach::Reach;
+use relief_core::scene::{SceneLimits, builtin_text, file::parse};
+use relief_proto::bundle::{Bundle, bundle_for};
+use relief_proto::convert::{check_register, request_from_pb, texture_from_pb, texture_to_pb};
+use relief_proto::pb;
+
+/// Cases per property: enough to reach every field's edge cases, few enough for CI
+/// (about ten seconds in all).
+const CASES: u32 = 8192;
+
+/// Small limits, so that a random scene that happens to be valid builds in no time.
+const LIMITS: SceneLimits = SceneLimits {
+    max_triangles: 20_000,
+    max_objects: 16,
+};
+
+/// `valid` with `edits` applied: each `(at, byte)` overwrites, inserts or deletes one
+/// byte at `at` (wrapped to the length), by the byte's low bits.
+fn edited(valid: &[u8], edits: &[(usize, u8)]) -> Vec<u8> {
+    let mut bytes = valid.to_vec();
+    for &(at, byte) in edits {
+        let at = at % (bytes.len() + 1);
+        match byte % 3 {
+            0 if at < bytes.len() => bytes[at] = byte,
+            1 => bytes.insert(at, byte),
+            _ if at < bytes.len() => {
+                bytes.remove(at);
+            }
+            _ => {}
+        }
+    }
+    bytes
+}
+
+fn edits() -> impl Strategy<Value = Vec<(usize, u8)>> {
+    prop::collection::vec((any::<usize>(), any::<u8>()), 1..16)
+}
+
+fn config() -> ProptestConfig {
+    ProptestConfig {
+        cases: std::env::var("RELIEF_FUZZ_CASES")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(CASES),
+        failure_persistence: Some(Box::new(prop::test_runner::FileFailurePersistence::WithSource(
+            "proptest-regressions",
+        ))),
+        ..ProptestConfig::default()
+    }
+}
+
+/// Decodes a bundle and, when it decodes, unpacks and loads it within its own
+/// directory and small limits.
+fn decode_and_load(bytes: Vec<u8>, tag: &str) {
+    if let Ok(bundle) = Bundle::decode(bytes) {
+        let dir = relief_tests::scratch(tag);
+        let _ = bundle.load(&dir, &LIMITS);
+    }
+}
+
+proptest! {
+    #![proptest_config(config())]
+
+    #[test]
+    fn bundles_decode_or_refuse(bytes in prop::collection::vec(any::<u8>(), 0..2048)) {
+        decode_and_load(bytes, "fuzz-bundles");
+    }
+
+    #[test]
+    fn edited_bundles_decode_or_refuse(edits in edits()) {
+        let valid = bundle_for("default").expect("default bundle").encoded;
+        decode_and_load(edited(&valid, &edits), "fuzz-edited-bundles");
+    }
+
+    #[test]
+    fn wire_messages_convert_or_refuse(bytes in prop::collection::vec(any::<u8>(), 0..512)) {
+        if let Ok(request) = pb::ImpostorRequest::decode(bytes.as_slice()) {
+            let _ = request_from_pb(&request);
+        }
+        if let Ok(texture) = pb::ReliefTexture::decode(bytes.as_slice()) {
+            let _ = texture_from_pb("texture", &texture);
+        }
+        if let Ok(register) = pb::Register::decode(bytes.as_slice()) {
+            let _ = check_register(&register);
+        }
+    }
+
+    #[test]
+    fn edited_textures_convert_or_refuse(edits in edits()) {
+        let texture = relief_core::relief::ReliefTexture::empty(
+            relief_core::relief::SourceCamera::facing(
+                glam::Vec3::new(0.0, 0.0, 5.0),
+                &relief_core::bounds::Aabb::from_points([glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0)]),
+                8,
+                8,
+            )
+            .expect("camera"),
+            relief_core::relief::DepthBits::Sixteen,
+            glam::Vec3::new(0.0, 0.0, 5.0),
+        );
+        let valid = texture_to_pb(&texture).encode_to_vec();
+        if let Ok(texture) = pb::ReliefTexture::decode(edited(&valid, &edits).as_slice()) {
+            let _ = texture_from_pb("texture", &texture);
+        }
+    }
+
+    #[test]
+    fn scene_files_parse_or_refuse(edits in edits(), text in "[ -~\n]{0,200}") {
+        let valid = builtin_text("default").expect("default scene");
+        let edited = String::from_utf8_lossy(&edited(valid.as_bytes(), &edits)).into_owned();
+        for text in [edited, text] {
+            let _ = parse(&text, "fuzz", Path::new("."), Reach::Within(Path::new(".")), &LIMITS);
+        }
+    }
+
+    #[test]
+    fn obj_files_load_or_refuse(edits in edits(), bytes in prop::collection::vec(any::<u8>(), 0..512)) {
+        let valid = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvn 0 0 1\nf 1//1 2//1 3//1\nf 1 2 4\nf 2 3 4 1\n";
+        let dir = relief_tests::scratch("fuzz-obj");
+        for (k, content) in [edited(valid.as_bytes(), &edits), bytes].into_iter().enumerate() {
+            let path = dir.join(format!("m{k}.obj"));
+            std::fs::write(&path, content).expect("writing the OBJ");
+            let _ = count_triangles(&path, Reach::Within(&dir));
+            let _ = load_obj(&path, Reach::Within(&dir));
+        }
+    }
+}
