@@ -602,3 +602,161 @@ async fn idle_connections_cannot_lock_clients_out() {
     );
     drop(idle);
 }
+
+/// A soak (not run by CI: `cargo test --release -p relief-tests --test hostile soak --
+/// --ignored --nocapture`, `RELIEF_SOAK_S` seconds, 60 by default): two honest clients
+/// keep asking for textures from two real workers while a hostile client floods
+/// requests it drops, withdraws others' ids, uploads decompression bombs, a forging
+/// worker answers every job it gets with a wrong texture (and registers again when
+/// dropped), and idle connections come and go. Every honest request must be answered;
+/// the counts and the server's peak memory are printed.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore]
+async fn soak_with_honest_and_hostile_callers() {
+    let seconds: u64 = std::env::var("RELIEF_SOAK_S")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(60);
+    let mut args: Vec<&str> = SERVER_ARGS.to_vec();
+    args.extend([
+        "--client-token",
+        "client-evil",
+        "--max-upload-mb",
+        "16",
+        "--job-progress-ms",
+        "5000",
+    ]);
+    args.extend(["--max-connections", "128", "--first-bytes-ms", "500"]);
+    let (server, url) = start_server(&args);
+    let _workers = [
+        start_worker(&url, &["--token", "worker-one"]),
+        start_worker(&url, &["--token", "worker-one"]),
+    ];
+    let bundle = bundle_for("default").expect("scene");
+    let mut setup = Remote::connect(&url, Some("client-one"), "setup")
+        .await
+        .expect("connect");
+    let hash = setup.put_scene(&bundle).await.expect("upload").to_string();
+    stats(&mut setup, "the workers", |s| s.workers >= 2).await;
+    let until = Instant::now() + Duration::from_secs(seconds);
+
+    let honest = |token: &'static str, id: &'static str| {
+        let (url, hash, bundle) = (url.clone(), hash.clone(), bundle.clone());
+        tokio::spawn(async move {
+            let mut remote = Remote::connect(&url, Some(token), id).await.expect("connect");
+            remote.put_scene(&bundle).await.expect("upload");
+            let (mut answered, mut failed, mut k) = (0u64, Vec::new(), 0u64);
+            while Instant::now() < until {
+                k += 1;
+                let request = pb::ImpostorRequest {
+                    eye: Some(vec3_to_pb(
+                        EYE + Vec3::new(0.0005 * (k % 20_000) as f32, 0.0, 0.0),
+                    )),
+                    ..ask(&hash, k, 64, id)
+                };
+                // (Read to the stream's end, as the client's source does: a stream dropped
+                // after its final result is reset, and h2 ends a connection after a
+                // thousand such resets.)
+                let outcome = async {
+                    let mut stream = remote.request(request).await?;
+                    let mut width = None;
+                    while let Some(result) = stream.message().await? {
+                        if result.r#final {
+                            width = result.texture.map(|t| t.width);
+                        }
+                    }
+                    Ok::<_, tonic::Status>(width)
+                }
+                .await;
+                match outcome {
+                    Ok(Some(64)) => answered += 1,
+                    other => failed.push(format!("{other:?}")),
+                }
+            }
+            (answered, failed)
+        })
+    };
+    let honest_tasks = [honest("client-one", "honest-a"), honest("client-two", "honest-b")];
+
+    // The hostile client: floods it drops, withdrawals of others' ids, bombs.
+    let evil = {
+        let (url, hash) = (url.clone(), hash.clone());
+        tokio::spawn(async move {
+            let mut remote = Remote::connect(&url, Some("client-evil"), "honest-a")
+                .await
+                .expect("connect");
+            let _ = remote.put_scene(&bundle_for("default").expect("scene")).await;
+            let mut bombs = scenes_client(&url, "client-evil").await;
+            let (mut sent, mut k) = (0u64, 0u64);
+            while Instant::now() < until {
+                for _ in 0..20 {
+                    k += 1;
+                    let request = pb::ImpostorRequest {
+                        eye: Some(vec3_to_pb(EYE + Vec3::new(0.0, 0.002 * (k % 499) as f32, 0.0))),
+                        ..ask(&hash, k, 512, "honest-a")
+                    };
+                    drop(remote.request(request).await);
+                    sent += 1;
+                }
+                let _ = remote.withdraw(&(0..200).collect::<Vec<u64>>()).await;
+                let zeros: Vec<pb::SceneChunk> = (0..32)
+                    .map(|_| pb::SceneChunk {
+                        data: vec![0u8; 1 << 20],
+                    })
+                    .collect();
+                let _ = bombs.put_scene(tokio_stream::iter(zeros)).await;
+                let address = url.trim_start_matches("http://").to_string();
+                let idle: Vec<_> = (0..50)
+                    .filter_map(|_| std::net::TcpStream::connect(&address).ok())
+                    .collect();
+                tokio::time::sleep(Duration::from_millis(200)).await;
+                drop(idle);
+            }
+            sent
+        })
+    };
+    // The forging worker.
+    let forger = {
+        let url = url.clone();
+        tokio::spawn(async move {
+            let mut dropped = 0u64;
+            while Instant::now() < until {
+                let Ok(mut fake) = FakeWorker::register(&url, "worker-two").await else {
+                    continue;
+                };
+                let next = tokio::time::timeout(Duration::from_secs(2), fake.inbound.message()).await;
+                if let Ok(Ok(Some(pb::ServerMessage {
+                    kind: Some(pb::server_message::Kind::Job(job)),
+                }))) = next
+                {
+                    fake.answer(job.job_id, tiny_texture()).await;
+                    if fake.ended().await == Code::PermissionDenied {
+                        dropped += 1;
+                    }
+                }
+            }
+            dropped
+        })
+    };
+    let mut answered = 0;
+    for task in honest_tasks {
+        let (ok, failed) = task.await.expect("honest client");
+        assert!(
+            failed.is_empty(),
+            "{} honest requests failed, e.g. {:?}",
+            failed.len(),
+            &failed[..failed.len().min(3)]
+        );
+        answered += ok;
+    }
+    let flooded = evil.await.expect("hostile client");
+    let forgeries = forger.await.expect("forging worker");
+    let stats = setup.stats().await.expect("stats");
+    eprintln!(
+        "{seconds} s: {answered} honest requests answered, none lost; hostile: {flooded} flood requests dropped, \
+         {forgeries} forging workers dropped (server counts {}), {} stalled; server peak RSS {:.0} MiB",
+        stats.workers_dropped_forged,
+        stats.jobs_stalled,
+        peak_rss_mib(server.0.id())
+    );
+}
