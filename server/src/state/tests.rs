@@ -575,7 +575,8 @@ fn a_stalled_job_is_taken_back_and_given_to_another_worker() {
 }
 
 /// Every client waiting for a texture, and every later one served from the cache, is
-/// sent the one texture the worker made, not a copy each.
+/// sent one texture, not a copy each — the worker's, compacted once to buffers of its
+/// own.
 #[test]
 fn waiters_and_cache_hits_share_one_texture() {
     let (mut s, hash) = state_with_scene();
@@ -590,11 +591,12 @@ fn waiters_and_cache_hits_share_one_texture() {
     s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
     s.dispatch();
     let job = next_job(&mut wrx).unwrap();
+    // As decoded from the wire: a slice of the whole message's (larger) buffer.
+    let message = tonic::codegen::Bytes::from(vec![7u8; 1 << 20]);
     let texture = pb::ReliefTexture {
-        albedo: vec![7; 3 * 16 * 16].into(),
+        albedo: message.slice(100..100 + 3 * 16 * 16),
         ..Default::default()
     };
-    let made = texture.albedo.as_ptr();
     s.result(job.job_id, texture, true, 1);
     let served: Vec<_> = std::iter::from_fn(|| rx.try_recv().ok())
         .map(|r| r.unwrap().texture.unwrap())
@@ -608,7 +610,14 @@ fn waiters_and_cache_hits_share_one_texture() {
         Ok(Admission::Cached(texture)) => texture,
         other => panic!("expected a cache hit, got {other:?}"),
     };
-    for t in served.iter().chain([&*hit]) {
-        assert_eq!(t.albedo.as_ptr(), made, "a copy was made");
+    let shared = hit.albedo.as_ptr();
+    let within = message.as_ptr_range();
+    assert!(
+        !within.contains(&shared),
+        "the cache keeps the whole message's buffer alive"
+    );
+    for t in &served {
+        assert_eq!(t.albedo.as_ptr(), shared, "a copy was made");
+        assert_eq!(t.albedo, hit.albedo);
     }
 }
