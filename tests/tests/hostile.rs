@@ -317,9 +317,9 @@ async fn a_worker_answers_only_for_its_own_jobs_with_the_texture_asked_for() {
 }
 
 /// One client's flood does not starve another's: with one worker busy on a flood of
-/// another client's requests, a second client's single request is baked next, not
-/// after the flood (measured: its latency, against the same request on an idle
-/// server, printed).
+/// another client's requests, a second client's single request takes the slot back
+/// and is baked at once, not after the flood (measured: its latency, against the same
+/// request on an idle server, printed).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_flood_from_one_client_does_not_starve_another() {
     let (_server, url) = start_server(&SERVER_ARGS);
@@ -754,9 +754,10 @@ async fn soak_with_honest_and_hostile_callers() {
     let stats = setup.stats().await.expect("stats");
     eprintln!(
         "{seconds} s: {answered} honest requests answered, none lost; hostile: {flooded} flood requests dropped, \
-         {forgeries} forging workers dropped (server counts {}), {} stalled; server peak RSS {:.0} MiB",
+         {forgeries} forging workers dropped (server counts {}), {} stalled, {} taken back; server peak RSS {:.0} MiB",
         stats.workers_dropped_forged,
         stats.jobs_stalled,
+        stats.jobs_preempted,
         peak_rss_mib(server.0.id())
     );
 }

@@ -86,10 +86,11 @@ const CAMERA_SLACK: f32 = 1e-4;
 #[derive(Debug)]
 pub(super) enum JobState {
     Queued(Priority),
-    /// On `worker`, which last showed progress on it (took it, or sent a preview) at
-    /// `progress`.
+    /// On `worker` since `started`; the worker last showed progress on it (took it,
+    /// or sent a preview) at `progress`.
     Running {
         worker: u64,
+        started: Instant,
         progress: Instant,
     },
 }
@@ -102,6 +103,9 @@ pub(super) struct Job {
     pub(super) spec: pb::Job,
     pub(super) state: JobState,
     pub(super) waiters: HashSet<WaiterId>,
+    /// It was taken back once for another client's request (see
+    /// `State::preempt_for`): never again.
+    pub(super) preempted: bool,
 }
 
 /// A client's request: `(client_id, request_id)`.
@@ -131,6 +135,7 @@ impl State {
                 .filter(|(_, w)| !w.draining && w.busy() < w.slots)
                 .min_by_key(|(_, w)| w.busy())
             else {
+                self.preempt_for(&owner, first);
                 return;
             };
             self.queue.remove(&owner, &first);
@@ -147,9 +152,11 @@ impl State {
                 continue;
             }
             worker.running.insert(first.id);
+            let now = Instant::now();
             job.state = JobState::Running {
                 worker: worker_id,
-                progress: Instant::now(),
+                started: now,
+                progress: now,
             };
             self.queue.started(&owner);
         }
@@ -296,26 +303,70 @@ impl State {
             .map(|(&id, _)| id)
             .collect();
         for id in stalled {
-            self.cancel_on_worker(id);
-            let Some(job) = self.jobs.get_mut(&id) else {
-                continue;
-            };
-            if let JobState::Running { worker, .. } = job.state {
-                if let Some(w) = self.workers.get_mut(&worker) {
-                    w.running.remove(&id);
-                    tracing::warn!(worker = %w.name, job = id, "no progress within {limit:?}: job taken back");
-                }
-                let priority = Priority {
-                    predicted: false,
-                    deadline_us: 0,
-                    id,
-                };
-                job.state = JobState::Queued(priority);
-                self.queue.stopped(&job.owner);
-                self.queue.insert(&job.owner, priority);
+            if self.take_back(id) {
+                tracing::warn!(job = id, "no progress within {limit:?}: job taken back");
                 self.counters.stalled += 1;
             }
         }
+    }
+
+    /// When no slot is free for `head`, the next job of `owner`: if it is needed now
+    /// and `owner` has nothing running, takes back a bake of the client with the most
+    /// running — its latest, the least work lost; never one taken back before, so no
+    /// job starves — so that one client's long bakes do not hold another's request for
+    /// their whole length. The slot comes free when the worker says it stopped (a
+    /// bake checks for a stop every block of rays), and the queue's order then gives it
+    /// to `owner`.
+    fn preempt_for(&mut self, owner: &Arc<str>, head: Priority) {
+        // (A slot already coming free — a job told to stop — serves it first; and a job
+        // taken back takes none back in turn, or two clients would take one slot from
+        // each other for ever.)
+        let freeing = self.workers.values().any(|w| !w.stopping.is_empty());
+        let taken_back = self.jobs.get(&head.id).is_some_and(|job| job.preempted);
+        if head.predicted || freeing || taken_back || self.queue.running_of(owner) > 0 {
+            return;
+        }
+        let victim = (self.jobs.iter())
+            .filter_map(|(&id, job)| match job.state {
+                JobState::Running { started, .. } if !job.preempted && job.owner != *owner => {
+                    Some((self.queue.running_of(&job.owner), started, id))
+                }
+                _ => None,
+            })
+            .max();
+        if let Some((_, _, id)) = victim
+            && self.take_back(id)
+        {
+            if let Some(job) = self.jobs.get_mut(&id) {
+                job.preempted = true;
+            }
+            self.counters.preempted += 1;
+        }
+    }
+
+    /// Takes running job `id` back from its worker: told to stop it (its slot stays
+    /// taken until it answers), and queued first for the next free slot. Returns
+    /// whether it was running.
+    fn take_back(&mut self, id: u64) -> bool {
+        self.cancel_on_worker(id);
+        let Some(job) = self.jobs.get_mut(&id) else {
+            return false;
+        };
+        let JobState::Running { worker, .. } = job.state else {
+            return false;
+        };
+        if let Some(w) = self.workers.get_mut(&worker) {
+            w.running.remove(&id);
+        }
+        let priority = Priority {
+            predicted: false,
+            deadline_us: 0,
+            id,
+        };
+        job.state = JobState::Queued(priority);
+        self.queue.stopped(&job.owner);
+        self.queue.insert(&job.owner, priority);
+        true
     }
 
     /// Requests waiting longer than [`Limits::job_timeout`](super::Limits::job_timeout) end with DEADLINE_EXCEEDED

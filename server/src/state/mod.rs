@@ -252,6 +252,7 @@ impl State {
                         spec,
                         state: JobState::Queued(priority),
                         waiters: HashSet::new(),
+                        preempted: false,
                     },
                 );
                 self.queue.insert(&owner, priority);

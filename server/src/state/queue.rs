@@ -81,7 +81,7 @@ impl FairQueue {
         }
     }
 
-    fn running_of(&self, owner: &str) -> usize {
+    pub(super) fn running_of(&self, owner: &str) -> usize {
         self.running.get(owner).copied().unwrap_or(0)
     }
 

@@ -28,6 +28,8 @@ pub struct Counters {
     pub scenes_evicted: u64,
     /// Jobs taken back from a worker that showed no progress on them.
     pub stalled: u64,
+    /// Jobs taken back from their worker for another client's needed-now request.
+    pub preempted: u64,
 }
 
 /// Upper bounds (ms) of the request latency histogram in [`pb::StatsReply`].
@@ -96,6 +98,7 @@ impl State {
             workers_dropped_forged: self.counters.forged,
             scenes_evicted: self.counters.scenes_evicted,
             jobs_stalled: self.counters.stalled,
+            jobs_preempted: self.counters.preempted,
             scene_bytes: self.scene_bytes() as u64,
         }
     }

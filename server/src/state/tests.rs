@@ -462,7 +462,7 @@ fn a_second_client_is_served_between_anothers_flood() {
         admit_now(&mut s, hash, id, id as f32, tx.clone());
     }
     let (wtx, mut wrx) = unbounded_channel();
-    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    let worker = s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
     s.dispatch();
     let first = next_job(&mut wrx).unwrap();
     let other = Request {
@@ -472,7 +472,10 @@ fn a_second_client_is_served_between_anothers_flood() {
     s.admit(&other, "client-2", tx.clone()).unwrap();
     s.dispatch();
     assert!(next_job(&mut wrx).is_none(), "the slot is taken");
+    // (The other client's needed-now request took the slot back: the worker is told
+    // to stop, and finishes first all the same.)
     s.result(first.job_id, pb::ReliefTexture::default(), true, 1);
+    s.released(worker, first.job_id);
     s.dispatch();
     assert_eq!(next_job(&mut wrx).unwrap().eye.unwrap().x, 9.0);
 }
@@ -620,4 +623,59 @@ fn waiters_and_cache_hits_share_one_texture() {
         assert_eq!(t.albedo.as_ptr(), shared, "a copy was made");
         assert_eq!(t.albedo, hit.albedo);
     }
+}
+
+/// With no slot free, a needed-now request of a client with nothing running takes a
+/// slot back from the client with the most running (its latest bake, told to stop,
+/// queued again first); a job is taken back once only, and predicted requests take
+/// nothing back.
+#[test]
+fn a_needed_now_request_takes_a_slot_back_once() {
+    let (mut s, hash) = state_with_scene();
+    for owner in ["client-2", "client-3"] {
+        s.add_owner(hash, &owner.into());
+    }
+    let (tx, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 1.0, tx.clone());
+    admit_now(&mut s, hash, 2, 2.0, tx.clone());
+    let (wtx, mut wrx) = unbounded_channel();
+    let worker = s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    s.dispatch();
+    let running = next_job(&mut wrx).unwrap();
+    let from = |owner: &str, id: u64, x: f32, urgency: Urgency| Request {
+        client_id: owner.into(),
+        ..request(hash, id, Vec3::new(x, 0.0, 5.0), urgency)
+    };
+    // A predicted request takes nothing back.
+    s.admit(
+        &from("b", 3, 3.0, Urgency::Predicted { in_ms: 10 }),
+        "client-2",
+        tx.clone(),
+    )
+    .unwrap();
+    s.dispatch();
+    assert!(wrx.try_recv().is_err());
+    // A needed-now one does: the running job is told to stop and queued again.
+    s.admit(&from("b", 4, 4.0, Urgency::Now), "client-2", tx.clone())
+        .unwrap();
+    s.dispatch();
+    match wrx.try_recv().unwrap().unwrap().kind {
+        Some(pb::server_message::Kind::Cancel(c)) => assert_eq!(c.job_id, running.job_id),
+        other => panic!("expected a cancel, got {other:?}"),
+    }
+    assert_eq!(s.stats().jobs_preempted, 1);
+    // The worker stops it; the slot goes to the needed-now request.
+    s.stopped();
+    s.released(worker, running.job_id);
+    s.dispatch();
+    assert_eq!(next_job(&mut wrx).unwrap().eye.unwrap().x, 4.0);
+    // Done; the job taken back runs again, and is not taken back a second time.
+    let b = s.jobs.keys().copied().find(|&id| s.holds(worker, id)).unwrap();
+    s.result(b, pb::ReliefTexture::default(), true, 1);
+    s.dispatch();
+    assert_eq!(next_job(&mut wrx).unwrap().job_id, running.job_id);
+    s.admit(&from("c", 5, 5.0, Urgency::Now), "client-3", tx).unwrap();
+    s.dispatch();
+    assert!(wrx.try_recv().is_err(), "a job was taken back twice");
+    assert_eq!(s.stats().jobs_preempted, 1);
 }
