@@ -59,9 +59,20 @@ pub enum CameraError {
     TooFarApart(Vec3),
     #[error("eye and target coincide: no view direction")]
     EyeAtTarget,
+    #[error(
+        "eye and target are {distance} apart, too close for f32 at their distance from the origin: \
+         the view direction could be off by {error_deg}° (at most {MAX_DIRECTION_ERROR_DEG}° is taken)"
+    )]
+    ImpreciseDirection { distance: f32, error_deg: f32 },
     #[error("up vector is zero or parallel to the view direction")]
     UpAlongView,
 }
+
+/// The most the view direction may be off (degrees) because eye and target are
+/// rounded to f32: half a degree, a few pixels at common fields of view. Past it (an
+/// eye a few steps of f32 from its target) the direction is noise: a one-step offset
+/// pointed a camera straight away from what was meant, and drew an empty frame.
+pub const MAX_DIRECTION_ERROR_DEG: f32 = 0.5;
 
 /// A camera path segment that cannot be flown; the message names the field.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -104,6 +115,19 @@ impl Camera {
             return Err(CameraError::TooFarApart(offset));
         }
         let forward = direction(offset).ok_or(CameraError::EyeAtTarget)?;
+        // Rounding the eye and the target to f32 moves each by up to half a step of
+        // their size; seen over `offset`, that turns the view by up to this much.
+        // (In units of that size: squared lengths of tiny or huge offsets under- or
+        // overflow.)
+        let size = eye.abs().max(target.abs()).max_element();
+        let relative = (offset / size).length();
+        let error_deg = (3f32.sqrt() * f32::EPSILON / relative).atan().to_degrees();
+        if error_deg > MAX_DIRECTION_ERROR_DEG {
+            return Err(CameraError::ImpreciseDirection {
+                distance: offset.length(),
+                error_deg,
+            });
+        }
         let right = direction(up)
             .and_then(|up| direction(forward.cross(up)))
             .ok_or(CameraError::UpAlongView)?;
@@ -453,6 +477,26 @@ impl Pose {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An eye a step of f32 from its target has no meaningful view direction and is
+    /// refused, naming the precision; eyes far from the origin looking at targets far
+    /// enough away, and ordinary cameras, are taken.
+    #[test]
+    fn a_view_direction_below_f32_precision_is_refused() {
+        let camera = |eye: Vec3, target: Vec3| Camera::look_at(eye, target, Vec3::Y, 40.0, 64, 64);
+        let eye = Vec3::new(1.0, 1.0, 1.0);
+        let one_step = Vec3::new(f32::from_bits(1.0f32.to_bits() + 1), 1.0, 1.0);
+        let err = camera(eye, one_step).unwrap_err();
+        assert!(matches!(err, CameraError::ImpreciseDirection { .. }), "{err}");
+        assert!(err.to_string().contains("too close for f32"), "{err}");
+        // Fifty steps at the scale of a millimetre: still noise.
+        let tiny = Vec3::splat(1e-3);
+        assert!(camera(tiny, tiny + Vec3::X * 1e-3 * f32::EPSILON * 50.0).is_err());
+        // Far from the origin, a target a kilometre away is fine; an ordinary camera too.
+        let far = Vec3::new(1e6, 0.0, 0.0);
+        assert!(camera(far, far - Vec3::new(1000.0, 0.0, 0.0)).is_ok());
+        assert!(camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO).is_ok());
+    }
 
     /// A box is seen when one of its points projects onto the screen in front of the
     /// eye (brute force over a grid of its points); boxes wholly behind, beside, above
