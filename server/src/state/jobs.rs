@@ -349,15 +349,22 @@ impl State {
     /// whether it was running.
     fn take_back(&mut self, id: u64) -> bool {
         self.cancel_on_worker(id);
-        let Some(job) = self.jobs.get_mut(&id) else {
+        let Some(JobState::Running { worker, .. }) = self.jobs.get(&id).map(|job| &job.state) else {
             return false;
         };
-        let JobState::Running { worker, .. } = job.state else {
-            return false;
-        };
+        let worker = *worker;
         if let Some(w) = self.workers.get_mut(&worker) {
             w.running.remove(&id);
         }
+        self.requeue_first(id)
+    }
+
+    /// Running job `id`, let go by its worker (taken back, or the worker gone), goes
+    /// back to the queue first in its client's line. Returns whether it was there.
+    pub(super) fn requeue_first(&mut self, id: u64) -> bool {
+        let Some(job) = self.jobs.get_mut(&id) else {
+            return false;
+        };
         let priority = Priority {
             predicted: false,
             deadline_us: 0,

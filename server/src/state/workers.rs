@@ -4,8 +4,6 @@
 use std::collections::HashSet;
 use std::time::Instant;
 
-use super::jobs::JobState;
-use super::queue::Priority;
 use super::{JobSender, State};
 
 #[derive(Debug)]
@@ -96,15 +94,7 @@ impl State {
         };
         tracing::info!(worker = %w.name, jobs = w.running.len(), "worker left; re-queueing its jobs");
         for id in w.running {
-            if let Some(job) = self.jobs.get_mut(&id) {
-                let priority = Priority {
-                    predicted: false,
-                    deadline_us: 0,
-                    id,
-                };
-                job.state = JobState::Queued(priority);
-                self.queue.stopped(&job.owner);
-                self.queue.insert(&job.owner, priority);
+            if self.requeue_first(id) {
                 self.counters.requeued += 1;
             }
         }
