@@ -153,3 +153,39 @@ pub fn start_worker(url: &str, extra: &[&str]) -> Running {
         .expect("starting relief-worker");
     Running(child)
 }
+
+/// A client of the server at `url` (sending `token`, as `client_id`) that has uploaded
+/// the default scene, and the scene's hash.
+pub async fn upload_default(
+    url: &str,
+    token: Option<&str>,
+    client_id: &str,
+) -> (relief_client::remote::Remote, String) {
+    let mut remote = relief_client::remote::Remote::connect(url, token, client_id)
+        .await
+        .expect("connect");
+    let bundle = relief_proto::bundle::bundle_for("default").expect("the default scene");
+    let hash = remote.put_scene(&bundle).await.expect("upload").to_string();
+    (remote, hash)
+}
+
+/// Waits (at most 30 s, polling) until `check` holds on the server's counters, and
+/// returns them.
+pub async fn wait_for(
+    remote: &mut relief_client::remote::Remote,
+    what: &str,
+    check: impl Fn(&relief_proto::pb::StatsReply) -> bool,
+) -> relief_proto::pb::StatsReply {
+    let start = std::time::Instant::now();
+    loop {
+        let stats = remote.stats().await.expect("stats");
+        if check(&stats) {
+            return stats;
+        }
+        assert!(
+            start.elapsed() < std::time::Duration::from_secs(30),
+            "timed out waiting for {what}: {stats:?}"
+        );
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+}

@@ -7,8 +7,6 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use relief_client::remote::Remote;
-use relief_proto::bundle::bundle_for;
 use relief_tests::{scratch, start_server, start_worker};
 
 /// The venv's python, created and filled from requirements.txt when missing.
@@ -50,17 +48,14 @@ fn a_python_client_generated_from_the_proto_gets_a_texture() {
     let (_server, url) = start_server(&[]);
     let _worker = start_worker(&url, &[]);
     let runtime = tokio::runtime::Runtime::new().unwrap();
-    let hash = runtime.block_on(async {
-        let mut remote = Remote::connect(&url, None, "setup").await.unwrap();
-        remote.put_scene(&bundle_for("default").unwrap()).await.unwrap()
-    });
+    let (_, hash) = runtime.block_on(relief_tests::upload_default(&url, None, "setup"));
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = Command::new(&python)
         .arg(root.join("foreign/client.py"))
         .arg(root.join("../proto"))
         .arg(scratch("python-stubs"))
         .arg(&url)
-        .arg(hash.to_string())
+        .arg(&hash)
         .output()
         .expect("running the Python client");
     let stdout = String::from_utf8_lossy(&out.stdout);

@@ -20,7 +20,9 @@ use relief_proto::auth::BearerToken;
 use relief_proto::bundle::bundle_for;
 use relief_proto::convert::{texture_to_pb, vec3_to_pb};
 use relief_proto::pb;
-use relief_tests::{Running, start_server, start_worker, wait_exit, worker_command};
+use relief_tests::{
+    Running, start_server, start_worker, upload_default, wait_exit, wait_for, worker_command,
+};
 use relief_trace::bake;
 use relief_trace::tracer::ObjectTracer;
 
@@ -171,21 +173,6 @@ fn tiny_texture() -> pb::ReliefTexture {
     }
 }
 
-async fn stats(remote: &mut Remote, what: &str, check: impl Fn(&pb::StatsReply) -> bool) -> pb::StatsReply {
-    let start = Instant::now();
-    loop {
-        let stats = remote.stats().await.expect("stats");
-        if check(&stats) {
-            return stats;
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "timed out waiting for {what}: {stats:?}"
-        );
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
-}
-
 /// Each credential does its own job only, and a client's requests and scenes are its
 /// own.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -239,7 +226,7 @@ async fn each_credential_may_do_its_own_job_only() {
     // With no worker, client one's request waits; client two, naming the same client
     // id and request id, withdraws nothing.
     let _waiting = one.request(ask(&hash, 7, 32, "same-id")).await.expect("queued");
-    stats(&mut one, "the request to wait", |s| s.queue_now == 1).await;
+    wait_for(&mut one, "the request to wait", |s| s.queue_now == 1).await;
     assert_eq!(two.withdraw(&[7]).await.expect("withdraw"), 0);
     assert_eq!(one.stats().await.expect("stats").queue_now, 1);
     assert_eq!(one.withdraw(&[7]).await.expect("withdraw"), 1);
@@ -265,16 +252,9 @@ async fn each_credential_may_do_its_own_job_only() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_worker_answers_only_for_its_own_jobs_with_the_texture_asked_for() {
     let (_server, url) = start_server(&SERVER_ARGS);
-    let mut client = Remote::connect(&url, Some("client-one"), "c")
-        .await
-        .expect("connect");
-    let hash = client
-        .put_scene(&bundle_for("default").expect("scene"))
-        .await
-        .expect("upload")
-        .to_string();
+    let (mut client, hash) = upload_default(&url, Some("client-one"), "c").await;
     let mut leased = FakeWorker::register(&url, "worker-one").await.expect("session");
-    stats(&mut client, "the fake worker", |s| s.workers == 1).await;
+    wait_for(&mut client, "the fake worker", |s| s.workers == 1).await;
     let mut results = client.request(ask(&hash, 1, 64, "c")).await.expect("queued");
     let job = leased.job().await;
     assert_eq!(job.size, 64);
@@ -284,7 +264,7 @@ async fn a_worker_answers_only_for_its_own_jobs_with_the_texture_asked_for() {
     // Another worker answers for a job it was never given — with the very texture the
     // job asks for: dropped all the same.
     let mut forger = FakeWorker::register(&url, "worker-two").await.expect("session");
-    stats(&mut client, "the second fake worker", |s| s.workers == 2).await;
+    wait_for(&mut client, "the second fake worker", |s| s.workers == 2).await;
     assert_eq!(
         read_scene(&url, "worker-two", &job.scene_hash).await,
         Err(Code::NotFound)
@@ -294,14 +274,14 @@ async fn a_worker_answers_only_for_its_own_jobs_with_the_texture_asked_for() {
     let genuine = bake(&sphere, EYE, 64, DepthBits::Eight).expect("bake");
     forger.answer(job.job_id, texture_to_pb(&genuine)).await;
     assert_eq!(forger.ended().await, Code::PermissionDenied);
-    let after = stats(&mut client, "the forger dropped", |s| s.workers == 1).await;
+    let after = wait_for(&mut client, "the forger dropped", |s| s.workers == 1).await;
     assert_eq!(after.workers_dropped_forged, 1);
 
     // The worker holding the job answers with a 1×1 texture for a 64² job: dropped too,
     // and the job goes back to the queue.
     leased.answer(job.job_id, tiny_texture()).await;
     assert_eq!(leased.ended().await, Code::PermissionDenied);
-    let after = stats(&mut client, "the leased worker dropped", |s| s.workers == 0).await;
+    let after = wait_for(&mut client, "the leased worker dropped", |s| s.workers == 0).await;
     assert_eq!((after.workers_dropped_forged, after.queue_now), (2, 1));
 
     // A real worker makes the texture, and the client gets it, whole.
@@ -333,7 +313,7 @@ async fn a_flood_from_one_client_does_not_starve_another() {
         .await
         .expect("connect");
     single.put_scene(&bundle).await.expect("upload");
-    stats(&mut single, "the worker", |s| s.workers == 1).await;
+    wait_for(&mut single, "the worker", |s| s.workers == 1).await;
     let at = |k: u64| pb::ImpostorRequest {
         eye: Some(vec3_to_pb(EYE + Vec3::new(0.0, 0.01 * k as f32, 0.0))),
         ..ask(&hash, k, 32, "single")
@@ -360,7 +340,7 @@ async fn a_flood_from_one_client_does_not_starve_another() {
         };
         flooding.push(flood.request(request).await.expect("queued"));
     }
-    stats(&mut single, "the flood queued", |s| {
+    wait_for(&mut single, "the flood queued", |s| {
         s.queue_now as u64 >= FLOOD - 2
     })
     .await;
@@ -507,16 +487,9 @@ async fn a_worker_that_never_answers_loses_its_job_to_another() {
     let mut args: Vec<&str> = SERVER_ARGS.to_vec();
     args.extend(["--job-progress-ms", "500"]);
     let (_server, url) = start_server(&args);
-    let mut client = Remote::connect(&url, Some("client-one"), "c")
-        .await
-        .expect("connect");
-    let hash = client
-        .put_scene(&bundle_for("default").expect("scene"))
-        .await
-        .expect("upload")
-        .to_string();
+    let (mut client, hash) = upload_default(&url, Some("client-one"), "c").await;
     let mut hung = FakeWorker::register(&url, "worker-one").await.expect("session");
-    stats(&mut client, "the hung worker", |s| s.workers == 1).await;
+    wait_for(&mut client, "the hung worker", |s| s.workers == 1).await;
     let mut results = client.request(ask(&hash, 1, 64, "c")).await.expect("queued");
     let job = hung.job().await;
     // It heartbeats (keeps its lease) but never answers; a real worker joins.
@@ -637,7 +610,7 @@ async fn soak_with_honest_and_hostile_callers() {
         .await
         .expect("connect");
     let hash = setup.put_scene(&bundle).await.expect("upload").to_string();
-    stats(&mut setup, "the workers", |s| s.workers >= 2).await;
+    wait_for(&mut setup, "the workers", |s| s.workers >= 2).await;
     let until = Instant::now() + Duration::from_secs(seconds);
 
     let honest = |token: &'static str, id: &'static str| {

@@ -14,7 +14,7 @@ use relief_proto::convert::{texture_from_pb, vec3_to_pb};
 use relief_proto::pb;
 use relief_tests::{
     Running, command, scratch, send_sigterm, spawn_server, start_server, start_server_at, start_worker,
-    wait_exit, worker_command,
+    upload_default, wait_exit, wait_for, worker_command,
 };
 use relief_trace::bake;
 use relief_trace::tracer::ObjectTracer;
@@ -41,38 +41,7 @@ fn request(
     }
 }
 
-/// Waits (bounded) until `check` holds on the server's counters.
-async fn wait_for(
-    remote: &mut Remote,
-    what: &str,
-    check: impl Fn(&pb::StatsReply) -> bool,
-) -> pb::StatsReply {
-    let start = Instant::now();
-    loop {
-        let stats = remote.stats().await.expect("stats");
-        if check(&stats) {
-            return stats;
-        }
-        assert!(
-            start.elapsed() < Duration::from_secs(30),
-            "timed out waiting for {what}: {stats:?}"
-        );
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
-}
-
 /// Collects a request's stream: previews and the final texture.
-/// A client of the server at `url` that has uploaded the default scene, and its hash.
-async fn upload_default(url: &str) -> (Remote, String) {
-    let mut remote = Remote::connect(url, None, "test").await.unwrap();
-    let hash = remote
-        .put_scene(&bundle_for("default").unwrap())
-        .await
-        .unwrap()
-        .to_string();
-    (remote, hash)
-}
-
 async fn collect(
     mut stream: tonic::Streaming<pb::ImpostorResult>,
 ) -> Result<Vec<pb::ImpostorResult>, tonic::Status> {
@@ -130,7 +99,7 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_requests_are_refused_with_the_field_named() {
     let (_server, url) = start_server(&[]);
-    let (mut remote, hash) = upload_default(&url).await;
+    let (mut remote, hash) = upload_default(&url, None, "test").await;
     let eye = Vec3::new(6.0, 2.5, 4.0);
     let refused = |r: Result<tonic::Streaming<pb::ImpostorResult>, tonic::Status>| r.expect_err("refused");
     let mut nan = request(&hash, "knot", eye, 64, 1, pb::Urgency::Now);
@@ -192,7 +161,7 @@ async fn bad_requests_are_refused_with_the_field_named() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn withdrawn_predictions_are_cancelled() {
     let (_server, url) = start_server(&[]);
-    let (mut remote, hash) = upload_default(&url).await;
+    let (mut remote, hash) = upload_default(&url, None, "test").await;
     // No worker yet: three predictions wait in the queue.
     let mut streams = Vec::new();
     for id in 1..=3 {
@@ -221,7 +190,7 @@ async fn withdrawn_predictions_are_cancelled() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_request_no_worker_takes_ends_in_an_error() {
     let (_server, url) = start_server(&["--job-timeout-ms", "300"]);
-    let (mut remote, hash) = upload_default(&url).await;
+    let (mut remote, hash) = upload_default(&url, None, "test").await;
     let eye = Vec3::new(6.0, 2.5, 4.0);
     let stream = remote
         .request(request(&hash, "knot", eye, 64, 1, pb::Urgency::Now))
@@ -253,7 +222,7 @@ async fn start_long_bake(remote: &mut Remote, hash: &str) -> tonic::Streaming<pb
 async fn withdrawn_running_jobs_stop_on_their_worker() {
     let (_server, url) = start_server(&[]);
     let _worker = start_worker(&url, &[]);
-    let (mut remote, hash) = upload_default(&url).await;
+    let (mut remote, hash) = upload_default(&url, None, "test").await;
     let stats = wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
     assert!(stats.worker_slots == 1 && stats.worker_threads >= 1, "{stats:?}");
     // A long bake; the client cancels the call while it runs.
@@ -280,7 +249,7 @@ async fn a_killed_workers_job_is_answered_by_another() {
     // (A slow machine's long bakes must not meet the job timeout.)
     let (_server, url) = start_server(&["--lease-ms", "400", "--job-timeout-ms", "600000"]);
     let mut first = start_worker(&url, &[]);
-    let (mut remote, hash) = upload_default(&url).await;
+    let (mut remote, hash) = upload_default(&url, None, "test").await;
     wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
     // A big bake of the heavy object, so the worker is killed while holding it.
     let stream = start_long_bake(&mut remote, &hash).await;
@@ -298,7 +267,7 @@ async fn a_killed_workers_job_is_answered_by_another() {
 async fn a_worker_told_to_stop_finishes_its_job_first() {
     let (_server, url) = start_server(&["--job-timeout-ms", "600000"]);
     let mut worker = start_worker(&url, &["--slots", "2"]);
-    let (mut remote, hash) = upload_default(&url).await;
+    let (mut remote, hash) = upload_default(&url, None, "test").await;
     wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
     let stream = start_long_bake(&mut remote, &hash).await;
     send_sigterm(&worker.0);
