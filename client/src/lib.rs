@@ -17,6 +17,8 @@
 //!   generator.
 //! - [`remote`] — the client side of the protocol: scenes up, textures down,
 //!   withdrawals.
+//! - [`link`] — the link to the server kept alive: the scene uploaded again when the
+//!   server lost it, and whether textures can come at all ([`link::Health`]).
 //! - [`flight`] — the real-time flight along a camera path that `relief demo`,
 //!   `render` and `load` share.
 //!
@@ -44,6 +46,7 @@
 //! ```
 
 pub mod flight;
+pub mod link;
 pub mod manager;
 pub mod predict;
 pub mod remote;

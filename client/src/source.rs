@@ -16,8 +16,8 @@ use relief_render::impostor::Faces;
 use relief_trace::bake;
 use relief_trace::tracer::ObjectTracer;
 
-use crate::manager::{Arrival, Command, Config, Manager, ReadyTexture, TextureRequest};
-use crate::remote::Remote;
+use crate::link::{Degraded, Link};
+use crate::manager::{Arrival, Command, Config, Failure, Manager, ReadyTexture, TextureRequest};
 
 fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::ImpostorRequest {
     pb::ImpostorRequest {
@@ -38,21 +38,25 @@ fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::I
     }
 }
 
-/// What a request to the server is made of besides itself: the scene's hash there, the
+/// What a request to the server is made of besides itself: the link it goes over, the
 /// faces its object shows, and the half round trip injected each way.
-#[derive(Clone, Copy)]
-struct Served {
-    scene_hash: ContentHash,
+struct Served<'a> {
+    link: &'a Link,
     faces: Faces,
     half: Duration,
 }
 
-/// Serves `commands` with `remote` on the current tokio runtime; `rtt` is added to
-/// every exchange (half each way). A request the server cannot take (unreachable)
-/// goes to the local generator instead.
+/// A request still unanswered this long after the eye was predicted to need it (after
+/// it was sent, for one needed now) is withdrawn and counted as timed out: the server
+/// or its workers are stuck, and the manager, asking again, asks for a nearer eye.
+/// (Loaded loopback runs answer within 5 s at p99.)
+pub const ANSWER_DEADLINE: Duration = Duration::from_secs(10);
+
+/// Serves `commands` over `link` on the current tokio runtime; `rtt` is added to every
+/// exchange (half each way). While the link is degraded (see [`crate::link`]) requests
+/// go to the local generator instead.
 pub fn spawn_remote(
-    remote: Remote,
-    scene_hash: ContentHash,
+    link: Arc<Link>,
     scene: Arc<Scene>,
     mut commands: UnboundedReceiver<Command>,
     arrivals: UnboundedSender<Arrival>,
@@ -61,9 +65,10 @@ pub fn spawn_remote(
     let half = rtt / 2;
     let (local_tx, local_rx) = unbounded_channel();
     spawn_local(scene.clone(), local_rx, arrivals.clone());
+    let watch = tokio::spawn(link.clone().watch());
     tokio::spawn(async move {
         while let Some(command) = commands.recv().await {
-            let mut remote = remote.clone();
+            let link = link.clone();
             let scene = scene.clone();
             let arrivals = arrivals.clone();
             let local = local_tx.clone();
@@ -71,54 +76,99 @@ pub fn spawn_remote(
                 tokio::time::sleep(half).await;
                 match command {
                     Command::Withdraw(ids) => {
-                        let _ = remote.withdraw(&ids).await;
+                        let _ = link.remote.clone().withdraw(&ids).await;
                         let _ = local.send(Command::Withdraw(ids));
                     }
                     Command::Request(request) => {
                         let faces = scene.object(&request.object).map_or(Faces::Both, Faces::of);
                         let from = Served {
-                            scene_hash,
+                            link: &link,
                             faces,
                             half,
                         };
-                        serve_request(&mut remote, request, from, &arrivals, &local).await;
+                        serve_request(request, from, &arrivals, &local).await;
                     }
                 }
             });
         }
+        // The manager is gone: so is the run.
+        watch.abort();
     });
 }
 
-/// Asks `remote` for `request` and passes on what comes back (each result `half` late)
-/// — ending, whatever happens, in the final texture or a failure the manager hears of.
-/// A server that cannot be reached hands the request to the local generator.
+/// Whether `status` says the server could not be reached (or the connection to it
+/// broke), as opposed to an answer from it.
+fn unreachable(status: &tonic::Status) -> bool {
+    // (A connection that broke surfaces as `UNAVAILABLE`, as `CANCELLED` — but for a
+    // withdrawal, the server's answer — or as `UNKNOWN` naming the transport.)
+    let broken = ["transport", "connection", "broken pipe", "reset"];
+    match status.code() {
+        tonic::Code::Unavailable => true,
+        tonic::Code::Cancelled => status.message() != relief_proto::WITHDRAWN,
+        tonic::Code::Unknown => broken.iter().any(|b| status.message().to_lowercase().contains(b)),
+        _ => false,
+    }
+}
+
+/// Asks the server for `request` and passes on what comes back (each result `half`
+/// late) — ending, whatever happens, in the final texture or a failure the manager
+/// hears of. A scene the server no longer holds is uploaded again and the request
+/// asked again, once; a server that cannot be reached, or stops answering mid-way,
+/// hands the request to the local generator.
 async fn serve_request(
-    remote: &mut Remote,
     request: TextureRequest,
-    Served {
-        scene_hash,
-        faces,
-        half,
-    }: Served,
+    Served { link, faces, half }: Served<'_>,
     arrivals: &UnboundedSender<Arrival>,
     local: &UnboundedSender<Command>,
 ) {
     let id = request.id;
-    let fail = |reason: String| {
-        let _ = arrivals.send(Arrival::Failed { id, reason });
+    let fail = |failure: Failure| {
+        let _ = arrivals.send(Arrival::Failed { id, failure });
     };
-    let wire = to_pb(&request, scene_hash, &remote.client_id);
-    let mut stream = match remote.request(wire).await {
-        Ok(s) => s,
-        Err(e) if e.code() == tonic::Code::Unavailable => {
-            let _ = local.send(Command::Request(request));
-            return;
+    let to_local = |request: TextureRequest| {
+        let _ = local.send(Command::Request(request));
+    };
+    if link.health.degraded().is_some() {
+        return to_local(request);
+    }
+    let wire = to_pb(&request, link.scene_hash, &link.remote.client_id);
+    let mut remote = link.remote.clone();
+    let sent = tokio::time::Instant::now();
+    let mut stream = None;
+    for first_try in [true, false] {
+        let uploads = link.uploads_done().await;
+        match remote.request(wire.clone()).await {
+            Ok(s) => {
+                stream = Some(s);
+                break;
+            }
+            Err(e) if unreachable(&e) => {
+                link.health
+                    .degrade(Degraded::Unreachable(e.message().to_string()));
+                return to_local(request);
+            }
+            // The server has lost the scene (restarted, or evicted it): upload it again.
+            Err(e) if e.code() == tonic::Code::NotFound && first_try => {
+                if let Err(upload) = link.upload_again(uploads).await {
+                    return fail(Failure::Refused(upload.to_string()));
+                }
+            }
+            Err(e) => return fail(Failure::Refused(e.message().to_string())),
         }
-        Err(e) => return fail(e.message().to_string()),
+    }
+    let Some(mut stream) = stream else {
+        return fail(Failure::Refused(
+            "the scene was uploaded again, and is still not known".into(),
+        ));
     };
+    let deadline = sent + Duration::from_millis(request.needed_in_ms.unwrap_or(0)) + ANSWER_DEADLINE;
     let mut finished = false;
     loop {
-        match stream.message().await {
+        let Ok(message) = tokio::time::timeout_at(deadline, stream.message()).await else {
+            let _ = remote.withdraw(&[id]).await;
+            return fail(Failure::TimedOut(deadline - sent));
+        };
+        match message {
             Ok(Some(result)) => {
                 finished |= result.r#final;
                 tokio::time::sleep(half).await;
@@ -130,16 +180,25 @@ async fn serve_request(
                             is_final: result.r#final,
                         });
                     }
-                    Some(Err(e)) => fail(e.message().to_string()),
-                    None => fail("a result without a texture".into()),
+                    Some(Err(e)) => fail(Failure::Refused(e.message().to_string())),
+                    None => fail(Failure::Refused("a result without a texture".into())),
                 }
             }
             // After the final texture nothing more is owed. Before it, the end is a
             // failure: the manager must hear of a stream cut off (and ignores the end
             // of one it withdrew).
             Ok(None) | Err(_) if finished => return,
-            Ok(None) => return fail("the result stream ended without a final texture".into()),
-            Err(e) => return fail(e.message().to_string()),
+            Ok(None) => {
+                return fail(Failure::Refused(
+                    "the result stream ended without a final texture".into(),
+                ));
+            }
+            Err(e) if unreachable(&e) => {
+                link.health
+                    .degrade(Degraded::Unreachable(e.message().to_string()));
+                return to_local(request);
+            }
+            Err(e) => return fail(Failure::Refused(e.message().to_string())),
         }
     }
 }
@@ -193,7 +252,7 @@ pub fn spawn_local(
                 let arrival = match scene.object(&request.object) {
                     Err(e) => Arrival::Failed {
                         id: request.id,
-                        reason: e.to_string(),
+                        failure: Failure::Refused(e.to_string()),
                     },
                     Ok(object) => {
                         let tracer = tracers
@@ -207,7 +266,7 @@ pub fn spawn_local(
                             },
                             Err(e) => Arrival::Failed {
                                 id: request.id,
-                                reason: e.to_string(),
+                                failure: Failure::Refused(e.to_string()),
                             },
                         }
                     }
@@ -221,19 +280,13 @@ pub fn spawn_local(
         .unwrap_or_else(|e| tracing::warn!("no local generator: {e}"));
 }
 
-/// A manager of `scene` whose textures come from `remote`, the scene uploaded there as
-/// `scene_hash` (its requests served on the current tokio runtime; `rtt` added to
-/// every exchange, half each way).
-pub fn remote_manager(
-    scene: &Arc<Scene>,
-    config: Config,
-    remote: Remote,
-    scene_hash: ContentHash,
-    rtt: Duration,
-) -> Manager {
+/// A manager of `scene` whose textures come over `link` (its requests served on the
+/// current tokio runtime; `rtt` added to every exchange, half each way). The link's
+/// [`Health`](crate::link::Health) says how long the run was degraded.
+pub fn remote_manager(scene: &Arc<Scene>, config: Config, link: Arc<Link>, rtt: Duration) -> Manager {
     let (commands_tx, commands_rx) = unbounded_channel();
     let (arrivals_tx, arrivals_rx) = unbounded_channel();
-    spawn_remote(remote, scene_hash, scene.clone(), commands_rx, arrivals_tx, rtt);
+    spawn_remote(link, scene.clone(), commands_rx, arrivals_tx, rtt);
     Manager::new(scene, config, commands_tx, arrivals_rx)
 }
 

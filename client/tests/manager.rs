@@ -224,7 +224,7 @@ fn the_local_generator_serves_requests_for_now_in_the_order_asked() {
         .map(
             |_| match arrivals_rx.blocking_recv().expect("the generator stopped") {
                 Arrival::Texture { id, .. } => id,
-                Arrival::Failed { id, reason } => panic!("request {id} failed: {reason}"),
+                Arrival::Failed { id, failure } => panic!("request {id} failed: {failure}"),
             },
         )
         .collect();
@@ -425,4 +425,46 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
         lifetime >= ms(to_pickup + shown_for) && lifetime < ms(to_pickup + shown_for) + 250.0,
         "lifetime {lifetime} ms"
     );
+}
+
+/// A request that ends without its texture is counted by how it ended — refused, or
+/// timed out — and is open no more; the end of one the manager did not ask for (or
+/// already heard the end of) counts nothing. Needed still, it is asked for again.
+#[test]
+fn failed_requests_are_counted_by_how_they_ended() {
+    use relief_client::manager::{Arrival, Failure};
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let (commands_tx, mut commands) = unbounded_channel();
+    let (arrivals, arrivals_rx) = unbounded_channel();
+    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let centre = scene.objects[index(&scene, "sphere")].bounds.center();
+    let mut asked_now = |manager: &mut Manager, t: f64| {
+        let drawn = (centre + Vec3::new(0.0, 1.0, 4.5), centre, t);
+        manager.frame(
+            &scene,
+            &Camera::look_at(drawn.0, centre, Vec3::Y, 60.0, 160, 90).unwrap(),
+            t,
+        );
+        std::iter::from_fn(|| commands.try_recv().ok())
+            .filter_map(|c| match c {
+                Command::Request(r) if r.needed_in_ms.is_none() => Some(r.id),
+                _ => None,
+            })
+            .collect::<Vec<u64>>()
+    };
+    let first = asked_now(&mut manager, 0.0);
+    assert_eq!(first.len(), 1);
+    assert_eq!(manager.requests_open(), 1);
+    let fail = |id, failure| arrivals.send(Arrival::Failed { id, failure }).unwrap();
+    fail(first[0], Failure::TimedOut(Duration::from_secs(10)));
+    fail(first[0], Failure::Refused("again".into()));
+    fail(9999, Failure::Refused("not asked".into()));
+    let again = asked_now(&mut manager, 0.1);
+    let counters = &manager.counters;
+    assert_eq!((counters.requests_timed_out, counters.requests_failed), (1, 0));
+    assert_eq!(again.len(), 1, "asked for again");
+    fail(again[0], Failure::Refused("no".into()));
+    asked_now(&mut manager, 0.2);
+    assert_eq!(manager.counters.requests_failed, 1);
 }

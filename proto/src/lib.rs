@@ -33,6 +33,11 @@ pub mod convert;
 pub mod limits;
 pub mod shutdown;
 
+/// The message of the `CANCELLED` status that ends a withdrawn request's result
+/// stream: an answer from the server, where a `CANCELLED` without it is a connection
+/// that broke (a client tells the two apart by it).
+pub const WITHDRAWN: &str = "withdrawn";
+
 /// The generated messages, clients and servers of package `relief.v1`.
 #[allow(clippy::all, missing_docs)]
 pub mod pb {

@@ -204,13 +204,27 @@ async fn serve(args: Args) -> Result<()> {
     health
         .set_serving::<pb::workers_server::WorkersServer<Service>>()
         .await;
-    let reflection = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
+    // Reflection in both versions stock tools speak: `v1` (grpcurl) and `v1alpha`
+    // (Python's grpcio-reflection, older grpcurl), of every service served.
+    let reflection = || {
+        tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+    };
+    let reflection_v1 = reflection()
         .build_v1()
+        .context("building the reflection service")?;
+    let reflection_v1alpha = reflection()
+        .build_v1alpha()
         .context("building the reflection service")?;
     // TLS first: a certificate that does not load must fail before the server says
     // it is listening.
-    let mut builder = Server::builder().max_concurrent_streams(Some(args.max_streams));
+    // (Keepalive as clients and workers ping: a peer gone without a word frees its
+    // connection, streams and jobs within seconds.)
+    let mut builder = Server::builder()
+        .max_concurrent_streams(Some(args.max_streams))
+        .http2_keepalive_interval(Some(relief_proto::connect::KEEPALIVE_INTERVAL))
+        .http2_keepalive_timeout(Some(relief_proto::connect::KEEPALIVE_TIMEOUT));
     if let (Some(cert), Some(key)) = (&args.tls_cert, &args.tls_key) {
         let read =
             |flag: &str, p: &PathBuf| std::fs::read(p).with_context(|| format!("{flag} {}", p.display()));
@@ -249,7 +263,8 @@ async fn serve(args: Args) -> Result<()> {
     };
     let serving = builder
         .add_service(health_service)
-        .add_service(reflection)
+        .add_service(reflection_v1)
+        .add_service(reflection_v1alpha)
         .add_service(tonic::service::interceptor::InterceptedService::new(
             scenes,
             credentials.interceptor(None),

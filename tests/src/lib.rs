@@ -1,10 +1,11 @@
 //! Helpers for Relief's end-to-end tests: find the real binaries, make scratch
-//! directories, write small meshes.
+//! directories, write small meshes, put a [`relay`] between processes.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 pub mod oracle;
+pub mod relay;
 
 /// The directory holding the workspace's binaries: the one above this test executable's
 /// `deps/` directory (`target/<profile>/`).

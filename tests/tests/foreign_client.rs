@@ -1,5 +1,6 @@
-//! A gRPC client that is not ours — Python stubs generated from `proto/` by
-//! grpc_tools' protoc — asks a real server for a relief texture.
+//! gRPC clients that are not ours: Python stubs generated from `proto/` by
+//! grpc_tools' protoc ask a real server for a relief texture, and Python's stock
+//! reflection client lists its services.
 //!
 //! The Python packages come from `tests/foreign/requirements.txt`, installed into a
 //! virtual environment under `target/` on first use (PyPI must be reachable).
@@ -71,4 +72,32 @@ fn a_python_client_generated_from_the_proto_gets_a_texture() {
     assert_eq!(reply["depth_bytes"], 64 * 64);
     let covered = reply["covered"].as_u64().unwrap();
     assert!(covered > 64 * 64 / 4 && covered < 64 * 64, "{reply}");
+}
+
+/// Python's `grpcio-reflection`, which asks `grpc.reflection.v1alpha` only, lists the
+/// server's services (a server serving reflection `v1` alone answered it UNIMPLEMENTED).
+#[test]
+fn python_reflection_lists_the_services() {
+    let python = python();
+    let (_server, url) = start_server(&[]);
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = Command::new(&python)
+        .arg(root.join("foreign/reflection.py"))
+        .arg(url.strip_prefix("http://").unwrap())
+        .output()
+        .expect("running the Python reflection client");
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for service in [
+        "relief.v1.Impostors",
+        "relief.v1.Scenes",
+        "relief.v1.Workers",
+        "grpc.health.v1.Health",
+    ] {
+        assert!(stdout.lines().any(|l| l == service), "{service} not in {stdout}");
+    }
 }

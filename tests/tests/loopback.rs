@@ -116,7 +116,7 @@ async fn bad_requests_are_refused_with_the_field_named() {
             .request(request(&hash, "teapot", eye, 64, 2, pb::Urgency::Now))
             .await,
     );
-    assert_eq!(e.code(), Code::NotFound);
+    assert_eq!(e.code(), Code::InvalidArgument);
     assert!(e.message().contains("teapot"), "{}", e.message());
     let inside = Vec3::new(3.0, 1.3, 0.0);
     let e = refused(

@@ -35,6 +35,14 @@ pub fn positive(text: &str) -> Result<f32, String> {
     }
 }
 
+/// A fraction, in [0, 1].
+pub fn fraction(text: &str) -> Result<f64, String> {
+    match finite(text)? {
+        v if (0.0..=1.0).contains(&v) => Ok(v as f64),
+        v => Err(format!("{v} must be a fraction in [0, 1]")),
+    }
+}
+
 /// A vertical field of view in degrees, in (0, 180).
 pub fn fov(text: &str) -> Result<f32, String> {
     match finite(text)? {

@@ -15,7 +15,7 @@ use relief_render::warp::params::WarpParams;
 
 use super::around::angle_between;
 use super::choose::growth;
-use super::messages::Arrival;
+use super::messages::{Arrival, Failure};
 use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START};
 use super::{Manager, TextureLifetimes};
 
@@ -162,10 +162,25 @@ impl Manager {
                         }
                     }
                 }
-                Arrival::Failed { id, reason } => {
+                Arrival::Failed { id, failure } => {
                     // (A withdrawn request's end is no news.)
-                    if self.pending.remove(&id).is_some() {
-                        tracing::warn!("texture request {id} failed: {reason}");
+                    if self.pending.remove(&id).is_none() {
+                        continue;
+                    }
+                    let counted = match failure {
+                        Failure::Refused(_) => &mut self.counters.requests_failed,
+                        Failure::TimedOut(_) => &mut self.counters.requests_timed_out,
+                    };
+                    *counted += 1;
+                    // The first of a run on stderr; the rest are counted (a server gone
+                    // for a while fails every request, and one line each buried the
+                    // rest). Needed again, a texture is asked for again.
+                    if self.counters.requests_failed + self.counters.requests_timed_out == 1 {
+                        tracing::warn!(
+                            "texture request {id} failed: {failure} (further failures are counted, not shown)"
+                        );
+                    } else {
+                        tracing::debug!("texture request {id} failed: {failure}");
                     }
                 }
             }

@@ -16,6 +16,10 @@ pub struct Counters {
     pub requests_now: u64,
     pub requests_predicted: u64,
     pub withdrawn: u64,
+    /// Requests that ended without their texture: refused or broken off …
+    pub requests_failed: u64,
+    /// … or unanswered within their deadline (and withdrawn).
+    pub requests_timed_out: u64,
     /// Request sent → final texture received by the client, milliseconds.
     pub latencies_ms: Vec<f64>,
     /// Final texture received → taken in by a frame (made ready, and the frame loop

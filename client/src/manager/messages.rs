@@ -38,6 +38,17 @@ pub enum Arrival {
     },
     Failed {
         id: u64,
-        reason: String,
+        failure: Failure,
     },
+}
+
+/// Why a request ended without its final texture.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Failure {
+    /// The server (or the generator) refused it or broke off, saying this.
+    #[error("{0}")]
+    Refused(String),
+    /// No answer came within the request's deadline; it was withdrawn.
+    #[error("no texture within {0:?}: withdrawn")]
+    TimedOut(std::time::Duration),
 }

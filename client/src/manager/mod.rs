@@ -54,7 +54,7 @@ use crate::predict::Predictor;
 pub use cache::ReadyTexture;
 pub use choose::{Show, ShownTexture};
 pub use counters::{Counters, RenderStages, StaleCauses, TextureLifetimes};
-pub use messages::{Arrival, Command, TextureRequest};
+pub use messages::{Arrival, Command, Failure, TextureRequest};
 pub use policy::Config;
 pub use requests::texture_ladder;
 
@@ -120,6 +120,12 @@ impl Manager {
     /// Textures held, over all objects: none after a whole run means none ever came.
     pub fn textures_held(&self) -> usize {
         self.objects.iter().map(|o| o.held.len()).sum()
+    }
+
+    /// Requests asked for and not yet ended (by their final texture, a failure or a
+    /// withdrawal): at the end of a run, the work it leaves unanswered.
+    pub fn requests_open(&self) -> usize {
+        self.pending.len()
     }
 
     /// Before the first frame: asks for the textures `camera` needs and waits (at most

@@ -491,7 +491,7 @@ impl State {
         for &request_id in request_ids {
             if self.end_waiter(
                 &(client_id.to_string(), request_id),
-                Status::cancelled("withdrawn"),
+                Status::cancelled(relief_proto::WITHDRAWN),
             ) {
                 withdrawn += 1;
                 self.counters.withdrawn += 1;

@@ -146,7 +146,12 @@ impl State {
             Status::not_found(format!("no scene with hash {} (upload it first)", request.scene))
         })?;
         let bounds = scene.objects.get(&request.object).ok_or_else(|| {
-            Status::not_found(format!("the scene has no object named `{}`", request.object))
+            // (An argument the scene cannot take: `NOT_FOUND` is kept for a scene the
+            // server does not hold, which a client mends by uploading it again.)
+            Status::invalid_argument(format!(
+                "object: the scene has no object named `{}`",
+                request.object
+            ))
         })?;
         // The camera a worker would bake with: refused here, naming the field, rather
         // than failing on a worker.

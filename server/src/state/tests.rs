@@ -351,7 +351,7 @@ fn a_vanished_workers_jobs_are_requeued_and_bad_requests_refused() {
     unknown.object = "cube".into();
     assert_eq!(
         s.admit(&unknown, OWNER, tx.clone()).unwrap_err().code(),
-        tonic::Code::NotFound
+        tonic::Code::InvalidArgument
     );
     unknown.scene = ContentHash([1; 32]);
     assert_eq!(

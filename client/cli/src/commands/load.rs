@@ -13,6 +13,7 @@ use clap::Args;
 use serde::Serialize;
 
 use relief_client::flight::Flight;
+use relief_client::link::Link;
 use relief_client::manager::{Config, Counters, Manager};
 use relief_client::source::remote_manager;
 use relief_core::scene::Scene;
@@ -144,7 +145,7 @@ pub fn run(args: LoadArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let setup = Setup {
         tracer: Arc::new(SceneTracer::new(&scene)),
-        bundle: bundle_for(&args.scene)?,
+        bundle: Arc::new(bundle_for(&args.scene)?),
         scene,
         runtime: tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
@@ -246,7 +247,7 @@ pub fn run(args: LoadArgs) -> Result<()> {
 struct Setup<'a> {
     scene: Arc<Scene>,
     tracer: Arc<SceneTracer>,
-    bundle: relief_proto::bundle::Bundle,
+    bundle: Arc<relief_proto::bundle::Bundle>,
     runtime: tokio::runtime::Runtime,
     args: &'a LoadArgs,
 }
@@ -280,8 +281,7 @@ impl Setup<'_> {
                     remote_manager(
                         &self.scene,
                         config,
-                        remote,
-                        hash,
+                        Link::new(remote, self.bundle.clone(), hash),
                         Duration::from_millis(args.rtt_ms),
                     )
                 };

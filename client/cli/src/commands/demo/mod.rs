@@ -14,6 +14,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 
 use relief_client::flight::{Flight, WARM_UP_LIMIT};
+use relief_client::link::Link;
 use relief_client::manager::Config;
 use relief_client::source::{local_manager, remote_manager};
 use relief_core::stats::{finite_mean, finite_median, finite_min, median, percentile};
@@ -82,6 +83,11 @@ pub struct DemoArgs {
     /// Frames per second the camera moves at (frames are paced to it).
     #[arg(long, default_value = "30", value_parser = clap::value_parser!(u32).range(1..=1000))]
     fps: u32,
+    /// Exit with an error when more than this fraction of the frames were stale (an
+    /// impostor shown past its tolerance, or missing): a run the service did not keep
+    /// up with. 1 never fails.
+    #[arg(long, default_value_t = DEFAULT_MAX_STALE_FRAC, value_parser = args::fraction)]
+    max_stale_frac: f64,
     /// Print the summary as JSON.
     #[arg(long)]
     json: bool,
@@ -90,6 +96,11 @@ pub struct DemoArgs {
     #[arg(long)]
     window: bool,
 }
+
+/// `--max-stale-frac`'s default: a quarter of the frames stale is a run that went
+/// without its textures for long stretches (healthy loopback runs: 0–2 %, 100 ms
+/// round trips included), not one a slow frame or two spoiled.
+const DEFAULT_MAX_STALE_FRAC: f64 = 0.25;
 
 /// Memory the frames kept for comparison after the flight may take.
 const MAX_COMPARED_BYTES: usize = 256 << 20;
@@ -128,26 +139,37 @@ pub fn run(args: DemoArgs) -> Result<()> {
         predict: !args.no_predict,
         ..Config::default()
     };
-    let (mut manager, source) = match &url {
+    // (`health`: whether the server could serve, for a run with one.)
+    let (mut manager, source, health) = match &url {
         Some(url) => {
             let _guard = runtime.enter();
             relief_proto::connect::refuse_token_in_clear(url, args.token.as_deref(), args.allow_insecure)?;
+            let bundle = Arc::new(bundle_for(&args.scene)?);
             // Workers we started must have registered; a given server has its own.
             let (remote, hash) = runtime.block_on(connect_and_upload(
                 url,
                 args.token.as_deref(),
                 args.tls_ca.as_deref(),
                 &format!("demo-{}", std::process::id()),
-                &bundle_for(&args.scene)?,
+                &bundle,
                 started_workers,
             ))?;
             let rtt = Duration::from_millis(args.rtt_ms);
+            let link = Link::new(remote, bundle, hash);
+            // (A server without a worker is known before the first request.)
+            runtime.block_on(link.look());
+            let health = link.health.clone();
             (
-                remote_manager(&scene, config, remote, hash, rtt),
+                remote_manager(&scene, config, link, rtt),
                 format!("server {url}"),
+                Some(health),
             )
         }
-        None => (local_manager(&scene, config), "in-process generator".to_string()),
+        None => (
+            local_manager(&scene, config),
+            "in-process generator".to_string(),
+            None,
+        ),
     };
     let flight = Flight {
         scene: &scene,
@@ -227,6 +249,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
         requests_now: counters.requests_now,
         requests_predicted: counters.requests_predicted,
         withdrawn: counters.withdrawn,
+        requests_failed: counters.requests_failed,
+        requests_timed_out: counters.requests_timed_out,
+        requests_open_at_exit: manager.requests_open(),
+        degraded_s: health.as_ref().map(|h| h.degraded_s()),
         latency_ms_p50: percentile(&counters.latencies_ms, 0.5),
         latency_ms_p99: percentile(&counters.latencies_ms, 0.99),
         pickup_ms_p50: percentile(&counters.pickup_ms, 0.5),
@@ -268,6 +294,18 @@ pub fn run(args: DemoArgs) -> Result<()> {
         println!("{}", summary.line(args.size, &args.out));
     }
     drop(service);
+    let stale_frac = summary.stale_frames as f64 / summary.frames.max(1) as f64;
+    if stale_frac > args.max_stale_frac {
+        bail!(
+            "{:.1} % of the frames were stale, over --max-stale-frac {:.1} %{}",
+            100.0 * stale_frac,
+            100.0 * args.max_stale_frac,
+            match summary.degraded_s {
+                Some(s) if s > 0.0 => format!(": the server could not serve for {s:.1} s"),
+                _ => String::new(),
+            }
+        );
+    }
     // Every frame drawn as geometry is not a run of the service: say so, and fail.
     if manager.textures_held() == 0 && summary.needs > 0 {
         bail!(

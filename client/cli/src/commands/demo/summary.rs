@@ -52,6 +52,15 @@ pub(super) struct Summary {
     pub(super) requests_now: u64,
     pub(super) requests_predicted: u64,
     pub(super) withdrawn: u64,
+    /// Requests that ended without their texture: refused or broken off …
+    pub(super) requests_failed: u64,
+    /// … or unanswered within their deadline (and withdrawn) …
+    pub(super) requests_timed_out: u64,
+    /// … or still open when the flight ended.
+    pub(super) requests_open_at_exit: usize,
+    /// Seconds the server could not serve (unreachable, or without a worker);
+    /// `null` without a server.
+    pub(super) degraded_s: Option<f64>,
     /// Request sent → final texture received by the client.
     pub(super) latency_ms_p50: f64,
     pub(super) latency_ms_p99: f64,
@@ -113,12 +122,34 @@ pub(super) struct Summary {
 }
 
 impl Summary {
+    /// What went wrong with the requests, for the one line: nothing when nothing did.
+    fn trouble(&self) -> String {
+        let mut said = Vec::new();
+        if self.requests_failed > 0 {
+            said.push(format!("{} failed", self.requests_failed));
+        }
+        if self.requests_timed_out > 0 {
+            said.push(format!("{} timed out", self.requests_timed_out));
+        }
+        if self.requests_open_at_exit > 0 {
+            said.push(format!("{} open at exit", self.requests_open_at_exit));
+        }
+        if let Some(s) = self.degraded_s.filter(|&s| s > 0.0) {
+            said.push(format!("server unable to serve for {s:.1} s"));
+        }
+        if said.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", said.join(", "))
+        }
+    }
+
     /// The one line the demo prints: frames and their time against all geometry,
     /// requests and their latency, stale frames, image error; where the outputs went.
     pub(super) fn line(&self, (w, h): (u32, u32), out: &Path) -> String {
         format!(
             "{} frames ({}x{}) from {}: frame {:.1} ms p50 / {:.1} p95 (all geometry {:.1} ms); \
-             {} requests now, {} predicted, latency {}; {} stale frames; PSNR {} -> {}",
+             {} requests now, {} predicted, latency {}{}; {} stale frames; PSNR {} -> {}",
             self.frames,
             w,
             h,
@@ -136,6 +167,7 @@ impl Summary {
             } else {
                 "not measured (no texture arrived during the flight)".to_string()
             },
+            self.trouble(),
             self.stale_frames,
             match (self.psnr_db_mean, self.psnr_db_min) {
                 (Some(mean), Some(min)) => format!("{mean:.1} dB mean, {min:.1} min"),

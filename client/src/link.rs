@@ -1,0 +1,249 @@
+//! The client's link to its server, kept alive through what a network and an operator
+//! do to it: the scene uploaded again when the server has lost it (a restart, an
+//! eviction from its store), and a watch on whether textures can come at all.
+//!
+//! # Degraded
+//!
+//! The link is *degraded* while the server cannot be reached or has no worker: no
+//! texture can come from it then. [`Health`] says so once on stderr when it begins and
+//! when it ends, and counts its seconds for the run's summary; meanwhile the requests
+//! go to the in-process generator (see [`source`](crate::source)), and back to the
+//! server as soon as a look at its counters finds it serving again — with the scene
+//! uploaded again at once when it had been unreachable (it may have restarted).
+//!
+//! # Uploading again
+//!
+//! A request answered "no scene with hash …" finds the scene gone: [`Link::upload_again`]
+//! uploads it once for every request that found it gone at the same time (they wait
+//! for the one upload), and after a failed upload waits [`REUPLOAD_BACKOFF_FIRST`],
+//! doubling, before trying again — a server refusing the scene is not sent it in a loop.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use relief_core::hash::ContentHash;
+use relief_proto::bundle::Bundle;
+
+use crate::remote::Remote;
+
+/// How often the link looks at the server's counters (is it there, has it a worker):
+/// a server back after a restart is found within this …
+pub const HEALTH_POLL: Duration = Duration::from_millis(500);
+
+/// … and one that does not answer a look within this counts as unreachable (a link
+/// cut without a word: HTTP/2 keepalive ends the connection a little later).
+pub const HEALTH_POLL_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// After a failed upload of the scene, the next waits this long, …
+pub const REUPLOAD_BACKOFF_FIRST: Duration = Duration::from_millis(250);
+
+/// … doubling each failure, up to this.
+pub const REUPLOAD_BACKOFF_MAX: Duration = Duration::from_secs(8);
+
+/// Why no texture can come from the server.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Degraded {
+    /// It does not answer (down, restarting, or cut off).
+    Unreachable(String),
+    /// It answers, but has no worker to make textures.
+    NoWorkers,
+}
+
+impl std::fmt::Display for Degraded {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Degraded::Unreachable(why) => write!(f, "the server cannot be reached ({why})"),
+            Degraded::NoWorkers => write!(f, "the server has no worker"),
+        }
+    }
+}
+
+#[derive(Debug, Default)]
+struct HealthState {
+    /// Since when, and why, while degraded.
+    degraded: Option<(Instant, Degraded)>,
+    /// Time degraded before the current episode.
+    past: Duration,
+    episodes: u32,
+}
+
+/// Whether textures can come from the server now, and for how long they could not: a
+/// cheap handle, shared by the link's tasks and whoever reports on the run.
+#[derive(Debug, Clone, Default)]
+pub struct Health(Arc<Mutex<HealthState>>);
+
+impl Health {
+    fn lock(&self) -> MutexGuard<'_, HealthState> {
+        // (A panic elsewhere while holding it leaves plain counters: still good.)
+        self.0.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+
+    /// The link is degraded for `why` (said once on stderr as it begins).
+    pub fn degrade(&self, why: Degraded) {
+        let mut state = self.lock();
+        if state.degraded.is_none() {
+            tracing::warn!("{why}: drawing with textures made here, or geometry, until it serves again");
+            state.episodes += 1;
+            state.degraded = Some((Instant::now(), why));
+        }
+    }
+
+    /// Textures can come from the server again (said once, with how long they could
+    /// not); returns why they could not, if they could not until now.
+    pub fn restore(&self) -> Option<Degraded> {
+        let mut state = self.lock();
+        let (since, why) = state.degraded.take()?;
+        let lasted = since.elapsed();
+        state.past += lasted;
+        tracing::warn!(
+            "the server serves again, after {:.1} s ({why})",
+            lasted.as_secs_f64()
+        );
+        Some(why)
+    }
+
+    /// Why no texture can come from the server now, if none can.
+    pub fn degraded(&self) -> Option<Degraded> {
+        self.lock().degraded.as_ref().map(|(_, why)| why.clone())
+    }
+
+    /// Seconds degraded so far, the current episode included.
+    pub fn degraded_s(&self) -> f64 {
+        let state = self.lock();
+        let now = state
+            .degraded
+            .as_ref()
+            .map_or(Duration::ZERO, |(since, _)| since.elapsed());
+        (state.past + now).as_secs_f64()
+    }
+
+    /// How many times the link became degraded.
+    pub fn episodes(&self) -> u32 {
+        self.lock().episodes
+    }
+}
+
+/// Uploads of the scene after the first, and when the next may be tried.
+#[derive(Debug)]
+struct Uploads {
+    /// Uploads that succeeded (after the one before the flight).
+    done: u64,
+    /// Failed uploads in a row, and the earliest the next may start.
+    failures: u32,
+    retry_at: Option<Instant>,
+}
+
+/// What every request to one server shares: the connection, the scene to upload again,
+/// and the link's [`Health`].
+pub struct Link {
+    pub remote: Remote,
+    pub bundle: Arc<Bundle>,
+    /// The hash the server stored the scene under.
+    pub scene_hash: ContentHash,
+    pub health: Health,
+    uploads: tokio::sync::Mutex<Uploads>,
+}
+
+/// Why the scene could not be uploaded again.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum UploadError {
+    #[error("uploading the scene again failed: {0}")]
+    Failed(String),
+    #[error("uploading the scene again: backing off for {0:?} after {1} failure(s)")]
+    BackingOff(Duration, u32),
+    #[error("the server stored the scene again under {0}, not {1}")]
+    OtherHash(ContentHash, ContentHash),
+}
+
+impl Link {
+    pub fn new(remote: Remote, bundle: Arc<Bundle>, scene_hash: ContentHash) -> Arc<Link> {
+        Arc::new(Link {
+            remote,
+            bundle,
+            scene_hash,
+            health: Health::default(),
+            uploads: tokio::sync::Mutex::new(Uploads {
+                done: 0,
+                failures: 0,
+                retry_at: None,
+            }),
+        })
+    }
+
+    /// The number of uploads after the first so far: a request that finds the scene
+    /// gone passes the count it saw before asking to [`Link::upload_again`].
+    pub async fn uploads_done(&self) -> u64 {
+        self.uploads.lock().await.done
+    }
+
+    /// Uploads the scene again unless another request did since `seen` (the count
+    /// [`Link::uploads_done`] gave before the request was sent); waits for an upload in
+    /// progress rather than starting a second.
+    pub async fn upload_again(&self, seen: u64) -> Result<(), UploadError> {
+        let mut uploads = self.uploads.lock().await;
+        if uploads.done != seen {
+            return Ok(());
+        }
+        if let Some(at) = uploads.retry_at
+            && let Some(left) = at.checked_duration_since(Instant::now())
+        {
+            return Err(UploadError::BackingOff(left, uploads.failures));
+        }
+        let result = self.remote.clone().put_scene(&self.bundle).await;
+        match result {
+            Ok(hash) if hash == self.scene_hash => {
+                uploads.done += 1;
+                uploads.failures = 0;
+                uploads.retry_at = None;
+                tracing::info!("uploaded the scene again ({hash})");
+                Ok(())
+            }
+            Ok(hash) => Err(UploadError::OtherHash(hash, self.scene_hash)),
+            Err(status) => {
+                uploads.failures += 1;
+                let wait = REUPLOAD_BACKOFF_FIRST
+                    .saturating_mul(1 << (uploads.failures - 1).min(16))
+                    .min(REUPLOAD_BACKOFF_MAX);
+                uploads.retry_at = Some(Instant::now() + wait);
+                Err(UploadError::Failed(status.message().to_string()))
+            }
+        }
+    }
+
+    /// Looks once at the server's counters (at most [`HEALTH_POLL_TIMEOUT`]) and
+    /// brings [`Link::health`] up to date: before a flight, so that its first requests
+    /// go where textures can come from.
+    pub async fn look(&self) {
+        let look = tokio::time::timeout(HEALTH_POLL_TIMEOUT, self.remote.clone().stats()).await;
+        match look {
+            Ok(Ok(stats)) if stats.workers == 0 => self.health.degrade(Degraded::NoWorkers),
+            Ok(Ok(_)) => {
+                // A server back from being unreachable may be a new one (restarted):
+                // upload the scene at once rather than when a request finds it gone.
+                if let Some(Degraded::Unreachable(_)) = self.health.restore() {
+                    let done = self.uploads_done().await;
+                    if let Err(e) = self.upload_again(done).await {
+                        tracing::warn!("{e}");
+                    }
+                }
+            }
+            Ok(Err(status)) => self
+                .health
+                .degrade(Degraded::Unreachable(status.message().to_string())),
+            Err(_) => self.health.degrade(Degraded::Unreachable(format!(
+                "no answer within {HEALTH_POLL_TIMEOUT:?}"
+            ))),
+        }
+    }
+
+    /// [`Link::look`] every [`HEALTH_POLL`], for ever (the task serving the link's
+    /// requests ends it with the run).
+    pub async fn watch(self: Arc<Link>) {
+        let mut tick = tokio::time::interval(HEALTH_POLL);
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        loop {
+            tick.tick().await;
+            self.look().await;
+        }
+    }
+}
