@@ -3,8 +3,8 @@
 //! (in [`convert`]) — every message is validated here, where it enters a process — and
 //! scene bundles ([`bundle`]), how scenes travel by content hash; and what the server
 //! and the workers share besides: the bearer token ([`auth`]), endpoints
-//! ([`connect`]), the sizes of what crosses the wire ([`limits`]) and the shutdown
-//! signal ([`shutdown`]).
+//! ([`connect`]), the sizes of what crosses the wire ([`limits`]), the metrics
+//! endpoint ([`metrics`]) and the shutdown signal ([`shutdown`]).
 //!
 //! # Brief overview
 //!
@@ -31,6 +31,7 @@ pub mod bundle;
 pub mod connect;
 pub mod convert;
 pub mod limits;
+pub mod metrics;
 pub mod shutdown;
 
 /// The message of the `CANCELLED` status that ends a withdrawn request's result

@@ -36,8 +36,10 @@
 //! - [`identity`] — who calls: each credential a client's or a worker's, and what it
 //!   owns.
 //! - [`service`] — the gRPC services (`Scenes`, `Impostors`, `Workers`) over it.
+//! - [`metrics`] — the same counters for Prometheus (`--metrics-listen`).
 
 pub mod connections;
 pub mod identity;
+pub mod metrics;
 pub mod service;
 pub mod state;

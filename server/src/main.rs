@@ -7,6 +7,7 @@
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{Context, Result};
@@ -112,6 +113,10 @@ struct Args {
     /// Calls open at once on one connection.
     #[arg(long, env = "RELIEF_MAX_STREAMS", default_value = "256", value_parser = clap::value_parser!(u32).range(1..=100_000))]
     max_streams: u32,
+    /// Serve metrics for Prometheus on this address (`http://ADDR/metrics`; any path
+    /// answers). Off by default.
+    #[arg(long, env = "RELIEF_METRICS_LISTEN")]
+    metrics_listen: Option<SocketAddr>,
     /// Where received scenes are unpacked (default: a directory under the system's temp dir).
     #[arg(long, env = "RELIEF_SCENE_DIR")]
     scene_dir: Option<PathBuf>,
@@ -179,6 +184,14 @@ async fn serve(args: Args) -> Result<()> {
             "no credential is asked for on {}: anyone who reaches it may use it",
             args.listen
         );
+    }
+    if let Some(address) = args.metrics_listen {
+        let listener = tokio::net::TcpListener::bind(address)
+            .await
+            .with_context(|| format!("--metrics-listen: binding {address}"))?;
+        tracing::info!("metrics on http://{address}/metrics");
+        let registry = Arc::new(relief_server::metrics::registry(shared.clone()));
+        tokio::spawn(relief_proto::metrics::serve(listener, registry));
     }
     let service = Service(shared);
     let scenes = pb::scenes_server::ScenesServer::new(service.clone())

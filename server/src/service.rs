@@ -283,7 +283,8 @@ impl pb::impostors_server::Impostors for Service {
     ) -> Result<Response<Self::RequestStream>, Status> {
         let began = std::time::Instant::now();
         let caller = Caller::of(&request)?;
-        let mut r = request_from_pb(request.get_ref())?;
+        let mut r =
+            request_from_pb(request.get_ref()).inspect_err(|e| self.0.state().count_refusal(e.code()))?;
         // Requests are the credential's: another cannot withdraw them by naming the id.
         r.client_id = scoped(&caller, &r.client_id);
         let span =
@@ -294,6 +295,7 @@ impl pb::impostors_server::Impostors for Service {
         let admission = state.admit(&r, &caller.name, tx.clone());
         if let Err(e) = &admission {
             tracing::info!(code = ?e.code(), "refused: {}", e.message());
+            state.count_refusal(e.code());
         }
         match admission? {
             Admission::Cached(texture) => {

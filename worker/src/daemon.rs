@@ -28,6 +28,7 @@ use relief_trace::bake::bake_unless_cancelled;
 use relief_trace::tracer::ObjectTracer;
 
 use crate::Args;
+use crate::metrics::WorkerMetrics;
 
 type Scenes = pb::scenes_client::ScenesClient<InterceptedService<Channel, BearerToken>>;
 
@@ -103,6 +104,7 @@ struct JobContext {
     /// Each running job's cancel flag, set when the server cancels it.
     cancelled: Arc<Mutex<HashMap<u64, Arc<AtomicBool>>>>,
     out: mpsc::UnboundedSender<pb::WorkerMessage>,
+    metrics: WorkerMetrics,
 }
 
 impl JobContext {
@@ -142,6 +144,14 @@ pub async fn run(args: Args) -> Result<()> {
     });
     let stop = relief_proto::shutdown::watch();
     let loaded = LoadedScenes::default();
+    let (metrics, registry) = WorkerMetrics::new();
+    if let Some(address) = args.metrics_listen {
+        let listener = tokio::net::TcpListener::bind(address)
+            .await
+            .map_err(|e| anyhow!("--metrics-listen: binding {address}: {e}"))?;
+        tracing::info!("metrics on http://{address}/metrics");
+        tokio::spawn(relief_proto::metrics::serve(listener, Arc::new(registry)));
+    }
     let mut backoff = REDIAL_FIRST;
     loop {
         if *stop.borrow() {
@@ -155,6 +165,7 @@ pub async fn run(args: Args) -> Result<()> {
             &auth,
             scene_dir,
             loaded.clone(),
+            metrics.clone(),
             stop.clone(),
         )
         .await
@@ -189,6 +200,7 @@ async fn session(
     auth: &BearerToken,
     scene_dir: &std::path::Path,
     loaded: LoadedScenes,
+    metrics: WorkerMetrics,
     mut stop: watch::Receiver<bool>,
 ) -> End {
     let channel = match endpoint.connect().await {
@@ -226,6 +238,7 @@ async fn session(
         Err(e) => return End::Lost(anyhow!("opening the session: {}", e.message())),
     };
     tracing::info!("registered with {} as {name}", args.server);
+    metrics.registered.set(1);
     let heartbeat = {
         let out = out.clone();
         let period = Duration::from_millis(args.heartbeat_ms);
@@ -248,6 +261,7 @@ async fn session(
         scene_dir: scene_dir.to_path_buf(),
         cancelled: Arc::new(Mutex::new(HashMap::new())),
         out,
+        metrics: metrics.clone(),
     };
     let mut jobs = JoinSet::new();
     let end = loop {
@@ -294,6 +308,7 @@ async fn session(
         }
     };
     heartbeat.abort();
+    metrics.registered.set(0);
     if matches!(end, End::Stopped) {
         // The results are queued, not yet sent: close this side (every sender gone)
         // and wait — bounded — for the server to end the session, which it does once
@@ -316,13 +331,19 @@ async fn run_job(job: pb::Job, context: JobContext, cancelled: Arc<AtomicBool>) 
     let out = context.out.clone();
     // (Every log line of the job names it.)
     let span = tracing::info_span!("job", id, object = %job.object, size = job.size);
-    let kind = match bake_job(job, &context, &cancelled).instrument(span).await {
+    context.metrics.jobs_running.inc();
+    let baked = bake_job(job, &context, &cancelled).instrument(span).await;
+    context.metrics.jobs_running.dec();
+    let kind = match baked {
         Ok(Baked::Finished) => None,
         Ok(Baked::Stopped) => Some(pb::worker_message::Kind::Stopped(pb::JobStopped { job_id: id })),
-        Err(reason) => Some(pb::worker_message::Kind::Failed(pb::JobFailed {
-            job_id: id,
-            reason,
-        })),
+        Err(reason) => {
+            context.metrics.bake_ended("failed");
+            Some(pb::worker_message::Kind::Failed(pb::JobFailed {
+                job_id: id,
+                reason,
+            }))
+        }
     };
     if let Some(kind) = kind {
         let _ = out.send(pb::WorkerMessage { kind: Some(kind) });
@@ -363,9 +384,14 @@ async fn bake_job(job: pb::Job, context: &JobContext, cancelled: &Arc<AtomicBool
                 .map_err(|e| e.to_string())?;
         let Some(texture) = texture else {
             tracing::debug!(edge, "cancelled: stopped mid-bake");
+            context.metrics.bake_ended("stopped");
             return Ok(Baked::Stopped);
         };
         tracing::debug!(edge, ms = start.elapsed().as_millis() as u64, "baked");
+        let metrics = &context.metrics;
+        metrics.bake_ended("finished");
+        metrics.bake_seconds.observe(start.elapsed().as_secs_f64());
+        metrics.rays.inc_by(u64::from(edge) * u64::from(edge));
         let result = pb::JobResult {
             job_id: job.job_id,
             texture: Some(texture_to_pb(&texture)),

@@ -3,6 +3,7 @@
 //! the jobs it holds, then exits).
 
 mod daemon;
+mod metrics;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -41,6 +42,10 @@ pub struct Args {
     /// Where fetched scenes are unpacked (default: under the system's temp dir).
     #[arg(long, env = "RELIEF_SCENE_DIR")]
     scene_dir: Option<PathBuf>,
+    /// Serve metrics for Prometheus on this address (`http://ADDR/metrics`; any path
+    /// answers): bakes, their time, rays cast. Off by default.
+    #[arg(long, env = "RELIEF_METRICS_LISTEN")]
+    metrics_listen: Option<std::net::SocketAddr>,
     /// Heartbeat period in milliseconds (keep well under the server's lease).
     #[arg(long, default_value = "1000", value_parser = clap::value_parser!(u64).range(10..=600_000))]
     heartbeat_ms: u64,

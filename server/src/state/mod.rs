@@ -17,7 +17,7 @@ mod cache;
 mod jobs;
 mod queue;
 mod scenes;
-mod stats;
+pub mod stats;
 mod workers;
 
 #[cfg(test)]
@@ -96,6 +96,8 @@ pub struct State {
     /// Every request latency since start, counted in [`LATENCY_BUCKETS_MS`] (the last
     /// count: above the last bound).
     latency_counts: [u64; LATENCY_BUCKETS_MS.len() + 1],
+    /// The sum of those latencies, ms (a histogram's `_sum`).
+    latency_sum_ms: f64,
     handling: VecDeque<f32>,
     pub counters: Counters,
 }
@@ -128,6 +130,7 @@ impl State {
             clock: 0,
             latencies: VecDeque::new(),
             latency_counts: [0; LATENCY_BUCKETS_MS.len() + 1],
+            latency_sum_ms: 0.0,
             handling: VecDeque::new(),
             counters: Counters::default(),
         }

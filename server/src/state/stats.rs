@@ -1,6 +1,6 @@
 //! The counters and latency figures the server reports in `Impostors.Stats`.
 
-use std::collections::VecDeque;
+use std::collections::{BTreeMap, VecDeque};
 
 use relief_core::stats::sorted_percentile;
 use relief_proto::pb;
@@ -30,6 +30,8 @@ pub struct Counters {
     pub stalled: u64,
     /// Jobs taken back from their worker for another client's needed-now request.
     pub preempted: u64,
+    /// Requests refused, by the gRPC code they were refused with (`tonic::Code as i32`).
+    pub refused: BTreeMap<i32, u64>,
 }
 
 /// Upper bounds (ms) of the request latency histogram in [`pb::StatsReply`].
@@ -52,6 +54,18 @@ impl State {
         push_sample(&mut self.latencies, ms);
         let bucket = LATENCY_BUCKETS_MS.partition_point(|&bound| bound < ms);
         self.latency_counts[bucket] += 1;
+        self.latency_sum_ms += f64::from(ms);
+    }
+
+    /// Counts a request refused with `code`.
+    pub fn count_refusal(&mut self, code: tonic::Code) {
+        *self.counters.refused.entry(code as i32).or_default() += 1;
+    }
+
+    /// The request latency histogram since start: the counts per
+    /// [`LATENCY_BUCKETS_MS`] bucket (one more: above the last bound) and their sum, ms.
+    pub fn latency_histogram(&self) -> (&[u64], f64) {
+        (&self.latency_counts, self.latency_sum_ms)
     }
 
     /// Records the time (µs) the server's code spent on one request or result.
