@@ -24,7 +24,9 @@ use std::time::{Duration, Instant};
 use relief_core::hash::ContentHash;
 use relief_proto::bundle::Bundle;
 
+use crate::manager::Arrival;
 use crate::remote::Remote;
+use tokio::sync::mpsc::UnboundedSender;
 
 /// How often the link looks at the server's counters (is it there, has it a worker):
 /// a server back after a restart is found within this …
@@ -212,9 +214,14 @@ impl Link {
 
     /// Looks once at the server's counters (at most [`HEALTH_POLL_TIMEOUT`]) and
     /// brings [`Link::health`] up to date: before a flight, so that its first requests
-    /// go where textures can come from.
-    pub async fn look(&self) {
+    /// go where textures can come from. Returns the wait the server foresees for a new
+    /// job, when it answered with one.
+    pub async fn look(&self) -> Option<Duration> {
         let look = tokio::time::timeout(HEALTH_POLL_TIMEOUT, self.remote.clone().stats()).await;
+        let wait = match &look {
+            Ok(Ok(stats)) => Some(Duration::from_millis(stats.estimated_wait_ms.into())),
+            _ => None,
+        };
         match look {
             Ok(Ok(stats)) if stats.workers == 0 => self.health.degrade(Degraded::NoWorkers),
             Ok(Ok(_)) => {
@@ -234,16 +241,21 @@ impl Link {
                 "no answer within {HEALTH_POLL_TIMEOUT:?}"
             ))),
         }
+        wait
     }
 
     /// [`Link::look`] every [`HEALTH_POLL`], for ever (the task serving the link's
-    /// requests ends it with the run).
-    pub async fn watch(self: Arc<Link>) {
+    /// requests ends it with the run), passing the server's load on to the manager.
+    pub async fn watch(self: Arc<Link>, arrivals: UnboundedSender<Arrival>) {
         let mut tick = tokio::time::interval(HEALTH_POLL);
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         loop {
             tick.tick().await;
-            self.look().await;
+            if let Some(wait) = self.look().await
+                && arrivals.send(Arrival::ServerLoad { wait }).is_err()
+            {
+                return;
+            }
         }
     }
 }

@@ -65,7 +65,7 @@ pub fn spawn_remote(
     let half = rtt / 2;
     let (local_tx, local_rx) = unbounded_channel();
     spawn_local(scene.clone(), local_rx, arrivals.clone());
-    let watch = tokio::spawn(link.clone().watch());
+    let watch = tokio::spawn(link.clone().watch(arrivals.clone()));
     tokio::spawn(async move {
         while let Some(command) = commands.recv().await {
             let link = link.clone();
@@ -110,6 +110,18 @@ fn unreachable(status: &tonic::Status) -> bool {
     }
 }
 
+/// The wait a refusal for saturation says the server foresaw, if it is one.
+fn saturated_wait(status: &tonic::Status) -> Option<Duration> {
+    let ms: u64 = status
+        .metadata()
+        .get(relief_proto::SATURATED_METADATA)?
+        .to_str()
+        .ok()?
+        .parse()
+        .ok()?;
+    Some(Duration::from_millis(ms))
+}
+
 /// Asks the server for `request` and passes on what comes back (each result `half`
 /// late) — ending, whatever happens, in the final texture or a failure the manager
 /// hears of. A scene the server no longer holds is uploaded again and the request
@@ -146,6 +158,10 @@ async fn serve_request(
                 link.health
                     .degrade(Degraded::Unreachable(e.message().to_string()));
                 return to_local(request);
+            }
+            // A prediction the saturated server will not make in time.
+            Err(e) if e.code() == tonic::Code::ResourceExhausted && saturated_wait(&e).is_some() => {
+                return fail(Failure::Shed(saturated_wait(&e).unwrap_or_default()));
             }
             // The server has lost the scene (restarted, or evicted it): upload it again.
             Err(e) if e.code() == tonic::Code::NotFound && first_try => {

@@ -225,6 +225,7 @@ fn the_local_generator_serves_requests_for_now_in_the_order_asked() {
             |_| match arrivals_rx.blocking_recv().expect("the generator stopped") {
                 Arrival::Texture { id, .. } => id,
                 Arrival::Failed { id, failure } => panic!("request {id} failed: {failure}"),
+                Arrival::ServerLoad { .. } => panic!("the local generator has no load to report"),
             },
         )
         .collect();
@@ -467,4 +468,43 @@ fn failed_requests_are_counted_by_how_they_ended() {
     fail(again[0], Failure::Refused("no".into()));
     asked_now(&mut manager, 0.2);
     assert_eq!(manager.counters.requests_failed, 1);
+}
+
+/// A server that reports a long wait for new jobs makes the client's textures live
+/// longer — its tolerance raised a step per report, up to `MAX_LOAD_SCALE` times the
+/// user's — and one with room again brings it back, a step per report, to the user's.
+#[test]
+fn a_saturated_server_lengthens_the_textures_lives() {
+    use relief_client::manager::Arrival;
+    use relief_client::manager::policy::{LOAD_HIGH_WAIT, LOAD_LOW_WAIT, LOAD_STEP, MAX_LOAD_SCALE};
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let (commands_tx, _commands) = unbounded_channel();
+    let (arrivals, arrivals_rx) = unbounded_channel();
+    let config = Config::default();
+    let asked = config.tolerance;
+    let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
+    let centre = scene.objects[index(&scene, "sphere")].bounds.center();
+    let report = |manager: &mut Manager, wait: Duration| {
+        arrivals.send(Arrival::ServerLoad { wait }).unwrap();
+        manager.frame(&scene, &camera_round(centre, 0.0), 0.0);
+        manager.tolerance() / asked
+    };
+    let busy = LOAD_HIGH_WAIT + Duration::from_millis(1);
+    assert_eq!(report(&mut manager, busy), LOAD_STEP);
+    assert_eq!(report(&mut manager, busy), LOAD_STEP * LOAD_STEP);
+    for _ in 0..20 {
+        report(&mut manager, busy);
+    }
+    assert_eq!(manager.tolerance() / asked, MAX_LOAD_SCALE);
+    // Between the two bounds it stays.
+    assert_eq!(
+        report(&mut manager, (LOAD_HIGH_WAIT + LOAD_LOW_WAIT) / 2),
+        MAX_LOAD_SCALE
+    );
+    assert_eq!(report(&mut manager, Duration::ZERO), MAX_LOAD_SCALE / LOAD_STEP);
+    for _ in 0..20 {
+        report(&mut manager, Duration::ZERO);
+    }
+    assert_eq!(manager.tolerance(), asked);
 }

@@ -39,6 +39,11 @@ pub mod shutdown;
 /// that broke (a client tells the two apart by it).
 pub const WITHDRAWN: &str = "withdrawn";
 
+/// The gRPC metadata key on a `RESOURCE_EXHAUSTED` refusal of a predicted request the
+/// server could not finish before it is needed: the wait it foresaw, milliseconds. A
+/// client takes it as "saturated" (see `StatsReply.estimated_wait_ms`).
+pub const SATURATED_METADATA: &str = "relief-saturated-wait-ms";
+
 /// The generated messages, clients and servers of package `relief.v1`.
 #[allow(clippy::all, missing_docs)]
 pub mod pb {

@@ -103,6 +103,13 @@ impl Collector for ServerCollector {
         )?;
         encode_one(
             e,
+            "estimated_wait_milliseconds",
+            "How long a job queued now would take to finish (0: not known yet)",
+            Gauge,
+            stats.estimated_wait_ms.into(),
+        )?;
+        encode_one(
+            e,
             "cache_bytes",
             "Bytes of finished textures cached",
             Gauge,
@@ -170,6 +177,11 @@ impl Collector for ServerCollector {
                 "scenes_evicted",
                 "Scenes evicted from the store",
                 stats.scenes_evicted,
+            ),
+            (
+                "predictions_shed",
+                "Predicted requests refused: they could not be ready when needed",
+                stats.predictions_shed,
             ),
         ];
         for (name, help, value) in counters {

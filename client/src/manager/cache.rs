@@ -16,7 +16,9 @@ use relief_render::warp::params::WarpParams;
 use super::around::angle_between;
 use super::choose::growth;
 use super::messages::{Arrival, Failure};
-use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START};
+use super::policy::{
+    CRITICAL_REGIONS, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, SHED_QUIET,
+};
 use super::{Manager, TextureLifetimes};
 
 /// A texture made ready for the frame loop: its pyramid (with texel connectivity),
@@ -79,6 +81,8 @@ pub(super) struct ObjectState {
     pub(super) recent_latencies: Vec<f64>,
     /// Final textures of this object received.
     pub(super) received: u64,
+    /// No new prediction of it is asked for before this (see [`SHED_QUIET`]).
+    pub(super) quiet_until: Option<Instant>,
 }
 
 /// How far (radians) around `centre`, turning the texture's eye about the vertical,
@@ -127,6 +131,7 @@ impl Manager {
                         self.pending.remove(&id);
                         self.record_round_trip(&p, arrived);
                     }
+                    let tolerance = self.tolerance();
                     let state = &mut self.objects[p.object];
                     state.received += is_final as u64;
                     // A final texture replaces its own preview.
@@ -142,7 +147,7 @@ impl Manager {
                     };
                     if is_final {
                         let centre = scene.objects[p.object].bounds.center();
-                        let angle = probe_valid_angle(&held, centre, camera, self.config.tolerance);
+                        let angle = probe_valid_angle(&held, centre, camera, tolerance);
                         state.valid_angle = Some(angle);
                         tracing::debug!(
                             object = p.object,
@@ -162,14 +167,21 @@ impl Manager {
                         }
                     }
                 }
+                Arrival::ServerLoad { wait } => self.feel_load(wait),
                 Arrival::Failed { id, failure } => {
                     // (A withdrawn request's end is no news.)
-                    if self.pending.remove(&id).is_none() {
+                    let Some(pending) = self.pending.remove(&id) else {
                         continue;
-                    }
+                    };
                     let counted = match failure {
                         Failure::Refused(_) => &mut self.counters.requests_failed,
                         Failure::TimedOut(_) => &mut self.counters.requests_timed_out,
+                        // (The load's own signal, counted: not news worth a line.)
+                        Failure::Shed(_) => {
+                            self.counters.requests_shed += 1;
+                            self.objects[pending.object].quiet_until = Some(Instant::now() + SHED_QUIET);
+                            continue;
+                        }
                     };
                     *counted += 1;
                     // The first of a run on stderr; the rest are counted (a server gone

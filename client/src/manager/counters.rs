@@ -18,8 +18,13 @@ pub struct Counters {
     pub withdrawn: u64,
     /// Requests that ended without their texture: refused or broken off …
     pub requests_failed: u64,
-    /// … or unanswered within their deadline (and withdrawn).
+    /// … or unanswered within their deadline (and withdrawn) …
     pub requests_timed_out: u64,
+    /// … or predictions the saturated server refused.
+    pub requests_shed: u64,
+    /// The factor the server's load put on the tolerance, summed over the frames drawn
+    /// (over their count: its mean; see [`LOAD_HIGH_WAIT`](super::policy::LOAD_HIGH_WAIT)).
+    pub load_scale_sum: f64,
     /// Request sent → final texture received by the client, milliseconds.
     pub latencies_ms: Vec<f64>,
     /// Final texture received → taken in by a frame (made ready, and the frame loop

@@ -40,6 +40,11 @@ pub enum Arrival {
         id: u64,
         failure: Failure,
     },
+    /// How long the server said a new job would wait now (its load; see
+    /// [`LOAD_HIGH_WAIT`](super::policy::LOAD_HIGH_WAIT)).
+    ServerLoad {
+        wait: std::time::Duration,
+    },
 }
 
 /// Why a request ended without its final texture.
@@ -51,4 +56,7 @@ pub enum Failure {
     /// No answer came within the request's deadline; it was withdrawn.
     #[error("no texture within {0:?}: withdrawn")]
     TimedOut(std::time::Duration),
+    /// A prediction the saturated server refused: it foresaw this wait.
+    #[error("the server is saturated: it would be ready in {0:?}")]
+    Shed(std::time::Duration),
 }

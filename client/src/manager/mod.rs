@@ -40,7 +40,7 @@ pub mod policy;
 mod requests;
 
 use std::collections::HashMap;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender};
@@ -84,6 +84,9 @@ pub struct Manager {
     sprites: Vec<Option<Kept>>,
     /// The eye of the last frame drawn.
     last_eye: Option<Vec3>,
+    /// The factor the server's load puts on the tolerance (1: none; see
+    /// [`policy::LOAD_HIGH_WAIT`]).
+    load_scale: f32,
     /// What this run counted.
     pub counters: Counters,
 }
@@ -108,6 +111,7 @@ impl Manager {
             arrivals,
             sprites: Vec::new(),
             last_eye: None,
+            load_scale: 1.0,
             counters: Counters::default(),
         }
     }
@@ -120,6 +124,29 @@ impl Manager {
     /// Textures held, over all objects: none after a whole run means none ever came.
     pub fn textures_held(&self) -> usize {
         self.objects.iter().map(|o| o.held.len()).sum()
+    }
+
+    /// The tolerance decisions use now: the user's, times the factor the server's load
+    /// puts on it (see [`policy::LOAD_HIGH_WAIT`]).
+    pub fn tolerance(&self) -> f32 {
+        self.config.tolerance * self.load_scale
+    }
+
+    /// Takes the server's load in: the wait it foresees for a new job raises the
+    /// tolerance a step when long, lowers it a step when short.
+    fn feel_load(&mut self, wait: Duration) {
+        self.load_scale = if wait > policy::LOAD_HIGH_WAIT {
+            (self.load_scale * policy::LOAD_STEP).min(policy::MAX_LOAD_SCALE)
+        } else if wait < policy::LOAD_LOW_WAIT {
+            (self.load_scale / policy::LOAD_STEP).max(1.0)
+        } else {
+            self.load_scale
+        };
+        tracing::debug!(
+            wait_ms = wait.as_millis() as u64,
+            scale = self.load_scale,
+            "server load"
+        );
     }
 
     /// Requests asked for and not yet ended (by their final texture, a failure or a
@@ -163,6 +190,7 @@ impl Manager {
     /// textures as needed. Never blocks.
     pub fn frame(&mut self, scene: &Scene, camera: &Camera, t: f64) -> Vec<Show> {
         self.drain(camera, scene);
+        let tolerance = self.tolerance();
         self.predictor.observe(t, camera.eye);
         let mut stale = false;
         // (When this frame shows its impostors: their textures' last use.)
@@ -195,11 +223,10 @@ impl Manager {
             let grades: Vec<Grade> = self.grades(scene, k, camera.eye, camera).collect();
             self.counters.needs += 1;
             let held = &self.objects[k].held;
-            let best = shown_texture(&grades, self.config.tolerance, |i| {
+            let best = shown_texture(&grades, tolerance, |i| {
                 angle_between(centre, held[i].eye, camera.eye)
             });
-            let within =
-                |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= self.config.tolerance);
+            let within = |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= tolerance);
             // Valid: some texture is within tolerance (when only one too coarse to be
             // shown is, a finer one is asked for if it can be had: `want_finer`), and the one
             // shown is not alone too far from its eye — without a partner, a texture
@@ -208,12 +235,10 @@ impl Manager {
             let shown_turn = best.map(|(i, _)| angle_between(centre, held[i].eye, camera.eye));
             let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
             let lone_too_far = partner.is_none() && shown_turn.is_some_and(|turn| turn > LONE_MAX_TURN);
-            let within_any = grades.iter().any(|g| g.growth <= self.config.tolerance);
+            let within_any = grades.iter().any(|g| g.growth <= tolerance);
             let valid = within_any && !lone_too_far;
-            let want_finer = !within(best)
-                && grades
-                    .iter()
-                    .any(|g| g.growth <= self.config.tolerance && g.finer_available);
+            let want_finer =
+                !within(best) && grades.iter().any(|g| g.growth <= tolerance && g.finer_available);
             let asked_for = self.pending_covers(k, centre, camera.eye);
             if valid || asked_for {
                 self.counters.prediction_hits += 1;
@@ -262,7 +287,7 @@ impl Manager {
             }
             self.predict_for(scene, k, camera);
             shows.push(match best {
-                Some((i, g)) if g.growth <= SHOWN_STALE * self.config.tolerance => {
+                Some((i, g)) if g.growth <= SHOWN_STALE * tolerance => {
                     let held = &mut self.objects[k].held;
                     held[i].last_shown = shown_at;
                     if let Some((p, _)) = partner {
@@ -281,6 +306,7 @@ impl Manager {
         if stale {
             self.counters.stale_frames += 1;
         }
+        self.counters.load_scale_sum += f64::from(self.load_scale);
         shows
     }
 }

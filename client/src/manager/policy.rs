@@ -167,6 +167,31 @@ pub const PROBE_LIMIT: f32 = 0.5 * PI;
 /// the first beyond: to 1/16 of the step, finer than the eye moves in a frame.
 pub const PROBE_REFINEMENTS: u32 = 4;
 
+// ---- The server's load ------------------------------------------------------------------
+
+/// A server foreseeing a wait longer than this for a new job (its
+/// `estimated_wait_ms`) is saturated: textures asked for now come late, so the client
+/// lets the ones it holds live longer — its tolerance times [`LOAD_STEP`] at each of
+/// the server's reports (every [`HEALTH_POLL`](crate::link::HEALTH_POLL)) — and asks
+/// for fewer. (Unloaded on loopback a job waits 20–50 ms.)
+pub const LOAD_HIGH_WAIT: Duration = Duration::from_millis(250);
+
+/// … and below this it has room again: the factor falls back by [`LOAD_STEP`] at each
+/// report, to 1.
+pub const LOAD_LOW_WAIT: Duration = Duration::from_millis(100);
+
+/// The factor's step per report: from 1 to [`MAX_LOAD_SCALE`] in about 3 s.
+pub const LOAD_STEP: f32 = 1.5;
+
+/// The most the server's load may multiply the tolerance by: textures live at most
+/// this much longer (in gap growth) than the user asked; past it, frames go stale.
+pub const MAX_LOAD_SCALE: f32 = 8.0;
+
+/// After a prediction of an object is refused by the saturated server, none of it is
+/// asked for this long (one load report): asked again at once, it was refused again
+/// every frame, and at 64 clients the request rate doubled.
+pub const SHED_QUIET: Duration = Duration::from_millis(500);
+
 // ---- Round trips ----------------------------------------------------------------------
 
 /// Round trips remembered, overall and per object.

@@ -222,14 +222,19 @@ impl Manager {
             .filter(|p| p.object == k)
             .map(|p| p.eye)
             .collect();
-        let covered = held_covers(centre, future, &held, &asked, self.config.tolerance)
+        let covered = held_covers(centre, future, &held, &asked, self.tolerance())
             || self.pending_covers(k, centre, future);
         let ahead = self.ahead(k, centre, camera.eye, future);
         let deadline = Some((horizon * 1e3) as u64);
-        if !covered {
-            let eye = self.lead(k, centre, camera.eye, future);
-            self.request(scene, k, eye, camera, deadline);
-        } else if let Ahead::AskAt(eye) = ahead {
+        // (Quiet a while after the saturated server refused one: see `SHED_QUIET`.)
+        let quiet = self.objects[k].quiet_until.is_some_and(|t| Instant::now() < t);
+        let ask = match (quiet, covered, ahead) {
+            (true, _, _) => None,
+            (false, false, _) => Some(self.lead(k, centre, camera.eye, future)),
+            (false, true, Ahead::AskAt(eye)) => Some(eye),
+            (false, true, _) => None,
+        };
+        if let Some(eye) = ask {
             self.request(scene, k, eye, camera, deadline);
         }
         // Predictions neither the eye nor its future will meet any more.

@@ -187,8 +187,15 @@ impl State {
             }
         }
         if is_final {
+            let started = match job.state {
+                JobState::Running { started, .. } => Some(started),
+                JobState::Queued(_) => None,
+            };
             let bytes = texture.albedo.len() + texture.normal.len() + texture.depth.len();
             let key = job.key.clone();
+            if let Some(started) = started {
+                self.job_took(started);
+            }
             self.cache_insert(key, texture, bytes);
             self.finish(job_id);
         }

@@ -13,6 +13,7 @@
 //!   out first;
 //! - `stats.rs` — the counters and latency figures of `Impostors.Stats`.
 
+mod admission;
 mod cache;
 mod jobs;
 mod queue;
@@ -98,6 +99,9 @@ pub struct State {
     latency_counts: [u64; LATENCY_BUCKETS_MS.len() + 1],
     /// The sum of those latencies, ms (a histogram's `_sum`).
     latency_sum_ms: f64,
+    /// The running mean of the time a job takes, dispatch to final texture (see
+    /// [`admission`]); `None` before the first.
+    job_time_s: Option<f64>,
     handling: VecDeque<f32>,
     pub counters: Counters,
 }
@@ -131,6 +135,7 @@ impl State {
             latencies: VecDeque::new(),
             latency_counts: [0; LATENCY_BUCKETS_MS.len() + 1],
             latency_sum_ms: 0.0,
+            job_time_s: None,
             handling: VecDeque::new(),
             counters: Counters::default(),
         }
@@ -237,6 +242,24 @@ impl State {
                 id
             }
             None => {
+                // A new job for a prediction the workers cannot finish in time is
+                // refused (see `admission`); one joining a job already there costs
+                // nothing more.
+                if let Urgency::Predicted { in_ms } = request.urgency
+                    && let Some(wait) = self.too_late(in_ms)
+                {
+                    self.counters.shed += 1;
+                    let ms = wait.as_millis().min(u128::from(u32::MAX));
+                    let mut refusal = Status::resource_exhausted(format!(
+                        "saturated: a texture needed in {in_ms} ms would be ready in about {ms} ms"
+                    ));
+                    if let Ok(value) = ms.to_string().parse() {
+                        refusal
+                            .metadata_mut()
+                            .insert(relief_proto::SATURATED_METADATA, value);
+                    }
+                    return Err(refusal);
+                }
                 let id = self.next();
                 let priority = Priority {
                     predicted,

@@ -30,6 +30,8 @@ pub struct Counters {
     pub stalled: u64,
     /// Jobs taken back from their worker for another client's needed-now request.
     pub preempted: u64,
+    /// Predicted requests refused: they could not be ready when needed.
+    pub shed: u64,
     /// Requests refused, by the gRPC code they were refused with (`tonic::Code as i32`).
     pub refused: BTreeMap<i32, u64>,
 }
@@ -113,6 +115,10 @@ impl State {
             scenes_evicted: self.counters.scenes_evicted,
             jobs_stalled: self.counters.stalled,
             jobs_preempted: self.counters.preempted,
+            estimated_wait_ms: self
+                .estimated_wait()
+                .map_or(0, |wait| wait.as_millis().min(u128::from(u32::MAX)) as u32),
+            predictions_shed: self.counters.shed,
             scene_bytes: self.scene_bytes() as u64,
         }
     }

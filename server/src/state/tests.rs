@@ -679,3 +679,55 @@ fn a_needed_now_request_takes_a_slot_back_once() {
     assert!(wrx.try_recv().is_err(), "a job was taken back twice");
     assert_eq!(s.stats().jobs_preempted, 1);
 }
+
+/// The wait foreseen for a new job is the jobs ahead shared over the slots, each
+/// taking the mean time a job took; a prediction that wait would make more than
+/// `SHED_SLACK` late is refused — saying the wait in its metadata — where one needed
+/// later, a needed-now one and one joining a job already there are taken.
+#[test]
+fn predictions_the_workers_cannot_finish_in_time_are_refused() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    // Nothing measured yet: nothing foreseen, everything taken.
+    assert_eq!(s.estimated_wait(), None);
+    admit_now(&mut s, hash, 1, 0.5, tx.clone());
+    s.dispatch();
+    let job = next_job(&mut wrx).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    s.result(job.job_id, pb::ReliefTexture::default(), true, 100);
+    let took = s.estimated_wait().unwrap();
+    assert!(took >= std::time::Duration::from_millis(100), "{took:?}");
+    // Nine more needed now (one running, eight queued): a new job waits ten jobs' time.
+    for id in 2..11 {
+        admit_now(&mut s, hash, id, id as f32, tx.clone());
+    }
+    s.dispatch();
+    let wait = s.estimated_wait().unwrap();
+    assert!(
+        (wait.as_secs_f64() / took.as_secs_f64() - 10.0).abs() < 1e-6,
+        "{wait:?} {took:?}"
+    );
+    let predicted =
+        |id: u64, x: f32, in_ms: u64| request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Predicted { in_ms });
+    let refused = s.admit(&predicted(20, 20.0, 0), OWNER, tx.clone()).unwrap_err();
+    assert_eq!(refused.code(), tonic::Code::ResourceExhausted);
+    let said: u64 = refused
+        .metadata()
+        .get(relief_proto::SATURATED_METADATA)
+        .unwrap()
+        .to_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(said, wait.as_millis() as u64);
+    assert_eq!(s.stats().predictions_shed, 1);
+    // Needed later than the wait (less the slack): taken.
+    let later = wait.as_millis() as u64;
+    assert!(s.admit(&predicted(21, 21.0, later), OWNER, tx.clone()).is_ok());
+    // Joining a queued job, even needed at once: taken.
+    assert!(s.admit(&predicted(22, 5.0, 0), OWNER, tx.clone()).is_ok());
+    assert_eq!(s.stats().predictions_shed, 1);
+    assert!(s.stats().estimated_wait_ms > 0);
+}

@@ -96,14 +96,19 @@ struct Row {
     lifetime_s_p50: f64,
     psnr_db_mean: f64,
     psnr_db_min: f64,
+    /// Predictions the saturated server refused.
+    requests_shed: u64,
+    /// The mean factor the server's load put on the tolerance, over the frames: how
+    /// much longer the textures were let live than asked.
+    load_scale_mean: f64,
 }
 
-const HEADER: &str = "tolerance_px,clients,repeats,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,latency_ms_p99_lo,latency_ms_p99_hi,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min";
+const HEADER: &str = "tolerance_px,clients,repeats,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,latency_ms_p99_lo,latency_ms_p99_hi,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min,requests_shed,load_scale_mean";
 
 impl Row {
     fn csv(&self) -> String {
         format!(
-            "{},{},{},{},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.3},{:.3},{:.3},{:.2},{:.2}",
+            "{},{},{},{},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.3},{:.3},{:.3},{:.2},{:.2},{},{:.2}",
             self.tolerance_px,
             self.clients,
             self.repeats,
@@ -120,7 +125,9 @@ impl Row {
             self.lifetime_s_p10,
             self.lifetime_s_p50,
             self.psnr_db_mean,
-            self.psnr_db_min
+            self.psnr_db_min,
+            self.requests_shed,
+            self.load_scale_mean
         )
     }
 }
@@ -370,6 +377,8 @@ fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
         // NaN (null in JSON) when no frame was compared.
         psnr_db_mean: finite_mean(&psnr).unwrap_or(f64::NAN),
         psnr_db_min: finite_min(&psnr).unwrap_or(f64::NAN),
+        requests_shed: sum(&|r| r.counters.requests_shed),
+        load_scale_mean: results().map(|r| r.counters.load_scale_sum).sum::<f64>() / frames.max(1) as f64,
     }
 }
 

@@ -56,8 +56,13 @@ pub(super) struct Summary {
     pub(super) requests_failed: u64,
     /// … or unanswered within their deadline (and withdrawn) …
     pub(super) requests_timed_out: u64,
-    /// … or still open when the flight ended.
+    /// … or still open when the flight ended; and predictions the saturated server
+    /// refused.
     pub(super) requests_open_at_exit: usize,
+    pub(super) requests_shed: u64,
+    /// The mean factor the server's load put on the tolerance over the frames (1: the
+    /// tolerance asked for throughout).
+    pub(super) load_scale_mean: f64,
     /// Seconds the server could not serve (unreachable, or without a worker);
     /// `null` without a server.
     pub(super) degraded_s: Option<f64>,
