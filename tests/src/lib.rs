@@ -190,3 +190,39 @@ pub async fn wait_for(
         tokio::time::sleep(std::time::Duration::from_millis(20)).await;
     }
 }
+
+/// The Python of a virtual environment under `target/` holding the packages of
+/// `tests/foreign/requirements.txt` (stock gRPC, Prometheus and Kubernetes tools the
+/// tests check Relief against), created and filled on first use: PyPI must be
+/// reachable then.
+pub fn foreign_python() -> PathBuf {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let venv = bin_dir().join("foreign-venv");
+    let python = venv.join("bin/python");
+    let requirements = root.join("foreign/requirements.txt");
+    let stamp = venv.join("installed.txt");
+    let wanted = std::fs::read_to_string(&requirements).expect("requirements.txt");
+    if std::fs::read_to_string(&stamp).ok().as_deref() != Some(wanted.as_str()) {
+        let ok = Command::new("python3")
+            .args(["-m", "venv"])
+            .arg(&venv)
+            .status()
+            .expect("python3 -m venv");
+        assert!(ok.success(), "creating the venv failed");
+        let ok = Command::new(&python)
+            .args([
+                "-m",
+                "pip",
+                "install",
+                "--quiet",
+                "--disable-pip-version-check",
+                "-r",
+            ])
+            .arg(&requirements)
+            .status()
+            .expect("pip install");
+        assert!(ok.success(), "installing {} failed", requirements.display());
+        std::fs::write(&stamp, wanted).expect("writing the venv stamp");
+    }
+    python
+}

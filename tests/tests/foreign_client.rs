@@ -3,50 +3,17 @@
 //! reflection client lists its services, and the Prometheus project's parser reads the
 //! server's and a worker's metrics.
 //!
-//! The Python packages come from `tests/foreign/requirements.txt`, installed into a
-//! virtual environment under `target/` on first use (PyPI must be reachable).
+//! The Python packages come from `tests/foreign/requirements.txt`
+//! ([`foreign_python`]).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
-use relief_tests::{scratch, start_server, start_worker};
-
-/// The venv's python, created and filled from requirements.txt when missing.
-fn python() -> PathBuf {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let venv = relief_tests::bin_dir().join("foreign-venv");
-    let python = venv.join("bin/python");
-    let requirements = root.join("foreign/requirements.txt");
-    let stamp = venv.join("installed.txt");
-    let wanted = std::fs::read_to_string(&requirements).expect("requirements.txt");
-    if std::fs::read_to_string(&stamp).ok().as_deref() != Some(wanted.as_str()) {
-        let ok = Command::new("python3")
-            .args(["-m", "venv"])
-            .arg(&venv)
-            .status()
-            .expect("python3 -m venv");
-        assert!(ok.success(), "creating the venv failed");
-        let ok = Command::new(&python)
-            .args([
-                "-m",
-                "pip",
-                "install",
-                "--quiet",
-                "--disable-pip-version-check",
-                "-r",
-            ])
-            .arg(&requirements)
-            .status()
-            .expect("pip install");
-        assert!(ok.success(), "installing {} failed", requirements.display());
-        std::fs::write(&stamp, wanted).expect("writing the venv stamp");
-    }
-    python
-}
+use relief_tests::{foreign_python, scratch, start_server, start_worker};
 
 #[test]
 fn a_python_client_generated_from_the_proto_gets_a_texture() {
-    let python = python();
+    let python = foreign_python();
     let (_server, url) = start_server(&[]);
     let _worker = start_worker(&url, &[]);
     let runtime = tokio::runtime::Runtime::new().unwrap();
@@ -79,7 +46,7 @@ fn a_python_client_generated_from_the_proto_gets_a_texture() {
 /// server's services (a server serving reflection `v1` alone answered it UNIMPLEMENTED).
 #[test]
 fn python_reflection_lists_the_services() {
-    let python = python();
+    let python = foreign_python();
     let (_server, url) = start_server(&[]);
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = Command::new(&python)
@@ -148,7 +115,7 @@ fn sample(families: &serde_json::Value, name: &str, labels: &[(&str, &str)]) -> 
 /// both (OpenMetrics text).
 #[test]
 fn the_prometheus_parser_reads_the_server_and_worker_metrics() {
-    let python = python();
+    let python = foreign_python();
     let (server_port, worker_port) = (free_port(), free_port());
     let server_metrics = format!("127.0.0.1:{server_port}");
     let (_server, url) = start_server(&["--metrics-listen", &server_metrics]);
