@@ -1,9 +1,11 @@
 //! Helpers for Relief's end-to-end tests: find the real binaries, make scratch
-//! directories, write small meshes, put a [`relay`] between processes.
+//! directories, write small meshes, put a [`relay`] between processes, run them on
+//! separate network stacks ([`netns`]).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+pub mod netns;
 pub mod oracle;
 pub mod relay;
 

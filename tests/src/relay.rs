@@ -36,9 +36,14 @@ pub struct Relay {
 }
 
 impl Relay {
-    /// A relay to `target` (`host:port`) adding `delay` to each direction.
+    /// A relay on 127.0.0.1 to `target` (`host:port`) adding `delay` to each direction.
     pub async fn start(target: &str, delay: Duration) -> Relay {
-        let listener = TcpListener::bind("127.0.0.1:0").await.expect("binding the relay");
+        Relay::start_on("127.0.0.1:0", target, delay).await
+    }
+
+    /// [`Relay::start`] listening on `listen` (`host:port`; port 0 picks one).
+    pub async fn start_on(listen: &str, target: &str, delay: Duration) -> Relay {
+        let listener = TcpListener::bind(listen).await.expect("binding the relay");
         let address = listener.local_addr().expect("the relay's address");
         let cut = Arc::new(AtomicBool::new(false));
         let target = target.to_string();

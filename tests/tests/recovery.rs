@@ -27,8 +27,19 @@ struct Flying {
 /// `relief demo` against `url`, `frames` long, its summary as JSON on stdout; `extra`
 /// flags after the rest.
 fn fly(url: &str, frames: u32, out: &std::path::Path, extra: &[&str]) -> Flying {
+    fly_as(command("relief"), url, frames, out, extra)
+}
+
+/// [`fly`] with `relief` as `relief` (e.g. on another host).
+fn fly_as(
+    mut relief: std::process::Command,
+    url: &str,
+    frames: u32,
+    out: &std::path::Path,
+    extra: &[&str],
+) -> Flying {
     use std::io::{BufRead, Read};
-    let mut child = command("relief")
+    let mut child = relief
         .args(["demo", "--server", url, "--frames", &frames.to_string()])
         .args([
             "--size",
@@ -222,4 +233,90 @@ fn a_server_without_workers_is_said_counted_and_can_fail_the_run() {
     let stderr = text(&lines);
     assert!(!status.success());
     assert!(stderr.contains("--max-stale-frac"), "{stderr}");
+}
+
+/// Each way's delay between hosts in [`a_flight_across_hosts_rides_out_a_partition`]:
+/// a 100 ms round trip.
+const HOST_DELAY: Duration = Duration::from_millis(50);
+
+/// Server, worker and client each on a network stack of its own (namespaces, joined
+/// only through relays this test runs; root needed, else skipped), the client 100 ms
+/// of round trip away: a flight rides out a 6 s partition of its link — said within
+/// [`NOTICED_WITHIN`], answered again within [`FLOWING_WITHIN`] of the link's return —
+/// and its frames stay mostly fresh.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_flight_across_hosts_rides_out_a_partition() {
+    let Some(hosts) = relief_tests::netns::Hosts::create("rlft", 77, 3) else {
+        eprintln!("skipped: network namespaces need root (`ip netns add` failed)");
+        return;
+    };
+    let (server_host, worker_host, client_host) = (1, 2, 3);
+    let mut server = hosts.command(server_host, "relief-server");
+    server.args(["--listen", &format!("{}:7411", hosts.address(server_host))]);
+    let (_server, _) = relief_tests::spawn_server(server);
+    let target = format!("{}:7411", hosts.address(server_host));
+    let to_worker = Relay::start_on(
+        &format!("{}:7411", hosts.gateway(worker_host)),
+        &target,
+        HOST_DELAY,
+    )
+    .await;
+    let to_client = Relay::start_on(
+        &format!("{}:7411", hosts.gateway(client_host)),
+        &target,
+        HOST_DELAY,
+    )
+    .await;
+    let mut worker = hosts.command(worker_host, "relief-worker");
+    worker.args(["--server", &to_worker.url(), "--heartbeat-ms", "250"]);
+    let _worker = relief_tests::Running(worker.spawn().expect("starting the worker"));
+    let mut watch = Remote::connect(&format!("http://{target}"), None, "watch")
+        .await
+        .unwrap();
+    wait_for(&mut watch, "the worker", |s| s.workers == 1).await;
+    let out = scratch("hosts");
+    let relief = hosts.command(client_host, "relief");
+    let demo = fly_as(
+        relief,
+        &to_client.url(),
+        600,
+        &out,
+        &["--max-stale-frac", "1", "--rtt-ms", "0"],
+    );
+    wait_for(&mut watch, "the flight's first textures", |s| answered(s) >= 2).await;
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    to_client.cut();
+    let cut = Instant::now();
+    tokio::time::sleep(CUT_FOR).await;
+    let before = answered(&watch.stats().await.unwrap());
+    to_client.heal();
+    let healed = Instant::now();
+    wait_for(&mut watch, "a request answered after the link healed", |s| {
+        answered(s) > before
+    })
+    .await;
+    let flowing = healed.elapsed();
+    let (status, summary, lines) = tokio::task::spawn_blocking(move || finish(demo, Duration::from_secs(90)))
+        .await
+        .unwrap();
+    let stderr = text(&lines);
+    assert!(status.success(), "{stderr}");
+    let noticed = lines
+        .iter()
+        .find(|(_, line)| line.contains("cannot be reached"))
+        .map(|(at, _)| at.saturating_duration_since(cut))
+        .unwrap_or_else(|| panic!("the cut was not noticed: {stderr}"));
+    let (stale, frames) = (
+        summary["stale_frames"].as_u64().unwrap(),
+        summary["frames"].as_u64().unwrap(),
+    );
+    eprintln!(
+        "across hosts, 100 ms round trip: cut noticed after {noticed:?}, answered {flowing:?} after healing; \
+         {stale} of {frames} frames stale; latency p50 {} ms",
+        summary["latency_ms_p50"]
+    );
+    assert!(noticed < NOTICED_WITHIN, "{noticed:?}");
+    assert!(flowing < FLOWING_WITHIN, "{flowing:?}");
+    // The partition's 6 s are a fifth of the flight; the rest stays fresh.
+    assert!((stale as f64) < 0.4 * frames as f64, "{stale} of {frames}");
 }

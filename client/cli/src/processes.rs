@@ -62,7 +62,9 @@ impl LocalService {
 /// Starts a server on an ephemeral 127.0.0.1 port; returns it and its URL.
 fn start_server(children: &mut Children, dir: &Path) -> Result<String> {
     let mut child = Command::new(sibling("relief-server")?)
-        .args(["--listen", "127.0.0.1:0", "--lease-ms", "2000"])
+        // (The standalone server's own lease and the workers' own heartbeat: the
+        // demo measures what a deployment gets.)
+        .args(["--listen", "127.0.0.1:0"])
         .arg("--scene-dir")
         .arg(dir)
         .stdout(Stdio::piped())
@@ -86,14 +88,7 @@ fn start_workers(children: &mut Children, url: &str, count: u32, dir: &Path) -> 
     let worker = sibling("relief-worker")?;
     for k in 0..count {
         let child = Command::new(&worker)
-            .args([
-                "--server",
-                url,
-                "--name",
-                &format!("local-{k}"),
-                "--heartbeat-ms",
-                "250",
-            ])
+            .args(["--server", url, "--name", &format!("local-{k}")])
             .arg("--scene-dir")
             .arg(dir.join(format!("worker-{k}-scenes")))
             .spawn()

@@ -13,10 +13,10 @@ use std::time::{Duration, Instant};
 
 use super::State;
 
-/// The weight of the newest job in the running mean of the time a job takes: about
-/// the last five jobs count, so the estimate follows a change of texture size or of
-/// load within seconds.
-pub const JOB_TIME_WEIGHT: f64 = 0.2;
+/// The time a job takes is the median of this many of the latest: it follows a change
+/// of texture size or load within a few jobs, and a worker's first job of a scene,
+/// which loads the scene too (once), does not count as the jobs to come.
+pub const JOB_TIMES_KEPT: usize = 15;
 
 /// A predicted request is refused when the foreseen wait exceeds the time until it is
 /// needed by more than this: a texture a little late still serves (the client shows an
@@ -24,21 +24,27 @@ pub const JOB_TIME_WEIGHT: f64 = 0.2;
 pub const SHED_SLACK: Duration = Duration::from_millis(500);
 
 impl State {
-    /// Folds the time a finished job took (its dispatch to its final texture) into the
-    /// running mean.
+    /// Counts the time a finished job held its slot: from its dispatch (`started`) to
+    /// its final texture.
     pub(super) fn job_took(&mut self, started: Instant) {
-        let took = started.elapsed().as_secs_f64();
-        self.job_time_s = Some(match self.job_time_s {
-            None => took,
-            Some(mean) => mean + JOB_TIME_WEIGHT * (took - mean),
-        });
+        if self.job_times.len() == JOB_TIMES_KEPT {
+            self.job_times.pop_front();
+        }
+        self.job_times.push_back(started.elapsed().as_secs_f64());
+    }
+
+    /// The time a job takes: the median of the latest ([`JOB_TIMES_KEPT`]).
+    fn job_time(&self) -> Option<f64> {
+        let mut times: Vec<f64> = self.job_times.iter().copied().collect();
+        times.sort_by(f64::total_cmp);
+        times.get(times.len() / 2).copied()
     }
 
     /// How long a job queued now would take to finish: the jobs queued and running
-    /// shared over the workers' slots, each taking the running mean, then its own.
+    /// shared over the workers' slots, each taking the median time, then its own.
     /// `None` before any job has finished, or without a worker.
     pub fn estimated_wait(&self) -> Option<Duration> {
-        let job_time = self.job_time_s?;
+        let job_time = self.job_time()?;
         let slots: usize = self.workers.values().map(|w| w.slots).sum();
         if slots == 0 {
             return None;

@@ -99,9 +99,8 @@ pub struct State {
     latency_counts: [u64; LATENCY_BUCKETS_MS.len() + 1],
     /// The sum of those latencies, ms (a histogram's `_sum`).
     latency_sum_ms: f64,
-    /// The running mean of the time a job takes, dispatch to final texture (see
-    /// [`admission`]); `None` before the first.
-    job_time_s: Option<f64>,
+    /// How long the latest jobs held their slots, seconds (see [`admission`]).
+    job_times: VecDeque<f64>,
     handling: VecDeque<f32>,
     pub counters: Counters,
 }
@@ -135,7 +134,7 @@ impl State {
             latencies: VecDeque::new(),
             latency_counts: [0; LATENCY_BUCKETS_MS.len() + 1],
             latency_sum_ms: 0.0,
-            job_time_s: None,
+            job_times: VecDeque::new(),
             handling: VecDeque::new(),
             counters: Counters::default(),
         }
