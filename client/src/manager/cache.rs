@@ -179,7 +179,11 @@ impl Manager {
                         // (The load's own signal, counted: not news worth a line.)
                         Failure::Shed(_) => {
                             self.counters.requests_shed += 1;
-                            self.objects[pending.object].quiet_until = Some(Instant::now() + SHED_QUIET);
+                            // (Quiet only while the server reports itself saturated: a
+                            // refusal in a passing burst is asked again at once.)
+                            if self.load_scale > 1.0 {
+                                self.objects[pending.object].quiet_until = Some(Instant::now() + SHED_QUIET);
+                            }
                             continue;
                         }
                     };

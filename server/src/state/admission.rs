@@ -20,8 +20,16 @@ pub const JOB_TIMES_KEPT: usize = 15;
 
 /// A predicted request is refused when the foreseen wait exceeds the time until it is
 /// needed by more than this: a texture a little late still serves (the client shows an
-/// older one meanwhile), one far past its need is baking for nothing.
-pub const SHED_SLACK: Duration = Duration::from_millis(500);
+/// older one meanwhile), one far past its need is baking for nothing. (At 500 ms one
+/// client at a 250 ms round trip had its own bursts refused and went stale 2–3× as
+/// often; see docs/load-test.md.)
+pub const SHED_SLACK: Duration = Duration::from_millis(1500);
+
+/// A prediction is refused only while the wait has stayed long, as a mean over about
+/// this long (each admission folding the wait in with weight `1 − e^(−Δt/τ)`): one
+/// client's burst of requests (a flight's start, a turn) fills the queue for a moment;
+/// overload from many clients stays.
+pub const SATURATION_TIME_CONSTANT: Duration = Duration::from_secs(2);
 
 impl State {
     /// Counts the time a finished job held its slot: from its dispatch (`started`) to
@@ -55,10 +63,27 @@ impl State {
         Some(Duration::from_secs_f64(job_time * rounds))
     }
 
+    /// Folds the wait foreseen now into its mean over time (see
+    /// [`SATURATION_TIME_CONSTANT`]); called at each admission.
+    pub(super) fn track_wait(&mut self) {
+        let now = Instant::now();
+        let wait = self.estimated_wait().map_or(0.0, |w| w.as_secs_f64());
+        self.mean_wait_s = match self.mean_wait_at {
+            None => wait,
+            Some(at) => {
+                let dt = now.duration_since(at).as_secs_f64();
+                let weight = 1.0 - (-dt / SATURATION_TIME_CONSTANT.as_secs_f64()).exp();
+                self.mean_wait_s + weight * (wait - self.mean_wait_s)
+            }
+        };
+        self.mean_wait_at = Some(now);
+    }
+
     /// Whether a new job for a request needed in `in_ms` should be refused: the wait
-    /// it would have, if too long.
+    /// it would have, when both it and the mean wait of late are too long.
     pub(super) fn too_late(&self, in_ms: u64) -> Option<Duration> {
         let wait = self.estimated_wait()?;
-        (wait > Duration::from_millis(in_ms) + SHED_SLACK).then_some(wait)
+        let limit = Duration::from_millis(in_ms) + SHED_SLACK;
+        (wait > limit && Duration::from_secs_f64(self.mean_wait_s) > limit).then_some(wait)
     }
 }

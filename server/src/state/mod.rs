@@ -101,6 +101,9 @@ pub struct State {
     latency_sum_ms: f64,
     /// How long the latest jobs held their slots, seconds (see [`admission`]).
     job_times: VecDeque<f64>,
+    /// The foreseen wait's mean over time, seconds, and when it was last updated.
+    mean_wait_s: f64,
+    mean_wait_at: Option<Instant>,
     handling: VecDeque<f32>,
     pub counters: Counters,
 }
@@ -135,6 +138,8 @@ impl State {
             latency_counts: [0; LATENCY_BUCKETS_MS.len() + 1],
             latency_sum_ms: 0.0,
             job_times: VecDeque::new(),
+            mean_wait_s: 0.0,
+            mean_wait_at: None,
             handling: VecDeque::new(),
             counters: Counters::default(),
         }
@@ -244,6 +249,7 @@ impl State {
                 // A new job for a prediction the workers cannot finish in time is
                 // refused (see `admission`); one joining a job already there costs
                 // nothing more.
+                self.track_wait();
                 if let Urgency::Predicted { in_ms } = request.urgency
                     && let Some(wait) = self.too_late(in_ms)
                 {

@@ -699,19 +699,27 @@ fn predictions_the_workers_cannot_finish_in_time_are_refused() {
     s.result(job.job_id, pb::ReliefTexture::default(), true, 100);
     let took = s.estimated_wait().unwrap();
     assert!(took >= std::time::Duration::from_millis(100), "{took:?}");
-    // Nine more needed now (one running, eight queued): a new job waits ten jobs' time.
-    for id in 2..11 {
+    // Thirty more needed now (one running, 29 queued): a new job waits 31 jobs' time,
+    // past the slack.
+    for id in 2..32 {
         admit_now(&mut s, hash, id, id as f32, tx.clone());
     }
     s.dispatch();
     let wait = s.estimated_wait().unwrap();
     assert!(
-        (wait.as_secs_f64() / took.as_secs_f64() - 10.0).abs() < 1e-6,
+        (wait.as_secs_f64() / took.as_secs_f64() - 31.0).abs() < 1e-6,
         "{wait:?} {took:?}"
     );
+    assert!(wait > admission::SHED_SLACK, "{wait:?}");
     let predicted =
         |id: u64, x: f32, in_ms: u64| request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Predicted { in_ms });
-    let refused = s.admit(&predicted(20, 20.0, 0), OWNER, tx.clone()).unwrap_err();
+    // A burst (the wait long only just now, its mean over time short): taken.
+    (s.mean_wait_s, s.mean_wait_at) = (0.0, Some(Instant::now()));
+    assert!(s.admit(&predicted(40, 40.0, 0), OWNER, tx.clone()).is_ok());
+    // The wait long for a while (its mean over time as long): refused.
+    let wait = s.estimated_wait().unwrap();
+    s.mean_wait_s = wait.as_secs_f64();
+    let refused = s.admit(&predicted(41, 41.0, 0), OWNER, tx.clone()).unwrap_err();
     assert_eq!(refused.code(), tonic::Code::ResourceExhausted);
     let said: u64 = refused
         .metadata()
@@ -725,9 +733,9 @@ fn predictions_the_workers_cannot_finish_in_time_are_refused() {
     assert_eq!(s.stats().predictions_shed, 1);
     // Needed later than the wait (less the slack): taken.
     let later = wait.as_millis() as u64;
-    assert!(s.admit(&predicted(21, 21.0, later), OWNER, tx.clone()).is_ok());
+    assert!(s.admit(&predicted(42, 42.0, later), OWNER, tx.clone()).is_ok());
     // Joining a queued job, even needed at once: taken.
-    assert!(s.admit(&predicted(22, 5.0, 0), OWNER, tx.clone()).is_ok());
+    assert!(s.admit(&predicted(43, 5.0, 0), OWNER, tx.clone()).is_ok());
     assert_eq!(s.stats().predictions_shed, 1);
     assert!(s.stats().estimated_wait_ms > 0);
 }
