@@ -18,6 +18,7 @@
 //! for the one upload), and after a failed upload waits [`REUPLOAD_BACKOFF_FIRST`],
 //! doubling, before trying again — a server refusing the scene is not sent it in a loop.
 
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -32,9 +33,15 @@ use tokio::sync::mpsc::UnboundedSender;
 /// a server back after a restart is found within this …
 pub const HEALTH_POLL: Duration = Duration::from_millis(500);
 
-/// … and one that does not answer a look within this counts as unreachable (a link
-/// cut without a word: HTTP/2 keepalive ends the connection a little later).
+/// … and a look unanswered within this is given up; [`SILENT_LOOKS`] in a row count
+/// as unreachable (a link cut without a word: HTTP/2 keepalive ends the connection
+/// about then too).
 pub const HEALTH_POLL_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// Looks given up in a row before the server counts as unreachable: one alone is a
+/// busy server (at 64 clients on two cores, single slow answers sent every client's
+/// requests to its own generator, and made the overload worse).
+pub const SILENT_LOOKS: u32 = 2;
 
 /// After a failed upload of the scene, the next waits this long, …
 pub const REUPLOAD_BACKOFF_FIRST: Duration = Duration::from_millis(250);
@@ -144,6 +151,8 @@ pub struct Link {
     pub scene_hash: ContentHash,
     pub health: Health,
     uploads: tokio::sync::Mutex<Uploads>,
+    /// Looks given up in a row (see [`SILENT_LOOKS`]).
+    silent_looks: AtomicU32,
 }
 
 /// Why the scene could not be uploaded again.
@@ -164,6 +173,7 @@ impl Link {
             bundle,
             scene_hash,
             health: Health::default(),
+            silent_looks: AtomicU32::new(0),
             uploads: tokio::sync::Mutex::new(Uploads {
                 done: 0,
                 failures: 0,
@@ -222,6 +232,9 @@ impl Link {
             Ok(Ok(stats)) => Some(Duration::from_millis(stats.estimated_wait_ms.into())),
             _ => None,
         };
+        if look.is_ok() {
+            self.silent_looks.store(0, Ordering::Relaxed);
+        }
         match look {
             Ok(Ok(stats)) if stats.workers == 0 => self.health.degrade(Degraded::NoWorkers),
             Ok(Ok(_)) => {
@@ -237,9 +250,14 @@ impl Link {
             Ok(Err(status)) => self
                 .health
                 .degrade(Degraded::Unreachable(status.message().to_string())),
-            Err(_) => self.health.degrade(Degraded::Unreachable(format!(
-                "no answer within {HEALTH_POLL_TIMEOUT:?}"
-            ))),
+            Err(_) => {
+                let silent = self.silent_looks.fetch_add(1, Ordering::Relaxed) + 1;
+                if silent >= SILENT_LOOKS {
+                    self.health.degrade(Degraded::Unreachable(format!(
+                        "{silent} looks unanswered within {HEALTH_POLL_TIMEOUT:?} each"
+                    )));
+                }
+            }
         }
         wait
     }
@@ -251,6 +269,10 @@ impl Link {
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         loop {
             tick.tick().await;
+            // (The manager gone, the run is over: a server stopping with it is no news.)
+            if arrivals.is_closed() {
+                return;
+            }
             if let Some(wait) = self.look().await
                 && arrivals.send(Arrival::ServerLoad { wait }).is_err()
             {

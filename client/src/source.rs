@@ -154,6 +154,8 @@ async fn serve_request(
                 stream = Some(s);
                 break;
             }
+            // (The manager gone, the run is over: a server stopping with it is no news.)
+            Err(_) if arrivals.is_closed() => return,
             Err(e) if unreachable(&e) => {
                 link.health
                     .degrade(Degraded::Unreachable(e.message().to_string()));
@@ -209,6 +211,8 @@ async fn serve_request(
                     "the result stream ended without a final texture".into(),
                 ));
             }
+            // (The manager gone, the run is over: a server stopping with it is no news.)
+            Err(_) if arrivals.is_closed() => return,
             Err(e) if unreachable(&e) => {
                 link.health
                     .degrade(Degraded::Unreachable(e.message().to_string()));

@@ -158,9 +158,9 @@ async fn a_flight_recovers_from_a_server_restart() {
 const CUT_FOR: Duration = Duration::from_secs(6);
 
 /// How soon after the cut the client must say the server cannot be reached (the
-/// target: 5 s; measured here 2.5 s: a look at the server's counters unanswered for
-/// 2 s, polled every 0.5 s).
-const NOTICED_WITHIN: Duration = Duration::from_secs(5);
+/// target: 5 s; measured here 3.9–4.0 s: HTTP/2 keepalive's 2 s ping and 2 s wait, or
+/// two looks at the server's counters unanswered; CI machines are slower and busier).
+const NOTICED_WITHIN: Duration = Duration::from_secs(6);
 
 /// How soon after the link heals a request of the flight must be answered again (the
 /// target: 2 s; CI machines are slower and busier).
