@@ -73,7 +73,6 @@ struct HealthState {
     degraded: Option<(Instant, Degraded)>,
     /// Time degraded before the current episode.
     past: Duration,
-    episodes: u32,
 }
 
 /// Whether textures can come from the server now, and for how long they could not: a
@@ -92,7 +91,6 @@ impl Health {
         let mut state = self.lock();
         if state.degraded.is_none() {
             tracing::warn!("{why}: drawing with textures made here, or geometry, until it serves again");
-            state.episodes += 1;
             state.degraded = Some((Instant::now(), why));
         }
     }
@@ -124,11 +122,6 @@ impl Health {
             .as_ref()
             .map_or(Duration::ZERO, |(since, _)| since.elapsed());
         (state.past + now).as_secs_f64()
-    }
-
-    /// How many times the link became degraded.
-    pub fn episodes(&self) -> u32 {
-        self.lock().episodes
     }
 }
 

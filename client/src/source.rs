@@ -112,6 +112,9 @@ fn unreachable(status: &tonic::Status) -> bool {
 
 /// The wait a refusal for saturation says the server foresaw, if it is one.
 fn saturated_wait(status: &tonic::Status) -> Option<Duration> {
+    if status.code() != tonic::Code::ResourceExhausted {
+        return None;
+    }
     let ms: u64 = status
         .metadata()
         .get(relief_proto::SATURATED_METADATA)?
@@ -162,9 +165,7 @@ async fn serve_request(
                 return to_local(request);
             }
             // A prediction the saturated server will not make in time.
-            Err(e) if e.code() == tonic::Code::ResourceExhausted && saturated_wait(&e).is_some() => {
-                return fail(Failure::Shed(saturated_wait(&e).unwrap_or_default()));
-            }
+            Err(e) if let Some(wait) = saturated_wait(&e) => return fail(Failure::Shed(wait)),
             // The server has lost the scene (restarted, or evicted it): upload it again.
             Err(e) if e.code() == tonic::Code::NotFound && first_try => {
                 if let Err(upload) = link.upload_again(uploads).await {

@@ -166,6 +166,47 @@ const NOTICED_WITHIN: Duration = Duration::from_secs(6);
 /// target: 2 s; CI machines are slower and busier).
 const FLOWING_WITHIN: Duration = Duration::from_secs(6);
 
+/// What a partition did to a flight: its summary once it ended, how long after the cut
+/// it said the server could not be reached, and how long after the link healed the
+/// server answered a request again.
+struct Partitioned {
+    summary: serde_json::Value,
+    noticed: Duration,
+    flowing: Duration,
+}
+
+/// Cuts `relay` for [`CUT_FOR`] while `demo` flies, heals it, and waits until `watch`
+/// (the server's counters) shows a request answered again; then lets the demo end
+/// (within `within`), which must succeed and must have said the cut.
+async fn partition(relay: &Relay, watch: &mut Remote, demo: Flying, within: Duration) -> Partitioned {
+    relay.cut();
+    let cut = Instant::now();
+    tokio::time::sleep(CUT_FOR).await;
+    let before = answered(&watch.stats().await.unwrap());
+    relay.heal();
+    let healed = Instant::now();
+    wait_for(watch, "a request answered after the link healed", |s| {
+        answered(s) > before
+    })
+    .await;
+    let flowing = healed.elapsed();
+    let (status, summary, lines) = tokio::task::spawn_blocking(move || finish(demo, within))
+        .await
+        .unwrap();
+    let stderr = text(&lines);
+    assert!(status.success(), "{stderr}");
+    let noticed = lines
+        .iter()
+        .find(|(_, line)| line.contains("cannot be reached"))
+        .map(|(at, _)| at.saturating_duration_since(cut))
+        .unwrap_or_else(|| panic!("the cut was not noticed: {stderr}"));
+    Partitioned {
+        summary,
+        noticed,
+        flowing,
+    }
+}
+
 /// The link between a flying client and its server is cut for [`CUT_FOR`] — a relay
 /// that stops passing bytes and closes nothing, as a partition does: the client says
 /// so within [`NOTICED_WITHIN`], draws meanwhile without the server, and is answered
@@ -180,27 +221,11 @@ async fn a_partition_is_noticed_and_healed() {
     let out = scratch("partition");
     let demo = fly(&relay.url(), 600, &out, &["--max-stale-frac", "1"]);
     wait_for(&mut watch, "the flight's first textures", |s| answered(s) >= 2).await;
-    relay.cut();
-    let cut = Instant::now();
-    tokio::time::sleep(CUT_FOR).await;
-    let before = answered(&watch.stats().await.unwrap());
-    relay.heal();
-    let healed = Instant::now();
-    wait_for(&mut watch, "a request answered after the link healed", |s| {
-        answered(s) > before
-    })
-    .await;
-    let flowing = healed.elapsed();
-    let (status, summary, lines) = tokio::task::spawn_blocking(move || finish(demo, Duration::from_secs(60)))
-        .await
-        .unwrap();
-    let stderr = text(&lines);
-    assert!(status.success(), "{stderr}");
-    let noticed = lines
-        .iter()
-        .find(|(_, line)| line.contains("cannot be reached"))
-        .map(|(at, _)| at.saturating_duration_since(cut))
-        .unwrap_or_else(|| panic!("the cut was not noticed: {stderr}"));
+    let Partitioned {
+        summary,
+        noticed,
+        flowing,
+    } = partition(&relay, &mut watch, demo, Duration::from_secs(60)).await;
     eprintln!("cut noticed after {noticed:?}; answered again {flowing:?} after the link healed");
     assert!(noticed < NOTICED_WITHIN, "{noticed:?}");
     assert!(flowing < FLOWING_WITHIN, "{flowing:?}");
@@ -276,36 +301,14 @@ async fn a_flight_across_hosts_rides_out_a_partition() {
     wait_for(&mut watch, "the worker", |s| s.workers == 1).await;
     let out = scratch("hosts");
     let relief = hosts.command(client_host, "relief");
-    let demo = fly_as(
-        relief,
-        &to_client.url(),
-        600,
-        &out,
-        &["--max-stale-frac", "1", "--rtt-ms", "0"],
-    );
+    let demo = fly_as(relief, &to_client.url(), 600, &out, &["--max-stale-frac", "1"]);
     wait_for(&mut watch, "the flight's first textures", |s| answered(s) >= 2).await;
     tokio::time::sleep(Duration::from_secs(3)).await;
-    to_client.cut();
-    let cut = Instant::now();
-    tokio::time::sleep(CUT_FOR).await;
-    let before = answered(&watch.stats().await.unwrap());
-    to_client.heal();
-    let healed = Instant::now();
-    wait_for(&mut watch, "a request answered after the link healed", |s| {
-        answered(s) > before
-    })
-    .await;
-    let flowing = healed.elapsed();
-    let (status, summary, lines) = tokio::task::spawn_blocking(move || finish(demo, Duration::from_secs(90)))
-        .await
-        .unwrap();
-    let stderr = text(&lines);
-    assert!(status.success(), "{stderr}");
-    let noticed = lines
-        .iter()
-        .find(|(_, line)| line.contains("cannot be reached"))
-        .map(|(at, _)| at.saturating_duration_since(cut))
-        .unwrap_or_else(|| panic!("the cut was not noticed: {stderr}"));
+    let Partitioned {
+        summary,
+        noticed,
+        flowing,
+    } = partition(&to_client, &mut watch, demo, Duration::from_secs(90)).await;
     let (stale, frames) = (
         summary["stale_frames"].as_u64().unwrap(),
         summary["frames"].as_u64().unwrap(),
