@@ -10,7 +10,7 @@ use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
 
 use relief_core::hash::ContentHash;
 use relief_core::scene::Scene;
-use relief_proto::convert::{texture_from_pb, vec3_to_pb};
+use relief_proto::convert::{projection_to_pb, texture_from_pb, vec3_to_pb};
 use relief_proto::pb;
 use relief_render::impostor::Faces;
 use relief_trace::bake;
@@ -35,6 +35,7 @@ fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::I
         client_id: client_id.to_string(),
         request_id: request.id,
         progressive: request.needed_in_ms.is_none(),
+        projection: projection_to_pb(request.projection).into(),
     }
 }
 
@@ -279,7 +280,15 @@ pub fn spawn_local(
                         let tracer = tracers
                             .entry(request.object.clone())
                             .or_insert_with(|| pool.install(|| ObjectTracer::new(object)));
-                        match pool.install(|| bake(tracer, request.eye, request.size, request.depth_bits)) {
+                        match pool.install(|| {
+                            bake(
+                                tracer,
+                                request.eye,
+                                request.size,
+                                request.depth_bits,
+                                request.projection,
+                            )
+                        }) {
                             Ok(texture) => Arrival::Texture {
                                 id: request.id,
                                 texture: Box::new(ReadyTexture::new(texture, Faces::of(object))),

@@ -202,7 +202,7 @@ fn one_request_for_now_is_in_flight_per_object() {
 #[test]
 fn the_local_generator_serves_requests_for_now_in_the_order_asked() {
     use relief_client::manager::{Arrival, TextureRequest};
-    use relief_core::relief::DepthBits;
+    use relief_core::relief::{DepthBits, SourceProjection};
     let scene = Arc::new(Scene::load("default").unwrap());
     let (commands_tx, commands_rx) = unbounded_channel();
     let (arrivals_tx, mut arrivals_rx) = unbounded_channel();
@@ -215,6 +215,7 @@ fn the_local_generator_serves_requests_for_now_in_the_order_asked() {
             eye: Vec3::new(0.0, 2.0, 12.0),
             size: 32,
             depth_bits: DepthBits::Eight,
+            projection: SourceProjection::Perspective,
             needed_in_ms: None,
         };
         commands_tx.send(Command::Request(request)).unwrap();
@@ -373,6 +374,7 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
         eye,
         64,
         DepthBits::Eight,
+        relief_core::relief::SourceProjection::Perspective,
     )
     .unwrap();
     manager.frame(&scene, &camera, 0.0);

@@ -1,20 +1,35 @@
-//! The relief texture: an orthographic image with per-texel albedo, normal and depth.
+//! The relief texture: an image with per-texel albedo, normal and depth.
 //!
 //! # Source camera and depth mapping (the one place it is defined)
 //!
-//! A texture of `width × height` texels is seen by an orthographic [`SourceCamera`]
+//! A texture of `width × height` texels is seen by a [`SourceCamera`]
 //! `(origin, a, b, f)`: `a` and `b` are the texel steps along the image's x (i) and y (j)
 //! axes, `f = a×b/|a×b|` the unit viewing direction, pointing away from the eye the
-//! texture was made for. Texel `(i, j)` covers the world points
+//! texture was made for. The image plane passes through `origin`, and a texel coordinate
+//! `(u, v)` (texel `i` has its centre at `u = i + 0.5`) is the plane point
+//! `Q = origin + u·a + v·b`. A texel's displacement `t` is its surface point's distance
+//! beyond that plane, along `f`:
 //!
 //! ```text
-//! origin + (i + 0.5)·a + (j + 0.5)·b + t·f
 //! t = depth_near + q / q_max · (depth_far − depth_near)
 //! ```
 //!
 //! where `q` is the stored depth level: `0 ..= q_max`, `q_max = 254` for 8-bit depth and
 //! `65534` for 16-bit; the next value (255 or 65535) marks an empty texel. Levels are
 //! rounded to nearest, so a decoded depth is within half a quantum of the surface.
+//!
+//! The surface point of `(u, v, t)` depends on the [`SourceProjection`]:
+//!
+//! ```text
+//! orthographic:  Q + t·f                       (every texel's ray along f)
+//! perspective:   C + (Q − C)·(h + t)/h          (rays from the centre C, h = (origin − C)·f)
+//! ```
+//!
+//! The orthographic texture is the thesis's (ch. 2.4): its rays are parallel, so what
+//! the eye sees at the sides of an object, above or below it, is seen edge-on or not
+//! at all. The perspective texture is seen from the eye itself, so at that eye it holds
+//! exactly what the eye sees; its pre-warp keeps eq. 3-1's form (see the render crate's
+//! `warp::params`).
 //!
 //! On disk (`relief bake --out DIR`): `albedo.png` (RGB8), `normal.png` (RGB8, world
 //! normal `n·0.5 + 0.5`), `depth.png` (Gray8 or Gray16) and `texture.json`
@@ -69,7 +84,17 @@ impl DepthBits {
     }
 }
 
-/// The orthographic camera of a relief texture (see the module docs for the mapping).
+/// How a relief texture's rays leave its image plane (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum SourceProjection {
+    /// All rays along `f`: the thesis's relief texture.
+    #[default]
+    Orthographic,
+    /// Rays from the eye the texture was made for: what that eye sees.
+    Perspective,
+}
+
+/// The camera of a relief texture (see the module docs for the mapping).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SourceCamera {
     pub width: u32,
@@ -80,13 +105,26 @@ pub struct SourceCamera {
     pub f: Vec3,
     pub depth_near: f32,
     pub depth_far: f32,
+    /// The centre of projection of a perspective texture; `None` for an orthographic
+    /// one. It lies in front of the image plane: `(origin − centre)·f > 0`.
+    pub centre: Option<Vec3>,
 }
+
+/// The widest a perspective texture may see an object: the tangent of the largest
+/// angle between its axis `f` and a ray to the object's bounds (60°). Nearer, the
+/// bounds' projection grows without limit and the texels at its edge stretch; such an
+/// eye is as good as inside the object, where it is drawn as geometry.
+pub const MAX_PERSPECTIVE_TANGENT: f32 = 1.732;
 
 /// Why no source camera can be made for an eye.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FacingError {
     #[error("the eye is inside the object's bounds: draw the object as geometry")]
     EyeInsideBounds,
+    /// The object's bounds reach wider than [`MAX_PERSPECTIVE_TANGENT`] around the
+    /// eye's view of them (or behind it): no perspective texture.
+    #[error("the eye is too near the object's bounds for a perspective texture: draw the object as geometry")]
+    EyeTooNear,
     #[error("relief texture size {0}x{1} must be between 1 and {MAX_TEXTURE_SIZE}")]
     BadSize(u32, u32),
     #[error("the eye {0} is not finite")]
@@ -101,10 +139,17 @@ pub enum FacingError {
 
 impl SourceCamera {
     /// The source camera of a relief texture of the object with `bounds`, made for
-    /// `eye`: orthographic, looking from the eye towards the bounds' centre, its image
-    /// plane at the near face of the bounds and its `width × height` texels spanning the
-    /// bounds' projection exactly.
-    pub fn facing(eye: Vec3, bounds: &Aabb, width: u32, height: u32) -> Result<Self, FacingError> {
+    /// `eye` with `projection`: looking from the eye towards the bounds' centre, its
+    /// image plane at the near face of the bounds (the plane through the corner nearest
+    /// the eye, square to `f`) and its `width × height` texels spanning the bounds'
+    /// projection exactly — along `f`, or from the eye.
+    pub fn facing(
+        eye: Vec3,
+        bounds: &Aabb,
+        width: u32,
+        height: u32,
+        projection: SourceProjection,
+    ) -> Result<Self, FacingError> {
         if width == 0 || height == 0 || width > MAX_TEXTURE_SIZE || height > MAX_TEXTURE_SIZE {
             return Err(FacingError::BadSize(width, height));
         }
@@ -136,6 +181,13 @@ impl SourceCamera {
             lo = lo.min(p);
             hi = hi.max(p);
         }
+        if projection == SourceProjection::Perspective {
+            let corners = bounds.corners().map(|corner| {
+                let d = corner - centre;
+                Vec3::new(d.dot(right), d.dot(down), d.dot(f))
+            });
+            return Self::perspective(eye, centre, (right, down, f), &corners, width, height);
+        }
         // A flat object seen edge-on projects to a line: keep every span positive.
         let min_span = (hi - lo).max_element().max(f32::MIN_POSITIVE) * 1e-4;
         for axis in 0..3 {
@@ -155,17 +207,120 @@ impl SourceCamera {
             f,
             depth_near: 0.0,
             depth_far: span.z,
+            centre: None,
         };
-        let usable = camera.origin.is_finite()
-            && camera.f.is_finite()
-            && camera.a.length_squared().is_normal()
-            && camera.b.length_squared().is_normal()
-            && camera.depth_far.is_normal();
+        camera.usable(eye)
+    }
+
+    /// [`SourceCamera::facing`] in perspective from `eye` (the centre of projection, on
+    /// the axis through the bounds' `centre`), given the view axes and the bounds'
+    /// corners in those axes about `centre`.
+    fn perspective(
+        eye: Vec3,
+        centre: Vec3,
+        (right, down, f): (Vec3, Vec3, Vec3),
+        corners: &[Vec3; 8],
+        width: u32,
+        height: u32,
+    ) -> Result<Self, FacingError> {
+        // Corners relative to the eye: the eye lies on the axis through the centre, at
+        // `distance` before it along `f`.
+        let distance = (centre - eye).dot(f);
+        let depth = |p: &Vec3| distance + p.z;
+        let near = corners.iter().map(depth).fold(f32::INFINITY, f32::min);
+        let far = corners.iter().map(depth).fold(f32::NEG_INFINITY, f32::max);
+        // The plane through the nearest corner; its distance from the eye, `h`, is the
+        // nearest corner's. At or behind the eye: too near.
+        if near.is_nan() || near <= 0.0 {
+            return Err(FacingError::EyeTooNear);
+        }
+        // The tangents of the rays to the corners: the box's projection is theirs.
+        let (mut t_lo, mut t_hi) = (
+            glam::Vec2::splat(f32::INFINITY),
+            glam::Vec2::splat(f32::NEG_INFINITY),
+        );
+        for p in corners {
+            let t = glam::Vec2::new(p.x, p.y) / depth(p);
+            t_lo = t_lo.min(t);
+            t_hi = t_hi.max(t);
+        }
+        if t_lo.min_element() < -MAX_PERSPECTIVE_TANGENT || t_hi.max_element() > MAX_PERSPECTIVE_TANGENT {
+            return Err(FacingError::EyeTooNear);
+        }
+        let min_span = (t_hi - t_lo).max_element().max(f32::MIN_POSITIVE) * 1e-4;
+        let span = (t_hi - t_lo).max(glam::Vec2::splat(min_span));
+        let camera = SourceCamera {
+            width,
+            height,
+            origin: eye + (f + right * t_lo.x + down * t_lo.y) * near,
+            a: right * (span.x * near / width as f32),
+            b: down * (span.y * near / height as f32),
+            f,
+            depth_near: 0.0,
+            depth_far: (far - near).max(min_span * near),
+            centre: Some(eye),
+        };
+        camera.usable(eye)
+    }
+
+    /// `Ok(self)` when every part of the camera is finite and its spans are normal
+    /// numbers, else [`FacingError::OutOfRange`] naming `eye`.
+    fn usable(self, eye: Vec3) -> Result<Self, FacingError> {
+        let usable = self.origin.is_finite()
+            && self.f.is_finite()
+            && self.a.length_squared().is_normal()
+            && self.b.length_squared().is_normal()
+            && self.depth_far.is_normal()
+            && self.centre_distance().is_none_or(|h| h.is_normal() && h > 0.0);
         if usable {
-            Ok(camera)
+            Ok(self)
         } else {
             Err(FacingError::OutOfRange(eye))
         }
+    }
+
+    /// The distance `h` of a perspective texture's centre of projection in front of its
+    /// image plane; `None` for an orthographic texture.
+    #[inline]
+    pub fn centre_distance(&self) -> Option<f32> {
+        self.centre.map(|c| (self.origin - c).dot(self.f))
+    }
+
+    /// The world point of texel coordinate `(u, v)` (texel centres at `i + 0.5`) at
+    /// displacement `t` (see the module docs).
+    #[inline]
+    pub fn point(&self, u: f32, v: f32, t: f32) -> Vec3 {
+        let q = self.origin + self.a * u + self.b * v;
+        match self.centre {
+            None => q + self.f * t,
+            Some(c) => {
+                let h = (self.origin - c).dot(self.f);
+                c + (q - c) * ((h + t) / h)
+            }
+        }
+    }
+
+    /// The larger side of a texel at displacement `t`: `|a|` and `|b|` at the plane,
+    /// growing with the distance from a perspective texture's centre.
+    pub fn texel_size_at(&self, t: f32) -> f32 {
+        let at_plane = self.a.length().max(self.b.length());
+        match self.centre_distance() {
+            None => at_plane,
+            Some(h) => at_plane * (h + t) / h,
+        }
+    }
+
+    /// The ray of texel `(i, j)`: its point at displacement `depth_near` and a
+    /// direction whose component along `f` is 1, so that the ray's parameter is the
+    /// displacement past `depth_near`.
+    #[inline]
+    pub fn texel_ray(&self, i: u32, j: u32) -> (Vec3, Vec3) {
+        let q = self.texel_origin(i, j);
+        let direction = match self.centre {
+            None => self.f,
+            Some(c) => (q - c) / (self.origin - c).dot(self.f),
+        };
+        (q + direction * self.depth_near, direction)
     }
 
     /// The centre of the image plane (`t = 0`).
@@ -243,6 +398,9 @@ pub struct TextureMeta {
     pub empty: u32,
     /// The eye the texture was made for.
     pub eye: [f64; 3],
+    /// A perspective texture's centre of projection; absent for an orthographic one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub centre: Option<[f64; 3]>,
 }
 
 fn to_f64(v: Vec3) -> [f64; 3] {
@@ -288,7 +446,8 @@ impl ReliefTexture {
     pub fn world_point(&self, i: u32, j: u32) -> Option<Vec3> {
         let q = self.depth[self.index(i, j)];
         (q != self.depth_bits.empty()).then(|| {
-            self.camera.texel_origin(i, j) + self.camera.f * self.camera.depth_of_level(q, self.depth_bits)
+            let t = self.camera.depth_of_level(q, self.depth_bits);
+            self.camera.point(i as f32 + 0.5, j as f32 + 0.5, t)
         })
     }
 
@@ -307,6 +466,7 @@ impl ReliefTexture {
             depth_bits: self.depth_bits.bits(),
             empty: self.depth_bits.empty() as u32,
             eye: to_f64(self.eye),
+            centre: c.centre.map(to_f64),
         }
     }
 
@@ -380,6 +540,7 @@ impl ReliefTexture {
             f: from_f64(meta.f),
             depth_near: meta.depth_near as f32,
             depth_far: meta.depth_far as f32,
+            centre: meta.centre.map(from_f64),
         };
         let finite = [camera.origin, camera.a, camera.b, camera.f]
             .iter()
@@ -388,6 +549,14 @@ impl ReliefTexture {
             && camera.depth_far.is_finite();
         if !finite || camera.depth_far <= camera.depth_near {
             return Err(bad("texture.json holds non-finite or inverted values".into()));
+        }
+        if camera
+            .centre_distance()
+            .is_some_and(|h| !(h.is_normal() && h > 0.0))
+        {
+            return Err(bad(
+                "texture.json: the centre of projection is not in front of the image plane".into(),
+            ));
         }
         let (w, h) = (meta.width, meta.height);
         if w == 0 || h == 0 || w > MAX_TEXTURE_SIZE || h > MAX_TEXTURE_SIZE {
@@ -447,7 +616,7 @@ mod tests {
     #[test]
     fn facing_camera_spans_the_bounds_and_faces_away_from_the_eye() {
         let eye = Vec3::new(3.0, 1.0, 4.0);
-        let c = SourceCamera::facing(eye, &unit_box(), 64, 32).unwrap();
+        let c = SourceCamera::facing(eye, &unit_box(), 64, 32, SourceProjection::Orthographic).unwrap();
         assert!(c.f.abs_diff_eq((-eye).normalize(), 1e-6));
         assert!(c.a.cross(c.b).normalize().abs_diff_eq(c.f, 1e-5));
         // Every corner projects inside the image and at depth within [near, far].
@@ -465,27 +634,99 @@ mod tests {
             assert!(t >= c.depth_near - 1e-5 && t <= c.depth_far + 1e-5);
         }
         assert_eq!(
-            SourceCamera::facing(Vec3::ZERO, &unit_box(), 8, 8),
+            SourceCamera::facing(Vec3::ZERO, &unit_box(), 8, 8, SourceProjection::Orthographic),
             Err(FacingError::EyeInsideBounds)
         );
-        assert!(SourceCamera::facing(eye, &unit_box(), 0, 8).is_err());
-        assert!(SourceCamera::facing(eye, &unit_box(), MAX_TEXTURE_SIZE + 1, 8).is_err());
-        assert!(SourceCamera::facing(Vec3::INFINITY, &unit_box(), 8, 8).is_err());
+        assert!(SourceCamera::facing(eye, &unit_box(), 0, 8, SourceProjection::Orthographic).is_err());
+        assert!(
+            SourceCamera::facing(
+                eye,
+                &unit_box(),
+                MAX_TEXTURE_SIZE + 1,
+                8,
+                SourceProjection::Orthographic
+            )
+            .is_err()
+        );
+        assert!(
+            SourceCamera::facing(Vec3::INFINITY, &unit_box(), 8, 8, SourceProjection::Orthographic).is_err()
+        );
         // Straight above: the up vector switches axis, no NaN.
-        let top = SourceCamera::facing(Vec3::Y * 5.0, &unit_box(), 8, 8).unwrap();
+        let top =
+            SourceCamera::facing(Vec3::Y * 5.0, &unit_box(), 8, 8, SourceProjection::Orthographic).unwrap();
         assert!(top.a.is_finite() && top.b.is_finite());
         // A flat box seen edge-on keeps positive spans.
         let flat = Aabb {
             min: Vec3::new(-1.0, 0.0, -1.0),
             max: Vec3::new(1.0, 0.0, 1.0),
         };
-        let edge_on = SourceCamera::facing(Vec3::X * 5.0, &flat, 8, 8).unwrap();
+        let edge_on =
+            SourceCamera::facing(Vec3::X * 5.0, &flat, 8, 8, SourceProjection::Orthographic).unwrap();
         assert!(edge_on.b.length() > 0.0 && edge_on.depth_far > 0.0);
+    }
+
+    /// A perspective camera's rays start at the eye: every corner of the bounds lies on
+    /// the ray of a texel coordinate inside the image at a displacement in range, and
+    /// `point` walks along those rays.
+    #[test]
+    fn perspective_camera_sees_the_bounds_from_the_eye() {
+        let eye = Vec3::new(3.0, 1.0, 4.0);
+        let c = SourceCamera::facing(eye, &unit_box(), 64, 32, SourceProjection::Perspective).unwrap();
+        assert_eq!(c.centre, Some(eye));
+        assert!(c.f.abs_diff_eq((-eye).normalize(), 1e-6));
+        let h = c.centre_distance().unwrap();
+        let nearest = unit_box()
+            .corners()
+            .iter()
+            .map(|&p| (p - eye).dot(c.f))
+            .fold(f32::MAX, f32::min);
+        assert!(
+            (h - nearest).abs() < 1e-5,
+            "the plane through the nearest corner: {h} {nearest}"
+        );
+        for corner in unit_box().corners() {
+            // Where the ray from the eye to the corner crosses the plane, and how far
+            // past the plane the corner is.
+            let t = (corner - eye).dot(c.f) - h;
+            let crossing = eye + (corner - eye) * (h / (h + t)) - c.origin;
+            let (u, v) = (
+                crossing.dot(c.a) / c.a.length_squared(),
+                crossing.dot(c.b) / c.b.length_squared(),
+            );
+            assert!(
+                (-1e-3..=64.001).contains(&u) && (-1e-3..=32.001).contains(&v),
+                "{u} {v}"
+            );
+            assert!(t >= c.depth_near - 1e-5 && t <= c.depth_far + 1e-5, "{t}");
+            assert!(
+                c.point(u, v, t).abs_diff_eq(corner, 1e-4),
+                "{:?} {corner}",
+                c.point(u, v, t)
+            );
+        }
+        // A texel's ray is scaled to 1 along `f`, from its point at `depth_near`.
+        let (start, direction) = c.texel_ray(10, 20);
+        assert!((direction.dot(c.f) - 1.0).abs() < 1e-5);
+        assert!((start + direction * 0.7).abs_diff_eq(c.point(10.5, 20.5, c.depth_near + 0.7), 1e-5));
+        assert!(direction.normalize().abs_diff_eq((start - eye).normalize(), 1e-5));
+        // Texels grow with the distance from the centre; an orthographic one does not.
+        assert!((c.texel_size_at(h) - 2.0 * c.texel_size_at(0.0)).abs() < 1e-5);
+        let parallel =
+            SourceCamera::facing(eye, &unit_box(), 64, 32, SourceProjection::Orthographic).unwrap();
+        assert_eq!(parallel.texel_size_at(5.0), parallel.texel_size_at(0.0));
+        // Too near: the bounds reach past 60° around the axis, or behind the plane.
+        let beside = Vec3::new(1.2, 0.0, 0.0);
+        assert_eq!(
+            SourceCamera::facing(beside, &unit_box(), 8, 8, SourceProjection::Perspective),
+            Err(FacingError::EyeTooNear)
+        );
+        assert!(SourceCamera::facing(beside, &unit_box(), 8, 8, SourceProjection::Orthographic).is_ok());
     }
 
     #[test]
     fn depth_levels_round_trip_within_half_a_quantum() {
-        let c = SourceCamera::facing(Vec3::Z * 5.0, &unit_box(), 4, 4).unwrap();
+        let c =
+            SourceCamera::facing(Vec3::Z * 5.0, &unit_box(), 4, 4, SourceProjection::Orthographic).unwrap();
         for bits in [DepthBits::Eight, DepthBits::Sixteen] {
             for k in 0..=100 {
                 let t = c.depth_far * k as f32 / 100.0;
@@ -500,21 +741,42 @@ mod tests {
     fn far_eyes_and_huge_objects_face_or_fail_clearly() {
         // An eye 1e20 away: its offset's squared length overflows f32, the direction
         // must not.
-        let c = SourceCamera::facing(Vec3::new(-3.0, 1.0, 1e20), &unit_box(), 4, 4).unwrap();
+        let c = SourceCamera::facing(
+            Vec3::new(-3.0, 1.0, 1e20),
+            &unit_box(),
+            4,
+            4,
+            SourceProjection::Orthographic,
+        )
+        .unwrap();
         assert!(c.f.abs_diff_eq(-Vec3::Z, 1e-6) && c.origin.is_finite(), "{c:?}");
         // Bounds of 1e30: the camera's spans overflow — an error, never NaN.
         let huge = Aabb {
             min: Vec3::splat(-1e38),
             max: Vec3::splat(1e38),
         };
-        let err = SourceCamera::facing(Vec3::new(3e38, 3e38, 3e38), &huge, 4, 4).unwrap_err();
+        let err = SourceCamera::facing(
+            Vec3::new(3e38, 3e38, 3e38),
+            &huge,
+            4,
+            4,
+            SourceProjection::Orthographic,
+        )
+        .unwrap_err();
         assert!(matches!(err, FacingError::OutOfRange(_)), "{err}");
         // A 10 nm object seen at 4096 texels still has a camera.
         let tiny = Aabb {
             min: Vec3::splat(-5e-9),
             max: Vec3::splat(5e-9),
         };
-        let c = SourceCamera::facing(Vec3::new(0.0, 0.0, 1e-7), &tiny, 4096, 4096).unwrap();
+        let c = SourceCamera::facing(
+            Vec3::new(0.0, 0.0, 1e-7),
+            &tiny,
+            4096,
+            4096,
+            SourceProjection::Orthographic,
+        )
+        .unwrap();
         assert!(c.a.length() > 0.0 && c.depth_far > 0.0, "{c:?}");
     }
 
@@ -528,8 +790,11 @@ mod tests {
     #[test]
     fn disk_round_trip() {
         let dir = std::env::temp_dir().join(format!("relief-tex-{}", std::process::id()));
-        for bits in [DepthBits::Eight, DepthBits::Sixteen] {
-            let c = SourceCamera::facing(Vec3::Z * 5.0, &unit_box(), 5, 3).unwrap();
+        for (bits, projection) in [
+            (DepthBits::Eight, SourceProjection::Orthographic),
+            (DepthBits::Sixteen, SourceProjection::Perspective),
+        ] {
+            let c = SourceCamera::facing(Vec3::Z * 5.0, &unit_box(), 5, 3, projection).unwrap();
             let mut t = ReliefTexture::empty(c, bits, Vec3::Z * 5.0);
             t.depth[4] = 7;
             t.albedo[4] = [1, 2, 3];

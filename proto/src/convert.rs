@@ -5,7 +5,7 @@ use glam::Vec3;
 use tonic::Status;
 
 use relief_core::hash::ContentHash;
-use relief_core::relief::{DepthBits, MAX_TEXTURE_SIZE, ReliefTexture, SourceCamera};
+use relief_core::relief::{DepthBits, MAX_TEXTURE_SIZE, ReliefTexture, SourceCamera, SourceProjection};
 
 use crate::pb;
 
@@ -99,6 +99,7 @@ pub fn texture_to_pb(t: &ReliefTexture) -> pb::ReliefTexture {
         depth_far: c.depth_far,
         depth_bits: t.depth_bits.bits(),
         eye: Some(vec3_to_pb(t.eye)),
+        centre: c.centre.map(vec3_to_pb),
         albedo: t.albedo.iter().flatten().copied().collect(),
         normal: t.normal.iter().flatten().copied().collect(),
         depth,
@@ -147,12 +148,23 @@ pub fn check_texture_pb(
         f: vec3_from_pb(&name("f"), t.f.as_ref())?,
         depth_near: t.depth_near,
         depth_far: t.depth_far,
+        centre: t
+            .centre
+            .as_ref()
+            .map(|c| vec3_from_pb(&name("centre"), Some(c)))
+            .transpose()?,
     };
     if !(t.depth_near.is_finite() && t.depth_far.is_finite() && t.depth_far > t.depth_near) {
         return Err(invalid(
             &name("depth_far"),
             "depth range must be finite with far > near",
         ));
+    }
+    if camera
+        .centre_distance()
+        .is_some_and(|h| !(h.is_normal() && h > 0.0))
+    {
+        return Err(invalid(&name("centre"), "not in front of the image plane"));
     }
     let texels = width as usize * height as usize;
     let plane = |f: &str, bytes: &[u8], per_texel: usize| {
@@ -198,6 +210,27 @@ pub struct Request {
     pub client_id: String,
     pub request_id: u64,
     pub progressive: bool,
+    pub projection: SourceProjection,
+}
+
+/// The projection a request or job asks for.
+pub fn projection_from_pb(field: &str, value: i32) -> Result<SourceProjection, Status> {
+    match pb::SourceProjection::try_from(value) {
+        Ok(pb::SourceProjection::Orthographic) => Ok(SourceProjection::Orthographic),
+        Ok(pb::SourceProjection::Perspective) => Ok(SourceProjection::Perspective),
+        Err(_) => Err(invalid(
+            field,
+            format_args!("{value} is not ORTHOGRAPHIC or PERSPECTIVE"),
+        )),
+    }
+}
+
+/// A projection on the wire.
+pub fn projection_to_pb(projection: SourceProjection) -> pb::SourceProjection {
+    match projection {
+        SourceProjection::Orthographic => pb::SourceProjection::Orthographic,
+        SourceProjection::Perspective => pb::SourceProjection::Perspective,
+    }
 }
 
 /// A `client_id` is not empty and at most
@@ -247,6 +280,7 @@ pub fn request_from_pb(r: &pb::ImpostorRequest) -> Result<Request, Status> {
         client_id: r.client_id.clone(),
         request_id: r.request_id,
         progressive: r.progressive,
+        projection: projection_from_pb("projection", r.projection)?,
     })
 }
 
@@ -271,7 +305,11 @@ mod tests {
                 max: Vec3::splat(1.0),
             };
             let eye = Vec3::new(0.5, 1.0, 4.0);
-            let mut t = ReliefTexture::empty(SourceCamera::facing(eye, &bounds, 5, 3).unwrap(), bits, eye);
+            let mut t = ReliefTexture::empty(
+                SourceCamera::facing(eye, &bounds, 5, 3, SourceProjection::Orthographic).unwrap(),
+                bits,
+                eye,
+            );
             t.depth[2] = 200;
             t.albedo[2] = [1, 2, 3];
             t.normal[7] = [9, 8, 7];
@@ -314,9 +352,20 @@ mod tests {
             client_id: "c".into(),
             request_id: 7,
             progressive: false,
+            projection: pb::SourceProjection::Perspective.into(),
         };
-        assert!(request_from_pb(&good).is_ok());
+        assert_eq!(
+            request_from_pb(&good).unwrap().projection,
+            SourceProjection::Perspective
+        );
         let field_of = |r: pb::ImpostorRequest| request_from_pb(&r).unwrap_err().message().to_string();
+        assert!(
+            field_of(pb::ImpostorRequest {
+                projection: 7,
+                ..good.clone()
+            })
+            .contains("projection")
+        );
         assert!(
             field_of(pb::ImpostorRequest {
                 eye: Some(pb::Vec3 {

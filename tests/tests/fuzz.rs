@@ -8,6 +8,7 @@
 //! longer run); failing seeds are kept in `tests/proptest-regressions/` and replayed
 //! first.
 
+use relief_core::relief::SourceProjection;
 use std::path::Path;
 
 use proptest::prelude::*;
@@ -108,7 +109,7 @@ proptest! {
                 glam::Vec3::new(0.0, 0.0, 5.0),
                 &relief_core::bounds::Aabb::from_points([glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0)]),
                 8,
-                8,
+                8, SourceProjection::Orthographic,
             )
             .expect("camera"),
             relief_core::relief::DepthBits::Sixteen,

@@ -14,7 +14,7 @@ use tonic::service::interceptor::InterceptedService;
 use tonic::transport::Channel;
 
 use relief_client::remote::Remote;
-use relief_core::relief::DepthBits;
+use relief_core::relief::{DepthBits, SourceProjection};
 use relief_core::scene::Scene;
 use relief_proto::auth::BearerToken;
 use relief_proto::bundle::bundle_for;
@@ -53,6 +53,7 @@ fn ask(scene: &str, id: u64, size: u32, client_id: &str) -> pb::ImpostorRequest 
         client_id: client_id.into(),
         request_id: id,
         progressive: false,
+        projection: pb::SourceProjection::Orthographic.into(),
     }
 }
 
@@ -170,6 +171,7 @@ fn tiny_texture() -> pb::ReliefTexture {
         albedo: vec![255, 0, 0].into(),
         normal: vec![128, 128, 255].into(),
         depth: vec![0].into(),
+        centre: None,
     }
 }
 
@@ -271,7 +273,7 @@ async fn a_worker_answers_only_for_its_own_jobs_with_the_texture_asked_for() {
     );
     let scene = Scene::load("default").expect("default scene");
     let sphere = ObjectTracer::new(scene.object("sphere").expect("sphere"));
-    let genuine = bake(&sphere, EYE, 64, DepthBits::Eight).expect("bake");
+    let genuine = bake(&sphere, EYE, 64, DepthBits::Eight, SourceProjection::Orthographic).expect("bake");
     forger.answer(job.job_id, texture_to_pb(&genuine)).await;
     assert_eq!(forger.ended().await, Code::PermissionDenied);
     let after = wait_for(&mut client, "the forger dropped", |s| s.workers == 1).await;

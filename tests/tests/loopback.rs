@@ -7,7 +7,7 @@ use glam::Vec3;
 use tonic::Code;
 
 use relief_client::remote::Remote;
-use relief_core::relief::DepthBits;
+use relief_core::relief::{DepthBits, SourceProjection};
 use relief_core::scene::Scene;
 use relief_proto::bundle::bundle_for;
 use relief_proto::convert::{texture_from_pb, vec3_to_pb};
@@ -38,6 +38,8 @@ fn request(
         client_id: "test".into(),
         request_id: id,
         progressive: false,
+        // (What the client asks for.)
+        projection: pb::SourceProjection::Perspective.into(),
     }
 }
 
@@ -74,6 +76,7 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
         eye,
         128,
         DepthBits::Eight,
+        SourceProjection::Perspective,
     )
     .unwrap();
     assert_eq!(got, local, "the worker's texture differs from a local bake");
@@ -85,15 +88,29 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
     // A smaller request at the same eye: the bigger cached texture serves it.
     req.request_id = 3;
     req.size = 64;
-    let smaller = collect(remote.request(req).await.unwrap()).await.unwrap();
+    let smaller = collect(remote.request(req.clone()).await.unwrap()).await.unwrap();
     assert_eq!(smaller.len(), 1);
     let served = texture_from_pb("texture", smaller[0].texture.as_ref().unwrap()).unwrap();
     assert_eq!(served, local, "the 64² request gets the cached 128² texture");
+    // The same eye in the other projection is another texture, baked for it.
+    req.request_id = 4;
+    req.projection = pb::SourceProjection::Orthographic.into();
+    let parallel = collect(remote.request(req).await.unwrap()).await.unwrap();
+    let parallel = texture_from_pb("texture", parallel[0].texture.as_ref().unwrap()).unwrap();
+    assert_eq!(
+        parallel.camera.centre, None,
+        "an orthographic texture has no centre"
+    );
+    assert_eq!(
+        local.camera.centre,
+        Some(eye),
+        "a perspective texture is seen from its eye"
+    );
     let stats = remote.stats().await.unwrap();
-    assert_eq!((stats.requests, stats.cache_hits), (3, 2), "{stats:?}");
+    assert_eq!((stats.requests, stats.cache_hits), (4, 2), "{stats:?}");
     // Every request's latency is in the histogram, one count per bucket and one over.
     assert_eq!(stats.latency_counts.len(), stats.latency_bucket_ms.len() + 1);
-    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 3, "{stats:?}");
+    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 4, "{stats:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -202,14 +219,14 @@ async fn a_request_no_worker_takes_ends_in_an_error() {
     assert_eq!(remote.stats().await.unwrap().jobs_timed_out, 1);
 }
 
-/// Asks for a bake that takes seconds (the 2048² rock, request 1, a 512² preview
+/// Asks for a bake that takes seconds (the 4096² rock, request 1, a 1024² preview
 /// first) and waits until its preview has come: the worker is then baking the final.
 async fn start_long_bake(remote: &mut Remote, hash: &str) -> tonic::Streaming<pb::ImpostorResult> {
     let eye = Vec3::new(0.5, 2.0, 8.0);
     let mut stream = remote
         .request(pb::ImpostorRequest {
             progressive: true,
-            ..request(hash, "rock", eye, 2048, 1, pb::Urgency::Now)
+            ..request(hash, "rock", eye, 4096, 1, pb::Urgency::Now)
         })
         .await
         .unwrap();

@@ -21,7 +21,9 @@ use relief_core::hash::ContentHash;
 use relief_core::scene::{Scene, SceneLimits};
 use relief_proto::auth::BearerToken;
 use relief_proto::bundle::Bundle;
-use relief_proto::convert::{depth_bits_from_pb, hash_from_pb, size_from_pb, texture_to_pb, vec3_from_pb};
+use relief_proto::convert::{
+    depth_bits_from_pb, hash_from_pb, projection_from_pb, size_from_pb, texture_to_pb, vec3_from_pb,
+};
 use relief_proto::limits::{MAX_SCENE_FETCH_MESSAGE_BYTES, MAX_TEXTURE_MESSAGE_BYTES};
 use relief_proto::pb;
 use relief_trace::bake::bake_unless_cancelled;
@@ -365,6 +367,7 @@ async fn bake_job(job: pb::Job, context: &JobContext, cancelled: &Arc<AtomicBool
     let eye = vec3_from_pb("eye", job.eye.as_ref()).map_err(message)?;
     let size = size_from_pb("size", job.size).map_err(message)?;
     let bits = depth_bits_from_pb("depth_bits", job.depth_bits).map_err(message)?;
+    let projection = projection_from_pb("projection", job.projection).map_err(message)?;
     let loaded = scene(hash, context).await?;
     let tracer = loaded.tracer(&job.object).map_err(|e| e.to_string())?;
     let mut sizes = vec![size];
@@ -377,11 +380,12 @@ async fn bake_job(job: pb::Job, context: &JobContext, cancelled: &Arc<AtomicBool
         }
         let (tracer, flag) = (tracer.clone(), cancelled.clone());
         let start = Instant::now();
-        let texture =
-            tokio::task::spawn_blocking(move || bake_unless_cancelled(&tracer, eye, edge, bits, &flag))
-                .await
-                .map_err(|e| e.to_string())?
-                .map_err(|e| e.to_string())?;
+        let texture = tokio::task::spawn_blocking(move || {
+            bake_unless_cancelled(&tracer, eye, edge, bits, projection, &flag)
+        })
+        .await
+        .map_err(|e| e.to_string())?
+        .map_err(|e| e.to_string())?;
         let Some(texture) = texture else {
             tracing::debug!(edge, "cancelled: stopped mid-bake");
             context.metrics.bake_ended("stopped");

@@ -6,7 +6,7 @@ use rayon::prelude::*;
 
 use relief_core::camera::Camera;
 use relief_core::frame::Frame;
-use relief_core::relief::DepthBits;
+use relief_core::relief::{DepthBits, SourceProjection};
 use relief_core::scene::{Scene, SceneObject};
 use relief_trace::bake;
 use relief_trace::tracer::ObjectTracer;
@@ -75,10 +75,23 @@ impl FramePlan {
                 let turn = Quat::from_rotation_y(source_angle_deg.to_radians());
                 let source_eye = centre + turn * (camera.eye - centre);
                 // (Its volume centre is as far from the source eye as from the eye.)
-                let size = resolution_for(&object.bounds, source_eye, camera, MAX_TEXEL_PIXELS)
-                    .unwrap_or(MAX_TEXTURE_EDGE)
-                    .clamp(MIN_LEVEL_EDGE, MAX_TEXTURE_EDGE);
-                let texture = bake(&ObjectTracer::new(object), source_eye, size, bits).ok();
+                let size = resolution_for(
+                    &object.bounds,
+                    source_eye,
+                    SourceProjection::Orthographic,
+                    camera,
+                    MAX_TEXEL_PIXELS,
+                )
+                .unwrap_or(MAX_TEXTURE_EDGE)
+                .clamp(MIN_LEVEL_EDGE, MAX_TEXTURE_EDGE);
+                let texture = bake(
+                    &ObjectTracer::new(object),
+                    source_eye,
+                    size,
+                    bits,
+                    SourceProjection::Orthographic,
+                )
+                .ok();
                 let impostor = texture.map(|texture| ImpostorObject {
                     index: k as u32,
                     pyramid: Pyramid::new(texture, MIN_LEVEL_EDGE).with_faces(Faces::of(object)),

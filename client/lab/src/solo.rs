@@ -6,7 +6,7 @@ use glam::Vec3;
 
 use relief_core::camera::Camera;
 use relief_core::frame::Frame;
-use relief_core::relief::{DepthBits, ReliefTexture};
+use relief_core::relief::{DepthBits, ReliefTexture, SourceProjection};
 use relief_core::scene::Scene;
 use relief_trace::tracer::SceneTracer;
 use relief_trace::{bake, render_reference};
@@ -92,7 +92,13 @@ impl Solo {
     /// Bakes the object's relief texture for `eye` (an error for an object too
     /// degenerate to orbit, whose eyes fall inside its bounds).
     pub fn bake(&self, eye: Vec3, size: u32, bits: DepthBits) -> Result<ReliefTexture, SoloError> {
-        Ok(bake(&self.tracer.objects[0], eye, size, bits)?)
+        Ok(bake(
+            &self.tracer.objects[0],
+            eye,
+            size,
+            bits,
+            SourceProjection::Orthographic,
+        )?)
     }
 
     /// The ray-traced reference frame, `samples × samples` rays per pixel (see

@@ -6,7 +6,7 @@ use glam::Vec3;
 use relief_core::camera::Camera;
 use relief_core::generators::Generator;
 use relief_core::mesh::{Material, Mesh};
-use relief_core::relief::{DepthBits, ReliefTexture, SourceCamera};
+use relief_core::relief::{DepthBits, ReliefTexture, SourceCamera, SourceProjection};
 use relief_core::scene::{Scene, SceneObject, default_lighting};
 use relief_core::shading::Specular;
 use relief_lab::methods::{DisplayError, Method, display};
@@ -109,7 +109,14 @@ fn check_all(scene: &Scene, texture: ReliefTexture, eye: Vec3, target: Vec3, wha
 }
 
 fn baked(scene: &Scene, eye: Vec3, size: u32, bits: DepthBits) -> ReliefTexture {
-    bake(&ObjectTracer::new(&scene.objects[0]), eye, size, bits).expect("bake")
+    bake(
+        &ObjectTracer::new(&scene.objects[0]),
+        eye,
+        size,
+        bits,
+        SourceProjection::Orthographic,
+    )
+    .expect("bake")
 }
 
 #[test]
@@ -215,6 +222,7 @@ fn eye_at_the_bounds_edge_and_inside() {
         Vec3::new(0.0, 0.0, 0.5),
         16,
         DepthBits::Eight,
+        SourceProjection::Orthographic,
     );
     assert!(inside.unwrap_err().to_string().contains("geometry"));
 }
@@ -276,7 +284,7 @@ fn empty_and_one_texel_textures() {
     let bounds = scene.objects[0].bounds;
     let eye = Vec3::new(0.0, 0.0, 5.0);
     let empty = ReliefTexture::empty(
-        SourceCamera::facing(eye, &bounds, 16, 16).unwrap(),
+        SourceCamera::facing(eye, &bounds, 16, 16, SourceProjection::Orthographic).unwrap(),
         DepthBits::Eight,
         eye,
     );

@@ -73,11 +73,16 @@ impl Impostor {
                 (n.dot(axis).abs() / facing).min(MAX_SLOPE)
             }
         };
+        // How much wider than at the plane a texel is at displacement `t`.
+        let spread = |t: f32| c.texel_size_at(t) / c.texel_size_at(0.0);
         let normals: Vec<Vec3> = texture.normal.iter().map(|&n| decode_normal_rgb8(n)).collect();
         let joined = |k: usize, l: usize, axis: Vec3, step: f32| {
             if texture.depth[k] == empty || texture.depth[l] == empty {
                 return false;
             }
+            // (A perspective texture's neighbouring rays part with depth: the texel's
+            // side where the surface lies.)
+            let step = step * spread(depth(k).max(depth(l)));
             let allowed = SLOPE_SLACK * step * slope(normals[k], axis).max(slope(normals[l], axis))
                 + step
                 + 2.0 * quantum;

@@ -28,7 +28,8 @@
 //!
 //! ```
 //! use glam::{Quat, Vec3};
-//! use relief_core::{camera::Camera, relief::DepthBits, scene::Scene};
+//! use relief_core::relief::{DepthBits, SourceProjection};
+//! use relief_core::{camera::Camera, scene::Scene};
 //! use relief_render::{gbuffer::GBuffer, geometry::render_geometry, impostor::Impostor};
 //! use relief_render::warp::{Variant, display};
 //! use relief_trace::{bake, tracer::ObjectTracer};
@@ -42,7 +43,13 @@
 //! let geometry = render_geometry(&scene, &camera, &mut gbuffer);
 //!
 //! let source_eye = centre + Quat::from_rotation_y(5f32.to_radians()) * (eye - centre);
-//! let texture = bake(&ObjectTracer::new(sphere), source_eye, 128, DepthBits::Eight)?;
+//! let texture = bake(
+//!     &ObjectTracer::new(sphere),
+//!     source_eye,
+//!     128,
+//!     DepthBits::Eight,
+//!     SourceProjection::Perspective,
+//! )?;
 //! let index = scene.objects.iter().position(|o| o.name == "sphere").unwrap() as u32;
 //! gbuffer.clear();
 //! display(Variant::Interleaved, &Impostor::new(texture), index, &camera, &mut gbuffer)?;

@@ -157,7 +157,14 @@ mod tests {
     ) -> ReliefTexture {
         let bounds = Aabb::from_points([Vec3::splat(-0.5), Vec3::splat(0.5)]);
         let eye = Vec3::new(0.0, 0.0, 4.0);
-        let camera = SourceCamera::facing(eye, &bounds, width, height).expect("faces the box");
+        let camera = SourceCamera::facing(
+            eye,
+            &bounds,
+            width,
+            height,
+            relief_core::relief::SourceProjection::Orthographic,
+        )
+        .expect("faces the box");
         let bits = DepthBits::Sixteen;
         let mut t = ReliefTexture::empty(camera, bits, eye);
         for j in 0..height {

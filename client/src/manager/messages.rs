@@ -4,7 +4,7 @@
 
 use glam::Vec3;
 
-use relief_core::relief::DepthBits;
+use relief_core::relief::{DepthBits, SourceProjection};
 
 use super::cache::ReadyTexture;
 
@@ -16,6 +16,7 @@ pub struct TextureRequest {
     pub eye: Vec3,
     pub size: u32,
     pub depth_bits: DepthBits,
+    pub projection: SourceProjection,
     /// `None`: needed now; `Some(ms)`: expected to be needed in `ms`.
     pub needed_in_ms: Option<u64>,
 }

@@ -19,7 +19,7 @@ use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
     MAX_HORIZON_S, MAX_TEXEL_PIXELS, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK,
-    PENDING_REACH, REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH,
+    PENDING_REACH, REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, projection_for,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -108,9 +108,12 @@ impl Manager {
     }
 
     /// The texture edge to ask for: what the screen can show of the object from `eye`
-    /// ([`resolution_for`], eq. 5-1), rounded up to the [`texture_ladder`].
+    /// ([`resolution_for`], eq. 5-1) in the projection asked for ([`projection_for`]),
+    /// rounded up to the [`texture_ladder`].
     pub(super) fn size_for(object: &SceneObject, eye: Vec3, camera: &Camera) -> u32 {
-        texture_ladder(resolution_for(&object.bounds, eye, camera, MAX_TEXEL_PIXELS).unwrap_or(u32::MAX))
+        let projection = projection_for(object, eye);
+        let edge = resolution_for(&object.bounds, eye, projection, camera, MAX_TEXEL_PIXELS);
+        texture_ladder(edge.unwrap_or(u32::MAX))
     }
 
     pub(super) fn request(
@@ -131,6 +134,7 @@ impl Manager {
             eye,
             size,
             depth_bits: REQUESTED_DEPTH_BITS,
+            projection: projection_for(o, eye),
             needed_in_ms,
         };
         if self.commands.send(Command::Request(request)).is_err() {

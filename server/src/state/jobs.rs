@@ -9,7 +9,7 @@ use tonic::Status;
 
 use glam::Vec3;
 use relief_core::hash::ContentHash;
-use relief_core::relief::{DepthBits, SourceCamera};
+use relief_core::relief::{DepthBits, SourceCamera, SourceProjection};
 use relief_proto::convert::Request;
 use relief_proto::pb;
 
@@ -23,6 +23,7 @@ pub(super) struct View {
     pub(super) scene: ContentHash,
     pub(super) object: String,
     pub(super) eye: [u32; 3],
+    pub(super) projection: SourceProjection,
 }
 
 /// What a job makes, or a request asks for: a view, at a size and depth.
@@ -40,6 +41,7 @@ impl JobKey {
                 scene: r.scene,
                 object: r.object.clone(),
                 eye: r.eye.to_array().map(f32::to_bits),
+                projection: r.projection,
             },
             size: r.size,
             depth_bits: r.depth_bits.bits(),
@@ -240,7 +242,8 @@ impl State {
         let Some(bounds) = self.object_bounds(&job.key.view.scene, &spec.object) else {
             return Ok(());
         };
-        let expected = SourceCamera::facing(eye, &bounds, w, h).map_err(|e| e.to_string())?;
+        let expected =
+            SourceCamera::facing(eye, &bounds, w, h, job.key.view.projection).map_err(|e| e.to_string())?;
         let extent = bounds.extent().length();
         let near = |a: Vec3, b: Vec3, scale: f32| a.distance(b) <= CAMERA_SLACK * scale;
         let fits = near(camera.origin, expected.origin, extent)
@@ -248,7 +251,12 @@ impl State {
             && near(camera.b, expected.b, expected.b.length())
             && near(camera.f, expected.f, 1.0)
             && (camera.depth_near - expected.depth_near).abs() <= CAMERA_SLACK * extent
-            && (camera.depth_far - expected.depth_far).abs() <= CAMERA_SLACK * extent;
+            && (camera.depth_far - expected.depth_far).abs() <= CAMERA_SLACK * extent
+            && match (camera.centre, expected.centre) {
+                (None, None) => true,
+                (Some(c), Some(e)) => near(c, e, extent),
+                _ => false,
+            };
         if !fits {
             return Err(format!(
                 "the result of job {job_id} is not framed on object `{}` from the job's eye",

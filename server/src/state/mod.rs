@@ -32,7 +32,7 @@ use tokio::sync::mpsc::UnboundedSender;
 use tonic::Status;
 
 use relief_core::relief::{FacingError, SourceCamera};
-use relief_proto::convert::{Request, Urgency, vec3_to_pb};
+use relief_proto::convert::{Request, Urgency, projection_to_pb, vec3_to_pb};
 use relief_proto::pb;
 
 pub use jobs::{JobKey, WaiterId};
@@ -167,11 +167,17 @@ impl State {
         })?;
         // The camera a worker would bake with: refused here, naming the field, rather
         // than failing on a worker.
-        match SourceCamera::facing(request.eye, bounds, request.size, request.size) {
+        match SourceCamera::facing(
+            request.eye,
+            bounds,
+            request.size,
+            request.size,
+            request.projection,
+        ) {
             Ok(_) => {}
-            Err(FacingError::EyeInsideBounds) => {
+            Err(e @ (FacingError::EyeInsideBounds | FacingError::EyeTooNear)) => {
                 return Err(Status::failed_precondition(format!(
-                    "the eye is inside the bounds of `{}`: draw it as geometry",
+                    "object `{}`: {e}",
                     request.object
                 )));
             }
@@ -279,6 +285,7 @@ impl State {
                     size: request.size,
                     depth_bits: request.depth_bits.bits(),
                     progressive: request.progressive,
+                    projection: projection_to_pb(request.projection).into(),
                 };
                 self.jobs.insert(
                     id,

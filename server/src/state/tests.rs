@@ -4,7 +4,7 @@ use super::*;
 use glam::Vec3;
 use relief_core::bounds::Aabb;
 use relief_core::hash::ContentHash;
-use relief_core::relief::DepthBits;
+use relief_core::relief::{DepthBits, SourceProjection};
 use tokio::sync::mpsc::unbounded_channel;
 
 /// The client that uploaded the scene and asks for its textures.
@@ -48,6 +48,7 @@ fn request(scene: ContentHash, id: u64, eye: Vec3, urgency: Urgency) -> Request 
         client_id: "c".into(),
         request_id: id,
         progressive: false,
+        projection: SourceProjection::Orthographic,
     }
 }
 
@@ -385,7 +386,8 @@ fn results_must_be_the_jobs_and_scenes_their_owners() {
     assert!(s.holds(worker, job.job_id) && !s.holds(worker, job.job_id + 1));
     let eye = Vec3::new(1.0, 0.0, 5.0);
     let bounds = s.object_bounds(&hash, "ball").unwrap();
-    let framed = |edge: u32| SourceCamera::facing(eye, &bounds, edge, edge).unwrap();
+    let framed =
+        |edge: u32| SourceCamera::facing(eye, &bounds, edge, edge, SourceProjection::Orthographic).unwrap();
     let check = |camera: &SourceCamera, bits: DepthBits, eye: Vec3, is_final: bool| {
         s.check_result(job.job_id, camera, bits, eye, is_final)
     };

@@ -1,11 +1,14 @@
-//! Baking a relief texture: cast one orthographic ray per texel and record the first
-//! surface's albedo, shading normal and quantised depth.
+//! Baking a relief texture: cast one ray per texel (parallel, or from the eye — see
+//! [`SourceProjection`]) and record the first surface's albedo, shading normal and quantised
+//! depth.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::Vec3;
 
-use relief_core::relief::{DepthBits, FacingError, ReliefTexture, SourceCamera, encode_normal_rgb8};
+use relief_core::relief::{
+    DepthBits, FacingError, ReliefTexture, SourceCamera, SourceProjection, encode_normal_rgb8,
+};
 use relief_core::shading::to_rgb8;
 
 use crate::bvh::Ray;
@@ -28,7 +31,7 @@ struct Texel {
     depth: u16,
 }
 
-/// The relief texture of `target` for `eye`, `size × size` texels (see
+/// The relief texture of `target` for `eye`, `size × size` texels in `projection` (see
 /// [`relief_core::relief`] for the camera and depth mapping). Runs on the current rayon
 /// pool.
 pub fn bake(
@@ -36,8 +39,9 @@ pub fn bake(
     eye: Vec3,
     size: u32,
     depth_bits: DepthBits,
+    projection: SourceProjection,
 ) -> Result<ReliefTexture, BakeError> {
-    match bake_unless_cancelled(target, eye, size, depth_bits, &AtomicBool::new(false))? {
+    match bake_unless_cancelled(target, eye, size, depth_bits, projection, &AtomicBool::new(false))? {
         Some(texture) => Ok(texture),
         None => unreachable!("a bake nobody can cancel was cancelled"),
     }
@@ -51,12 +55,15 @@ pub fn bake_unless_cancelled(
     eye: Vec3,
     size: u32,
     depth_bits: DepthBits,
+    projection: SourceProjection,
     cancelled: &AtomicBool,
 ) -> Result<Option<ReliefTexture>, BakeError> {
     let camera =
-        SourceCamera::facing(eye, &target.object.bounds, size, size).map_err(|reason| BakeError {
-            object: target.object.name.clone(),
-            reason,
+        SourceCamera::facing(eye, &target.object.bounds, size, size, projection).map_err(|reason| {
+            BakeError {
+                object: target.object.name.clone(),
+                reason,
+            }
         })?;
     let mesh = &target.object.mesh;
     let span = camera.depth_far - camera.depth_near;
@@ -76,11 +83,15 @@ pub fn bake_unless_cancelled(
         }
         let rays: Vec<Ray> = block
             .pixels()
-            .map(|(i, j)| Ray {
-                origin: camera.texel_origin(i, j) + camera.f * camera.depth_near,
-                direction: camera.f,
-                t_min: -margin,
-                t_max: span + margin,
+            .map(|(i, j)| {
+                // (The direction's component along `f` is 1: `t` is the displacement.)
+                let (origin, direction) = camera.texel_ray(i, j);
+                Ray {
+                    origin,
+                    direction,
+                    t_min: -margin,
+                    t_max: span + margin,
+                }
             })
             .collect();
         let mut hits = vec![None; rays.len()];

@@ -12,13 +12,14 @@
 //!
 //! ```
 //! use glam::Vec3;
-//! use relief_core::{camera::Camera, relief::DepthBits, scene::Scene};
+//! use relief_core::relief::{DepthBits, SourceProjection};
+//! use relief_core::{camera::Camera, scene::Scene};
 //! use relief_trace::{SceneTracer, bake, render_reference, tracer::ObjectTracer};
 //!
 //! let scene = Scene::load("orbit-sphere")?;
 //! let sphere = scene.object("sphere")?;
 //! let eye = sphere.bounds.center() + Vec3::new(0.0, 1.0, 4.0);
-//! let texture = bake(&ObjectTracer::new(sphere), eye, 64, DepthBits::Eight)?;
+//! let texture = bake(&ObjectTracer::new(sphere), eye, 64, DepthBits::Eight, SourceProjection::Orthographic)?;
 //! assert!(texture.covered_texels() > 64 * 64 / 2);
 //!
 //! let camera = Camera::look_at(eye, sphere.bounds.center(), Vec3::Y, 40.0, 96, 54)?;

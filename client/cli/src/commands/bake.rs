@@ -3,10 +3,10 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use clap::Args;
+use clap::{Args, ValueEnum};
 use glam::Vec3;
 
-use relief_core::relief::DepthBits;
+use relief_core::relief::{DepthBits, SourceProjection};
 use relief_trace::bake;
 use relief_trace::tracer::ObjectTracer;
 
@@ -29,9 +29,29 @@ pub struct BakeArgs {
     /// Depth precision: 8 (levels 0..254, 255 empty) or 16 (0..65534, 65535 empty).
     #[arg(long, default_value = "8", value_parser = args::depth_bits)]
     depth_bits: u32,
+    /// Which way the texels' rays go: parallel (the thesis's relief texture) or from
+    /// the eye (what the eye sees; the client asks for these).
+    #[arg(long, value_enum, default_value_t = ProjectionArg::Orthographic)]
+    projection: ProjectionArg,
     /// Output directory: albedo.png, normal.png, depth.png, texture.json.
     #[arg(long)]
     out: PathBuf,
+}
+
+/// `--projection`.
+#[derive(Clone, Copy, ValueEnum)]
+enum ProjectionArg {
+    Orthographic,
+    Perspective,
+}
+
+impl From<ProjectionArg> for SourceProjection {
+    fn from(p: ProjectionArg) -> SourceProjection {
+        match p {
+            ProjectionArg::Orthographic => SourceProjection::Orthographic,
+            ProjectionArg::Perspective => SourceProjection::Perspective,
+        }
+    }
 }
 
 pub fn run(args: BakeArgs) -> Result<()> {
@@ -45,6 +65,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
         args.eye,
         args.size,
         DepthBits::from_bits(args.depth_bits)?,
+        args.projection.into(),
     )?;
     texture.write_dir(&args.out)?;
     tracing::info!(

@@ -45,6 +45,12 @@ pub enum DisplayError {
         "the eye is {turn_deg:.0}° round the object from the texture's eye, past the {max_deg:.0}° one texture can show: needs a texture from nearer"
     )]
     FarSide { turn_deg: f32, max_deg: f32 },
+    /// The forward and inverse methods follow the thesis's orthographic relief texture;
+    /// a perspective one is shown by the pre-warp.
+    #[error(
+        "{method} shows orthographic relief textures only; this one is perspective (use a pre-warp method)"
+    )]
+    NeedsOrthographic { method: Method },
 }
 
 /// The widest turn round an object, from its texture's eye, at which the forward and
@@ -189,7 +195,9 @@ pub fn display(
 /// before their [`draw`]s (see [`relief_render::warp`]).
 pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<Prepared, DisplayError> {
     if let Some(variant) = method.variant() {
-        return Ok(Prepared::Prewarped(Prewarped::new(variant, impostor, camera)?));
+        return Ok(Prepared::Prewarped(Box::new(Prewarped::new(
+            variant, impostor, camera,
+        )?)));
     }
     let fills = match method {
         Method::ForwardPullPush => Some(PULLPUSH_MAX_TEXEL_PIXELS),
@@ -199,6 +207,9 @@ pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<P
         _ => return Err(DisplayError::NeedsPreviousFrame),
     };
     let texture = &impostor.texture;
+    if texture.camera.centre.is_some() {
+        return Err(DisplayError::NeedsOrthographic { method });
+    }
     let centre = volume_centre(&texture.camera);
     let turn_deg = (texture.eye - centre)
         .angle_between(camera.eye - centre)
@@ -230,7 +241,7 @@ pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<P
 /// What [`prepare`] made, for [`draw`].
 pub enum Prepared {
     /// The pre-warp methods' pre-warped image.
-    Prewarped(Prewarped),
+    Prewarped(Box<Prewarped>),
     PullPush,
     Kernel(u8),
     Inverse(u16),

@@ -28,8 +28,8 @@ pub struct CriticalPair {
 impl CriticalPair {
     /// `(Err_u, Err_v, Err)` of eq. 5-5…5-7 for the eye of `params`.
     pub fn error(&self, params: &WarpParams) -> (f32, f32, f32) {
-        let shift = |t: Vec2, d: f32| (params.epipole - t) * d / (params.h + d);
-        let offset = (self.t1 + shift(self.t1, self.d1)) - (self.t2 + shift(self.t2, self.d2));
+        // (`T + Δ` is the pre-warped position; for a perspective texture too.)
+        let offset = params.warp_at(self.t1, self.d1) - params.warp_at(self.t2, self.d2);
         let (u, v) = (offset.x.abs(), offset.y.abs());
         (u, v, u * u + v * v)
     }

@@ -6,7 +6,7 @@ use glam::Vec3;
 
 use relief_core::bounds::Aabb;
 use relief_core::camera::Camera;
-use relief_core::relief::SourceCamera;
+use relief_core::relief::{SourceCamera, SourceProjection};
 
 /// β_transP: the largest angle, over the corners of `bounds`, between the directions
 /// to the corner from the old and from the new eye — how far the object's extremes
@@ -37,15 +37,17 @@ pub fn sprite_still_valid(bounds: &Aabb, old_eye: Vec3, camera: &Camera) -> bool
 /// volume's nearest point, it asked for a third more texels per edge for an eye three
 /// radii from a sphere, texels that the surface, mostly deeper, shows smaller).
 pub fn texel_angle(texture: &SourceCamera, eye: Vec3) -> f32 {
+    let middle = 0.5 * (texture.depth_near + texture.depth_far);
     let centre = volume_centre(texture);
     let distance = centre.distance(eye).max(f32::MIN_POSITIVE);
-    2.0 * (0.5 * texture.a.length().max(texture.b.length()) / distance).atan()
+    2.0 * (0.5 * texture.texel_size_at(middle) / distance).atan()
 }
 
 /// The middle of the texture's volume: its image plane's centre, half-way down its
 /// depth range.
 pub fn volume_centre(texture: &SourceCamera) -> Vec3 {
-    texture.plane_centre() + texture.f * (0.5 * (texture.depth_near + texture.depth_far))
+    let (w, h) = (texture.width as f32, texture.height as f32);
+    texture.point(0.5 * w, 0.5 * h, 0.5 * (texture.depth_near + texture.depth_far))
 }
 
 /// The resolution test (eq. 4-1): the texture is too coarse when a texel subtends more
@@ -55,15 +57,21 @@ pub fn needs_finer_texture(texture: &SourceCamera, camera: &Camera, k: f32) -> b
 }
 
 /// The texture edge for the object with `bounds` seen from `eye` through `camera`: the
-/// fewest texels whose texture facing `eye` ([`SourceCamera::facing`], the one a bake
-/// makes) passes the resolution test with `k` — eq. 5-1 with the texture's own span,
+/// fewest texels whose texture facing `eye` in `projection` ([`SourceCamera::facing`],
+/// the one a bake makes) passes the resolution test with `k` — eq. 5-1 with the texture's own span,
 /// at the middle of its volume, so that no texel the screen cannot show is made (the
 /// bounds' diagonal, as eq. 5-1 reads literally, asked for up to 1.7× the texels per
 /// edge of a box seen face on). `None` when no texture faces the eye (inside the
 /// bounds, or a non-finite eye or bounds).
-pub fn resolution_for(bounds: &Aabb, eye: Vec3, camera: &Camera, k: f32) -> Option<u32> {
-    let unit = SourceCamera::facing(eye, bounds, 1, 1).ok()?;
-    let span = unit.a.length().max(unit.b.length());
+pub fn resolution_for(
+    bounds: &Aabb,
+    eye: Vec3,
+    projection: SourceProjection,
+    camera: &Camera,
+    k: f32,
+) -> Option<u32> {
+    let unit = SourceCamera::facing(eye, bounds, 1, 1, projection).ok()?;
+    let span = unit.texel_size_at(0.5 * (unit.depth_near + unit.depth_far));
     let distance = volume_centre(&unit).distance(eye);
     // texel_angle(N) = 2·atan(span / (2·N·distance)) ≤ k · pixel angle.
     let edge = 0.5 * span / (distance * (0.5 * k * camera.pixel_angle()).tan());
@@ -116,9 +124,19 @@ mod tests {
         ] {
             let camera =
                 Camera::look_at(eye, bounds.center(), Vec3::Y, 60.0, height * 16 / 9, height).unwrap();
-            for k in [1.0, 2.0] {
-                let n = resolution_for(&bounds, eye, &camera, k).unwrap();
-                let texture = |n| SourceCamera::facing(eye, &bounds, n, n).unwrap();
+            for (k, projection) in [1.0, 2.0].into_iter().flat_map(|k| {
+                [
+                    (k, SourceProjection::Orthographic),
+                    (k, SourceProjection::Perspective),
+                ]
+            }) {
+                if SourceCamera::facing(eye, &bounds, 1, 1, projection).is_err() {
+                    // (Too near for a perspective texture: none is asked for.)
+                    assert_eq!(resolution_for(&bounds, eye, projection, &camera, k), None);
+                    continue;
+                }
+                let n = resolution_for(&bounds, eye, projection, &camera, k).unwrap();
+                let texture = |n| SourceCamera::facing(eye, &bounds, n, n, projection).unwrap();
                 assert!(!needs_finer_texture(&texture(n), &camera, k), "{eye} {k}: {n}");
                 assert!(
                     n == 1 || needs_finer_texture(&texture(n - 1), &camera, k),
@@ -128,6 +146,11 @@ mod tests {
         }
         // Seen from inside, no texture faces the eye.
         let inside = Camera::look_at(Vec3::new(0.0, 1.0, 0.0), Vec3::Z, Vec3::Y, 60.0, 64, 36).unwrap();
-        assert_eq!(resolution_for(&bounds, inside.eye, &inside, 1.0), None);
+        for projection in [SourceProjection::Orthographic, SourceProjection::Perspective] {
+            assert_eq!(
+                resolution_for(&bounds, inside.eye, projection, &inside, 1.0),
+                None
+            );
+        }
     }
 }

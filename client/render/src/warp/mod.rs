@@ -18,14 +18,14 @@
 //! one pre-warp split at its epipole leaves a core idle when the epipole is near an edge.
 //!
 //! ```
-//! use relief_core::relief::{DepthBits, ReliefTexture, SourceCamera};
+//! use relief_core::relief::{DepthBits, ReliefTexture, SourceCamera, SourceProjection};
 //! use relief_render::gbuffer::GBuffer;
 //! use relief_render::impostor::Impostor;
 //! use relief_render::warp::{Prewarped, Variant};
 //! # use relief_core::{bounds::Aabb, camera::Camera};
 //! # let bounds = Aabb::from_points([glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0)]);
 //! # let eye = glam::Vec3::new(0.0, 0.0, 5.0);
-//! # let source = SourceCamera::facing(eye, &bounds, 16, 16)?;
+//! # let source = SourceCamera::facing(eye, &bounds, 16, 16, SourceProjection::Orthographic)?;
 //! // (An empty texture: a baked one comes from `relief_trace::bake`.)
 //! let impostor = Impostor::new(ReliefTexture::empty(source, DepthBits::Eight, eye));
 //! let camera = Camera::look_at(glam::Vec3::new(1.0, 0.0, 5.0), glam::Vec3::ZERO, glam::Vec3::Y, 40.0, 64, 64)?;

@@ -3,17 +3,33 @@
 //! With texel coordinates `(u, v)` (texel `i` has its centre at `u = i + 0.5`) and
 //! displacement `d` along `f`, the pre-warp of eq. 3-1/3-2 moves a texel to the point
 //! where the ray from the destination eye through its surface point crosses the source
-//! plane:
+//! plane. For an orthographic texture:
 //!
 //! ```text
 //! u' = (u + e1·k3·d) / (1 + k3·d),   v' = (v + e2·k3·d) / (1 + k3·d)
 //! ```
 //!
-//! where `(e1, e2)` is the epipole (the eye projected on the plane) and `k3 = 1/(c·f)`,
-//! `c·f` being the eye's distance in front of the plane. Each texel moves towards the
-//! epipole by the factor `s = 1/(1 + k3·d) ∈ (0, 1]`. With depth stored as levels, a
-//! table per level turns this into two additions and two multiplications per texel
-//! (ch. 8.2): `u' = (u + add_u[q])·scale[q]`.
+//! where `(e1, e2)` is the eye's foot on the plane and `k3 = 1/h`, `h = c·f` being the
+//! eye's distance in front of the plane. Each texel moves towards that point, the
+//! epipole, by the factor `s = 1/(1 + k3·d) ∈ (0, 1]`.
+//!
+//! A perspective texture, seen from a centre at distance `h_s` in front of the plane
+//! with its foot at `(c1, c2)`, keeps the form (with `g = d/h_s`, the surface point
+//! `Q + (Q − C)·g`):
+//!
+//! ```text
+//! u' = (u + add_u(d))·s(d),   s(d) = h·(1 + g) / (h + d),
+//! add_u(d) = (d·e1 − g·h·c1) / (h·(1 + g))
+//! ```
+//!
+//! (`g = 0` is the orthographic case). Every texel moves along the line through the
+//! epipole `e* = (e − (h/h_s)·c) / (1 − h/h_s)`, where the line from the centre to the
+//! eye crosses the plane: `u' = e* + (u − e*)·s(d)`. While the eye is nearer the plane
+//! than the centre (`h < h_s`) the deeper texels move the more towards it (`s ≤ 1`),
+//! as in the orthographic case; farther (`h > h_s`) they move away from it (`s ≥ 1`),
+//! the deeper the more, and the visiting order turns round ([`WarpParams::outward`]).
+//! With depth stored as levels, a table per level turns this into two additions and two
+//! multiplications per texel (ch. 8.2): `u' = (u + add_u[q])·scale[q]`.
 
 use glam::{Vec2, Vec3};
 
@@ -30,17 +46,34 @@ pub struct WarpParams {
     pub h: f32,
     /// `1 / h`.
     pub k3: f32,
-    /// The epipole in texel coordinates.
+    /// The eye's foot on the plane (texel coordinates): where its ray along `f` crosses
+    /// the plane.
+    pub foot: Vec2,
+    /// The point every texel moves towards or away from (texel coordinates); the
+    /// eye's foot for an orthographic texture. Bounded (about a million texels away
+    /// when the eye is as far from the plane as a perspective texture's centre).
     pub epipole: Vec2,
+    /// Texels move away from the epipole (`s ≥ 1`): the eye is farther from the plane
+    /// than a perspective texture's centre. The occlusion-compatible order is then from
+    /// the epipole outwards.
+    pub outward: bool,
+    /// A perspective texture's `1/h_s` and its centre's foot; `(0, 0)` orthographic.
+    source: (f32, Vec2),
     /// Displacement of each depth level.
     pub depth: Vec<f32>,
-    /// `e1·k3·d` per level.
+    /// `add_u(d)` per level.
     pub add_u: Vec<f32>,
-    /// `e2·k3·d` per level.
+    /// `add_v(d)` per level.
     pub add_v: Vec<f32>,
-    /// `1 / (1 + k3·d)` per level.
+    /// `s(d)` per level.
     pub scale: Vec<f32>,
 }
+
+/// How near `h/h_s` may come to 1 (the eye as far from the plane as a perspective
+/// texture's centre, the epipole at infinity) before the epipole is held at about a
+/// million texels: far enough that ordering by it is ordering by direction, near
+/// enough that `f32` keeps it finite.
+const PARALLEL_EPIPOLE: f32 = 1e-6;
 
 impl WarpParams {
     /// The constants for showing `texture` from `eye`; an error when the eye is in or
@@ -56,29 +89,49 @@ impl WarpParams {
         if h <= h_min || !h.is_finite() {
             return Err(WarpError::EyeInPlane(h));
         }
-        let k3 = 1.0 / h;
-        let epipole = Vec2::new(
-            to_eye.dot(c.a) / c.a.length_squared(),
-            to_eye.dot(c.b) / c.b.length_squared(),
-        );
-        if !epipole.is_finite() {
+        let plane_coords = |p: Vec3| {
+            Vec2::new(
+                p.dot(c.a) / c.a.length_squared(),
+                p.dot(c.b) / c.b.length_squared(),
+            )
+        };
+        let foot = plane_coords(to_eye);
+        let source = match (c.centre, c.centre_distance()) {
+            (Some(centre), Some(h_s)) => (1.0 / h_s, plane_coords(centre - c.origin)),
+            _ => (0.0, Vec2::ZERO),
+        };
+        let ratio = h * source.0;
+        let outward = ratio > 1.0;
+        let denominator = match 1.0 - ratio {
+            x if x.abs() >= PARALLEL_EPIPOLE => x,
+            x if x < 0.0 => -PARALLEL_EPIPOLE,
+            _ => PARALLEL_EPIPOLE,
+        };
+        let epipole = (foot - source.1 * ratio) / denominator;
+        if !epipole.is_finite() || !foot.is_finite() {
             return Err(WarpError::NonFinite);
         }
         let levels = texture.depth_bits.max_level() as usize + 1;
         let depth: Vec<f32> = (0..levels)
             .map(|q| c.depth_of_level(q as u16, texture.depth_bits))
             .collect();
-        let scale: Vec<f32> = depth.iter().map(|&d| 1.0 / (1.0 + k3 * d)).collect();
-        let params = WarpParams {
+        let mut params = WarpParams {
             eye,
             h,
-            k3,
+            k3: 1.0 / h,
+            foot,
             epipole,
-            add_u: depth.iter().map(|&d| epipole.x * k3 * d).collect(),
-            add_v: depth.iter().map(|&d| epipole.y * k3 * d).collect(),
-            scale,
+            outward,
+            source,
+            add_u: Vec::new(),
+            add_v: Vec::new(),
+            scale: Vec::new(),
             depth,
         };
+        let (add, scale): (Vec<Vec2>, Vec<f32>) = params.depth.iter().map(|&d| params.at_depth(d)).unzip();
+        params.add_u = add.iter().map(|a| a.x).collect();
+        params.add_v = add.iter().map(|a| a.y).collect();
+        params.scale = scale;
         // Finite tables keep every pre-warped position finite: the warps' loops over
         // the pixels between two positions rely on it.
         let tables = [&params.depth, &params.add_u, &params.add_v, &params.scale];
@@ -86,6 +139,15 @@ impl WarpParams {
             return Err(WarpError::NonFinite);
         }
         Ok(params)
+    }
+
+    /// `(add(d), s(d))` of the module docs for displacement `d`.
+    #[inline]
+    fn at_depth(&self, d: f32) -> (Vec2, f32) {
+        let (inverse_h_s, centre_foot) = self.source;
+        let g = d * inverse_h_s;
+        let add = (self.foot * d - centre_foot * (g * self.h)) / (self.h * (1.0 + g));
+        (add, self.h * (1.0 + g) / (self.h + d))
     }
 
     /// Pre-warped position of the texel centred at `(u, v)` with level `q`.
@@ -97,11 +159,24 @@ impl WarpParams {
         )
     }
 
-    /// Pre-warped v of a row at `v` for a displacement `d` between levels (two-pass
-    /// variants interpolate `d`).
+    /// Pre-warped position of the point `uv` of the plane at displacement `d`, between
+    /// levels (two-pass variants and predictions interpolate `d`).
+    #[inline]
+    pub fn warp_at(&self, uv: Vec2, d: f32) -> Vec2 {
+        let (add, s) = self.at_depth(d);
+        (uv + add) * s
+    }
+
+    /// Pre-warped v of a row at `v` for a displacement `d` between levels.
     #[inline]
     pub fn warp_v(&self, v: f32, d: f32) -> f32 {
-        (v + self.epipole.y * self.k3 * d) / (1.0 + self.k3 * d)
+        let (add, s) = self.at_depth(d);
+        (v + add.y) * s
+    }
+
+    /// True for a perspective texture's warp.
+    pub fn perspective(&self) -> bool {
+        self.source.0 != 0.0
     }
 
     /// The largest displacement any level has.
@@ -114,53 +189,80 @@ impl WarpParams {
 mod tests {
     use super::*;
     use relief_core::bounds::Aabb;
-    use relief_core::relief::{DepthBits, SourceCamera};
+    use relief_core::relief::{DepthBits, SourceCamera, SourceProjection};
 
-    fn texture() -> ReliefTexture {
+    fn texture(projection: SourceProjection) -> ReliefTexture {
         let bounds = Aabb {
             min: Vec3::splat(-1.0),
             max: Vec3::splat(1.0),
         };
         let eye = Vec3::new(0.5, 0.3, 5.0);
         ReliefTexture::empty(
-            SourceCamera::facing(eye, &bounds, 64, 64).unwrap(),
+            SourceCamera::facing(eye, &bounds, 64, 64, projection).unwrap(),
             DepthBits::Eight,
             eye,
         )
     }
 
     /// The table form equals the definition: the eye-ray through the texel's surface
-    /// point crosses the plane at the pre-warped position.
+    /// point crosses the plane at the pre-warped position — for both projections, and
+    /// for eyes nearer the plane than a perspective texture's centre, as far, and
+    /// farther.
     #[test]
     fn table_matches_ray_plane_intersection() {
-        let t = texture();
-        let c = t.camera;
-        let eye = Vec3::new(2.0, 1.5, 4.0);
-        let p = WarpParams::new(&t, eye).unwrap();
-        for (u, v, q) in [(3.5f32, 60.5f32, 0usize), (31.5, 7.5, 100), (63.5, 0.5, 254)] {
-            let surface = c.origin + c.a * u + c.b * v + c.f * p.depth[q];
-            let dir = surface - eye;
-            let s = (c.origin - eye).dot(c.f) / dir.dot(c.f);
-            let hit = eye + dir * s - c.origin;
-            let want = Vec2::new(
-                hit.dot(c.a) / c.a.length_squared(),
-                hit.dot(c.b) / c.b.length_squared(),
-            );
-            assert!(
-                p.warp(u, v, q).abs_diff_eq(want, 1e-3),
-                "{:?} vs {want:?}",
-                p.warp(u, v, q)
-            );
-            assert!((p.warp_v(v, p.depth[q]) - want.y).abs() < 1e-3);
+        for projection in [SourceProjection::Orthographic, SourceProjection::Perspective] {
+            let t = texture(projection);
+            let c = t.camera;
+            let away = t.eye - c.plane_centre();
+            let eyes = [
+                Vec3::new(2.0, 1.5, 4.0),
+                t.eye + away * 0.3,
+                t.eye - away * 0.2 + c.a * 9.0,
+                t.eye + c.a * 30.0 - c.b * 4.0,
+                t.eye + c.a * 1e-3,
+            ];
+            for eye in eyes {
+                let p = WarpParams::new(&t, eye).unwrap();
+                for (u, v, q) in [(3.5f32, 60.5f32, 0usize), (31.5, 7.5, 100), (63.5, 0.5, 254)] {
+                    let surface = c.point(u, v, p.depth[q]);
+                    let dir = surface - eye;
+                    let s = (c.origin - eye).dot(c.f) / dir.dot(c.f);
+                    let hit = eye + dir * s - c.origin;
+                    let want = Vec2::new(
+                        hit.dot(c.a) / c.a.length_squared(),
+                        hit.dot(c.b) / c.b.length_squared(),
+                    );
+                    let got = p.warp(u, v, q);
+                    assert!(
+                        got.abs_diff_eq(want, 2e-3),
+                        "{projection:?} {eye}: {got:?} vs {want:?}"
+                    );
+                    assert!(p.warp_at(Vec2::new(u, v), p.depth[q]).abs_diff_eq(want, 2e-3));
+                    assert!((p.warp_v(v, p.depth[q]) - want.y).abs() < 2e-3);
+                    // Along the line through the epipole, away from it when outward.
+                    let (from, to) = (Vec2::new(u, v) - p.epipole, got - p.epipole);
+                    assert!(from.perp_dot(to).abs() <= 1e-3 * from.length() * to.length().max(1.0));
+                    if p.epipole.length() < 1e4 && q > 0 {
+                        assert_eq!(to.length() > from.length(), p.outward, "{projection:?} {eye}");
+                    }
+                }
+            }
+            // At the source eye the pre-warp keeps texels that lie in the plane in place,
+            // and a perspective texture's every texel.
+            let same = WarpParams::new(&t, t.eye).unwrap();
+            assert!(same.warp(10.5, 20.5, 0).abs_diff_eq(Vec2::new(10.5, 20.5), 1e-4));
+            if projection == SourceProjection::Perspective {
+                assert!(
+                    same.warp(10.5, 20.5, 200)
+                        .abs_diff_eq(Vec2::new(10.5, 20.5), 1e-3)
+                );
+            }
         }
-        // At the source eye the pre-warp keeps texels that lie in the plane in place.
-        let same = WarpParams::new(&t, t.eye).unwrap();
-        assert!(same.warp(10.5, 20.5, 0).abs_diff_eq(Vec2::new(10.5, 20.5), 1e-4));
     }
 
     #[test]
     fn eye_in_or_behind_the_plane_is_refused() {
-        let t = texture();
+        let t = texture(SourceProjection::Orthographic);
         let c = t.camera;
         let in_plane = c.origin + c.a * 10.0 + c.b * 3.0;
         assert!(matches!(
@@ -175,7 +277,7 @@ mod tests {
         assert_eq!(WarpParams::new(&t, Vec3::NAN), Err(WarpError::NonFinite));
         // Finite inputs whose tables overflow (a depth range near f32::MAX): refused,
         // so pre-warped positions are always finite.
-        let mut deep = texture();
+        let mut deep = texture(SourceProjection::Orthographic);
         deep.camera.depth_far = f32::MAX;
         let eye = deep.camera.origin - deep.camera.f * 1e34 + deep.camera.a * 1e35;
         assert_eq!(WarpParams::new(&deep, eye), Err(WarpError::NonFinite));

@@ -5,7 +5,12 @@
 //! Order: the epipole splits rows and columns into halves; each half is visited from the
 //! border towards the epipole. (Each texel moves towards the epipole by `s ∈ (0, 1]`, the
 //! deeper the more, so of two texels landing on one spot the one nearer the epipole in
-//! the source is the nearer surface — it must come last.)
+//! the source is the nearer surface — it must come last.) A perspective texture seen
+//! from farther than its centre moves texels away from the epipole, the deeper the more
+//! ([`WarpParams::outward`]): the nearer surface is then the one farther from the
+//! epipole, and each half is visited from the epipole outwards. Either way texels stay
+//! on their side of the epipole, and consecutive texels of a surface move apart ahead of
+//! the visit.
 //!
 //! Filling: consecutive texels A, B of a row (connected — one surface, see
 //! [`Impostor`] — and moving in the visiting direction) produce every pre-warped pixel
@@ -29,7 +34,7 @@
 use wide::bytemuck::cast;
 use wide::{i16x8, u8x16, u16x8, u64x2};
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use relief_core::camera::Camera;
 use relief_core::relief::SourceCamera;
 
@@ -110,12 +115,25 @@ impl PrewarpImage {
 /// How far past the source quad (in quad sizes) the pre-warped image may reach.
 const MAX_MARGIN: f32 = 1.0;
 
-/// The range of pre-warped coordinates along one axis: texels move from `[0, n]`
-/// towards the epipole `e` by at least the factor `s_min`.
-fn axis_extent(n: f32, e: f32, s_min: f32) -> (i32, i32) {
-    let lo = 0f32.min(e + s_min * (0.0 - e)).max(-MAX_MARGIN * n);
-    let hi = n.max(e + s_min * (n - e)).min((1.0 + MAX_MARGIN) * n);
-    (lo.floor() as i32, hi.ceil() as i32)
+/// The range of pre-warped coordinates, `((u0, u1), (v0, v1))`: the quad and its
+/// corners warped at the first and last levels — for one level the warp is affine in
+/// `(u, v)`, and for one point monotonic in the level, so these bound every landing —
+/// within `MAX_MARGIN` quads of the quad.
+fn extent(params: &WarpParams, w: f32, h: f32) -> ((i32, i32), (i32, i32)) {
+    let (mut lo, mut hi) = (Vec2::ZERO, Vec2::new(w, h));
+    for q in [0, params.depth.len().saturating_sub(1)] {
+        for (u, v) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
+            let p = params.warp(u, v, q);
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    let size = Vec2::new(w, h);
+    let (lo, hi) = (lo.max(-MAX_MARGIN * size), hi.min((1.0 + MAX_MARGIN) * size));
+    (
+        (lo.x.floor() as i32, hi.x.ceil() as i32),
+        (lo.y.floor() as i32, hi.y.ceil() as i32),
+    )
 }
 
 /// A texel's albedo and encoded normal: six bytes in the low bytes of a `u64`, so one
@@ -253,8 +271,9 @@ fn between<const FORWARDS: bool>(a: f32, b: f32, end: i64, mut each: impl FnMut(
     }
     // (Finite: samples that coincide have no centre between them, returned above.)
     let inv = 1.0 / (b - a);
-    // Samples move towards the epipole, which is ahead in the visit: a far one makes
-    // spans run far past the image on that side (never before it), cut at its end.
+    // Samples move ahead in the visit (towards the epipole, or outwards away from it):
+    // a far one makes spans run far past the image on that side (never before it), cut
+    // at its end.
     let first = (below_a as i64).saturating_add(1);
     let last = (below_b as i64).min(end);
     // (Half-open ranges: `..=` iterates measurably slower here.)
@@ -317,8 +336,7 @@ fn visited<const FORWARDS: bool>(cells: &std::ops::Range<usize>, k: usize) -> us
 }
 
 /// The number of cells of `0..n` (centres at `k + 0.5`) before the epipole `e`: the
-/// pre-warp visits those forwards and the others backwards, each half towards the
-/// epipole.
+/// pre-warp visits each half towards the epipole (or, outwards, away from it).
 #[inline]
 fn split_at(n: usize, e: f32) -> usize {
     (e - 0.5).ceil().clamp(0.0, n as f32) as usize
@@ -428,15 +446,15 @@ struct Job<'a> {
     variant: Variant,
     u0: i64,
     columns: usize,
-    /// The texels of each row visited: those before the epipole (rightwards), and
-    /// those after it (leftwards) — all, or those that can land where the screen sees.
+    /// The texels of each row visited: those before the epipole, and those after it —
+    /// all, or those that can land where the screen sees.
     row_halves: [std::ops::Range<usize>; 2],
 }
 
 impl Job<'_> {
     /// The row pass over source row `j`: `sink.emit(x, cell)` for each pre-warped
     /// pixel, the texels before the epipole visited rightwards, then the others
-    /// leftwards.
+    /// leftwards — or, [`WarpParams::outward`], each half from the epipole outwards.
     #[inline(always)]
     fn row(
         &self,
@@ -445,8 +463,13 @@ impl Job<'_> {
         sink: &mut impl RowSink,
     ) {
         let [before, after] = &self.row_halves;
-        self.row_half::<true>(j, before.clone(), interpolate, sink);
-        self.row_half::<false>(j, after.clone(), interpolate, sink);
+        if self.params.outward {
+            self.row_half::<false>(j, before.clone(), interpolate, sink);
+            self.row_half::<true>(j, after.clone(), interpolate, sink);
+        } else {
+            self.row_half::<true>(j, before.clone(), interpolate, sink);
+            self.row_half::<false>(j, after.clone(), interpolate, sink);
+        }
     }
 
     /// The texels `texels` of source row `j`, visited rightwards when `RIGHT`:
@@ -472,13 +495,20 @@ impl Job<'_> {
         let v = j as f32 + 0.5;
         // With the back faces hidden, the eye seen from this row's texels (before their
         // column and depth): a texel is turned away when its normal points away from it.
+        // A texel's surface point is `Q + ray·d`, its plane point `Q` moving by `a` per
+        // texel along the row, its ray (scaled to 1 along `f`) by `ray_step`.
         let facing = (impostor.faces == Faces::Front).then(|| {
             let c = &texture.camera;
-            (p.eye - c.origin - c.b * v, c.a, c.f)
+            let (ray, ray_step) = match (c.centre, c.centre_distance()) {
+                (Some(centre), Some(h_s)) => ((c.origin + c.b * v - centre) / h_s, c.a / h_s),
+                _ => (c.f, Vec3::ZERO),
+            };
+            (p.eye - c.origin - c.b * v, c.a, ray, ray_step)
         });
         let turned_away = |i: usize, texel: u64, q: u16| {
-            facing.is_some_and(|(row_eye, a, f)| {
-                let to_eye = row_eye - a * (i as f32 + 0.5) - f * p.depth[q as usize];
+            facing.is_some_and(|(row_eye, a, ray, ray_step)| {
+                let u = i as f32 + 0.5;
+                let to_eye = row_eye - a * u - (ray + ray_step * u) * p.depth[q as usize];
                 let [_, _, _, x, y, z, ..] = texel.to_le_bytes();
                 // (The encoded normal, `n·127.5 + 127.5`: its direction is enough.)
                 let n = Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5);
@@ -677,7 +707,8 @@ pub fn prewarp(impostor: &Impostor, params: &WarpParams, variant: Variant) -> Pr
 }
 
 /// As [`prewarp`], with the halves above and below the epipole on two threads: they
-/// write disjoint rows (texels move towards the epipole, never past it), so each
+/// write disjoint rows (texels move towards the epipole or away from it, never past
+/// it), so each
 /// writes straight into the final image. With `seen` (see [`PlaneWindow::seen_by`]),
 /// only the part of the image a texture mapping through that window reads is made,
 /// from only the texels that can reach it — the same pixels there as without.
@@ -804,9 +835,7 @@ fn prewarp_with(
 ) -> PrewarpImage {
     let c = &impostor.texture.camera;
     let (w, h) = (c.width as usize, c.height as usize);
-    let s_min = 1.0 / (1.0 + params.k3 * params.max_depth());
-    let (mut u0, mut u1) = axis_extent(w as f32, params.epipole.x, s_min);
-    let (mut v0, mut v1) = axis_extent(h as f32, params.epipole.y, s_min);
+    let ((mut u0, mut u1), (mut v0, mut v1)) = extent(params, w as f32, h as f32);
     let (column_split, row_split) = (split_at(w, params.epipole.x), split_at(h, params.epipole.y));
     let (mut row_halves, mut rows) = ([0..column_split, column_split..w], [0..row_split, row_split..h]);
     // The scale factors' range: the table's ends (depth is linear in the level).
@@ -872,14 +901,20 @@ fn prewarp_with(
     };
     let [above, below] = rows;
     let visited = (job.row_halves[0].len() + job.row_halves[1].len()) * (above.len() + below.len());
+    // Each half towards the epipole, or away from it (`outward`).
+    let upper_half = |out: &mut Output| match params.outward {
+        false => job.half::<true>(above.clone(), out),
+        true => job.half::<false>(above.clone(), out),
+    };
+    let lower_half = |out: &mut Output| match params.outward {
+        false => job.half::<false>(below.clone(), out),
+        true => job.half::<true>(below.clone(), out),
+    };
     if parallel {
-        rayon::join(
-            || job.half::<true>(above, &mut upper),
-            || job.half::<false>(below, &mut lower),
-        );
+        rayon::join(|| upper_half(&mut upper), || lower_half(&mut lower));
     } else {
-        job.half::<true>(above, &mut upper);
-        job.half::<false>(below, &mut lower);
+        upper_half(&mut upper);
+        lower_half(&mut lower);
     }
     PrewarpImage {
         u0,
@@ -894,11 +929,16 @@ fn prewarp_with(
 /// The sample at pixel centre `centre` between row neighbours `a` and `b`, taken at the
 /// point of the 3D segment between their surface points that pre-warps exactly there:
 /// with `u(t) = u_a + t·Δu`, `d(t) = d_a + t·Δd` in the source, solve
-/// `(u(t) + e1·k3·d(t)) / (1 + k3·d(t)) = centre` for `t`.
+/// `(u(t) + e1·k3·d(t)) / (1 + k3·d(t)) = centre` for `t`. (The orthographic warp's
+/// closed form: a perspective texture's samples blend linearly.)
 // (Always inlined: called, it returned its cell through memory, and the vector lerp's
 // result read back piecewise stalled every pixel — 2.6× slower.)
 #[inline(always)]
 fn compensated(a: &RowSample, b: &RowSample, centre: f32, p: &WarpParams) -> Cell {
+    if p.perspective() {
+        let t = ((centre - a.u) / (b.u - a.u)).clamp(0.0, 1.0);
+        return a.cell.lerp(&b.cell, if t.is_finite() { t } else { 0.5 });
+    }
     let (k3, e1) = (p.k3, p.epipole.x);
     let (ad, bd) = (a.cell.depth, b.cell.depth);
     let (du, dd) = (b.source - a.source, bd - ad);

@@ -48,15 +48,12 @@ pub(crate) fn screen_rect(camera: &Camera, corners: &[Vec3]) -> (u32, u32, u32, 
 }
 
 /// The screen rectangle `(x0, y0, x1, y1)` the texture's whole volume (its quad swept
-/// from `depth_near` to `depth_far`) can cover.
+/// along its rays from `depth_near` to `depth_far`) can cover.
 pub fn volume_rect(camera: &Camera, c: &SourceCamera) -> (u32, u32, u32, u32) {
     let (w, h) = (c.width as f32, c.height as f32);
     let corners: Vec<Vec3> = [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)]
         .into_iter()
-        .flat_map(|(u, v)| {
-            let p = c.origin + c.a * u + c.b * v;
-            [p + c.f * c.depth_near, p + c.f * c.depth_far]
-        })
+        .flat_map(|(u, v)| [c.point(u, v, c.depth_near), c.point(u, v, c.depth_far)])
         .collect();
     screen_rect(camera, &corners)
 }
@@ -121,8 +118,8 @@ pub fn map(
                 let along = |start: f32, step: f32| f32x8::splat(start) + f32x8::splat(step) * steps;
                 let towards_plane = along(row.x, x_step.x);
                 let s = f32x8::splat(params.h) / towards_plane;
-                let u = f32x8::splat(params.epipole.x) + s * along(row.y, x_step.y);
-                let v = f32x8::splat(params.epipole.y) + s * along(row.z, x_step.z);
+                let u = f32x8::splat(params.foot.x) + s * along(row.y, x_step.y);
+                let v = f32x8::splat(params.foot.y) + s * along(row.z, x_step.z);
                 let (fu, fv) = (u - corner_u, v - corner_v);
                 // (Every comparison is false for NaN.)
                 let facing = towards_plane.simd_gt(f32x8::ZERO);

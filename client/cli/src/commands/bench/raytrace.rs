@@ -6,7 +6,7 @@ use clap::Args;
 use glam::Vec3;
 use serde::Serialize;
 
-use relief_core::relief::DepthBits;
+use relief_core::relief::{DepthBits, SourceProjection};
 use relief_core::scene::SceneObject;
 use relief_trace::bake;
 use relief_trace::bvh::Bvh;
@@ -70,7 +70,16 @@ pub fn run(args: RaytraceArgs) -> Result<()> {
     // A fixed, oblique view from three bounding radii away.
     let radius = object.bounds.extent().length() * 0.5;
     let eye = object.bounds.center() + Vec3::new(0.45, 0.35, 0.82).normalize() * radius * 3.0;
-    let bake_once = || bake(&tracer, eye, args.size, DepthBits::Eight).map(drop);
+    let bake_once = || {
+        bake(
+            &tracer,
+            eye,
+            args.size,
+            DepthBits::Eight,
+            SourceProjection::Orthographic,
+        )
+        .map(drop)
+    };
     bake_once()?;
     bar.set_message("tracing, all threads");
     let bake_ms_mt = best_ms(runs, || drop(bake_once()));

@@ -117,6 +117,8 @@ pub fn run(args: RpcArgs) -> Result<()> {
                 client_id: "bench".into(),
                 request_id: k as u64,
                 progressive: false,
+                // (What the client asks for.)
+                projection: pb::SourceProjection::Perspective.into(),
             };
             let start = Instant::now();
             let mut stream = remote.request(request).await?;
