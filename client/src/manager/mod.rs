@@ -62,7 +62,7 @@ use around::angle_between;
 use cache::ObjectState;
 use choose::{Grade, shown_texture};
 use draw::Kept;
-use policy::{LONE_MAX_TURN, MAX_TEXEL_PIXELS, SHOWN_STALE, WARM_UP_POLL};
+use policy::{LONE_MAX_TURN, SHOWN_STALE, WARM_UP_POLL, texel_pixels};
 use requests::Pending;
 
 /// The manager of one client: what it holds and has asked for per object, where the eye
@@ -293,7 +293,9 @@ impl Manager {
                     if let Some((p, _)) = partner {
                         held[p].last_shown = shown_at;
                     }
-                    let level = held[i].pyramid.level_for(camera, MAX_TEXEL_PIXELS);
+                    let level = held[i]
+                        .pyramid
+                        .level_for(camera, texel_pixels(&scene.objects[k], camera));
                     Show::Impostor {
                         texture: i,
                         level,

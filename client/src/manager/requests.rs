@@ -18,8 +18,8 @@ use super::choose::{Grade, held_covers};
 use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
-    MAX_HORIZON_S, MAX_TEXEL_PIXELS, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK,
-    PENDING_REACH, REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, projection_for,
+    MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK, PENDING_REACH,
+    REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, projection_for, texel_pixels,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -112,7 +112,9 @@ impl Manager {
     /// rounded up to the [`texture_ladder`].
     pub(super) fn size_for(object: &SceneObject, eye: Vec3, camera: &Camera) -> u32 {
         let projection = projection_for(object, eye);
-        let edge = resolution_for(&object.bounds, eye, projection, camera, MAX_TEXEL_PIXELS);
+        let at_eye = Camera { eye, ..*camera };
+        let texel = texel_pixels(object, &at_eye);
+        let edge = resolution_for(&object.bounds, eye, projection, camera, texel);
         texture_ladder(edge.unwrap_or(u32::MAX))
     }
 
