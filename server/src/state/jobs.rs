@@ -3,7 +3,7 @@
 
 use std::collections::HashSet;
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use tonic::Status;
 
@@ -58,6 +58,12 @@ impl JobKey {
             && (wanted.size..=wanted.size.saturating_mul(MAX_SERVED_RATIO)).contains(&self.size)
     }
 }
+
+/// How long a job told to stop counts as a slot coming free: a bake looks for a stop
+/// every block of rays (milliseconds), so the answer takes about a round trip. Past it
+/// the worker is hung on that job — its slot stays taken, but preemption no longer
+/// waits for it (a hung worker's one unanswered stop turned preemption off for good).
+pub const STOP_GRACE: Duration = Duration::from_secs(2);
 
 /// How many times a request's edge a texture that serves it may be: 2 (4× the texels).
 /// A far bigger one would cost a small request's client far more bytes — and, still
@@ -295,7 +301,7 @@ impl State {
                 kind: Some(pb::server_message::Kind::Cancel(pb::CancelJob { job_id })),
             };
             let _ = w.tx.send(Ok(cancel));
-            w.stopping.insert(job_id);
+            w.stopping.insert(job_id, Instant::now());
         }
     }
 
@@ -333,10 +339,13 @@ impl State {
     /// bake checks for a stop every block of rays), and the queue's order then gives it
     /// to `owner`.
     fn preempt_for(&mut self, owner: &Arc<str>, head: Priority) {
-        // (A slot already coming free — a job told to stop — serves it first; and a job
-        // taken back takes none back in turn, or two clients would take one slot from
-        // each other for ever.)
-        let freeing = self.workers.values().any(|w| !w.stopping.is_empty());
+        // (A slot already coming free — a job told to stop within `STOP_GRACE` — serves
+        // it first; and a job taken back takes none back in turn, or two clients would
+        // take one slot from each other for ever.)
+        let now = Instant::now();
+        let freeing = (self.workers.values())
+            .flat_map(|w| w.stopping.values())
+            .any(|&told| now.saturating_duration_since(told) < STOP_GRACE);
         let taken_back = self.jobs.get(&head.id).is_some_and(|job| job.preempted);
         if head.predicted || freeing || taken_back || self.queue.running_of(owner) > 0 {
             return;

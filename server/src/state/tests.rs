@@ -682,6 +682,65 @@ fn a_needed_now_request_takes_a_slot_back_once() {
     assert_eq!(s.stats().jobs_preempted, 1);
 }
 
+/// A worker that never answers a stop (it heartbeats, but hangs on the job) keeps that
+/// slot, but holds preemption off only for `STOP_GRACE`: after it, a needed-now request
+/// of another client takes a slot back again (before, one unanswered stop turned
+/// preemption off for good).
+#[test]
+fn a_stop_never_answered_holds_preemption_off_for_a_grace_only() {
+    let (mut s, hash) = state_with_scene();
+    for owner in ["client-2", "client-3", "client-4"] {
+        s.add_owner(hash, &owner.into());
+    }
+    let (tx, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 1.0, tx.clone());
+    admit_now(&mut s, hash, 2, 2.0, tx.clone());
+    let (wtx, mut wrx) = unbounded_channel();
+    let worker = s.add_worker("w".into(), "worker-1".into(), 2, 1, wtx);
+    s.dispatch();
+    assert!(next_job(&mut wrx).is_some() && next_job(&mut wrx).is_some());
+    let from = |owner: &str, id: u64, x: f32| Request {
+        client_id: owner.into(),
+        ..request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Now)
+    };
+    let cancels = |rx: &mut tokio::sync::mpsc::UnboundedReceiver<_>| {
+        std::iter::from_fn(|| rx.try_recv().ok())
+            .filter(|m: &Result<pb::ServerMessage, Status>| {
+                matches!(
+                    m,
+                    Ok(pb::ServerMessage {
+                        kind: Some(pb::server_message::Kind::Cancel(_))
+                    })
+                )
+            })
+            .count()
+    };
+    s.admit(&from("b", 3, 3.0), "client-2", tx.clone()).unwrap();
+    s.dispatch();
+    assert_eq!(
+        cancels(&mut wrx),
+        1,
+        "the first needed-now request takes a slot back"
+    );
+    // The worker never answers. While the stop is fresh, its slot is coming free.
+    s.admit(&from("c", 4, 4.0), "client-3", tx.clone()).unwrap();
+    s.dispatch();
+    assert_eq!(
+        cancels(&mut wrx),
+        0,
+        "a slot is coming free: nothing more taken back"
+    );
+    // Past the grace the worker is hung on it: the next one takes another back.
+    let aged = std::time::Instant::now() - jobs::STOP_GRACE - std::time::Duration::from_millis(100);
+    for told in s.workers.get_mut(&worker).unwrap().stopping.values_mut() {
+        *told = aged;
+    }
+    s.admit(&from("d", 5, 5.0), "client-4", tx).unwrap();
+    s.dispatch();
+    assert_eq!(cancels(&mut wrx), 1, "preemption is on again");
+    assert_eq!(s.stats().jobs_preempted, 2);
+}
+
 /// The wait foreseen for a new job is the jobs ahead shared over the slots, each
 /// taking the mean time a job took; a prediction that wait would make more than
 /// `SHED_SLACK` late is refused — saying the wait in its metadata — where one needed

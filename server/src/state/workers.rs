@@ -1,7 +1,7 @@
 //! Workers: registration, heartbeats and leases (a silent worker's jobs go back to the
 //! queue), draining before a worker stops.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::time::Instant;
 
 use super::{JobSender, State};
@@ -16,9 +16,10 @@ pub(super) struct Worker {
     /// Threads each of its jobs bakes on (as it says; for Stats).
     pub(super) threads: u32,
     pub(super) running: HashSet<u64>,
-    /// Jobs it was told to stop and has not yet said it stopped (or finished): their
-    /// slots stay taken, so a worker that hangs is not handed job after job.
-    pub(super) stopping: HashSet<u64>,
+    /// Jobs it was told to stop, and when, that it has not yet said it stopped (or
+    /// finished): their slots stay taken, so a worker that hangs is not handed job
+    /// after job.
+    pub(super) stopping: HashMap<u64, Instant>,
     /// It said it is stopping: no new jobs.
     pub(super) draining: bool,
     pub(super) tx: JobSender,
@@ -51,7 +52,7 @@ impl State {
                 slots,
                 threads,
                 running: HashSet::new(),
-                stopping: HashSet::new(),
+                stopping: HashMap::new(),
                 draining: false,
                 tx,
                 last_seen: Instant::now(),
@@ -72,7 +73,7 @@ impl State {
     pub fn holds(&self, worker: u64, job_id: u64) -> bool {
         self.workers
             .get(&worker)
-            .is_some_and(|w| w.running.contains(&job_id) || w.stopping.contains(&job_id))
+            .is_some_and(|w| w.running.contains(&job_id) || w.stopping.contains_key(&job_id))
     }
 
     /// The worker broke the protocol (answered for a job not its own, or with a
