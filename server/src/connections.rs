@@ -1,34 +1,46 @@
 //! Accepting connections within bounds: at most so many open at once, each required
-//! to start speaking (the HTTP/2 preface, or a TLS hello) within a deadline, and a
-//! listener that backs off instead of spinning when the process runs out of file
-//! descriptors.
+//! to start speaking (the HTTP/2 preface, or a TLS hello) within a deadline and closed
+//! once it has had no call open for a while, and a listener that backs off instead of
+//! spinning when the process runs out of file descriptors.
 //!
 //! Without these, a thousand idle TCP connections that never sent a byte took every
 //! descriptor of a server limited to 1,024: `accept` then failed at once, again and
-//! again (a core at 90 %), and every honest client's call timed out.
+//! again (a core at 90 %), and every honest client's call timed out. A connection that
+//! spoke and then fell silent answers the server's keepalive pings, so it would hold
+//! its place for ever: [`CountCalls`] counts each connection's open calls (a streamed
+//! answer counts until its last frame), and a connection with none for
+//! [`Bounds::idle_within`] is closed.
 //!
 //! ```no_run
 //! # async fn serve() -> std::io::Result<()> {
 //! use std::time::Duration;
-//! use relief_server::connections::{Bounds, accept_within};
+//! use relief_server::connections::{Bounds, CountCalls, accept_within};
 //!
 //! let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
-//! let incoming = accept_within(listener, Bounds { max_open: 512, first_bytes_within: Duration::from_secs(5) });
-//! // … `tonic::transport::Server::builder().…serve_with_incoming(incoming)`
+//! let bounds = Bounds {
+//!     max_open: 512,
+//!     first_bytes_within: Duration::from_secs(5),
+//!     idle_within: Duration::from_secs(60),
+//! };
+//! let incoming = accept_within(listener, bounds);
+//! // … `tonic::transport::Server::builder().layer(CountCalls).…serve_with_incoming(incoming)`
 //! # Ok(())
 //! # }
 //! ```
 
+use std::future::Future;
 use std::pin::Pin;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::task::{Context, Poll};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::{OwnedSemaphorePermit, Semaphore, mpsc};
 use tokio::time::Sleep;
 use tokio_stream::wrappers::ReceiverStream;
+use tonic::codegen::http;
 use tonic::transport::server::{Connected, TcpConnectInfo};
 
 /// Bytes a connection must send before [`Bounds::first_bytes_within`]: the HTTP/2
@@ -46,6 +58,9 @@ pub struct Bounds {
     pub max_open: usize,
     /// A connection that has not sent its opening bytes by then is closed.
     pub first_bytes_within: Duration,
+    /// A connection with no call open for this long is closed (with
+    /// [`CountCalls`] on the server; without it every connection counts as idle).
+    pub idle_within: Duration,
 }
 
 /// The connections `listener` accepts, within `bounds`, as a stream for
@@ -66,6 +81,9 @@ pub fn accept_within(listener: TcpListener, bounds: Bounds) -> ReceiverStream<st
                         stream,
                         _open: permit,
                         opening: Some((0, Box::pin(tokio::time::sleep(bounds.first_bytes_within)))),
+                        activity: Arc::new(Activity::new()),
+                        idle_within: bounds.idle_within,
+                        idle_check: Box::pin(tokio::time::sleep(bounds.idle_within)),
                     };
                     if tx.send(Ok(connection)).await.is_err() {
                         return;
@@ -82,12 +100,63 @@ pub fn accept_within(listener: TcpListener, bounds: Bounds) -> ReceiverStream<st
 }
 
 /// An accepted connection: it holds its place among the open ones until dropped, and
-/// fails its reads once it has been silent past its deadline before its opening bytes.
+/// fails its reads once it has been silent past its deadline before its opening bytes,
+/// or has had no call open for [`Bounds::idle_within`].
 pub struct Bounded {
     stream: TcpStream,
     _open: OwnedSemaphorePermit,
     /// Bytes read so far and the deadline, until the opening bytes are in.
     opening: Option<(usize, Pin<Box<Sleep>>)>,
+    activity: Arc<Activity>,
+    idle_within: Duration,
+    /// When next to see whether the connection has been idle too long.
+    idle_check: Pin<Box<Sleep>>,
+}
+
+/// A connection's open calls, and since when it has had none: shared by its reads and
+/// by [`CountCalls`], which sees its calls.
+#[derive(Debug)]
+pub struct Activity {
+    calls: AtomicUsize,
+    /// When the last call ended (or the connection opened), ms after `epoch`.
+    idle_since_ms: AtomicU64,
+    epoch: Instant,
+}
+
+impl Activity {
+    fn new() -> Activity {
+        Activity {
+            calls: AtomicUsize::new(0),
+            idle_since_ms: AtomicU64::new(0),
+            epoch: Instant::now(),
+        }
+    }
+
+    /// How long the connection has had no call open; `None` while one is.
+    fn idle_for(&self) -> Option<Duration> {
+        (self.calls.load(Ordering::Acquire) == 0).then(|| {
+            let since = Duration::from_millis(self.idle_since_ms.load(Ordering::Acquire));
+            self.epoch.elapsed().saturating_sub(since)
+        })
+    }
+}
+
+/// One open call of a connection, from its request to its answer's last frame.
+struct OpenCall(Arc<Activity>);
+
+impl OpenCall {
+    fn new(activity: Arc<Activity>) -> OpenCall {
+        activity.calls.fetch_add(1, Ordering::AcqRel);
+        OpenCall(activity)
+    }
+}
+
+impl Drop for OpenCall {
+    fn drop(&mut self) {
+        let now = self.0.epoch.elapsed().as_millis() as u64;
+        self.0.idle_since_ms.store(now, Ordering::Release);
+        self.0.calls.fetch_sub(1, Ordering::AcqRel);
+    }
 }
 
 impl AsyncRead for Bounded {
@@ -104,6 +173,22 @@ impl AsyncRead for Bounded {
                 std::io::ErrorKind::TimedOut,
                 "the connection sent nothing in time",
             )));
+        }
+        // (Looked at when the check falls due, then re-armed for when the connection
+        // would next be idle too long.)
+        while this.idle_check.as_mut().poll(cx).is_ready() {
+            let wait = match this.activity.idle_for() {
+                Some(idle) if idle >= this.idle_within => {
+                    return Poll::Ready(Err(std::io::Error::new(
+                        std::io::ErrorKind::TimedOut,
+                        "the connection had no call open in time",
+                    )));
+                }
+                Some(idle) => this.idle_within - idle,
+                None => this.idle_within,
+            };
+            let next = tokio::time::Instant::now() + wait;
+            this.idle_check.as_mut().reset(next);
         }
         let before = buf.filled().len();
         let read = Pin::new(&mut this.stream).poll_read(cx, buf);
@@ -147,10 +232,93 @@ impl AsyncWrite for Bounded {
     }
 }
 
+/// What tonic puts in each request's extensions for a [`Bounded`] connection.
+#[derive(Debug, Clone)]
+pub struct BoundedInfo {
+    pub tcp: TcpConnectInfo,
+    activity: Arc<Activity>,
+}
+
 impl Connected for Bounded {
-    type ConnectInfo = TcpConnectInfo;
+    type ConnectInfo = BoundedInfo;
 
     fn connect_info(&self) -> Self::ConnectInfo {
-        self.stream.connect_info()
+        BoundedInfo {
+            tcp: self.stream.connect_info(),
+            activity: self.activity.clone(),
+        }
+    }
+}
+
+/// The layer that counts each [`Bounded`] connection's open calls (for
+/// [`Bounds::idle_within`]): a call is open from its request until its answer's body
+/// ends or is dropped — a worker's session or a streamed texture as long as it lasts.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CountCalls;
+
+impl<S> tower_layer::Layer<S> for CountCalls {
+    type Service = Counted<S>;
+
+    fn layer(&self, inner: S) -> Counted<S> {
+        Counted { inner }
+    }
+}
+
+/// A service whose calls [`CountCalls`] counts.
+#[derive(Debug, Clone)]
+pub struct Counted<S> {
+    inner: S,
+}
+
+impl<S, B> tonic::codegen::Service<http::Request<B>> for Counted<S>
+where
+    S: tonic::codegen::Service<http::Request<B>, Response = http::Response<tonic::body::Body>>,
+    S::Future: Send + 'static,
+{
+    type Response = http::Response<tonic::body::Body>;
+    type Error = S::Error;
+    type Future = Pin<Box<dyn Future<Output = Result<Self::Response, S::Error>> + Send>>;
+
+    fn poll_ready(&mut self, cx: &mut Context<'_>) -> Poll<Result<(), S::Error>> {
+        self.inner.poll_ready(cx)
+    }
+
+    fn call(&mut self, request: http::Request<B>) -> Self::Future {
+        let call =
+            (request.extensions().get::<BoundedInfo>()).map(|info| OpenCall::new(info.activity.clone()));
+        let answer = self.inner.call(request);
+        Box::pin(async move {
+            let response = answer.await?;
+            Ok(match call {
+                Some(call) => response.map(|body| tonic::body::Body::new(CountedBody { body, _call: call })),
+                None => response,
+            })
+        })
+    }
+}
+
+/// A response body that holds its call open until it ends (or is dropped).
+struct CountedBody {
+    body: tonic::body::Body,
+    _call: OpenCall,
+}
+
+impl http_body::Body for CountedBody {
+    type Data = tonic::codegen::Bytes;
+    type Error = tonic::Status;
+
+    fn poll_frame(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+    ) -> Poll<Option<Result<http_body::Frame<Self::Data>, Self::Error>>> {
+        Pin::new(&mut self.body).poll_frame(cx)
+    }
+
+    fn is_end_stream(&self) -> bool {
+        self.body.is_end_stream()
+    }
+
+    fn size_hint(&self) -> http_body::SizeHint {
+        self.body.size_hint()
     }
 }

@@ -19,7 +19,7 @@ use relief_core::scene::SceneLimits;
 use relief_proto::bundle::SceneDir;
 use relief_proto::limits::{MAX_REQUEST_MESSAGE_BYTES, MAX_TEXTURE_MESSAGE_BYTES, MAX_UPLOAD_MESSAGE_BYTES};
 use relief_proto::pb;
-use relief_server::connections::{Bounds, accept_within};
+use relief_server::connections::{Bounds, CountCalls, accept_within};
 use relief_server::identity::{Credentials, Role, read_tokens_file};
 use relief_server::service::{Service, Shared, Uploads};
 use relief_server::state::{Limits, State};
@@ -110,6 +110,11 @@ struct Args {
     /// long (ms) is closed.
     #[arg(long, env = "RELIEF_FIRST_BYTES_MS", default_value = "5000", value_parser = clap::value_parser!(u64).range(100..=600_000))]
     first_bytes_ms: u64,
+    /// A connection with no call open for this long (ms) is closed: it holds a place
+    /// among `--max-connections`. Clients and workers never idle that long (a client
+    /// looks at the server's health twice a second, a worker's session is a call).
+    #[arg(long, env = "RELIEF_IDLE_CONNECTION_MS", default_value = "60000", value_parser = clap::value_parser!(u64).range(100..=86_400_000))]
+    idle_connection_ms: u64,
     /// Calls open at once on one connection.
     #[arg(long, env = "RELIEF_MAX_STREAMS", default_value = "256", value_parser = clap::value_parser!(u32).range(1..=100_000))]
     max_streams: u32,
@@ -258,6 +263,7 @@ async fn serve(args: Args) -> Result<()> {
         Bounds {
             max_open: args.max_connections as usize,
             first_bytes_within: Duration::from_millis(args.first_bytes_ms),
+            idle_within: Duration::from_millis(args.idle_connection_ms),
         },
     );
     // On SIGINT/SIGTERM: stop taking connections and let calls in flight end, but not
@@ -275,6 +281,7 @@ async fn serve(args: Args) -> Result<()> {
         }
     };
     let serving = builder
+        .layer(CountCalls)
         .add_service(health_service)
         .add_service(reflection_v1)
         .add_service(reflection_v1alpha)

@@ -578,6 +578,56 @@ async fn idle_connections_cannot_lock_clients_out() {
     drop(idle);
 }
 
+/// A connection that spoke and then fell silent — it answers the server's keepalive
+/// pings, so keepalive never closes it — is closed once it has had no call open for
+/// `--idle-connection-ms`, freeing its place among `--max-connections` for a client
+/// waiting in the backlog; a connection with a call open all along (a worker's
+/// session) stays. (Without the idle limit the waiting client's call timed out.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_connection_idle_past_its_limit_gives_its_place_up() {
+    let mut args: Vec<&str> = SERVER_ARGS.to_vec();
+    args.extend(["--max-connections", "2", "--idle-connection-ms", "1500"]);
+    let (_server, url) = start_server(&args);
+    let _worker = start_worker(&url, &["--token", "worker-one"]);
+    let mut first = Remote::connect(&url, Some("client-one"), "first")
+        .await
+        .expect("connect");
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while first.stats().await.expect("stats").workers != 1 {
+        assert!(Instant::now() < deadline, "the worker never registered");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    // Both places taken: the worker's session and `first`, now idle.
+    let start = Instant::now();
+    let waited = tokio::time::timeout(Duration::from_secs(8), async {
+        let mut second = Remote::connect(&url, Some("client-two"), "second").await?;
+        second.stats().await?;
+        Ok::<_, Box<dyn std::error::Error + Send + Sync>>(second)
+    })
+    .await;
+    let waited_for = start.elapsed();
+    let mut second = match waited {
+        Ok(Ok(second)) => second,
+        Ok(Err(e)) => panic!("the waiting client's call failed: {e}"),
+        Err(_) => panic!("the waiting client got no place in 8 s"),
+    };
+    eprintln!("a place came free after {waited_for:?}");
+    assert!(
+        waited_for >= Duration::from_millis(800),
+        "{waited_for:?}: a place was free at once"
+    );
+    // The worker's session, a call open throughout, was never closed.
+    for _ in 0..20 {
+        assert_eq!(
+            second.stats().await.expect("stats").workers,
+            1,
+            "the worker's session was closed"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    drop(first);
+}
+
 /// A soak (not run by CI: `cargo test --release -p relief-tests --test hostile soak --
 /// --ignored --nocapture`, `RELIEF_SOAK_S` seconds, 60 by default): two honest clients
 /// keep asking for textures from two real workers while a hostile client floods
