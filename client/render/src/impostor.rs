@@ -73,8 +73,10 @@ impl Impostor {
                 (n.dot(axis).abs() / facing).min(MAX_SLOPE)
             }
         };
-        // How much wider than at the plane a texel is at displacement `t`.
-        let spread = |t: f32| c.texel_size_at(t) / c.texel_size_at(0.0);
+        // How much wider than at the plane a texel is at displacement `t`
+        // (`SourceCamera::texel_size_at` over its value at the plane, worked out once).
+        let inverse_h = c.centre_distance().map_or(0.0, |h| 1.0 / h);
+        let spread = |t: f32| 1.0 + t * inverse_h;
         let normals: Vec<Vec3> = texture.normal.iter().map(|&n| decode_normal_rgb8(n)).collect();
         let joined = |k: usize, l: usize, axis: Vec3, step: f32| {
             if texture.depth[k] == empty || texture.depth[l] == empty {
