@@ -9,7 +9,10 @@
 //! spoke and then fell silent answers the server's keepalive pings, so it would hold
 //! its place for ever: [`CountCalls`] counts each connection's open calls (a streamed
 //! answer counts until its last frame), and a connection with none for
-//! [`Bounds::idle_within`] is closed.
+//! [`Bounds::idle_within`] is closed. A client that asks for a large texture and does
+//! not read it leaves the answer's encoded copy with the server, the rest of it waiting
+//! on HTTP/2 flow control: a connection one of whose answers has had a frame waiting to
+//! be taken for [`Bounds::stalled_within`] is closed too.
 //!
 //! ```no_run
 //! # async fn serve() -> std::io::Result<()> {
@@ -21,6 +24,7 @@
 //!     max_open: 512,
 //!     first_bytes_within: Duration::from_secs(5),
 //!     idle_within: Duration::from_secs(60),
+//!     stalled_within: Duration::from_secs(30),
 //! };
 //! let incoming = accept_within(listener, bounds);
 //! // … `tonic::transport::Server::builder().layer(CountCalls).…serve_with_incoming(incoming)`
@@ -61,6 +65,9 @@ pub struct Bounds {
     /// A connection with no call open for this long is closed (with
     /// [`CountCalls`] on the server; without it every connection counts as idle).
     pub idle_within: Duration,
+    /// A connection one of whose answers has waited this long for its next frame to be
+    /// taken (its reader not reading) is closed (with [`CountCalls`]).
+    pub stalled_within: Duration,
 }
 
 /// The connections `listener` accepts, within `bounds`, as a stream for
@@ -83,7 +90,11 @@ pub fn accept_within(listener: TcpListener, bounds: Bounds) -> ReceiverStream<st
                         opening: Some((0, Box::pin(tokio::time::sleep(bounds.first_bytes_within)))),
                         activity: Arc::new(Activity::new()),
                         idle_within: bounds.idle_within,
-                        idle_check: Box::pin(tokio::time::sleep(bounds.idle_within)),
+                        stalled_within: bounds.stalled_within,
+                        // (The first look as soon as either limit could be reached.)
+                        idle_check: Box::pin(tokio::time::sleep(
+                            bounds.idle_within.min(bounds.stalled_within / 4),
+                        )),
                     };
                     if tx.send(Ok(connection)).await.is_err() {
                         return;
@@ -109,7 +120,8 @@ pub struct Bounded {
     opening: Option<(usize, Pin<Box<Sleep>>)>,
     activity: Arc<Activity>,
     idle_within: Duration,
-    /// When next to see whether the connection has been idle too long.
+    stalled_within: Duration,
+    /// When next to see whether the connection has been idle, or stalled, too long.
     idle_check: Pin<Box<Sleep>>,
 }
 
@@ -121,6 +133,10 @@ pub struct Activity {
     /// When the last call ended (or the connection opened), ms after `epoch`.
     idle_since_ms: AtomicU64,
     epoch: Instant,
+    /// The open calls whose answer handed a frame over that has not been followed by
+    /// a call for the next one, and since when (by call number).
+    waiting: std::sync::Mutex<std::collections::HashMap<u64, Instant>>,
+    next_call: AtomicU64,
 }
 
 impl Activity {
@@ -129,7 +145,29 @@ impl Activity {
             calls: AtomicUsize::new(0),
             idle_since_ms: AtomicU64::new(0),
             epoch: Instant::now(),
+            waiting: Default::default(),
+            next_call: AtomicU64::new(0),
         }
+    }
+
+    /// How long the answer waiting longest for its next frame to be taken has waited.
+    fn stalled_for(&self) -> Duration {
+        let waiting = self.waiting.lock().unwrap_or_else(|e| e.into_inner());
+        waiting
+            .values()
+            .map(|since| since.elapsed())
+            .max()
+            .unwrap_or_default()
+    }
+
+    /// Call `call`'s answer handed a frame over (`Some(now)`) or is asked for the next
+    /// (`None`).
+    fn set_waiting(&self, call: u64, since: Option<Instant>) {
+        let mut waiting = self.waiting.lock().unwrap_or_else(|e| e.into_inner());
+        match since {
+            Some(since) => waiting.insert(call, since),
+            None => waiting.remove(&call),
+        };
     }
 
     /// How long the connection has had no call open; `None` while one is.
@@ -141,18 +179,21 @@ impl Activity {
     }
 }
 
-/// One open call of a connection, from its request to its answer's last frame.
-struct OpenCall(Arc<Activity>);
+/// One open call of a connection, from its request to its answer's last frame, and
+/// its number among the connection's calls.
+struct OpenCall(Arc<Activity>, u64);
 
 impl OpenCall {
     fn new(activity: Arc<Activity>) -> OpenCall {
         activity.calls.fetch_add(1, Ordering::AcqRel);
-        OpenCall(activity)
+        let number = activity.next_call.fetch_add(1, Ordering::Relaxed);
+        OpenCall(activity, number)
     }
 }
 
 impl Drop for OpenCall {
     fn drop(&mut self) {
+        self.0.set_waiting(self.1, None);
         let now = self.0.epoch.elapsed().as_millis() as u64;
         self.0.idle_since_ms.store(now, Ordering::Release);
         self.0.calls.fetch_sub(1, Ordering::AcqRel);
@@ -175,7 +216,8 @@ impl AsyncRead for Bounded {
             )));
         }
         // (Looked at when the check falls due, then re-armed for when the connection
-        // would next be idle too long.)
+        // would next be idle too long, or, with calls open, a quarter of the stall
+        // limit on.)
         while this.idle_check.as_mut().poll(cx).is_ready() {
             let wait = match this.activity.idle_for() {
                 Some(idle) if idle >= this.idle_within => {
@@ -185,7 +227,13 @@ impl AsyncRead for Bounded {
                     )));
                 }
                 Some(idle) => this.idle_within - idle,
-                None => this.idle_within,
+                None if this.activity.stalled_for() >= this.stalled_within => {
+                    return Poll::Ready(Err(std::io::Error::new(
+                        std::io::ErrorKind::TimedOut,
+                        "an answer on the connection was not read in time",
+                    )));
+                }
+                None => this.stalled_within / 4,
             };
             let next = tokio::time::Instant::now() + wait;
             this.idle_check.as_mut().reset(next);
@@ -290,17 +338,33 @@ where
         Box::pin(async move {
             let response = answer.await?;
             Ok(match call {
-                Some(call) => response.map(|body| tonic::body::Body::new(CountedBody { body, _call: call })),
+                Some(call) => response.map(|body| {
+                    tonic::body::Body::new(CountedBody {
+                        body,
+                        call,
+                        rest: None,
+                    })
+                }),
                 None => response,
             })
         })
     }
 }
 
-/// A response body that holds its call open until it ends (or is dropped).
+/// The largest part of an answer handed to HTTP/2 at once. tonic encodes a message
+/// into one frame (a large texture: megabytes); handed over whole, it sits in the
+/// HTTP/2 stream's send buffer, where nothing sees whether its reader reads. In parts,
+/// the stream asks for the next only as its reader makes room, and a part left waiting
+/// says the reader stopped.
+const ANSWER_PART_BYTES: usize = 64 * 1024;
+
+/// A response body that holds its call open until it ends (or is dropped), handed over
+/// in parts of at most [`ANSWER_PART_BYTES`].
 struct CountedBody {
     body: tonic::body::Body,
-    _call: OpenCall,
+    call: OpenCall,
+    /// The rest of a data frame larger than a part.
+    rest: Option<tonic::codegen::Bytes>,
 }
 
 impl http_body::Body for CountedBody {
@@ -311,14 +375,47 @@ impl http_body::Body for CountedBody {
         mut self: Pin<&mut Self>,
         cx: &mut Context<'_>,
     ) -> Poll<Option<Result<http_body::Frame<Self::Data>, Self::Error>>> {
-        Pin::new(&mut self.body).poll_frame(cx)
+        // Asked for a frame: whatever was handed over has been taken. One handed over
+        // now waits until the next ask — long only when flow control holds it, the
+        // reader not reading.
+        let this = &mut *self;
+        let OpenCall(activity, number) = &this.call;
+        activity.set_waiting(*number, None);
+        let frame = match this.rest.take() {
+            Some(rest) => Poll::Ready(Some(Ok(http_body::Frame::data(rest)))),
+            None => Pin::new(&mut this.body).poll_frame(cx),
+        };
+        let frame = frame.map(|frame| {
+            frame.map(|frame| {
+                frame.map(|frame| match frame.into_data() {
+                    Ok(mut data) => {
+                        if data.len() > ANSWER_PART_BYTES {
+                            this.rest = Some(data.split_off(ANSWER_PART_BYTES));
+                        }
+                        http_body::Frame::data(data)
+                    }
+                    Err(frame) => frame,
+                })
+            })
+        });
+        if let Poll::Ready(Some(Ok(_))) = &frame {
+            activity.set_waiting(*number, Some(Instant::now()));
+        }
+        frame
     }
 
     fn is_end_stream(&self) -> bool {
-        self.body.is_end_stream()
+        self.rest.is_none() && self.body.is_end_stream()
     }
 
     fn size_hint(&self) -> http_body::SizeHint {
-        self.body.size_hint()
+        let rest = self.rest.as_ref().map_or(0, |r| r.len() as u64);
+        let inner = self.body.size_hint();
+        let mut hint = http_body::SizeHint::new();
+        hint.set_lower(inner.lower().saturating_add(rest));
+        if let Some(upper) = inner.upper() {
+            hint.set_upper(upper.saturating_add(rest));
+        }
+        hint
     }
 }

@@ -115,6 +115,11 @@ struct Args {
     /// looks at the server's health twice a second, a worker's session is a call).
     #[arg(long, env = "RELIEF_IDLE_CONNECTION_MS", default_value = "60000", value_parser = clap::value_parser!(u64).range(100..=86_400_000))]
     idle_connection_ms: u64,
+    /// A connection one of whose answers has waited this long (ms) for its reader to
+    /// take its next part is closed: a client that does not read would leave the
+    /// encoded texture with the server.
+    #[arg(long, env = "RELIEF_STALLED_ANSWER_MS", default_value = "30000", value_parser = clap::value_parser!(u64).range(100..=86_400_000))]
+    stalled_answer_ms: u64,
     /// Calls open at once on one connection.
     #[arg(long, env = "RELIEF_MAX_STREAMS", default_value = "256", value_parser = clap::value_parser!(u32).range(1..=100_000))]
     max_streams: u32,
@@ -264,6 +269,7 @@ async fn serve(args: Args) -> Result<()> {
             max_open: args.max_connections as usize,
             first_bytes_within: Duration::from_millis(args.first_bytes_ms),
             idle_within: Duration::from_millis(args.idle_connection_ms),
+            stalled_within: Duration::from_millis(args.stalled_answer_ms),
         },
     );
     // On SIGINT/SIGTERM: stop taking connections and let calls in flight end, but not

@@ -628,6 +628,48 @@ async fn a_connection_idle_past_its_limit_gives_its_place_up() {
     drop(first);
 }
 
+/// A client that asks for a large texture and does not read it loses its connection,
+/// not the server its memory: once the answer has waited `--stalled-answer-ms` for the
+/// reader to take its next part (HTTP/2 flow control holding the rest), the server
+/// closes the connection, and what was left is freed. A client that reads gets the same
+/// texture. (Without the limit the stalled answer waited, whole, for as long as the
+/// client kept its connection — then was read in full.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_answer_nobody_reads_costs_its_reader_the_connection() {
+    let mut args: Vec<&str> = SERVER_ARGS.to_vec();
+    args.extend(["--stalled-answer-ms", "1000"]);
+    let (_server, url) = start_server(&args);
+    let _worker = start_worker(&url, &["--token", "worker-one"]);
+    let (mut reader, hash) = relief_tests::upload_default(&url, Some("client-one"), "reader").await;
+    // The rock at 2048² with 16-bit depth: noise that compresses little, megabytes
+    // past a stream's window.
+    let big = |id: u64| pb::ImpostorRequest {
+        depth_bits: 16,
+        object: "rock".into(),
+        eye: Some(vec3_to_pb(Vec3::new(0.5, 2.0, 8.0))),
+        ..ask(&hash, id, 2048, "reader")
+    };
+    let mut read = reader.request(big(1)).await.expect("asked");
+    let texture = read.message().await.expect("read").expect("a texture");
+    let bytes = texture
+        .texture
+        .as_ref()
+        .map_or(0, |t| t.albedo.len() + t.normal.len() + t.depth.len());
+    assert!(bytes > 4 << 20, "{bytes} bytes: not past the window");
+    // Asked again on a connection of its own (served from the cache), and not read.
+    let (mut idle, _) = relief_tests::upload_default(&url, Some("client-one"), "idle").await;
+    let mut unread = idle.request(big(2)).await.expect("asked");
+    tokio::time::sleep(Duration::from_millis(3500)).await;
+    let late = unread.message().await;
+    assert!(
+        late.is_err(),
+        "the unread answer was kept for 3.5 s: {:?}",
+        late.map(|m| m.is_some())
+    );
+    // The reader's connection is untouched.
+    reader.stats().await.expect("the reader's connection is open");
+}
+
 /// A soak (not run by CI: `cargo test --release -p relief-tests --test hostile soak --
 /// --ignored --nocapture`, `RELIEF_SOAK_S` seconds, 60 by default): two honest clients
 /// keep asking for textures from two real workers while a hostile client floods
