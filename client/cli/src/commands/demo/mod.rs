@@ -282,6 +282,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         geometry_psnr_aa_db_min_by_object: by_object(&judged.geometry_by_object, finite_min),
         psnr_aa_db_median_by_object: by_object(&judged.by_object, finite_median),
         geometry_psnr_aa_db_median_by_object: by_object(&judged.geometry_by_object, finite_median),
+        psnr_aa_gap_db_min_by_object: by_object(&judged.gap_by_object, finite_min),
+        psnr_aa_gap_db_median_by_object: by_object(&judged.gap_by_object, finite_median),
         rtt_ms: args.rtt_ms,
         predict: !args.no_predict,
         tolerance: args.tolerance,

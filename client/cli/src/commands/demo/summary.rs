@@ -117,6 +117,12 @@ pub(super) struct Summary {
     /// The median of the same, per object, for the impostor and for exact geometry.
     pub(super) psnr_aa_db_median_by_object: BTreeMap<String, f64>,
     pub(super) geometry_psnr_aa_db_median_by_object: BTreeMap<String, f64>,
+    /// Per object, frame by frame, the impostor's figure minus exact geometry's, over
+    /// the frames where it covers at least
+    /// [`MIN_JUDGED_OBJECT_PIXELS`](super::judge::MIN_JUDGED_OBJECT_PIXELS) pixels: the
+    /// worst frame's, and the median.
+    pub(super) psnr_aa_gap_db_min_by_object: BTreeMap<String, f64>,
+    pub(super) psnr_aa_gap_db_median_by_object: BTreeMap<String, f64>,
     pub(super) rtt_ms: u64,
     pub(super) predict: bool,
     pub(super) tolerance: f32,
