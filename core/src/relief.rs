@@ -174,19 +174,18 @@ impl SourceCamera {
         let world_up = if f.y.abs() < 0.99 { Vec3::Y } else { Vec3::Z };
         let right = f.cross(world_up).normalize();
         let down = f.cross(right); // right × down = f, so a×b points along f.
-        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for corner in bounds.corners() {
+        // The bounds' corners in the view axes, about the bounds' centre.
+        let corners = bounds.corners().map(|corner| {
             let d = corner - centre;
-            let p = Vec3::new(d.dot(right), d.dot(down), d.dot(f));
+            Vec3::new(d.dot(right), d.dot(down), d.dot(f))
+        });
+        if projection == SourceProjection::Perspective {
+            return Self::perspective(eye, centre, (right, down, f), &corners, width, height);
+        }
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for p in corners {
             lo = lo.min(p);
             hi = hi.max(p);
-        }
-        if projection == SourceProjection::Perspective {
-            let corners = bounds.corners().map(|corner| {
-                let d = corner - centre;
-                Vec3::new(d.dot(right), d.dot(down), d.dot(f))
-            });
-            return Self::perspective(eye, centre, (right, down, f), &corners, width, height);
         }
         // A flat object seen edge-on projects to a line: keep every span positive.
         let min_span = (hi - lo).max_element().max(f32::MIN_POSITIVE) * 1e-4;
@@ -271,12 +270,19 @@ impl SourceCamera {
             && self.a.length_squared().is_normal()
             && self.b.length_squared().is_normal()
             && self.depth_far.is_normal()
-            && self.centre_distance().is_none_or(|h| h.is_normal() && h > 0.0);
+            && self.centre_in_front();
         if usable {
             Ok(self)
         } else {
             Err(FacingError::OutOfRange(eye))
         }
+    }
+
+    /// Whether a perspective texture's centre of projection lies in front of its image
+    /// plane, at a normal distance (always, for an orthographic texture): the mapping
+    /// divides by that distance.
+    pub fn centre_in_front(&self) -> bool {
+        self.centre_distance().is_none_or(|h| h.is_normal() && h > 0.0)
     }
 
     /// The distance `h` of a perspective texture's centre of projection in front of its
@@ -291,12 +297,17 @@ impl SourceCamera {
     #[inline]
     pub fn point(&self, u: f32, v: f32, t: f32) -> Vec3 {
         let q = self.origin + self.a * u + self.b * v;
+        q + self.ray_direction(q) * t
+    }
+
+    /// The direction of the ray through plane point `q`, scaled to 1 along `f`: `f`
+    /// itself, or from the centre `C`, `(q − C)/h` (so `C + (q − C)·(h + t)/h` is
+    /// `q + t·(q − C)/h`).
+    #[inline]
+    fn ray_direction(&self, q: Vec3) -> Vec3 {
         match self.centre {
-            None => q + self.f * t,
-            Some(c) => {
-                let h = (self.origin - c).dot(self.f);
-                c + (q - c) * ((h + t) / h)
-            }
+            None => self.f,
+            Some(c) => (q - c) / (self.origin - c).dot(self.f),
         }
     }
 
@@ -316,10 +327,7 @@ impl SourceCamera {
     #[inline]
     pub fn texel_ray(&self, i: u32, j: u32) -> (Vec3, Vec3) {
         let q = self.texel_origin(i, j);
-        let direction = match self.centre {
-            None => self.f,
-            Some(c) => (q - c) / (self.origin - c).dot(self.f),
-        };
+        let direction = self.ray_direction(q);
         (q + direction * self.depth_near, direction)
     }
 
@@ -550,10 +558,7 @@ impl ReliefTexture {
         if !finite || camera.depth_far <= camera.depth_near {
             return Err(bad("texture.json holds non-finite or inverted values".into()));
         }
-        if camera
-            .centre_distance()
-            .is_some_and(|h| !(h.is_normal() && h > 0.0))
-        {
+        if !camera.centre_in_front() {
             return Err(bad(
                 "texture.json: the centre of projection is not in front of the image plane".into(),
             ));

@@ -160,10 +160,7 @@ pub fn check_texture_pb(
             "depth range must be finite with far > near",
         ));
     }
-    if camera
-        .centre_distance()
-        .is_some_and(|h| !(h.is_normal() && h > 0.0))
-    {
+    if !camera.centre_in_front() {
         return Err(invalid(&name("centre"), "not in front of the image plane"));
     }
     let texels = width as usize * height as usize;

@@ -89,16 +89,21 @@ impl Solo {
         Ok(Camera::look_at(eye, centre, Vec3::Y, fov, size, size)?)
     }
 
-    /// Bakes the object's relief texture for `eye` (an error for an object too
-    /// degenerate to orbit, whose eyes fall inside its bounds).
+    /// Bakes the object's relief texture for `eye`, orthographic as the thesis's (an
+    /// error for an object too degenerate to orbit, whose eyes fall inside its bounds).
     pub fn bake(&self, eye: Vec3, size: u32, bits: DepthBits) -> Result<ReliefTexture, SoloError> {
-        Ok(bake(
-            &self.tracer.objects[0],
-            eye,
-            size,
-            bits,
-            SourceProjection::Orthographic,
-        )?)
+        self.bake_in(eye, size, bits, SourceProjection::Orthographic)
+    }
+
+    /// [`Solo::bake`] in `projection`.
+    pub fn bake_in(
+        &self,
+        eye: Vec3,
+        size: u32,
+        bits: DepthBits,
+        projection: SourceProjection,
+    ) -> Result<ReliefTexture, SoloError> {
+        Ok(bake(&self.tracer.objects[0], eye, size, bits, projection)?)
     }
 
     /// The ray-traced reference frame, `samples × samples` rays per pixel (see

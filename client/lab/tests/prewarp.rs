@@ -578,14 +578,9 @@ fn a_perspective_texture_shows_its_nearest_surfaces_from_any_eye() {
     let scene = Scene::load("default").expect("default scene");
     let solo = Solo::new(&scene, "knot", 3.0).expect("solo");
     let source = solo.eye(0.0);
-    let texture = relief_trace::bake(
-        &solo.tracer.objects[0],
-        source,
-        128,
-        DepthBits::Eight,
-        SourceProjection::Perspective,
-    )
-    .expect("bake");
+    let texture = solo
+        .bake_in(source, 128, DepthBits::Eight, SourceProjection::Perspective)
+        .expect("bake");
     let impostor = Impostor::new(texture.clone());
     let towards = solo.scene.objects[0].bounds.center() - source;
     let side = towards.cross(Vec3::Y).normalize() * towards.length();
@@ -662,7 +657,8 @@ fn a_perspective_texture_shows_the_leaves_parallel_rays_miss() {
     let geometry_db = object_psnr(&exact.shade(&solo.scene, &camera), &reference, 0).expect("the tree");
     let shown_db = |projection| {
         let edge = resolution_for(&tree.bounds, eye, projection, &camera, MAX_TEXEL_PIXELS).expect("edge");
-        let texture = relief_trace::bake(&solo.tracer.objects[0], eye, edge, DepthBits::Eight, projection)
+        let texture = solo
+            .bake_in(eye, edge, DepthBits::Eight, projection)
             .expect("bake");
         let impostor = Impostor::new(texture).with_faces(Faces::of(tree));
         let mut shown = GBuffer::new(size, size);
@@ -680,14 +676,9 @@ fn a_perspective_texture_shows_the_leaves_parallel_rays_miss() {
     assert!(perspective_db > geometry_db - 3.0, "{measured}");
     assert!(orthographic_db < perspective_db - 4.0, "{measured}");
     // The forward and inverse methods, the thesis's, refuse a perspective texture.
-    let texture = relief_trace::bake(
-        &solo.tracer.objects[0],
-        eye,
-        32,
-        DepthBits::Eight,
-        SourceProjection::Perspective,
-    )
-    .expect("bake");
+    let texture = solo
+        .bake_in(eye, 32, DepthBits::Eight, SourceProjection::Perspective)
+        .expect("bake");
     for method in [Method::ForwardPullPush, Method::Inverse(64)] {
         let refused = relief_lab::methods::prepare(method, &Impostor::new(texture.clone()), &camera);
         assert!(

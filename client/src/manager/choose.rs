@@ -154,7 +154,7 @@ impl Manager {
         eye: Vec3,
         camera: &'a Camera,
     ) -> impl Iterator<Item = Grade> + 'a {
-        let wanted = Self::size_for(&scene.objects[object], eye, camera);
+        let (wanted, _) = Self::size_for(&scene.objects[object], eye, camera);
         let at_eye = Camera { eye, ..*camera };
         self.objects[object].held.iter().map(move |h| {
             let texture = &h.pyramid.levels[0].texture.camera;

@@ -159,10 +159,27 @@ pub const FINE_TEXEL_MAX_EDGE: u32 = 256;
 /// else [`MAX_TEXEL_PIXELS`]).
 pub fn texel_pixels(object: &SceneObject, camera: &Camera) -> f32 {
     let projection = projection_for(object, camera.eye);
-    match resolution_for(&object.bounds, camera.eye, projection, camera, FINE_TEXEL_PIXELS) {
-        Some(edge) if edge <= FINE_TEXEL_MAX_EDGE => FINE_TEXEL_PIXELS,
-        _ => MAX_TEXEL_PIXELS,
+    match fine_edge(object, camera, projection) {
+        Some(_) => FINE_TEXEL_PIXELS,
+        None => MAX_TEXEL_PIXELS,
     }
+}
+
+/// What a texture of `object` is asked for in from `camera`: its projection
+/// ([`projection_for`]) and the fewest texels per edge at its texel
+/// ([`texel_pixels`], eq. 5-1: [`resolution_for`]); no edge when no texture faces the
+/// eye.
+pub fn asked_for(object: &SceneObject, camera: &Camera) -> (SourceProjection, Option<u32>) {
+    let projection = projection_for(object, camera.eye);
+    let edge = fine_edge(object, camera, projection)
+        .or_else(|| resolution_for(&object.bounds, camera.eye, projection, camera, MAX_TEXEL_PIXELS));
+    (projection, edge)
+}
+
+/// The edge at [`FINE_TEXEL_PIXELS`], if it keeps within [`FINE_TEXEL_MAX_EDGE`].
+fn fine_edge(object: &SceneObject, camera: &Camera, projection: SourceProjection) -> Option<u32> {
+    resolution_for(&object.bounds, camera.eye, projection, camera, FINE_TEXEL_PIXELS)
+        .filter(|&edge| edge <= FINE_TEXEL_MAX_EDGE)
 }
 
 /// Predicted textures are asked for once the eye's future leaves this fraction of the

@@ -7,10 +7,10 @@ use std::time::Instant;
 use glam::Vec3;
 
 use relief_core::camera::Camera;
+use relief_core::relief::SourceProjection;
 use relief_core::scene::{Scene, SceneObject};
 use relief_core::stats::percentile;
 use relief_render::geometry::{GeometryReason, geometry_reason};
-use relief_render::validity::schaufler::resolution_for;
 
 use super::Manager;
 use super::around::{angle_between, similar_distance, turned};
@@ -19,7 +19,7 @@ use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
     MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK, PENDING_REACH,
-    REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, projection_for, texel_pixels,
+    REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, asked_for,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -107,15 +107,12 @@ impl Manager {
         })
     }
 
-    /// The texture edge to ask for: what the screen can show of the object from `eye`
-    /// ([`resolution_for`], eq. 5-1) in the projection asked for ([`projection_for`]),
-    /// rounded up to the [`texture_ladder`].
-    pub(super) fn size_for(object: &SceneObject, eye: Vec3, camera: &Camera) -> u32 {
-        let projection = projection_for(object, eye);
-        let at_eye = Camera { eye, ..*camera };
-        let texel = texel_pixels(object, &at_eye);
-        let edge = resolution_for(&object.bounds, eye, projection, camera, texel);
-        texture_ladder(edge.unwrap_or(u32::MAX))
+    /// The texture to ask for from `eye`: its edge — what the screen can show of the
+    /// object ([`asked_for`]), rounded up to the [`texture_ladder`] — and its
+    /// projection.
+    pub(super) fn size_for(object: &SceneObject, eye: Vec3, camera: &Camera) -> (u32, SourceProjection) {
+        let (projection, edge) = asked_for(object, &Camera { eye, ..*camera });
+        (texture_ladder(edge.unwrap_or(u32::MAX)), projection)
     }
 
     pub(super) fn request(
@@ -127,7 +124,7 @@ impl Manager {
         needed_in_ms: Option<u64>,
     ) {
         let o = &scene.objects[object];
-        let size = Self::size_for(o, eye, camera);
+        let (size, projection) = Self::size_for(o, eye, camera);
         let id = self.next_id;
         self.next_id += 1;
         let request = TextureRequest {
@@ -136,7 +133,7 @@ impl Manager {
             eye,
             size,
             depth_bits: REQUESTED_DEPTH_BITS,
-            projection: projection_for(o, eye),
+            projection,
             needed_in_ms,
         };
         if self.commands.send(Command::Request(request)).is_err() {

@@ -178,11 +178,6 @@ impl WarpParams {
     pub fn perspective(&self) -> bool {
         self.source.0 != 0.0
     }
-
-    /// The largest displacement any level has.
-    pub fn max_depth(&self) -> f32 {
-        self.depth.last().copied().unwrap_or(0.0)
-    }
 }
 
 #[cfg(test)]

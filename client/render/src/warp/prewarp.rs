@@ -28,7 +28,8 @@
 //! - [`Variant::Asymmetric`]: the row pass also stores each sample's final v'.
 //! - [`Variant::Compensated`]: as `OneD`, but an interpolated sample takes the depth of
 //!   the point on the 3D segment A–B that pre-warps exactly to its pixel (the purpose of
-//!   eq. 8-1, solved here in closed form) instead of a linear blend.
+//!   eq. 8-1, solved here in closed form for orthographic textures) instead of a linear
+//!   blend; a perspective texture's samples blend linearly.
 //! - [`Variant::Interleaved`]: one pass; each row sample goes straight into its column.
 
 use wide::bytemuck::cast;
@@ -659,10 +660,16 @@ impl Job<'_> {
                 }
                 self.close_columns::<DOWN>(&columns, out);
             }
-            Variant::Compensated => self.two_pass::<DOWN>(rows, &mut columns, out, |a, b, centre, _| {
-                compensated(a, b, centre, self.params)
-            }),
-            Variant::OneD | Variant::Asymmetric => self.two_pass::<DOWN>(rows, &mut columns, out, linear),
+            // (Its closed form is the orthographic warp's: a perspective texture's samples
+            // blend linearly.)
+            Variant::Compensated if !self.params.perspective() => {
+                self.two_pass::<DOWN>(rows, &mut columns, out, |a, b, centre, _| {
+                    compensated(a, b, centre, self.params)
+                })
+            }
+            Variant::Compensated | Variant::OneD | Variant::Asymmetric => {
+                self.two_pass::<DOWN>(rows, &mut columns, out, linear)
+            }
         }
     }
 
@@ -929,16 +936,12 @@ fn prewarp_with(
 /// The sample at pixel centre `centre` between row neighbours `a` and `b`, taken at the
 /// point of the 3D segment between their surface points that pre-warps exactly there:
 /// with `u(t) = u_a + t·Δu`, `d(t) = d_a + t·Δd` in the source, solve
-/// `(u(t) + e1·k3·d(t)) / (1 + k3·d(t)) = centre` for `t`. (The orthographic warp's
-/// closed form: a perspective texture's samples blend linearly.)
+/// `(u(t) + e1·k3·d(t)) / (1 + k3·d(t)) = centre` for `t` (an orthographic texture's
+/// warp).
 // (Always inlined: called, it returned its cell through memory, and the vector lerp's
 // result read back piecewise stalled every pixel — 2.6× slower.)
 #[inline(always)]
 fn compensated(a: &RowSample, b: &RowSample, centre: f32, p: &WarpParams) -> Cell {
-    if p.perspective() {
-        let t = ((centre - a.u) / (b.u - a.u)).clamp(0.0, 1.0);
-        return a.cell.lerp(&b.cell, if t.is_finite() { t } else { 0.5 });
-    }
     let (k3, e1) = (p.k3, p.epipole.x);
     let (ad, bd) = (a.cell.depth, b.cell.depth);
     let (du, dd) = (b.source - a.source, bd - ad);
