@@ -67,6 +67,23 @@ fn still_eyes_draw_sprites_and_moving_eyes_warp() {
     let shows = manager.frame(&scene, &moved, 0.4);
     manager.render(&scene, &shows, &moved, &mut gbuffer);
     assert_eq!(manager.counters.sprites, 2 * impostors);
+    // The eye still, the view turned by a few pixels: the kept images would land where
+    // the objects were, so every impostor is warped again.
+    let turned = Camera::look_at(
+        Vec3::new(2.6, 3.0, 9.0),
+        Vec3::new(0.5, 1.0, 0.0),
+        Vec3::Y,
+        60.0,
+        160,
+        90,
+    )
+    .unwrap();
+    let shows = manager.frame(&scene, &turned, 0.5);
+    manager.render(&scene, &shows, &turned, &mut gbuffer);
+    assert_eq!(
+        (manager.counters.warps, manager.counters.sprites),
+        (4 * impostors, 2 * impostors)
+    );
 }
 
 /// A manager of `scene` whose textures the in-process generator makes.
@@ -294,7 +311,7 @@ fn between_two_textures_the_other_is_drawn_behind() {
 
 /// Stale object-frames are counted by cause: before any texture, `missing`; a sphere's
 /// one texture 50° from the eye — within tolerance (a sphere's gaps do not grow) but
-/// with no partner to fill the side it never saw — `alone`.
+/// with no partner to fill the side it never saw — `too_far`.
 #[test]
 fn stale_object_frames_are_counted_by_cause() {
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
@@ -308,14 +325,57 @@ fn stale_object_frames_are_counted_by_cause() {
     let (mut unserved, _commands) = unanswered(&scene, config.clone());
     unserved.frame(&scene, &camera_at(0.0), 0.0);
     let causes = unserved.counters.stale_causes;
-    assert_eq!((causes.missing, causes.beyond_tolerance, causes.alone), (1, 0, 0));
+    assert_eq!(
+        (causes.missing, causes.beyond_tolerance, causes.too_far),
+        (1, 0, 0)
+    );
 
     let mut manager = served_locally(&scene, config);
     assert!(manager.warm_up(&scene, &camera_at(0.0), Duration::from_secs(60)));
     manager.frame(&scene, &camera_at(50.0), 0.0);
     let causes = manager.counters.stale_causes;
-    assert_eq!((causes.missing, causes.beyond_tolerance, causes.alone), (0, 0, 1));
+    assert_eq!(
+        (causes.missing, causes.beyond_tolerance, causes.too_far),
+        (0, 0, 1)
+    );
     assert_eq!(manager.counters.stale_frames, 1);
+}
+
+/// A texture shown alone goes stale once the band past its rim that it cannot show
+/// ([`LONE_BAND`] pixels, predicted from the rim's curvature) would open: for a sphere
+/// of radius `R` pixels, at `acos(1 − LONE_BAND/R)` round it — well before
+/// [`LONE_MAX_TURN`], where it went stale when only the turn counted.
+#[test]
+fn a_lone_texture_goes_stale_when_its_rim_band_opens() {
+    use relief_client::manager::policy::{LONE_BAND, LONE_MAX_TURN};
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let sphere = index(&scene, "sphere");
+    let centre = scene.objects[sphere].bounds.center();
+    let config = Config {
+        predict: false,
+        ..Config::default()
+    };
+    let mut manager = served_locally(&scene, config);
+    let first = camera_round(centre, 0.0);
+    assert!(manager.warm_up(&scene, &first, Duration::from_secs(60)));
+    let radius_px = scene.objects[sphere].bounds.extent().x * 0.5 * first.height as f32
+        / (2.0 * first.tan_half_fov())
+        / first.eye.distance(centre);
+    let expected = (1.0 - LONE_BAND / radius_px).acos().to_degrees();
+    let stale_from = (1..40)
+        .map(|degrees| degrees as f32)
+        .find(|&degrees| {
+            manager.frame(&scene, &camera_round(centre, degrees), 0.0);
+            manager.counters.stale_frames > 0
+        })
+        .expect("stale before 40°");
+    assert_eq!(manager.counters.stale_causes.too_far, 1);
+    eprintln!("sphere of {radius_px:.0} px: stale from {stale_from}°, band predicts {expected:.1}°");
+    assert!(
+        (stale_from - expected).abs() <= 2.0 && stale_from < LONE_MAX_TURN.to_degrees() - 10.0,
+        "stale from {stale_from}°, where a {LONE_BAND} px band opens at {expected:.1}°"
+    );
 }
 
 /// An object wholly off screen is not needed now: no stale frame, no request for now

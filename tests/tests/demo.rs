@@ -80,7 +80,7 @@ fn the_demo_flies_and_summarises() {
     );
     assert!(needs >= frames && hits <= needs && hits * 2 > needs, "{summary}");
     // The stale object-frames' causes are in the summary.
-    for cause in ["missing", "beyond_tolerance", "alone"] {
+    for cause in ["missing", "beyond_tolerance", "too_far"] {
         assert!(summary["stale_causes"][cause].is_u64(), "{cause}: {summary}");
     }
     // Textures arrived and were used: the impostor frames look like the reference.

@@ -89,9 +89,12 @@ fn schaufler_tests_on_an_orbit() {
     let bounds = solo.scene.objects[0].bounds;
     let source = solo.eye(0.0);
     let camera = solo.camera(source, 512).expect("orbit camera");
-    assert!(sprite_still_valid(&bounds, source, &camera));
+    assert!(sprite_still_valid(&bounds, &camera, &camera));
     let turned = solo.camera(solo.eye(5.0), 512).expect("orbit camera");
-    assert!(!sprite_still_valid(&bounds, source, &turned), "5° is many pixels");
+    assert!(
+        !sprite_still_valid(&bounds, &camera, &turned),
+        "5° is many pixels"
+    );
     // 64 texels across an object that covers ~230 of 512 pixels is too coarse; 512 is not.
     let coarse = solo.bake(source, 64, DepthBits::Eight).unwrap();
     let fine = solo.bake(source, 512, DepthBits::Eight).unwrap();

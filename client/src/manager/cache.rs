@@ -11,6 +11,7 @@ use relief_core::scene::Scene;
 use relief_render::impostor::Faces;
 use relief_render::pyramid::Pyramid;
 use relief_render::validity::critical::CriticalPoints;
+use relief_render::validity::rim::Rim;
 use relief_render::warp::params::WarpParams;
 
 use super::around::angle_between;
@@ -22,12 +23,13 @@ use super::policy::{
 use super::{Manager, TextureLifetimes};
 
 /// A texture made ready for the frame loop: its pyramid (with texel connectivity),
-/// critical points and the gaps it shows at its own eye. Building this takes
+/// critical points, the gaps it shows at its own eye and its rim. Building this takes
 /// milliseconds for big textures, so the texture sources do it on their own threads.
 pub struct ReadyTexture {
     pyramid: Pyramid,
     critical: CriticalPoints,
     baseline: Vec<f32>,
+    rim: Rim,
     /// When the texture reached the client, before it was made ready.
     arrived: Instant,
 }
@@ -43,6 +45,7 @@ impl ReadyTexture {
             |params| critical.region_gaps(&params),
         );
         ReadyTexture {
+            rim: Rim::find(&texture),
             pyramid: Pyramid::new(texture, MIN_LEVEL_EDGE).with_faces(faces),
             critical,
             baseline,
@@ -64,6 +67,8 @@ pub(super) struct Held {
     pub(super) critical: CriticalPoints,
     /// The regions' gaps at the texture's own eye: what it shows at best.
     pub(super) baseline: Vec<f32>,
+    /// Its rim's curvature: the band past the outline it cannot show from a turned eye.
+    pub(super) rim: Rim,
     pub(super) eye: Vec3,
     pub(super) is_final: bool,
     /// When it reached the client, and the last frame it was shown in (as the shown
@@ -125,6 +130,7 @@ impl Manager {
                         pyramid,
                         critical,
                         baseline,
+                        rim,
                         arrived,
                     } = *texture;
                     if is_final {
@@ -141,6 +147,7 @@ impl Manager {
                         pyramid,
                         critical,
                         baseline,
+                        rim,
                         is_final,
                         arrived,
                         last_shown: None,

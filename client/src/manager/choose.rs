@@ -1,6 +1,7 @@
 //! Which held texture an object is shown with, and its partner: each held texture
 //! graded at the eye (the critical-point gap growth, the resolution test), the nearest
-//! within tolerance shown, and a texture from the far side of the eye drawn behind it.
+//! within tolerance shown, and a texture from the far side of the eye drawn behind it
+//! once the shown one leaves a band past its rim or has turned far.
 
 use glam::Vec3;
 
@@ -13,8 +14,8 @@ use super::Manager;
 use super::around::{angle_between, similar_distance};
 use super::cache::Held;
 use super::policy::{
-    COARSEST_SHOWN, DEFAULT_VALID_ANGLE, LONE_MAX_TURN, MAX_TEXEL_PIXELS, MAX_TURN, PARTNER_FROM,
-    PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PLANNING_MARGIN,
+    COARSEST_SHOWN, DEFAULT_VALID_ANGLE, LONE_BAND, LONE_MAX_TURN, MAX_TEXEL_PIXELS, MAX_TURN, PARTNER_FROM,
+    PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
 };
 
 /// How an object is drawn this frame.
@@ -31,7 +32,8 @@ pub enum Show {
 }
 
 /// How an impostor was shown, for the record: the texture's turn round the object from
-/// the eye and its distance, the texel size on screen, and its partner's turn.
+/// the eye and its distance, the texel size on screen, the widest gap's growth and the
+/// band past its rim, and its partner's turn.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ShownTexture {
     /// Degrees round the object from the texture's eye to the eye.
@@ -40,6 +42,11 @@ pub struct ShownTexture {
     pub distance_ratio: f32,
     /// The level drawn's texel, in pixels' angles.
     pub texel_pixels: f32,
+    /// The growth of the widest gap its warp opens, pixels (the critical-point error).
+    pub growth_pixels: f32,
+    /// The band past the texture's rim it cannot show alone, pixels (see
+    /// [`Rim::band`](relief_render::validity::rim::Rim::band)).
+    pub band_pixels: f32,
     /// The partner's turn from the eye, degrees, when one was drawn.
     pub partner_turn_deg: Option<f32>,
 }
@@ -49,6 +56,9 @@ pub struct ShownTexture {
 pub(super) struct Grade {
     /// Growth of the widest predicted gap, screen pixels.
     pub(super) growth: f32,
+    /// The band past its rim it cannot show alone, screen pixels
+    /// ([`Rim::band`](relief_render::validity::rim::Rim::band)).
+    pub(super) band: f32,
     /// Too coarse to be shown: its texels would cover more than [`COARSEST_SHOWN`]
     /// pixels (eq. 4-1).
     pub(super) too_coarse: bool,
@@ -75,6 +85,27 @@ pub(super) fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     let pixels_per_texel =
         c.a.length().max(c.b.length()) * focal / centre.distance(eye).max(f32::MIN_POSITIVE);
     held.critical.worst_growth(&params, &held.baseline) * pixels_per_texel
+}
+
+/// The band (screen pixels) past `held`'s rim that it cannot show alone at `eye`, about
+/// the object's `centre`.
+pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32 {
+    let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
+    let texture = &held.pyramid.levels[0].texture;
+    held.rim.band(texture, centre, eye) * focal / centre.distance(eye).max(f32::MIN_POSITIVE)
+}
+
+/// Whether a texture graded `grade` at an eye `turn` radians round from its own may be
+/// shown there, `partnered` or not: alone, its rim's band under [`LONE_BAND`] and the
+/// turn under [`LONE_MAX_TURN`]; with a partner filling the band, the band under
+/// [`PARTNERED_BAND`] (the texels inside the rim stretch as the band widens) and the turn
+/// under [`MAX_TURN`] — all times `margin` (1 to draw; the planning margin to plan).
+pub(super) fn may_show(grade: &Grade, turn: f32, partnered: bool, margin: f32) -> bool {
+    let (band, turn_limit) = match partnered {
+        false => (LONE_BAND, LONE_MAX_TURN),
+        true => (PARTNERED_BAND, MAX_TURN),
+    };
+    grade.band <= margin * band && turn <= margin * turn_limit
 }
 
 /// Which of an object's held textures (graded `grades` at the eye, `turn(i)` radians
@@ -104,8 +135,8 @@ pub(super) fn shown_texture(
 /// Whether one of an object's held textures (`held`: eye and grade at `future`)
 /// covers the eye `future` (all about `centre`), as prediction plans it: within the
 /// planning margin of `tolerance`, not too coarse with a finer one to be had, and
-/// within the planning margin of the turn a texture may be shown alone — or up to
-/// [`MAX_TURN`] with a partner there, held (fine enough to be drawn there, as drawing
+/// within the planning margin of what may be shown alone — or with a partner there
+/// ([`may_show`]), held (fine enough to be drawn there, as drawing
 /// requires) or asked for (`asked`).
 pub(super) fn held_covers(
     centre: Vec3,
@@ -128,7 +159,8 @@ pub(super) fn held_covers(
         let turn = angle_between(centre, eye, future);
         g.growth <= PLANNING_MARGIN * tolerance
             && !g.finer_available
-            && (turn <= PLANNING_MARGIN * LONE_MAX_TURN || (turn <= MAX_TURN && partnered(eye)))
+            && (may_show(&g, turn, false, PLANNING_MARGIN)
+                || (may_show(&g, turn, true, PLANNING_MARGIN) && partnered(eye)))
     })
 }
 
@@ -155,12 +187,14 @@ impl Manager {
         camera: &'a Camera,
     ) -> impl Iterator<Item = Grade> + 'a {
         let (wanted, _) = Self::size_for(&scene.objects[object], eye, camera);
+        let centre = scene.objects[object].bounds.center();
         let at_eye = Camera { eye, ..*camera };
         self.objects[object].held.iter().map(move |h| {
             let texture = &h.pyramid.levels[0].texture.camera;
             let too_coarse = needs_finer_texture(texture, &at_eye, COARSEST_SHOWN);
             Grade {
                 growth: growth(h, eye, camera),
+                band: band(h, centre, eye, camera),
                 too_coarse,
                 finer_available: too_coarse && texture.width < wanted,
             }
@@ -187,6 +221,8 @@ impl Manager {
             turn_deg: turn(texture)?,
             distance_ratio: (shown.eye - centre).length() / (camera.eye - centre).length(),
             texel_pixels: texel_angle(drawn, camera.eye) / camera.pixel_angle(),
+            growth_pixels: growth(shown, camera.eye, camera),
+            band_pixels: band(shown, centre, camera.eye, camera),
             partner_turn_deg: partner.and_then(|(i, _)| turn(i)),
         })
     }
@@ -202,7 +238,8 @@ impl Manager {
     /// and [`MAX_DISTANCE_RATIO`] of its distance — it holds what the eye has turned to
     /// see and `shown` cannot. The least growth first, then the nearest (past
     /// [`MAX_TURN`] every growth is infinite). `None` while the eye is within
-    /// [`PARTNER_FROM`] of `shown`'s.
+    /// [`PARTNER_FROM`] of `shown`'s and `shown` leaves no band past its rim wider than
+    /// [`LONE_BAND`].
     pub(super) fn partner(
         &self,
         k: usize,
@@ -213,7 +250,7 @@ impl Manager {
     ) -> Option<(usize, usize)> {
         let held = &self.objects[k].held;
         let (from, eye) = (held[shown].eye - centre, camera.eye - centre);
-        if from.angle_between(eye) < PARTNER_FROM {
+        if from.angle_between(eye) < PARTNER_FROM && grades[shown].band <= LONE_BAND {
             return None;
         }
         held.iter()
@@ -242,6 +279,7 @@ mod tests {
         let turns = [0.7, 0.1, 0.05, 0.3];
         let mut grades = growths.map(|growth| Grade {
             growth,
+            band: 0.0,
             too_coarse: false,
             finer_available: false,
         });
@@ -261,6 +299,7 @@ mod tests {
         // (Too coarse, and a finer one to be had: not shown there either.)
         let grade = |too_coarse| Grade {
             growth: 0.0,
+            band: 0.0,
             too_coarse,
             finer_available: too_coarse,
         };
@@ -280,6 +319,28 @@ mod tests {
         assert!(held_covers(Vec3::ZERO, future, &near, &[], 4.0));
     }
 
+    /// Alone, a texture may be shown while its rim's band stays under [`LONE_BAND`];
+    /// partnered, under [`PARTNERED_BAND`]; and planning asks the same within its margin.
+    #[test]
+    fn the_rim_band_decides_what_may_be_shown_alone_or_partnered() {
+        let with_band = |band| Grade {
+            growth: 0.0,
+            band,
+            too_coarse: false,
+            finer_available: false,
+        };
+        let turn = 10f32.to_radians();
+        let between = 0.5 * (LONE_BAND + PARTNERED_BAND);
+        assert!(may_show(&with_band(0.9 * LONE_BAND), turn, false, 1.0));
+        assert!(!may_show(&with_band(between), turn, false, 1.0));
+        assert!(may_show(&with_band(between), turn, true, 1.0));
+        assert!(!may_show(&with_band(1.1 * PARTNERED_BAND), turn, true, 1.0));
+        assert!(!may_show(&with_band(0.9 * LONE_BAND), turn, false, 0.5));
+        // The turn still bounds a texture whose rim shows no band (sharp edges).
+        assert!(!may_show(&with_band(0.0), 1.1 * LONE_MAX_TURN, false, 1.0));
+        assert!(!may_show(&with_band(0.0), 1.1 * MAX_TURN, true, 1.0));
+    }
+
     #[test]
     fn the_texture_shown_is_the_nearest_within_tolerance_else_the_least_grown() {
         // 1 is nearer than 0, whose growth is less (2 is nearer still, but too coarse).
@@ -291,6 +352,7 @@ mod tests {
         // Only a too coarse one: none.
         let coarse = Grade {
             growth: 0.0,
+            band: 0.0,
             too_coarse: true,
             finer_available: false,
         };

@@ -80,10 +80,10 @@ pub struct StaleCauses {
     pub missing: u64,
     /// Some can, but none within the tolerance.
     pub beyond_tolerance: u64,
-    /// One within tolerance, but shown alone more than
-    /// [`LONE_MAX_TURN`](super::policy::LONE_MAX_TURN) from its eye (no partner held to
-    /// fill the side it misses).
-    pub alone: u64,
+    /// One within tolerance, but shown too far from its eye: alone, with no partner held
+    /// to fill the side it misses, or past what even a partner can mend (see
+    /// `may_show` in `choose.rs`).
+    pub too_far: u64,
 }
 
 /// Where one [`Manager::render`](super::Manager::render) spent its time, milliseconds.

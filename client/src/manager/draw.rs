@@ -27,8 +27,8 @@ use super::policy::PARTNER_BEHIND;
 /// The last image of an impostor, kept to be redrawn while the eye stays put.
 pub(super) struct Kept {
     sprite: Sprite,
-    /// The eye it was drawn from.
-    eye: Vec3,
+    /// The camera it was drawn through.
+    camera: Camera,
     /// Which textures (by their eyes) and pyramid levels it shows.
     key: ShownKey,
 }
@@ -79,7 +79,7 @@ impl Manager {
             .enumerate()
             .map(|(k, key)| match (key, &self.sprites[k]) {
                 (Some(key), Some(kept)) => {
-                    kept.key == *key && sprite_still_valid(&scene.objects[k].bounds, kept.eye, camera)
+                    kept.key == *key && sprite_still_valid(&scene.objects[k].bounds, &kept.camera, camera)
                 }
                 _ => false,
             })
@@ -161,24 +161,24 @@ impl Manager {
                 continue;
             };
             self.counters.warps += 1;
-            // Kept only while the eye moves by less than the sprite test allows
+            // Kept only while the view moves by less than the sprite test allows
             // per frame (or has not moved yet): else the next frame warps anyway,
             // and the copy (about a seventh of a frame's time) is wasted.
             let bounds = &scene.objects[k].bounds;
             if self
-                .last_eye
-                .is_some_and(|eye| !sprite_still_valid(bounds, eye, camera))
+                .last_camera
+                .is_some_and(|last| !sprite_still_valid(bounds, &last, camera))
             {
                 self.sprites[k] = None;
                 continue;
             }
             self.sprites[k] = Sprite::capture_in(gbuffer, k as u32, rect).map(|sprite| Kept {
                 sprite,
-                eye: camera.eye,
+                camera: *camera,
                 key,
             });
         }
-        self.last_eye = Some(camera.eye);
+        self.last_camera = Some(*camera);
         let impostors_done = Instant::now();
         rasterize(&geometry, camera, near_plane(scene), gbuffer);
         let geometry_done = Instant::now();

@@ -42,7 +42,6 @@ mod requests;
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
-use glam::Vec3;
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender};
 
 use relief_core::camera::Camera;
@@ -60,9 +59,9 @@ pub use requests::texture_ladder;
 
 use around::angle_between;
 use cache::ObjectState;
-use choose::{Grade, shown_texture};
+use choose::{Grade, may_show, shown_texture};
 use draw::Kept;
-use policy::{LONE_MAX_TURN, SHOWN_STALE, WARM_UP_POLL, texel_pixels};
+use policy::{SHOWN_STALE, WARM_UP_POLL, texel_pixels};
 use requests::Pending;
 
 /// The manager of one client: what it holds and has asked for per object, where the eye
@@ -82,8 +81,8 @@ pub struct Manager {
     recent_latencies: Vec<f64>,
     /// Per object, its last image, kept to be redrawn while the sprite test holds.
     sprites: Vec<Option<Kept>>,
-    /// The eye of the last frame drawn.
-    last_eye: Option<Vec3>,
+    /// The camera of the last frame drawn.
+    last_camera: Option<Camera>,
     /// The factor the server's load puts on the tolerance (1: none; see
     /// [`policy::LOAD_HIGH_WAIT`]).
     load_scale: f32,
@@ -110,7 +109,7 @@ impl Manager {
             commands,
             arrivals,
             sprites: Vec::new(),
-            last_eye: None,
+            last_camera: None,
             load_scale: 1.0,
             counters: Counters::default(),
         }
@@ -229,14 +228,16 @@ impl Manager {
             let within = |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= tolerance);
             // Valid: some texture is within tolerance (when only one too coarse to be
             // shown is, a finer one is asked for if it can be had: `want_finer`), and the one
-            // shown is not alone too far from its eye — without a partner, a texture
-            // more than [`LONE_MAX_TURN`] from its eye misses the side the eye has
-            // turned to.
+            // shown is not too far from its eye for it to be shown alone or with the
+            // partner it has: alone, a texture misses the side the eye has turned to see
+            // (`may_show`).
             let shown_turn = best.map(|(i, _)| angle_between(centre, held[i].eye, camera.eye));
             let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
-            let lone_too_far = partner.is_none() && shown_turn.is_some_and(|turn| turn > LONE_MAX_TURN);
+            let too_far = best
+                .zip(shown_turn)
+                .is_some_and(|((_, g), turn)| !may_show(&g, turn, partner.is_some(), 1.0));
             let within_any = grades.iter().any(|g| g.growth <= tolerance);
-            let valid = within_any && !lone_too_far;
+            let valid = within_any && !too_far;
             let want_finer =
                 !within(best) && grades.iter().any(|g| g.growth <= tolerance && g.finer_available);
             let asked_for = self.pending_covers(k, centre, camera.eye);
@@ -248,7 +249,7 @@ impl Manager {
                 if grades.iter().all(|g| g.growth == f32::INFINITY) {
                     causes.missing += 1;
                 } else if within(best) {
-                    causes.alone += 1;
+                    causes.too_far += 1;
                 } else {
                     causes.beyond_tolerance += 1;
                 }
@@ -268,7 +269,7 @@ impl Manager {
                         object = %object.name,
                         growth = best.map(|b| b.1.growth),
                         shown_deg,
-                        lone_too_far,
+                        too_far,
                         held = self.objects[k].held.len(),
                         valid_deg = self.valid_angle(k).to_degrees(),
                         planned_latency_s = self.latency(k),

@@ -76,7 +76,22 @@ pub const MAX_DISTANCE_RATIO: f32 = 1.6;
 
 /// Beyond this turn a texture drawn without a partner counts as stale (and one for now
 /// is asked for): alone, it misses the side of the object the eye has turned to see.
+/// (A curved rim's band, [`LONE_BAND`], says so sooner; this bounds the rest: sharp
+/// edges, open surfaces.)
 pub const LONE_MAX_TURN: f32 = 40.0 * PI / 180.0;
+
+/// A texture drawn without a partner counts as stale once the band past its rim it
+/// cannot show ([`Rim::band`](relief_render::validity::rim::Rim::band)) is wider than
+/// this, in pixels. Measured on the sphere (`the_band_past_the_rim_is_what_the_warp_leaves_empty`):
+/// a predicted 0.9 px loses nothing, 3.5 px loses 1.4 px of outline on average and up to 3
+/// in a row — the spikes the eye sees — so at 2 px about half a pixel is lost.
+pub const LONE_BAND: f32 = 2.0;
+
+/// With a partner filling the band past its rim, a texture counts as stale once that
+/// band is wider than this, in pixels: the texels just inside the rim, grazed by the
+/// texture's rays, stretch over as much again (the sphere shown 35–47° from its eye with
+/// a partner, bands of 14–39 px, scored 11–17 dB below geometry).
+pub const PARTNERED_BAND: f32 = 4.0;
 
 /// A texture whose texels would cover more than this many pixels' angle is not shown:
 /// geometry is drawn instead while a finer texture is on its way (or, near an object
@@ -90,8 +105,8 @@ pub const SHOWN_STALE: f32 = 2.0;
 // ---- Partners: a second texture drawn behind the shown one ----------------------------
 
 /// A partner is drawn once the eye is this far around the object from the shown
-/// texture's eye: nearer, what the texture cannot show is a sliver a pixel or two wide,
-/// not worth a second warp.
+/// texture's eye (or the band past its rim is over [`LONE_BAND`]): nearer, what the
+/// texture cannot show is a sliver a pixel or two wide, not worth a second warp.
 pub const PARTNER_FROM: f32 = 15.0 * PI / 180.0;
 
 /// A partner is at most this far around the object from the eye: it fills in only where

@@ -6,6 +6,9 @@
 //!   for the screen?), with eq. 5-1's resolution to ask for.
 //! - [`critical`] — the critical-point error (eq. 5-3…5-7): the widest gap a warp to a
 //!   new eye opens, predicted from the texture alone, per N×M region.
+//! - [`rim`] — the band past a closed surface's outline that an eye turned from the
+//!   texture's sees and the texture alone cannot show, from its rim's curvature.
 
 pub mod critical;
+pub mod rim;
 pub mod schaufler;

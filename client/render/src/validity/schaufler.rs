@@ -26,10 +26,19 @@ pub fn parallax_angle(bounds: &Aabb, old_eye: Vec3, new_eye: Vec3) -> f32 {
         .fold(0.0, f32::max)
 }
 
-/// The sprite test: the previous image may be shown unchanged while its extremes have
-/// moved by at most one pixel's angle (β_transP ≤ β_screen).
-pub fn sprite_still_valid(bounds: &Aabb, old_eye: Vec3, camera: &Camera) -> bool {
-    parallax_angle(bounds, old_eye, camera.eye) <= camera.pixel_angle()
+/// The sprite test: the image drawn through `old` may be shown unchanged through
+/// `camera` while the object's extremes have moved by at most one pixel's angle
+/// (β_transP ≤ β_screen). The sprite is those pixels copied, not a quad re-projected as
+/// Schaufler's: the view's own turn moves them as much as the eye's step, so it counts
+/// too (a camera turning on the spot slid the kept sphere 100 pixels off its place), and
+/// another frame size or field of view ends it.
+pub fn sprite_still_valid(bounds: &Aabb, old: &Camera, camera: &Camera) -> bool {
+    let same_frame = (old.width, old.height, old.fov_y) == (camera.width, camera.height, camera.fov_y);
+    let turn = old
+        .forward
+        .angle_between(camera.forward)
+        .max(old.up.angle_between(camera.up));
+    same_frame && parallax_angle(bounds, old.eye, camera.eye) + turn <= camera.pixel_angle()
 }
 
 /// β_impostor: the angle one texel subtends from `eye`, at the middle of the texture's
@@ -94,20 +103,37 @@ mod tests {
         };
         let eye = Vec3::new(0.0, 0.0, 10.0);
         let camera = Camera::look_at(eye, Vec3::ZERO, Vec3::Y, 60.0, 800, 600).unwrap();
-        assert!(sprite_still_valid(&bounds, eye, &camera));
+        assert!(sprite_still_valid(&bounds, &camera, &camera));
         // A sideways step that moves the extremes by less than a pixel's angle …
         let step = 10.0 * camera.pixel_angle() * 0.5;
         let near = Camera {
             eye: eye + Vec3::X * step,
             ..camera
         };
-        assert!(sprite_still_valid(&bounds, eye, &near));
+        assert!(sprite_still_valid(&bounds, &camera, &near));
         // … and one that moves them by several.
         let far = Camera {
             eye: eye + Vec3::X * step * 8.0,
             ..camera
         };
-        assert!(!sprite_still_valid(&bounds, eye, &far));
+        assert!(!sprite_still_valid(&bounds, &camera, &far));
+        // The eye still, the view turned by a few pixels' angle: the object has moved
+        // on screen.
+        let turned = Camera::look_at(
+            eye,
+            Vec3::X * 10.0 * camera.pixel_angle() * 3.0,
+            Vec3::Y,
+            60.0,
+            800,
+            600,
+        )
+        .unwrap();
+        assert!(!sprite_still_valid(&bounds, &camera, &turned));
+        let wider = Camera {
+            fov_y: camera.fov_y * 1.01,
+            ..camera
+        };
+        assert!(!sprite_still_valid(&bounds, &camera, &wider));
     }
 
     #[test]

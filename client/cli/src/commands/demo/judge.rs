@@ -78,7 +78,7 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
     for (_, name) in &candidates {
         let name = column(name);
         log.push_str(&format!(
-            ",psnr_aa_db_{name},geometry_psnr_aa_db_{name},turn_deg_{name},texel_px_{name},partner_turn_deg_{name}"
+            ",psnr_aa_db_{name},geometry_psnr_aa_db_{name},turn_deg_{name},texel_px_{name},growth_px_{name},band_px_{name},partner_turn_deg_{name}"
         ));
     }
     log.push('\n');
@@ -125,15 +125,23 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
                 }
             }
             let how = shown.get(k as usize).copied().flatten();
-            let fields = how.map(|s| (s.turn_deg, s.texel_pixels, s.partner_turn_deg));
+            let fields = how.map(|s| {
+                (
+                    s.turn_deg,
+                    s.texel_pixels,
+                    s.growth_pixels,
+                    s.band_pixels,
+                    s.partner_turn_deg,
+                )
+            });
             match fields {
-                Some((turn, texel, partner)) => {
-                    log.push_str(&format!(",{turn:.1},{texel:.2},"));
+                Some((turn, texel, growth, band, partner)) => {
+                    log.push_str(&format!(",{turn:.1},{texel:.2},{growth:.2},{band:.2},"));
                     if let Some(p) = partner {
                         log.push_str(&format!("{p:.1}"));
                     }
                 }
-                None => log.push_str(",,,"),
+                None => log.push_str(",,,,,"),
             }
         }
         log.push('\n');
