@@ -143,7 +143,10 @@ impl State {
                 .filter(|(_, w)| !w.draining && w.busy() < w.slots)
                 .min_by_key(|(_, w)| w.busy())
             else {
-                self.preempt_for(&owner, first);
+                // (A slot taken back is lent at once: hand it out.)
+                if self.preempt_for(&owner, first) {
+                    continue;
+                }
                 return;
             };
             self.queue.remove(&owner, &first);
@@ -335,10 +338,10 @@ impl State {
     /// and `owner` has nothing running, takes back a bake of the client with the most
     /// running — its latest, the least work lost; never one taken back before, so no
     /// job starves — so that one client's long bakes do not hold another's request for
-    /// their whole length. The slot comes free when the worker says it stopped (a
-    /// bake checks for a stop every block of rays), and the queue's order then gives it
-    /// to `owner`.
-    fn preempt_for(&mut self, owner: &Arc<str>, head: Priority) {
+    /// their whole length. The slot is lent at once (a bake checks for a stop every
+    /// block of rays; see [`Worker::lent`](super::workers::Worker)), and the queue's
+    /// order gives it to `owner`. Returns whether a slot was lent.
+    fn preempt_for(&mut self, owner: &Arc<str>, head: Priority) -> bool {
         // (A slot already coming free — a job told to stop within `STOP_GRACE` — serves
         // it first; and a job taken back takes none back in turn, or two clients would
         // take one slot from each other for ever.)
@@ -348,7 +351,7 @@ impl State {
             .any(|&told| now.saturating_duration_since(told) < STOP_GRACE);
         let taken_back = self.jobs.get(&head.id).is_some_and(|job| job.preempted);
         if head.predicted || freeing || taken_back || self.queue.running_of(owner) > 0 {
-            return;
+            return false;
         }
         let victim = (self.jobs.iter())
             .filter_map(|(&id, job)| match job.state {
@@ -358,14 +361,21 @@ impl State {
                 _ => None,
             })
             .max();
-        if let Some((_, _, id)) = victim
-            && self.take_back(id)
-        {
-            if let Some(job) = self.jobs.get_mut(&id) {
-                job.preempted = true;
-            }
-            self.counters.preempted += 1;
+        let Some((_, _, id)) = victim else {
+            return false;
+        };
+        let worker = match self.jobs.get(&id).map(|job| &job.state) {
+            Some(JobState::Running { worker, .. }) => *worker,
+            _ => return false,
+        };
+        if !self.take_back(id) {
+            return false;
         }
+        if let Some(job) = self.jobs.get_mut(&id) {
+            job.preempted = true;
+        }
+        self.counters.preempted += 1;
+        self.workers.get_mut(&worker).is_some_and(|w| w.lent.insert(id))
     }
 
     /// Takes running job `id` back from its worker: told to stop it (its slot stays

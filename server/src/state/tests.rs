@@ -629,8 +629,8 @@ fn waiters_and_cache_hits_share_one_texture() {
 
 /// With no slot free, a needed-now request of a client with nothing running takes a
 /// slot back from the client with the most running (its latest bake, told to stop,
-/// queued again first); a job is taken back once only, and predicted requests take
-/// nothing back.
+/// queued again first) and is handed that slot at once; a job is taken back once only,
+/// and predicted requests take nothing back.
 #[test]
 fn a_needed_now_request_takes_a_slot_back_once() {
     let (mut s, hash) = state_with_scene();
@@ -666,11 +666,13 @@ fn a_needed_now_request_takes_a_slot_back_once() {
         other => panic!("expected a cancel, got {other:?}"),
     }
     assert_eq!(s.stats().jobs_preempted, 1);
-    // The worker stops it; the slot goes to the needed-now request.
+    // Its slot goes to the needed-now request at once, before the worker answers the
+    // stop (the bake stops within a block of rays); the answer frees nothing more.
+    assert_eq!(next_job(&mut wrx).unwrap().eye.unwrap().x, 4.0);
     s.stopped();
     s.released(worker, running.job_id);
     s.dispatch();
-    assert_eq!(next_job(&mut wrx).unwrap().eye.unwrap().x, 4.0);
+    assert!(wrx.try_recv().is_err(), "the slot was lent and taken back twice");
     // Done; the job taken back runs again, and is not taken back a second time.
     let b = s.jobs.keys().copied().find(|&id| s.holds(worker, id)).unwrap();
     s.result(b, pb::ReliefTexture::default(), true, 1);

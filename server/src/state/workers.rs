@@ -4,6 +4,7 @@
 use std::collections::{HashMap, HashSet};
 use std::time::Instant;
 
+use super::jobs::STOP_GRACE;
 use super::{JobSender, State};
 
 #[derive(Debug)]
@@ -20,6 +21,10 @@ pub(super) struct Worker {
     /// finished): their slots stay taken, so a worker that hangs is not handed job
     /// after job.
     pub(super) stopping: HashMap<u64, Instant>,
+    /// Of those, jobs taken back for another client's needed-now request, whose slot
+    /// that request has at once, for [`STOP_GRACE`] (a bake stops within a block of
+    /// rays: waiting for the worker to say so cost the request a round trip).
+    pub(super) lent: HashSet<u64>,
     /// It said it is stopping: no new jobs.
     pub(super) draining: bool,
     pub(super) tx: JobSender,
@@ -27,9 +32,14 @@ pub(super) struct Worker {
 }
 
 impl Worker {
-    /// Slots taken: jobs running, and cancelled ones it has not answered for.
+    /// Slots taken: jobs running, and cancelled ones it has not answered for — but
+    /// not a slot lent on within [`STOP_GRACE`] of the stop.
     pub(super) fn busy(&self) -> usize {
-        self.running.len() + self.stopping.len()
+        let now = Instant::now();
+        let lent = (self.stopping.iter())
+            .filter(|&(id, &told)| self.lent.contains(id) && now.saturating_duration_since(told) < STOP_GRACE)
+            .count();
+        self.running.len() + self.stopping.len() - lent
     }
 }
 
@@ -53,6 +63,7 @@ impl State {
                 threads,
                 running: HashSet::new(),
                 stopping: HashMap::new(),
+                lent: HashSet::new(),
                 draining: false,
                 tx,
                 last_seen: Instant::now(),
@@ -127,6 +138,7 @@ impl State {
     pub fn released(&mut self, worker: u64, job_id: u64) {
         if let Some(w) = self.workers.get_mut(&worker) {
             w.stopping.remove(&job_id);
+            w.lent.remove(&job_id);
         }
     }
 }
