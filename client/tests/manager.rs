@@ -359,9 +359,8 @@ fn a_lone_texture_goes_stale_when_its_rim_band_opens() {
     let mut manager = served_locally(&scene, config);
     let first = camera_round(centre, 0.0);
     assert!(manager.warm_up(&scene, &first, Duration::from_secs(60)));
-    let radius_px = scene.objects[sphere].bounds.extent().x * 0.5 * first.height as f32
-        / (2.0 * first.tan_half_fov())
-        / first.eye.distance(centre);
+    let radius_px =
+        scene.objects[sphere].bounds.extent().x * 0.5 * first.focal_pixels() / first.eye.distance(centre);
     let expected = (1.0 - LONE_BAND / radius_px).acos().to_degrees();
     let stale_from = (1..40)
         .map(|degrees| degrees as f32)

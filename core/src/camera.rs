@@ -174,6 +174,13 @@ impl Camera {
         (self.fov_y * 0.5).tan()
     }
 
+    /// The focal length in pixels: a length `l` across the view at depth `d` spans
+    /// about `l · focal / d` pixels.
+    #[inline]
+    pub fn focal_pixels(&self) -> f32 {
+        self.height as f32 / (2.0 * self.tan_half_fov())
+    }
+
     /// Whether any of `bounds` can be on screen: false only when all of the box is
     /// behind the eye or beyond one side of the view (its eight corners all outside
     /// one of the frustum's side planes) — a box may pass and still show nothing, next

@@ -466,9 +466,6 @@ fn a_texture_drawn_behind_fills_what_the_first_leaves_empty() {
 #[test]
 fn a_silhouette_lies_where_its_samples_put_it() {
     use relief_lab::image_error::object_psnr;
-    use relief_render::gbuffer::GBuffer;
-    use relief_render::raster::rasterize;
-    use relief_render::warp::{Variant, display};
     use relief_trace::ANTIALIASED_SAMPLES;
 
     let scene = Scene::load("default").expect("default scene");
@@ -478,12 +475,7 @@ fn a_silhouette_lies_where_its_samples_put_it() {
         let eye = solo.eye(degrees);
         let camera = solo.camera(eye, size).expect("orbit camera");
         let impostor = Impostor::new(solo.bake(eye, edge, DepthBits::Eight).expect("bake"));
-        let mut shown = GBuffer::new(size, size);
-        display(Variant::Interleaved, &impostor, 0, &camera, &mut shown).expect("display");
-        let shown = shown.shade(&solo.scene, &camera);
-        let mut exact = GBuffer::new(size, size);
-        rasterize(&[(0, &solo.scene.objects[0])], &camera, 0.01, &mut exact);
-        let exact = exact.shade(&solo.scene, &camera);
+        let (shown, exact) = impostor_and_geometry(&solo, &impostor, &camera);
         let (mut grown, mut shrunk, mut area) = (0i64, 0i64, 0i64);
         for (&a, &b) in shown.object.iter().zip(&exact.object) {
             let (a, b) = (a == 0, b == 0);
@@ -698,11 +690,8 @@ fn a_perspective_texture_shows_the_leaves_parallel_rays_miss() {
 /// the eye turned to (measured against the exact outline) and nothing on the other.
 #[test]
 fn the_band_past_the_rim_is_what_the_warp_leaves_empty() {
-    use relief_render::gbuffer::GBuffer;
     use relief_render::impostor::Faces;
-    use relief_render::raster::rasterize;
     use relief_render::validity::rim::Rim;
-    use relief_render::warp::{Variant, display};
 
     let scene = Scene::load("default").expect("default scene");
     let solo = Solo::new(&scene, "sphere", 3.0).expect("solo");
@@ -714,14 +703,9 @@ fn the_band_past_the_rim_is_what_the_warp_leaves_empty() {
     for degrees in [10.0, 20.0, 30.0] {
         let eye = solo.eye(degrees);
         let camera = solo.camera(eye, size).expect("orbit camera");
-        let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
+        let focal = camera.focal_pixels();
         let predicted = rim.band(&texture, centre, eye) * focal / eye.distance(centre);
-        let mut shown = GBuffer::new(size, size);
-        display(Variant::Interleaved, &impostor, 0, &camera, &mut shown).expect("display");
-        let shown = shown.shade(&solo.scene, &camera);
-        let mut exact = GBuffer::new(size, size);
-        rasterize(&[(0, &solo.scene.objects[0])], &camera, 0.01, &mut exact);
-        let exact = exact.shade(&solo.scene, &camera);
+        let (shown, exact) = impostor_and_geometry(&solo, &impostor, &camera);
         // Each row's outline, left and right (the first and last pixel of the sphere).
         let ends = |frame: &relief_core::frame::Frame, y: u32| {
             let row = &frame.object[(y * size) as usize..((y + 1) * size) as usize];
@@ -758,4 +742,22 @@ fn the_band_past_the_rim_is_what_the_warp_leaves_empty() {
             "{degrees}°: {kept:.2} px lost on the side turned from"
         );
     }
+}
+
+/// `solo`'s object from `camera`: `impostor` drawn by the interleaved pre-warp, and the
+/// exact geometry (one sample a pixel), both shaded.
+fn impostor_and_geometry(
+    solo: &Solo,
+    impostor: &Impostor,
+    camera: &relief_core::camera::Camera,
+) -> (relief_core::frame::Frame, relief_core::frame::Frame) {
+    use relief_render::gbuffer::GBuffer;
+    use relief_render::raster::rasterize;
+    use relief_render::warp::{Variant, display};
+
+    let mut shown = GBuffer::new(camera.width, camera.height);
+    display(Variant::Interleaved, impostor, 0, camera, &mut shown).expect("display");
+    let mut exact = GBuffer::new(camera.width, camera.height);
+    rasterize(&[(0, &solo.scene.objects[0])], camera, 0.01, &mut exact);
+    (shown.shade(&solo.scene, camera), exact.shade(&solo.scene, camera))
 }

@@ -79,7 +79,7 @@ pub(super) fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     let Ok(params) = WarpParams::new(texture, eye) else {
         return f32::INFINITY;
     };
-    let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
+    let focal = camera.focal_pixels();
     // (At the image plane, the nearest the texture's surface comes: where a gap looks
     // widest.)
     let pixels_per_texel =
@@ -90,7 +90,7 @@ pub(super) fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
 /// The band (screen pixels) past `held`'s rim that it cannot show alone at `eye`, about
 /// the object's `centre`.
 pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32 {
-    let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
+    let focal = camera.focal_pixels();
     let texture = &held.pyramid.levels[0].texture;
     held.rim.band(texture, centre, eye) * focal / centre.distance(eye).max(f32::MIN_POSITIVE)
 }

@@ -148,7 +148,7 @@ fn merge(layer: &Layer, keep: impl Fn(usize) -> bool, x0: u32, y0: u32, object: 
 /// One surface spans about its footprint in depth (more on slopes): three footprints of
 /// a level's pixel, plus two texels.
 fn surface_margin(impostor: &Impostor, camera: &Camera) -> impl Fn(usize) -> DepthMargin {
-    let focal = camera.height as f32 / (2.0 * camera.tan_half_fov());
+    let focal = camera.focal_pixels();
     let c = &impostor.texture.camera;
     let texel = c.a.length().max(c.b.length());
     move |level| DepthMargin {
