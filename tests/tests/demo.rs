@@ -108,6 +108,41 @@ fn the_demo_flies_and_summarises() {
         gap("psnr_aa_gap_db_median_by_object"),
     );
     assert!(-15.0 < worst && worst <= median && median < 3.0, "{summary}");
+    // psnr.csv: per object its figures, the pixels it covers and how it was drawn,
+    // every row as wide as the header; a drawn impostor's predicted errors are pixels.
+    let csv = std::fs::read_to_string(out.join("psnr.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let column = |name: &str| {
+        (header.iter().position(|c| *c == name)).unwrap_or_else(|| panic!("no {name} in {header:?}"))
+    };
+    let knot = [
+        "psnr_aa_db",
+        "geometry_psnr_aa_db",
+        "pixels",
+        "turn_deg",
+        "texel_px",
+        "growth_px",
+        "band_px",
+    ]
+    .map(|c| column(&format!("{c}_knot")));
+    column("partner_turn_deg_knot");
+    let mut drawn = 0;
+    for line in lines {
+        let row: Vec<&str> = line.split(',').collect();
+        assert_eq!(row.len(), header.len(), "{line}");
+        if !row[knot[0]].is_empty() {
+            assert!(row[knot[2]].parse::<u32>().unwrap() > 0, "{line}");
+        }
+        if !row[knot[3]].is_empty() {
+            drawn += 1;
+            for k in &knot[4..] {
+                let v: f32 = row[*k].parse().unwrap();
+                assert!(v.is_finite() && v >= 0.0, "{line}");
+            }
+        }
+    }
+    assert!(drawn > 0, "the knot was never drawn as an impostor: {csv}");
     // Every 15th frame drawn is written, named by its path frame.
     let written = std::fs::read_dir(&out)
         .unwrap()
