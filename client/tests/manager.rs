@@ -19,15 +19,9 @@ use relief_render::gbuffer::GBuffer;
 fn still_eyes_draw_sprites_and_moving_eyes_warp() {
     let scene = Arc::new(Scene::load("default").unwrap());
     let mut manager = served_locally(&scene, Config::default());
-    let camera = Camera::look_at(
-        Vec3::new(2.0, 3.0, 9.0),
-        Vec3::new(0.0, 1.0, 0.0),
-        Vec3::Y,
-        60.0,
-        160,
-        90,
-    )
-    .unwrap();
+    // A 160×90 view from `eye` towards `at`.
+    let view = |eye: Vec3, at: Vec3| Camera::look_at(eye, at, Vec3::Y, 60.0, 160, 90).unwrap();
+    let camera = view(Vec3::new(2.0, 3.0, 9.0), Vec3::new(0.0, 1.0, 0.0));
     assert!(
         manager.warm_up(&scene, &camera, Duration::from_secs(60)),
         "textures did not arrive"
@@ -47,15 +41,7 @@ fn still_eyes_draw_sprites_and_moving_eyes_warp() {
     assert_eq!(manager.counters.sprites, impostors);
     assert_eq!(first, second);
     // A step of many pixels' angle: warped again.
-    let moved = Camera::look_at(
-        Vec3::new(2.6, 3.0, 9.0),
-        Vec3::new(0.0, 1.0, 0.0),
-        Vec3::Y,
-        60.0,
-        160,
-        90,
-    )
-    .unwrap();
+    let moved = view(Vec3::new(2.6, 3.0, 9.0), Vec3::new(0.0, 1.0, 0.0));
     let shows = manager.frame(&scene, &moved, 0.2);
     manager.render(&scene, &shows, &moved, &mut gbuffer);
     assert_eq!(manager.counters.warps, 2 * impostors);
@@ -69,15 +55,7 @@ fn still_eyes_draw_sprites_and_moving_eyes_warp() {
     assert_eq!(manager.counters.sprites, 2 * impostors);
     // The eye still, the view turned by a few pixels: the kept images would land where
     // the objects were, so every impostor is warped again.
-    let turned = Camera::look_at(
-        Vec3::new(2.6, 3.0, 9.0),
-        Vec3::new(0.5, 1.0, 0.0),
-        Vec3::Y,
-        60.0,
-        160,
-        90,
-    )
-    .unwrap();
+    let turned = view(Vec3::new(2.6, 3.0, 9.0), Vec3::new(0.5, 1.0, 0.0));
     let shows = manager.frame(&scene, &turned, 0.5);
     manager.render(&scene, &shows, &turned, &mut gbuffer);
     assert_eq!(

@@ -327,7 +327,7 @@ impl State {
             .map(|(&id, _)| id)
             .collect();
         for id in stalled {
-            if self.take_back(id) {
+            if self.take_back(id).is_some() {
                 tracing::warn!(job = id, "no progress within {limit:?}: job taken back");
                 self.counters.stalled += 1;
             }
@@ -364,13 +364,9 @@ impl State {
         let Some((_, _, id)) = victim else {
             return false;
         };
-        let worker = match self.jobs.get(&id).map(|job| &job.state) {
-            Some(JobState::Running { worker, .. }) => *worker,
-            _ => return false,
-        };
-        if !self.take_back(id) {
+        let Some(worker) = self.take_back(id) else {
             return false;
-        }
+        };
         if let Some(job) = self.jobs.get_mut(&id) {
             job.preempted = true;
         }
@@ -379,18 +375,18 @@ impl State {
     }
 
     /// Takes running job `id` back from its worker: told to stop it (its slot stays
-    /// taken until it answers), and queued first for the next free slot. Returns
-    /// whether it was running.
-    fn take_back(&mut self, id: u64) -> bool {
+    /// taken until it answers), and queued first for the next free slot. Returns the
+    /// worker it ran on, if it was running.
+    fn take_back(&mut self, id: u64) -> Option<u64> {
         self.cancel_on_worker(id);
         let Some(JobState::Running { worker, .. }) = self.jobs.get(&id).map(|job| &job.state) else {
-            return false;
+            return None;
         };
         let worker = *worker;
         if let Some(w) = self.workers.get_mut(&worker) {
             w.running.remove(&id);
         }
-        self.requeue_first(id)
+        self.requeue_first(id).then_some(worker)
     }
 
     /// Running job `id`, let go by its worker (taken back, or the worker gone), goes

@@ -71,18 +71,16 @@ impl Rim {
                     continue;
                 }
                 let outward = outward.normalize();
+                // The texel one step inwards, if covered: its point and normal.
                 let (ii, jj) = (i - outward.x.round() as i64, j - outward.y.round() as i64);
-                if !covered(ii, jj) {
-                    continue;
-                }
-                let l = texture.index(ii as u32, jj as u32);
-                let (Some(p1), Some(p2)) = (
-                    texture.world_point(i as u32, j as u32),
-                    texture.world_point(ii as u32, jj as u32),
-                ) else {
+                let inward = ((0..w).contains(&ii) && (0..h).contains(&jj))
+                    .then(|| texture.world_point(ii as u32, jj as u32))
+                    .flatten();
+                let (Some(p1), Some(p2)) = (texture.world_point(i as u32, j as u32), inward) else {
                     continue;
                 };
-                let bend = n1.angle_between(decode_normal_rgb8(texture.normal[l]));
+                let n2 = decode_normal_rgb8(texture.normal[texture.index(ii as u32, jj as u32)]);
+                let bend = n1.angle_between(n2);
                 let radius = if bend > 0.0 {
                     (p1.distance(p2) / bend).min(cap)
                 } else {
