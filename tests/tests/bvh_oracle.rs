@@ -3,14 +3,16 @@
 //! barycentrics — for rays through random meshes (degenerate and edge-sharing
 //! triangles among them) and generated ones. Where two triangles tie
 //! (a shared edge, a coplanar overlap), the one the BVH names must itself be crossed
-//! there, at the barycentrics it reports.
+//! there, at the barycentrics it reports. A bake's beams of parallel rays are held to
+//! the same, and must leave no hole in a surface whose edges run through texel centres.
 
 use glam::Vec3;
 
 use relief_core::generators::Generator;
 use relief_core::mesh::{Material, Mesh};
 use relief_tests::oracle::{nearest_hit, ray_triangle};
-use relief_trace::bvh::Bvh;
+use relief_trace::bvh::{Bvh, Hit, ParallelRays};
+use relief_trace::tiles::{Block, TILE};
 
 /// A small deterministic generator (xorshift64*).
 struct Rng(u64);
@@ -40,8 +42,19 @@ struct Tally {
 }
 
 fn check(mesh: &Mesh, bvh: &Bvh, origin: Vec3, direction: Vec3, t_max: f32, tally: &mut Tally) {
+    check_hit(
+        mesh,
+        bvh.intersect(origin, direction, 0.0, t_max),
+        origin,
+        direction,
+        t_max,
+        tally,
+    );
+}
+
+/// [`check`] for a hit found otherwise (a beam's).
+fn check_hit(mesh: &Mesh, got: Option<Hit>, origin: Vec3, direction: Vec3, t_max: f32, tally: &mut Tally) {
     tally.rays += 1;
-    let got = bvh.intersect(origin, direction, 0.0, t_max);
     let nearest = nearest_hit(mesh, origin, direction);
     let want = nearest.filter(|h| h.t < t_max as f64);
     let grazes = |u: f64, v: f64, t: f64| {
@@ -196,4 +209,184 @@ fn generated_meshes_match_the_oracle() {
         );
         assert!(tally.grazing <= tally.rays / 1000, "{tally:?}");
     }
+}
+
+/// An orthographic texture's frame looking at `mesh` along `f`: texels of `texel`
+/// world units, `size` a side, centred on the mesh; the plane two radii before it.
+fn parallel_frame(mesh: &Mesh, f: Vec3, texel: f32, size: u32) -> (Vec3, Vec3, Vec3, Vec3) {
+    let f = f.normalize();
+    let up = if f.y.abs() < 0.9 { Vec3::Y } else { Vec3::Z };
+    let a = f.cross(up).normalize() * texel;
+    let b = f.cross(a).normalize() * texel;
+    let radius = mesh.bounds().extent().length();
+    let centre = mesh.bounds().center() - f * 2.0 * radius;
+    let origin = centre - (a + b) * (size as f32 * 0.5);
+    (origin, a, b, f)
+}
+
+/// Every texel of a `size²` texture traced in beams of [`TILE`]², then each checked
+/// against the oracle as its own ray.
+fn check_beams(
+    mesh: &Mesh,
+    bvh: &Bvh,
+    (origin, a, b, f): (Vec3, Vec3, Vec3, Vec3),
+    size: u32,
+    tally: &mut Tally,
+) {
+    let t_max = 4.0 * mesh.bounds().extent().length();
+    let rays = ParallelRays::new(origin, a, b, f, 0.0, t_max).expect("a frame spanning space");
+    let mut hits = Vec::new();
+    for y0 in (0..size).step_by(TILE) {
+        for x0 in (0..size).step_by(TILE) {
+            let block = Block {
+                x0,
+                y0,
+                width: (size - x0).min(TILE as u32),
+                height: (size - y0).min(TILE as u32),
+            };
+            hits.clear();
+            hits.resize((block.width * block.height) as usize, None);
+            bvh.intersect_parallel(&rays, block, &mut hits);
+            for ((i, j), &hit) in block.pixels().zip(&hits) {
+                let start = origin + a * (i as f32 + 0.5) + b * (j as f32 + 0.5);
+                check_hit(mesh, hit, start, f, t_max, tally);
+            }
+        }
+    }
+}
+
+/// Beams of parallel rays (a bake's) through random meshes, from several directions
+/// (axis-aligned among them), at texels from a tenth of a triangle to several.
+#[test]
+fn parallel_beams_match_the_oracle() {
+    let mut rng = Rng(0xD1B5_4A32_D192_ED03);
+    for count in [1usize, 3, 40, 300, 3000] {
+        let mesh = random_mesh(&mut rng, count);
+        let bvh = Bvh::build(&mesh);
+        let mut tally = Tally::default();
+        for (k, f) in [Vec3::Z, -Vec3::X, Vec3::new(0.3, -0.5, 0.8), rng.vec(1.0)]
+            .into_iter()
+            .enumerate()
+        {
+            let texel = [0.004, 0.03, 0.05, 0.2][k];
+            check_beams(&mesh, &bvh, parallel_frame(&mesh, f, texel, 61), 61, &mut tally);
+        }
+        eprintln!("{count} triangles, beams: {tally:?}");
+        if count >= 40 {
+            assert!(
+                tally.hits > tally.rays / 10,
+                "{count} triangles: too few hits to test: {tally:?}"
+            );
+        }
+        assert!(tally.grazing <= tally.rays / 1000, "{count} triangles: {tally:?}");
+    }
+    for mesh in [
+        Generator::Knot {
+            p: 2,
+            q: 3,
+            segments: 96,
+            sides: 12,
+            tube_radius: 0.25,
+        }
+        .build(),
+        Generator::Sphere { subdivisions: 3 }.build(),
+    ] {
+        let bvh = Bvh::build(&mesh);
+        let mut tally = Tally::default();
+        let texel = mesh.bounds().extent().length() / 64.0;
+        check_beams(
+            &mesh,
+            &bvh,
+            parallel_frame(&mesh, Vec3::new(0.45, 0.35, 0.82), texel, 64),
+            64,
+            &mut tally,
+        );
+        eprintln!("generated, beams: {tally:?}");
+        assert!(tally.hits > tally.rays / 5, "too few hits to test: {tally:?}");
+        assert!(tally.grazing <= tally.rays / 1000, "{tally:?}");
+    }
+}
+
+/// A fan of long triangles round a texel centre of a texture 4,096 texels wide, in a
+/// turned frame: each spoke runs through hundreds of texel centres, up to rounding, and
+/// is shared by the two triangles either side of it. Beams must hit every texel centre
+/// on a spoke, however rounding falls: edges evaluated from either end would leave holes.
+#[test]
+fn beams_leave_no_hole_along_shared_edges() {
+    const SIZE: u32 = 4096;
+    let hub = glam::DVec2::splat(SIZE as f64 / 2.0 + 0.5);
+    // Spoke directions in texels, in angle order; each reaches 2,000 texels or so.
+    let mut steps: Vec<glam::IVec2> = (-5..=5)
+        .flat_map(|x| (-5..=5).map(move |y| glam::IVec2::new(x, y)))
+        .filter(|s| *s != glam::IVec2::ZERO && gcd(s.x.unsigned_abs(), s.y.unsigned_abs()) == 1)
+        .collect();
+    steps.sort_by(|p, q| {
+        (p.y as f64)
+            .atan2(p.x as f64)
+            .total_cmp(&(q.y as f64).atan2(q.x as f64))
+    });
+    let reach = |s: glam::IVec2| (2000.0 / s.as_dvec2().length()).floor();
+    // Texels a tenth of a unit, turned 30° about the view axis, far from the world's
+    // origin: no projection is exact.
+    let (sin, cos) = 30f64.to_radians().sin_cos();
+    let (a, b) = (
+        glam::DVec3::new(cos, sin, 0.0) * 0.1,
+        glam::DVec3::new(-sin, cos, 0.0) * 0.1,
+    );
+    let origin = glam::DVec3::new(37.0, -21.0, 5.0);
+    let world =
+        |p: glam::DVec2, height: f64| (origin + a * p.x + b * p.y + glam::DVec3::Z * height).as_vec3();
+    // Corners a ten-thousandth of a texel off their places: a texel centre on a spoke
+    // is then as near its edge as rounding can tell.
+    let mut rng = Rng(0x5851_F42D_4C95_7F2D);
+    let mut jitter = || glam::DVec2::new(rng.next() as f64 - 0.5, rng.next() as f64 - 0.5) * 2e-4;
+    let mut mesh = Mesh {
+        positions: vec![world(hub + jitter(), 1.0)],
+        materials: vec![Material::default()],
+        ..Default::default()
+    };
+    for (k, &s) in steps.iter().enumerate() {
+        mesh.positions.push(world(
+            hub + s.as_dvec2() * reach(s) + jitter(),
+            1.0 + 0.1 * (k % 3) as f64,
+        ));
+    }
+    let spokes = steps.len() as u32;
+    mesh.triangles = (1..=spokes).map(|k| [0, k, k % spokes + 1]).collect();
+    let bvh = Bvh::build(&mesh);
+    let rays = ParallelRays::new(origin.as_vec3(), a.as_vec3(), b.as_vec3(), Vec3::Z, 0.0, 10.0)
+        .expect("the axes span space");
+    let mut on_spokes = 0;
+    let mut holes = Vec::new();
+    let mut hits = Vec::new();
+    for &s in &steps {
+        for m in 1..reach(s) as i32 {
+            let centre = hub + (s * m).as_dvec2();
+            let (i, j) = ((centre.x - 0.5) as u32, (centre.y - 0.5) as u32);
+            let block = Block {
+                x0: i,
+                y0: j,
+                width: 1,
+                height: 1,
+            };
+            hits.clear();
+            hits.push(None);
+            bvh.intersect_parallel(&rays, block, &mut hits);
+            on_spokes += 1;
+            if hits[0].is_none() {
+                holes.push((i, j));
+            }
+        }
+    }
+    assert!(on_spokes > 10_000, "{on_spokes} texel centres on spokes");
+    assert!(
+        holes.is_empty(),
+        "{} of {on_spokes} texel centres on shared edges missed: {:?}",
+        holes.len(),
+        &holes[..holes.len().min(10)]
+    );
+}
+
+fn gcd(a: u32, b: u32) -> u32 {
+    if b == 0 { a } else { gcd(b, a % b) }
 }

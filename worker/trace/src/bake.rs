@@ -1,19 +1,21 @@
 //! Baking a relief texture: cast one ray per texel (parallel, or from the eye — see
 //! [`SourceProjection`]) and record the first surface's albedo, shading normal and quantised
-//! depth.
+//! depth. Parallel rays are cast a block at a time as one beam ([`ParallelRays`]).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::Vec3;
+use rayon::prelude::*;
 
+use relief_core::mesh::Mesh;
 use relief_core::relief::{
     DepthBits, FacingError, ReliefTexture, SourceCamera, SourceProjection, encode_normal_rgb8,
 };
 use relief_core::shading::to_rgb8;
 
-use crate::bvh::Ray;
+use crate::bvh::{Bvh, Hit, ParallelRays, Ray};
 use crate::prefetch::prefetch_lines;
-use crate::tiles::par_fill_blocks;
+use crate::tiles::{Block, TILE, band_blocks, par_fill_blocks};
 use crate::tracer::ObjectTracer;
 
 /// Why a texture could not be baked.
@@ -22,13 +24,6 @@ use crate::tracer::ObjectTracer;
 pub struct BakeError {
     pub object: String,
     pub reason: FacingError,
-}
-
-#[derive(Clone, Copy, Default)]
-struct Texel {
-    albedo: [u8; 3],
-    normal: [u8; 3],
-    depth: u16,
 }
 
 /// The relief texture of `target` for `eye`, `size × size` texels in `projection` (see
@@ -58,76 +53,153 @@ pub fn bake_unless_cancelled(
     projection: SourceProjection,
     cancelled: &AtomicBool,
 ) -> Result<Option<ReliefTexture>, BakeError> {
-    let camera =
-        SourceCamera::facing(eye, &target.object.bounds, size, size, projection).map_err(|reason| {
-            BakeError {
-                object: target.object.name.clone(),
-                reason,
-            }
-        })?;
+    let rays = TexelRays::new(target, eye, size, projection)?;
+    let camera = rays.camera;
     let mesh = &target.object.mesh;
-    let span = camera.depth_far - camera.depth_near;
-    // The plane touches the bounds; start a little before it so surfaces lying in it
-    // are not lost to rounding.
-    let margin = span * 1e-4;
-    let empty = Texel {
-        albedo: [0; 3],
-        normal: [0; 3],
-        depth: depth_bits.empty(),
-    };
-    let mut texels = vec![empty; size as usize * size as usize];
-    par_fill_blocks(size, size, &mut texels, |block, values| {
-        if cancelled.load(Ordering::Relaxed) {
-            values.resize((block.width * block.height) as usize, empty);
-            return;
-        }
-        let rays: Vec<Ray> = block
-            .pixels()
-            .map(|(i, j)| {
-                // (The direction's component along `f` is 1: `t` is the displacement.)
-                let (origin, direction) = camera.texel_ray(i, j);
-                Ray {
-                    origin,
-                    direction,
-                    t_min: -margin,
-                    t_max: span + margin,
+    let mut texture = ReliefTexture::empty(camera, depth_bits, eye);
+    let width = size as usize;
+    // Bands of rows of the three planes, filled in place on all cores: an intermediate
+    // image and its copy were a third of a small mesh's bake (allocation and first
+    // touch of the pages, mostly).
+    let bands = (
+        texture.albedo.par_chunks_mut(width * TILE),
+        texture.normal.par_chunks_mut(width * TILE),
+        texture.depth.par_chunks_mut(width * TILE),
+    );
+    bands.into_par_iter().enumerate().for_each_init(
+        || Vec::with_capacity(TILE * TILE),
+        |hits, (band, (albedo, normal, depth))| {
+            for block in band_blocks(size, band, depth.len() / width) {
+                if cancelled.load(Ordering::Relaxed) {
+                    return;
                 }
-            })
-            .collect();
-        let mut hits = vec![None; rays.len()];
-        target.bvh.intersect_batch(&rays, &mut hits);
-        // Shading reads each hit's vertex indices, then its vertices' attributes: fetch
-        // both for the whole block before using any (see `prefetch`).
-        for hit in hits.iter().flatten() {
-            prefetch_lines(std::slice::from_ref(&mesh.triangles[hit.triangle as usize]));
-        }
-        if let Some(normals) = &mesh.normals {
-            for hit in hits.iter().flatten() {
-                for &v in &mesh.triangles[hit.triangle as usize] {
-                    prefetch_lines(std::slice::from_ref(&normals[v as usize]));
+                rays.trace(&target.bvh, block, hits);
+                prefetch_shading(mesh, hits);
+                for ((i, j), hit) in block.pixels().zip(hits.iter()) {
+                    let Some(hit) = hit else { continue };
+                    let k = (j - block.y0) as usize * width + i as usize;
+                    let tri = hit.triangle as usize;
+                    albedo[k] = to_rgb8(mesh.albedo(tri, hit.u, hit.v));
+                    normal[k] = encode_normal_rgb8(mesh.shading_normal(tri, hit.u, hit.v));
+                    depth[k] = camera.level_of_depth(camera.depth_near + hit.t, depth_bits);
                 }
             }
-        }
-        values.extend(hits.into_iter().map(|hit| match hit {
-            None => empty,
-            Some(hit) => {
-                let tri = hit.triangle as usize;
-                Texel {
-                    albedo: to_rgb8(mesh.albedo(tri, hit.u, hit.v)),
-                    normal: encode_normal_rgb8(mesh.shading_normal(tri, hit.u, hit.v)),
-                    depth: camera.level_of_depth(camera.depth_near + hit.t, depth_bits),
-                }
-            }
-        }));
-    });
+        },
+    );
     if cancelled.load(Ordering::Relaxed) {
         return Ok(None);
     }
-    let mut texture = ReliefTexture::empty(camera, depth_bits, eye);
-    for (k, t) in texels.into_iter().enumerate() {
-        texture.albedo[k] = t.albedo;
-        texture.normal[k] = t.normal;
-        texture.depth[k] = t.depth;
-    }
     Ok(Some(texture))
+}
+
+/// Starts fetching what shading reads for a block's hits: each hit's vertex indices,
+/// then its vertices' normals, for the whole block before any is used (see
+/// `prefetch`).
+fn prefetch_shading(mesh: &Mesh, hits: &[Option<Hit>]) {
+    for hit in hits.iter().flatten() {
+        prefetch_lines(std::slice::from_ref(&mesh.triangles[hit.triangle as usize]));
+    }
+    if let Some(normals) = &mesh.normals {
+        for hit in hits.iter().flatten() {
+            for &v in &mesh.triangles[hit.triangle as usize] {
+                prefetch_lines(std::slice::from_ref(&normals[v as usize]));
+            }
+        }
+    }
+}
+
+/// The ray casting of a bake alone, without shading: how many texels the object
+/// covers. `relief bench raytrace` times it apart from the whole bake (`trace_ms`), as
+/// Embree's figure is.
+pub fn trace_texels(
+    target: &ObjectTracer,
+    eye: Vec3,
+    size: u32,
+    projection: SourceProjection,
+) -> Result<usize, BakeError> {
+    let rays = TexelRays::new(target, eye, size, projection)?;
+    let mut covered = vec![false; size as usize * size as usize];
+    par_fill_blocks(size, size, &mut covered, |block, values| {
+        let mut hits = Vec::new();
+        rays.trace(&target.bvh, block, &mut hits);
+        values.extend(hits.iter().map(Option::is_some));
+    });
+    Ok(covered.into_iter().filter(|&c| c).count())
+}
+
+/// A texture's rays, one per texel: a block of an orthographic texture's parallel rays
+/// is traced as one beam, a perspective texture's one ray at a time.
+struct TexelRays {
+    camera: SourceCamera,
+    /// The rays' parameter range (past `depth_near`).
+    t_min: f32,
+    t_max: f32,
+    parallel: Option<ParallelRays>,
+}
+
+impl TexelRays {
+    fn new(
+        target: &ObjectTracer,
+        eye: Vec3,
+        size: u32,
+        projection: SourceProjection,
+    ) -> Result<Self, BakeError> {
+        let error = |reason| BakeError {
+            object: target.object.name.clone(),
+            reason,
+        };
+        let camera =
+            SourceCamera::facing(eye, &target.object.bounds, size, size, projection).map_err(error)?;
+        let span = camera.depth_far - camera.depth_near;
+        // The plane touches the bounds; start a little before it so surfaces lying in it
+        // are not lost to rounding.
+        let margin = span * 1e-4;
+        let (t_min, t_max) = (-margin, span + margin);
+        let parallel = match camera.centre {
+            Some(_) => None,
+            None => Some(
+                ParallelRays::new(
+                    camera.origin + camera.f * camera.depth_near,
+                    camera.a,
+                    camera.b,
+                    camera.f,
+                    t_min,
+                    t_max,
+                )
+                .ok_or(error(FacingError::OutOfRange(eye)))?,
+            ),
+        };
+        Ok(TexelRays {
+            camera,
+            t_min,
+            t_max,
+            parallel,
+        })
+    }
+
+    /// The nearest hit of each texel of `block`, in [`Block::pixels`] order, into `hits`.
+    fn trace(&self, bvh: &Bvh, block: Block, hits: &mut Vec<Option<Hit>>) {
+        hits.clear();
+        hits.resize((block.width * block.height) as usize, None);
+        match &self.parallel {
+            Some(parallel) => bvh.intersect_parallel(parallel, block, hits),
+            None => {
+                let rays: Vec<Ray> = block
+                    .pixels()
+                    .map(|(i, j)| {
+                        // (The direction's component along `f` is 1: `t` is the
+                        // displacement.)
+                        let (origin, direction) = self.camera.texel_ray(i, j);
+                        Ray {
+                            origin,
+                            direction,
+                            t_min: self.t_min,
+                            t_max: self.t_max,
+                        }
+                    })
+                    .collect();
+                bvh.intersect_batch(&rays, hits);
+            }
+        }
+    }
 }

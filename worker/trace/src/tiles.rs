@@ -42,23 +42,29 @@ where
     out.par_chunks_mut(w * TILE).enumerate().for_each_init(
         || Vec::with_capacity(TILE * TILE),
         |values, (band, rows)| {
-            let band_height = rows.len() / w;
-            for x0 in (0..w).step_by(TILE) {
-                let block = Block {
-                    x0: x0 as u32,
-                    y0: (band * TILE) as u32,
-                    width: TILE.min(w - x0) as u32,
-                    height: band_height as u32,
-                };
+            for block in band_blocks(width, band, rows.len() / w) {
                 values.clear();
                 shade(block, values);
                 debug_assert_eq!(values.len(), (block.width * block.height) as usize);
+                let x0 = block.x0 as usize;
                 for (dy, row) in values.chunks(block.width as usize).enumerate() {
                     rows[dy * w + x0..dy * w + x0 + row.len()].copy_from_slice(row);
                 }
             }
         },
     );
+}
+
+/// The blocks of band `band` (rows `band · TILE ..`, `band_height` of them) of an image
+/// `width` wide, left to right: how [`par_fill_blocks`] cuts each band, for callers
+/// that fill several planes at once.
+pub fn band_blocks(width: u32, band: usize, band_height: usize) -> impl Iterator<Item = Block> {
+    (0..width).step_by(TILE).map(move |x0| Block {
+        x0,
+        y0: (band * TILE) as u32,
+        width: (TILE as u32).min(width - x0),
+        height: band_height as u32,
+    })
 }
 
 #[cfg(test)]

@@ -89,8 +89,8 @@ pub(super) fn build(mesh: &Mesh) -> Bvh {
             let [a, b, c] = mesh.corners(t as usize);
             TriAccel {
                 v0: a,
-                e1: b - a,
-                e2: c - a,
+                v1: b,
+                v2: c,
                 id: t,
             }
         })

@@ -3,9 +3,13 @@
 //! Built as a binary tree with binned SAH (`build.rs`), then collapsed into a 4-wide tree
 //! whose nodes keep their children's boxes in structure-of-arrays form, so one node
 //! visit tests four boxes with SIMD lanes (`glam::Vec4`). Triangles are copied into leaf
-//! order as `(v0, e1, e2)` for the Möller–Trumbore test, with their original index
-//! beside them.
+//! order, their corners with their original index beside them.
+//!
+//! Two traversals read it: one ray at a time ([`Bvh::intersect_batch`], several
+//! interleaved), for rays from anywhere; and a block of an orthographic texture's
+//! parallel rays as one beam ([`Bvh::intersect_parallel`], `beam.rs`), for bakes.
 
+mod beam;
 mod build;
 mod triangle;
 
@@ -16,6 +20,7 @@ use relief_core::mesh::Mesh;
 
 use crate::prefetch::prefetch_lines;
 
+pub use beam::ParallelRays;
 pub use triangle::intersect_triangle;
 
 /// A 4-wide node: up to four children, each either an inner node (`count == 0`,
@@ -36,12 +41,14 @@ pub(crate) struct Node4 {
     lanes: u32,
 }
 
-/// A triangle in the form the intersection test wants.
+/// A triangle in leaf order: its corners exactly as the mesh has them, so that the
+/// triangles sharing a corner agree on it to the bit (the beam's watertightness rests
+/// on that; the single-ray test derives its edges on the fly).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct TriAccel {
     v0: Vec3,
-    e1: Vec3,
-    e2: Vec3,
+    v1: Vec3,
+    v2: Vec3,
     /// Index of the triangle in the mesh.
     id: u32,
 }
@@ -255,8 +262,8 @@ impl Traversal {
                     self.origin,
                     self.direction,
                     tri.v0,
-                    tri.e1,
-                    tri.e2,
+                    tri.v1 - tri.v0,
+                    tri.v2 - tri.v0,
                     self.t_min,
                     self.best_t,
                 ) {

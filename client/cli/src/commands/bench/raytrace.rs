@@ -9,6 +9,7 @@ use serde::Serialize;
 use relief_core::relief::{DepthBits, SourceProjection};
 use relief_core::scene::SceneObject;
 use relief_trace::bake;
+use relief_trace::bake::trace_texels;
 use relief_trace::bvh::Bvh;
 use relief_trace::tracer::ObjectTracer;
 
@@ -29,6 +30,10 @@ pub struct RaytraceArgs {
     /// Timed runs per measurement (best is reported), after one warm-up.
     #[arg(long, default_value = "5", value_parser = clap::value_parser!(u32).range(1..=1000))]
     runs: u32,
+    /// Embree's rays per second on the same texture's rays (from
+    /// `../shared/tools/embree_rays.py`, same machine, same run): prints the ratios.
+    #[arg(long, value_parser = args::positive)]
+    anchor_rays_per_s: Option<f32>,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -44,11 +49,22 @@ struct RaytraceReport {
     /// BVH + mesh heap bytes per triangle.
     bytes_per_triangle: f64,
     size: u32,
+    /// The bake's eye, for `relief bake --eye` when measuring the anchor on the same rays.
+    eye: [f32; 3],
     bake_ms_1t: f64,
     bake_ms_mt: f64,
     rays_per_s_1t: f64,
     rays_per_s_mt: f64,
+    /// The rays alone (no shading), all threads; `shade_ms` is the rest of the bake.
+    trace_ms: f64,
+    shade_ms: f64,
+    trace_rays_per_s: f64,
+    /// Texels the object covers (rays that hit).
+    covered: usize,
     threads: usize,
+    /// `rays_per_s_mt` and `trace_rays_per_s` over `--anchor-rays-per-s`.
+    embree_ratio: Option<f64>,
+    embree_ratio_trace: Option<f64>,
 }
 
 pub fn run(args: RaytraceArgs) -> Result<()> {
@@ -83,6 +99,9 @@ pub fn run(args: RaytraceArgs) -> Result<()> {
     bake_once()?;
     bar.set_message("tracing, all threads");
     let bake_ms_mt = best_ms(runs, || drop(bake_once()));
+    let trace_once = || trace_texels(&tracer, eye, args.size, SourceProjection::Orthographic);
+    let covered = trace_once()?;
+    let trace_ms = best_ms(runs, || drop(trace_once()));
     bar.set_message("tracing, one thread");
     let one = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
@@ -99,30 +118,55 @@ pub fn run(args: RaytraceArgs) -> Result<()> {
         bvh_nodes: tracer.bvh.node_count(),
         bytes_per_triangle: (tracer.bvh.heap_bytes() + mesh.heap_bytes()) as f64 / triangles as f64,
         size: args.size,
+        eye: eye.to_array(),
         bake_ms_1t,
         bake_ms_mt,
         rays_per_s_1t: rays / (bake_ms_1t * 1e-3),
         rays_per_s_mt: rays / (bake_ms_mt * 1e-3),
+        trace_ms,
+        shade_ms: bake_ms_mt - trace_ms,
+        trace_rays_per_s: rays / (trace_ms * 1e-3),
+        covered,
         threads: rayon::current_num_threads(),
+        embree_ratio: args
+            .anchor_rays_per_s
+            .map(|anchor| rays / (bake_ms_mt * 1e-3) / anchor as f64),
+        embree_ratio_trace: args
+            .anchor_rays_per_s
+            .map(|anchor| rays / (trace_ms * 1e-3) / anchor as f64),
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
     } else {
         println!(
             "{}: {} triangles, BVH {:.1} ms ({} nodes, {:.1} B/triangle)\n\
-             bake {}²: {:.2} ms on 1 thread ({:.2} Mrays/s), {:.2} ms on {} threads ({:.2} Mrays/s)",
+             bake {}² from {},{},{}: {:.2} ms on 1 thread ({:.2} Mrays/s), {:.2} ms on {} threads ({:.2} Mrays/s)",
             report.object,
             report.triangles,
             report.bvh_build_ms,
             report.bvh_nodes,
             report.bytes_per_triangle,
             report.size,
+            eye.x,
+            eye.y,
+            eye.z,
             report.bake_ms_1t,
             report.rays_per_s_1t / 1e6,
             report.bake_ms_mt,
             report.threads,
             report.rays_per_s_mt / 1e6
         );
+        println!(
+            "  of which tracing {:.2} ms ({:.2} Mrays/s, {} of {} texels covered), shading {:.2} ms",
+            report.trace_ms,
+            report.trace_rays_per_s / 1e6,
+            report.covered,
+            rays,
+            report.shade_ms
+        );
+        if let (Some(bake), Some(trace)) = (report.embree_ratio, report.embree_ratio_trace) {
+            println!("  against Embree: {bake:.2}× (bake), {trace:.2}× (tracing alone)");
+        }
     }
     Ok(())
 }
