@@ -69,6 +69,7 @@ pub fn bake_unless_cancelled(
     bands.into_par_iter().enumerate().for_each_init(
         || Vec::with_capacity(TILE * TILE),
         |hits, (band, (albedo, normal, depth))| {
+            let mut last = LastTriangle::NONE;
             for block in band_blocks(size, band, depth.len() / width) {
                 if cancelled.load(Ordering::Relaxed) {
                     return;
@@ -79,8 +80,15 @@ pub fn bake_unless_cancelled(
                     let Some(hit) = hit else { continue };
                     let k = (j - block.y0) as usize * width + i as usize;
                     let tri = hit.triangle as usize;
-                    albedo[k] = to_rgb8(mesh.albedo(tri, hit.u, hit.v));
-                    normal[k] = encode_normal_rgb8(mesh.shading_normal(tri, hit.u, hit.v));
+                    if hit.triangle != last.triangle {
+                        last = LastTriangle::of(mesh, hit.triangle);
+                    }
+                    albedo[k] = last
+                        .albedo
+                        .unwrap_or_else(|| to_rgb8(mesh.albedo(tri, hit.u, hit.v)));
+                    normal[k] = last
+                        .normal
+                        .unwrap_or_else(|| encode_normal_rgb8(mesh.shading_normal(tri, hit.u, hit.v)));
                     depth[k] = camera.level_of_depth(camera.depth_near + hit.t, depth_bits);
                 }
             }
@@ -90,6 +98,32 @@ pub fn bake_unless_cancelled(
         return Ok(None);
     }
     Ok(Some(texture))
+}
+
+/// The last triangle a band shaded, with its albedo and normal where they are the same
+/// all over it (no texture, no vertex normals): the texels it covers after the first
+/// then cost a comparison. Texels on one triangle come in runs along a row.
+struct LastTriangle {
+    triangle: u32,
+    albedo: Option<[u8; 3]>,
+    normal: Option<[u8; 3]>,
+}
+
+impl LastTriangle {
+    const NONE: LastTriangle = LastTriangle {
+        triangle: u32::MAX,
+        albedo: None,
+        normal: None,
+    };
+
+    fn of(mesh: &Mesh, triangle: u32) -> Self {
+        let tri = triangle as usize;
+        LastTriangle {
+            triangle,
+            albedo: mesh.uniform_albedo(tri).map(to_rgb8),
+            normal: mesh.uniform_normal(tri).map(encode_normal_rgb8),
+        }
+    }
 }
 
 /// Starts fetching what shading reads for a block's hits: each hit's vertex indices,
