@@ -14,8 +14,8 @@ use super::Manager;
 use super::around::{angle_between, similar_distance};
 use super::cache::Held;
 use super::policy::{
-    COARSEST_SHOWN, DEFAULT_VALID_ANGLE, LONE_BAND, LONE_MAX_TURN, MAX_TEXEL_PIXELS, MAX_TURN, PARTNER_FROM,
-    PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
+    COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LONE_BAND, LONE_MAX_TURN, MAX_TEXEL_PIXELS,
+    MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
 };
 
 /// How an object is drawn this frame.
@@ -100,11 +100,18 @@ pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32
 /// turn under [`LONE_MAX_TURN`]; with a partner filling the band, the band under
 /// [`PARTNERED_BAND`] (the texels inside the rim stretch as the band widens) and the turn
 /// under [`MAX_TURN`] — all times `margin` (1 to draw; the planning margin to plan).
-pub(super) fn may_show(grade: &Grade, turn: f32, partnered: bool, margin: f32) -> bool {
+///
+/// The bands are the default's: they scale with `tolerance` over [`DEFAULT_TOLERANCE`],
+/// so the one knob — and the server's load, which raises it — trades both predicted
+/// errors for lifetime. (With the band alone fixed, four times the tolerance left the
+/// requests as many: the band, not the gaps, retired the textures.) The turns are where
+/// the warp stops being the object's near side, whatever the tolerance.
+pub(super) fn may_show(grade: &Grade, turn: f32, partnered: bool, margin: f32, tolerance: f32) -> bool {
     let (band, turn_limit) = match partnered {
         false => (LONE_BAND, LONE_MAX_TURN),
         true => (PARTNERED_BAND, MAX_TURN),
     };
+    let band = band * tolerance / DEFAULT_TOLERANCE;
     grade.band <= margin * band && turn <= margin * turn_limit
 }
 
@@ -159,8 +166,8 @@ pub(super) fn held_covers(
         let turn = angle_between(centre, eye, future);
         g.growth <= PLANNING_MARGIN * tolerance
             && !g.finer_available
-            && (may_show(&g, turn, false, PLANNING_MARGIN)
-                || (may_show(&g, turn, true, PLANNING_MARGIN) && partnered(eye)))
+            && (may_show(&g, turn, false, PLANNING_MARGIN, tolerance)
+                || (may_show(&g, turn, true, PLANNING_MARGIN, tolerance) && partnered(eye)))
     })
 }
 
@@ -331,14 +338,24 @@ mod tests {
         };
         let turn = 10f32.to_radians();
         let between = 0.5 * (LONE_BAND + PARTNERED_BAND);
-        assert!(may_show(&with_band(0.9 * LONE_BAND), turn, false, 1.0));
-        assert!(!may_show(&with_band(between), turn, false, 1.0));
-        assert!(may_show(&with_band(between), turn, true, 1.0));
-        assert!(!may_show(&with_band(1.1 * PARTNERED_BAND), turn, true, 1.0));
-        assert!(!may_show(&with_band(0.9 * LONE_BAND), turn, false, 0.5));
+        let may = |band, turn, partnered, margin| {
+            may_show(&with_band(band), turn, partnered, margin, DEFAULT_TOLERANCE)
+        };
+        assert!(may(0.9 * LONE_BAND, turn, false, 1.0));
+        assert!(!may(between, turn, false, 1.0));
+        assert!(may(between, turn, true, 1.0));
+        assert!(!may(1.1 * PARTNERED_BAND, turn, true, 1.0));
+        assert!(!may(0.9 * LONE_BAND, turn, false, 0.5));
         // The turn still bounds a texture whose rim shows no band (sharp edges).
-        assert!(!may_show(&with_band(0.0), 1.1 * LONE_MAX_TURN, false, 1.0));
-        assert!(!may_show(&with_band(0.0), 1.1 * MAX_TURN, true, 1.0));
+        assert!(!may(0.0, 1.1 * LONE_MAX_TURN, false, 1.0));
+        assert!(!may(0.0, 1.1 * MAX_TURN, true, 1.0));
+        // Twice the tolerance lets the band open twice as far, and no turn further.
+        let twice =
+            |band, turn, partnered| may_show(&with_band(band), turn, partnered, 1.0, 2.0 * DEFAULT_TOLERANCE);
+        assert!(twice(1.9 * LONE_BAND, turn, false));
+        assert!(!twice(2.1 * LONE_BAND, turn, false));
+        assert!(twice(1.9 * PARTNERED_BAND, turn, true));
+        assert!(!twice(0.0, 1.1 * LONE_MAX_TURN, false));
     }
 
     #[test]

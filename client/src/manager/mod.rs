@@ -235,7 +235,7 @@ impl Manager {
             let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
             let too_far = best
                 .zip(shown_turn)
-                .is_some_and(|((_, g), turn)| !may_show(&g, turn, partner.is_some(), 1.0));
+                .is_some_and(|((_, g), turn)| !may_show(&g, turn, partner.is_some(), 1.0, tolerance));
             let within_any = grades.iter().any(|g| g.growth <= tolerance);
             let valid = within_any && !too_far;
             let want_finer =
