@@ -11,7 +11,7 @@ use glam::Vec3;
 use relief_core::generators::Generator;
 use relief_core::mesh::{Material, Mesh};
 use relief_tests::oracle::{nearest_hit, ray_triangle};
-use relief_trace::bvh::{Bvh, Hit, ParallelRays};
+use relief_trace::bvh::{Bvh, Hit, PlaneRays};
 use relief_trace::tiles::{Block, TILE};
 
 /// A small deterministic generator (xorshift64*).
@@ -224,17 +224,26 @@ fn parallel_frame(mesh: &Mesh, f: Vec3, texel: f32, size: u32) -> (Vec3, Vec3, V
     (origin, a, b, f)
 }
 
-/// Every texel of a `size²` texture traced in beams of [`TILE`]², then each checked
+/// Every texel of a `size²` texture traced in beams of [`TILE`]², parallel or from a
+/// centre set back from the plane by three of the mesh's radii, then each checked
 /// against the oracle as its own ray.
 fn check_beams(
     mesh: &Mesh,
     bvh: &Bvh,
     (origin, a, b, f): (Vec3, Vec3, Vec3, Vec3),
     size: u32,
+    perspective: bool,
     tally: &mut Tally,
 ) {
-    let t_max = 4.0 * mesh.bounds().extent().length();
-    let rays = ParallelRays::new(origin, a, b, f, 0.0, t_max).expect("a frame spanning space");
+    let radius = mesh.bounds().extent().length();
+    let t_max = 4.0 * radius;
+    let middle = origin + (a + b) * (size as f32 * 0.5);
+    let centre = middle - f * 3.0 * radius;
+    let rays = match perspective {
+        false => PlaneRays::parallel(origin, a, b, f, 0.0, t_max),
+        true => PlaneRays::from_centre(centre, origin, a, b, f, 0.0, t_max),
+    }
+    .expect("a frame spanning space");
     let mut hits = Vec::new();
     for y0 in (0..size).step_by(TILE) {
         for x0 in (0..size).step_by(TILE) {
@@ -246,19 +255,26 @@ fn check_beams(
             };
             hits.clear();
             hits.resize((block.width * block.height) as usize, None);
-            bvh.intersect_parallel(&rays, block, &mut hits);
+            bvh.intersect_block(&rays, block, &mut hits);
             for ((i, j), &hit) in block.pixels().zip(&hits) {
                 let start = origin + a * (i as f32 + 0.5) + b * (j as f32 + 0.5);
-                check_hit(mesh, hit, start, f, t_max, tally);
+                // (From the centre: scaled to 1 along `f`, so `t` is the displacement.)
+                let direction = if perspective {
+                    (start - centre) / (3.0 * radius)
+                } else {
+                    f
+                };
+                check_hit(mesh, hit, start, direction, t_max, tally);
             }
         }
     }
 }
 
-/// Beams of parallel rays (a bake's) through random meshes, from several directions
-/// (axis-aligned among them), at texels from a tenth of a triangle to several.
+/// Beams of a bake's rays, parallel and from a centre, through random meshes, from
+/// several directions (axis-aligned among them), at texels from a tenth of a triangle
+/// to several.
 #[test]
-fn parallel_beams_match_the_oracle() {
+fn beams_match_the_oracle() {
     let mut rng = Rng(0xD1B5_4A32_D192_ED03);
     for count in [1usize, 3, 40, 300, 3000] {
         let mesh = random_mesh(&mut rng, count);
@@ -269,7 +285,16 @@ fn parallel_beams_match_the_oracle() {
             .enumerate()
         {
             let texel = [0.004, 0.03, 0.05, 0.2][k];
-            check_beams(&mesh, &bvh, parallel_frame(&mesh, f, texel, 61), 61, &mut tally);
+            for perspective in [false, true] {
+                check_beams(
+                    &mesh,
+                    &bvh,
+                    parallel_frame(&mesh, f, texel, 61),
+                    61,
+                    perspective,
+                    &mut tally,
+                );
+            }
         }
         eprintln!("{count} triangles, beams: {tally:?}");
         if count >= 40 {
@@ -294,15 +319,12 @@ fn parallel_beams_match_the_oracle() {
         let bvh = Bvh::build(&mesh);
         let mut tally = Tally::default();
         let texel = mesh.bounds().extent().length() / 64.0;
-        check_beams(
-            &mesh,
-            &bvh,
-            parallel_frame(&mesh, Vec3::new(0.45, 0.35, 0.82), texel, 64),
-            64,
-            &mut tally,
-        );
+        let frame = parallel_frame(&mesh, Vec3::new(0.45, 0.35, 0.82), texel, 64);
+        for perspective in [false, true] {
+            check_beams(&mesh, &bvh, frame, 64, perspective, &mut tally);
+        }
         eprintln!("generated, beams: {tally:?}");
-        assert!(tally.hits > tally.rays / 5, "too few hits to test: {tally:?}");
+        assert!(tally.hits > tally.rays / 8, "too few hits to test: {tally:?}");
         assert!(tally.grazing <= tally.rays / 1000, "{tally:?}");
     }
 }
@@ -354,7 +376,7 @@ fn beams_leave_no_hole_along_shared_edges() {
     let spokes = steps.len() as u32;
     mesh.triangles = (1..=spokes).map(|k| [0, k, k % spokes + 1]).collect();
     let bvh = Bvh::build(&mesh);
-    let rays = ParallelRays::new(origin.as_vec3(), a.as_vec3(), b.as_vec3(), Vec3::Z, 0.0, 10.0)
+    let rays = PlaneRays::parallel(origin.as_vec3(), a.as_vec3(), b.as_vec3(), Vec3::Z, 0.0, 10.0)
         .expect("the axes span space");
     let mut on_spokes = 0;
     let mut holes = Vec::new();
@@ -371,7 +393,7 @@ fn beams_leave_no_hole_along_shared_edges() {
             };
             hits.clear();
             hits.push(None);
-            bvh.intersect_parallel(&rays, block, &mut hits);
+            bvh.intersect_block(&rays, block, &mut hits);
             on_spokes += 1;
             if hits[0].is_none() {
                 holes.push((i, j));

@@ -182,3 +182,19 @@ mod tests {
         assert_eq!(texture_size("256"), Ok(256));
     }
 }
+
+/// `--projection`: which way a texture's texels' rays go.
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum ProjectionArg {
+    Orthographic,
+    Perspective,
+}
+
+impl From<ProjectionArg> for relief_core::relief::SourceProjection {
+    fn from(p: ProjectionArg) -> Self {
+        match p {
+            ProjectionArg::Orthographic => Self::Orthographic,
+            ProjectionArg::Perspective => Self::Perspective,
+        }
+    }
+}

@@ -1,6 +1,6 @@
 //! Baking a relief texture: cast one ray per texel (parallel, or from the eye — see
 //! [`SourceProjection`]) and record the first surface's albedo, shading normal and quantised
-//! depth. Parallel rays are cast a block at a time as one beam ([`ParallelRays`]).
+//! depth. The rays are cast a block at a time as one beam ([`PlaneRays`]).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -13,7 +13,7 @@ use relief_core::relief::{
 };
 use relief_core::shading::to_rgb8;
 
-use crate::bvh::{Bvh, Hit, ParallelRays, Ray};
+use crate::bvh::{Bvh, Hit, PlaneRays};
 use crate::prefetch::prefetch_lines;
 use crate::tiles::{Block, TILE, band_blocks, par_fill_blocks};
 use crate::tracer::ObjectTracer;
@@ -161,14 +161,10 @@ pub fn trace_texels(
     Ok(covered.into_iter().filter(|&c| c).count())
 }
 
-/// A texture's rays, one per texel: a block of an orthographic texture's parallel rays
-/// is traced as one beam, a perspective texture's one ray at a time.
+/// A texture's rays, one per texel, traced a block at a time as one beam.
 struct TexelRays {
     camera: SourceCamera,
-    /// The rays' parameter range (past `depth_near`).
-    t_min: f32,
-    t_max: f32,
-    parallel: Option<ParallelRays>,
+    beam: PlaneRays,
 }
 
 impl TexelRays {
@@ -189,51 +185,20 @@ impl TexelRays {
         // are not lost to rounding.
         let margin = span * 1e-4;
         let (t_min, t_max) = (-margin, span + margin);
-        let parallel = match camera.centre {
-            Some(_) => None,
-            None => Some(
-                ParallelRays::new(
-                    camera.origin + camera.f * camera.depth_near,
-                    camera.a,
-                    camera.b,
-                    camera.f,
-                    t_min,
-                    t_max,
-                )
-                .ok_or(error(FacingError::OutOfRange(eye)))?,
-            ),
-        };
-        Ok(TexelRays {
-            camera,
-            t_min,
-            t_max,
-            parallel,
-        })
+        let (origin, a, b, f) = (camera.origin, camera.a, camera.b, camera.f);
+        let beam = match camera.centre {
+            // (Rays start at `depth_near`, 0 for every camera `facing` makes.)
+            None => PlaneRays::parallel(origin + f * camera.depth_near, a, b, f, t_min, t_max),
+            Some(centre) => PlaneRays::from_centre(centre, origin, a, b, f, t_min, t_max),
+        }
+        .ok_or(error(FacingError::OutOfRange(eye)))?;
+        Ok(TexelRays { camera, beam })
     }
 
     /// The nearest hit of each texel of `block`, in [`Block::pixels`] order, into `hits`.
     fn trace(&self, bvh: &Bvh, block: Block, hits: &mut Vec<Option<Hit>>) {
         hits.clear();
         hits.resize((block.width * block.height) as usize, None);
-        match &self.parallel {
-            Some(parallel) => bvh.intersect_parallel(parallel, block, hits),
-            None => {
-                let rays: Vec<Ray> = block
-                    .pixels()
-                    .map(|(i, j)| {
-                        // (The direction's component along `f` is 1: `t` is the
-                        // displacement.)
-                        let (origin, direction) = self.camera.texel_ray(i, j);
-                        Ray {
-                            origin,
-                            direction,
-                            t_min: self.t_min,
-                            t_max: self.t_max,
-                        }
-                    })
-                    .collect();
-                bvh.intersect_batch(&rays, hits);
-            }
-        }
+        bvh.intersect_block(&self.beam, block, hits);
     }
 }

@@ -29,9 +29,9 @@
 //! ```
 //!
 //! - [`bvh`] — bounding-volume hierarchy over one mesh: binned-SAH build (parallel),
-//!   closest-hit traversal of single rays, and of a block of parallel rays as one beam
-//!   ([`ParallelRays`](bvh::ParallelRays)) for orthographic bakes (both checked against
-//!   an independent ray caster in `tests/tests/bvh_oracle.rs`).
+//!   closest-hit traversal of single rays, and of a block of a texture's rays as one
+//!   beam ([`PlaneRays`](bvh::PlaneRays)) for bakes (both checked against an
+//!   independent ray caster in `tests/tests/bvh_oracle.rs`).
 //! - [`tracer`] — a scene ready for ray casting: one BVH per object.
 //! - [`tiles`] — the one way images are split across threads.
 //! - [`bake`](mod@bake) — the relief texture of one object for an eye.

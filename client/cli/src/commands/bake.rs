@@ -3,10 +3,10 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use glam::Vec3;
 
-use relief_core::relief::{DepthBits, SourceProjection};
+use relief_core::relief::DepthBits;
 use relief_trace::bake;
 use relief_trace::tracer::ObjectTracer;
 
@@ -31,27 +31,11 @@ pub struct BakeArgs {
     depth_bits: u32,
     /// Which way the texels' rays go: parallel (the thesis's relief texture) or from
     /// the eye (what the eye sees; the client asks for these).
-    #[arg(long, value_enum, default_value_t = ProjectionArg::Orthographic)]
-    projection: ProjectionArg,
+    #[arg(long, value_enum, default_value_t = args::ProjectionArg::Orthographic)]
+    projection: args::ProjectionArg,
     /// Output directory: albedo.png, normal.png, depth.png, texture.json.
     #[arg(long)]
     out: PathBuf,
-}
-
-/// `--projection`.
-#[derive(Clone, Copy, ValueEnum)]
-enum ProjectionArg {
-    Orthographic,
-    Perspective,
-}
-
-impl From<ProjectionArg> for SourceProjection {
-    fn from(p: ProjectionArg) -> SourceProjection {
-        match p {
-            ProjectionArg::Orthographic => SourceProjection::Orthographic,
-            ProjectionArg::Perspective => SourceProjection::Perspective,
-        }
-    }
 }
 
 pub fn run(args: BakeArgs) -> Result<()> {

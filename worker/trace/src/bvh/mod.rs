@@ -6,8 +6,9 @@
 //! order, their corners with their original index beside them.
 //!
 //! Two traversals read it: one ray at a time ([`Bvh::intersect_batch`], several
-//! interleaved), for rays from anywhere; and a block of an orthographic texture's
-//! parallel rays as one beam ([`Bvh::intersect_parallel`], `beam.rs`), for bakes.
+//! interleaved), for rays from anywhere; and a block of a texture's rays — parallel, or
+//! from its centre of projection — as one beam ([`Bvh::intersect_block`], `beam.rs`),
+//! for bakes.
 
 mod beam;
 mod build;
@@ -20,7 +21,7 @@ use relief_core::mesh::Mesh;
 
 use crate::prefetch::prefetch_lines;
 
-pub use beam::ParallelRays;
+pub use beam::PlaneRays;
 pub use triangle::intersect_triangle;
 
 /// A 4-wide node: up to four children, each either an inner node (`count == 0`,

@@ -6,7 +6,7 @@ use clap::Args;
 use glam::Vec3;
 use serde::Serialize;
 
-use relief_core::relief::{DepthBits, SourceProjection};
+use relief_core::relief::DepthBits;
 use relief_core::scene::SceneObject;
 use relief_trace::bake;
 use relief_trace::bake::trace_texels;
@@ -24,6 +24,10 @@ pub struct RaytraceArgs {
     /// Object to trace (default: the one with the most triangles).
     #[arg(long)]
     object: Option<String>,
+    /// Which way the texels' rays go: parallel, or from the eye (as the client asks
+    /// for open surfaces' textures).
+    #[arg(long, value_enum, default_value_t = args::ProjectionArg::Orthographic)]
+    projection: args::ProjectionArg,
     /// Bake size N: N² primary rays per run.
     #[arg(long, default_value = "256", value_parser = args::texture_size, allow_hyphen_values = true)]
     size: u32,
@@ -86,20 +90,11 @@ pub fn run(args: RaytraceArgs) -> Result<()> {
     // A fixed, oblique view from three bounding radii away.
     let radius = object.bounds.extent().length() * 0.5;
     let eye = object.bounds.center() + Vec3::new(0.45, 0.35, 0.82).normalize() * radius * 3.0;
-    let bake_once = || {
-        bake(
-            &tracer,
-            eye,
-            args.size,
-            DepthBits::Eight,
-            SourceProjection::Orthographic,
-        )
-        .map(drop)
-    };
+    let bake_once = || bake(&tracer, eye, args.size, DepthBits::Eight, args.projection.into()).map(drop);
     bake_once()?;
     bar.set_message("tracing, all threads");
     let bake_ms_mt = best_ms(runs, || drop(bake_once()));
-    let trace_once = || trace_texels(&tracer, eye, args.size, SourceProjection::Orthographic);
+    let trace_once = || trace_texels(&tracer, eye, args.size, args.projection.into());
     let covered = trace_once()?;
     let trace_ms = best_ms(runs, || drop(trace_once()));
     bar.set_message("tracing, one thread");
