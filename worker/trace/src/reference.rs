@@ -14,8 +14,8 @@ use relief_core::camera::Camera;
 use relief_core::frame::{Frame, NO_OBJECT};
 use relief_core::shading::{SurfacePoint, to_rgb8};
 
-use crate::bvh::Ray;
-use crate::tiles::par_fill_blocks;
+use crate::bvh::{Hit, PlaneRays, Ray};
+use crate::tiles::{Block, TILE, par_fill_blocks};
 use crate::tracer::SceneTracer;
 
 /// Rays per pixel edge of the anti-aliased reference the reports and the demo compare
@@ -30,38 +30,23 @@ pub const ANTIALIASED_SAMPLES: u32 = 3;
 pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> Frame {
     let n = samples.max(1) | 1;
     let middle = (n * n / 2) as usize;
-    let offsets: Vec<(f32, f32)> = (0..n)
-        .flat_map(|j| (0..n).map(move |i| ((i as f32 + 0.5) / n as f32, (j as f32 + 0.5) / n as f32)))
-        .collect();
+    let grid = SampleGrid::new(tracer, camera, n);
     let background = to_rgb8(tracer.background);
     let mut pixels = vec![(background, NO_OBJECT); camera.width as usize * camera.height as usize];
     par_fill_blocks(camera.width, camera.height, &mut pixels, |block, values| {
-        let rays: Vec<Ray> = block
-            .pixels()
-            .flat_map(|(x, y)| {
-                offsets.iter().map(move |&(dx, dy)| Ray {
-                    origin: camera.eye,
-                    direction: camera.ray_direction(x as f32 + dx, y as f32 + dy),
-                    t_min: 0.0,
-                    t_max: f32::INFINITY,
-                })
-            })
-            .collect();
-        let mut hits = vec![None; rays.len()];
-        tracer.closest_hits(&rays, &mut hits);
+        let nearest = grid.nearest(tracer, block);
         // Every hit lit at once (the model runs several points per instruction).
-        let points: Vec<SurfacePoint> = rays
+        let points: Vec<SurfacePoint> = nearest
             .iter()
-            .zip(&hits)
-            .filter_map(|(ray, hit)| {
-                let (k, hit) = hit.as_ref()?;
+            .filter_map(|sample| {
+                let (k, hit, ray) = sample.as_ref()?;
                 let o = &tracer.objects[*k].object;
                 let tri = hit.triangle as usize;
                 Some(SurfacePoint {
                     albedo: o.mesh.albedo(tri, hit.u, hit.v),
                     normal: o.mesh.shading_normal(tri, hit.u, hit.v),
-                    position: ray.origin + ray.direction * hit.t,
-                    towards_eye: -ray.direction,
+                    position: camera.eye + *ray * hit.t,
+                    towards_eye: -ray.normalize(),
                     specular: o.specular,
                 })
             })
@@ -69,14 +54,14 @@ pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> 
         let mut lit = vec![Vec3::ZERO; points.len()];
         tracer.lighting.shade_all(&points, &mut lit);
         let mut lit = lit.into_iter();
-        let shaded: Vec<(Vec3, u32)> = hits
+        let shaded: Vec<(Vec3, u32)> = nearest
             .iter()
-            .map(|hit| match hit {
+            .map(|sample| match sample {
                 None => (tracer.background, NO_OBJECT),
-                Some((k, _)) => (lit.next().unwrap_or(tracer.background), *k as u32),
+                Some((k, ..)) => (lit.next().unwrap_or(tracer.background), *k as u32),
             })
             .collect();
-        values.extend(shaded.chunks_exact(offsets.len()).map(|pixel| {
+        values.extend(shaded.chunks_exact((n * n) as usize).map(|pixel| {
             let sum: Vec3 = pixel.iter().map(|(c, _)| *c).sum();
             (to_rgb8(sum / pixel.len() as f32), pixel[middle].1)
         }));
@@ -89,3 +74,186 @@ pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> 
         object,
     }
 }
+
+/// A frame's samples as a grid `n` times finer than its pixels, sample `(i, j)` of
+/// pixel `(x, y)` at fine cell `(n·x + i, n·y + j)`, its centre at pixel position
+/// `(x + (i + ½)/n, y + (j + ½)/n)`. Each object wholly before the eye is traced as
+/// beams from it ([`PlaneRays`] on the plane one unit before the eye); one reaching
+/// behind the eye's plane, ray by ray.
+struct SampleGrid<'a> {
+    camera: &'a Camera,
+    n: u32,
+    /// Per object: its beams, or `None` to cast its rays one at a time — or to skip it,
+    /// wholly behind the eye (`behind`).
+    beams: Vec<Option<PlaneRays>>,
+    behind: Vec<bool>,
+}
+
+/// A sample's nearest hit: the object, the hit (`t` in view depth, so that the point
+/// is `eye + ray·t`) and the sample's ray scaled to a unit forward component.
+type Sample = Option<(usize, Hit, Vec3)>;
+
+impl<'a> SampleGrid<'a> {
+    fn new(tracer: &SceneTracer, camera: &'a Camera, n: u32) -> Self {
+        let (w, h) = (camera.width as f32, camera.height as f32);
+        let tan_half = camera.tan_half_fov();
+        // `Camera::ray` at pixel position (0, 0), and per fine cell.
+        let origin = camera.eye + camera.ray(0.0, 0.0);
+        let a = camera.right * (2.0 * tan_half * w / h / w / n as f32);
+        let b = -camera.up * (2.0 * tan_half / h / n as f32);
+        let depths: Vec<(f32, f32)> = tracer
+            .objects
+            .iter()
+            .map(|o| {
+                let depth = |p: &Vec3| (*p - camera.eye).dot(camera.forward);
+                let corners = o.object.bounds.corners();
+                let near = corners.iter().map(depth).fold(f32::INFINITY, f32::min);
+                let far = corners.iter().map(depth).fold(f32::NEG_INFINITY, f32::max);
+                (near, far)
+            })
+            .collect();
+        let beams = tracer
+            .objects
+            .iter()
+            .zip(&depths)
+            .map(|(o, &(near, far))| {
+                // (`t` is the depth past the plane at depth 1.)
+                let t_max = (far - 1.0) * (1.0 + BEAM_DEPTH_MARGIN) + BEAM_DEPTH_MARGIN;
+                let fine_enough = || {
+                    let samples = footprint_pixels(camera, &o.object.bounds) * (n * n) as f32;
+                    o.object.mesh.triangle_count() as f32 <= BEAM_MAX_TRIANGLES_PER_SAMPLE * samples.max(1.0)
+                };
+                (near > 0.0 && far.is_finite() && fine_enough())
+                    .then(|| PlaneRays::from_centre(camera.eye, origin, a, b, camera.forward, -1.0, t_max))
+                    .flatten()
+            })
+            .collect();
+        SampleGrid {
+            camera,
+            n,
+            beams,
+            behind: depths.iter().map(|&(_, far)| far <= 0.0).collect(),
+        }
+    }
+
+    /// The nearest hit of each sample of the pixels of `block`, pixel by pixel (in
+    /// [`Block::pixels`] order), each pixel's samples row by row.
+    fn nearest(&self, tracer: &SceneTracer, block: Block) -> Vec<Sample> {
+        let n = self.n;
+        let fine = Block {
+            x0: block.x0 * n,
+            y0: block.y0 * n,
+            width: block.width * n,
+            height: block.height * n,
+        };
+        // Fine cell (fx, fy) of the block's samples, at its place in the output.
+        let index = |fx: u32, fy: u32| {
+            let (dx, dy) = (fx - fine.x0, fy - fine.y0);
+            let pixel = (dy / n) * block.width + dx / n;
+            ((pixel * n + dy % n) * n + dx % n) as usize
+        };
+        let ray_of = |fx: u32, fy: u32| {
+            let cell = 1.0 / n as f32;
+            self.camera
+                .ray((fx as f32 + 0.5) * cell, (fy as f32 + 0.5) * cell)
+        };
+        let mut nearest: Vec<Sample> = vec![None; fine.pixels().count()];
+        let mut keep = |at: usize, k: usize, hit: Hit, ray: Vec3| {
+            if nearest[at].is_none_or(|(_, best, _)| hit.t < best.t) {
+                nearest[at] = Some((k, hit, ray));
+            }
+        };
+        let mut hits = Vec::new();
+        for (k, o) in tracer.objects.iter().enumerate() {
+            if self.behind[k] {
+                continue;
+            }
+            match &self.beams[k] {
+                Some(beam) => {
+                    for y0 in (fine.y0..fine.y0 + fine.height).step_by(TILE) {
+                        for x0 in (fine.x0..fine.x0 + fine.width).step_by(TILE) {
+                            let sub = Block {
+                                x0,
+                                y0,
+                                width: (TILE as u32).min(fine.x0 + fine.width - x0),
+                                height: (TILE as u32).min(fine.y0 + fine.height - y0),
+                            };
+                            hits.clear();
+                            hits.resize((sub.width * sub.height) as usize, None);
+                            o.bvh.intersect_block(beam, sub, &mut hits);
+                            for ((fx, fy), hit) in sub.pixels().zip(&hits) {
+                                if let Some(hit) = hit {
+                                    // Depth past the plane at depth 1 to view depth.
+                                    let hit = Hit {
+                                        t: hit.t + 1.0,
+                                        ..*hit
+                                    };
+                                    keep(index(fx, fy), k, hit, ray_of(fx, fy));
+                                }
+                            }
+                        }
+                    }
+                }
+                None => {
+                    let cells: Vec<(u32, u32)> = fine.pixels().collect();
+                    let rays: Vec<Ray> = cells
+                        .iter()
+                        .map(|&(fx, fy)| Ray {
+                            origin: self.camera.eye,
+                            direction: ray_of(fx, fy).normalize(),
+                            t_min: 0.0,
+                            t_max: f32::INFINITY,
+                        })
+                        .collect();
+                    hits.clear();
+                    hits.resize(rays.len(), None);
+                    o.bvh.intersect_batch(&rays, &mut hits);
+                    for (&(fx, fy), hit) in cells.iter().zip(&hits) {
+                        if let Some(hit) = hit {
+                            let ray = ray_of(fx, fy);
+                            // Distance along the unit ray to view depth.
+                            let hit = Hit {
+                                t: hit.t / ray.length(),
+                                ..*hit
+                            };
+                            keep(index(fx, fy), k, hit, ray);
+                        }
+                    }
+                }
+            }
+        }
+        nearest
+    }
+}
+
+/// The pixels of the screen the projection of `bounds` spans (its bounding rectangle),
+/// for bounds wholly before the eye.
+fn footprint_pixels(camera: &Camera, bounds: &relief_core::bounds::Aabb) -> f32 {
+    let (w, h) = (camera.width as f32, camera.height as f32);
+    let tan_half = camera.tan_half_fov();
+    let (mut lo, mut hi) = (
+        glam::Vec2::splat(f32::INFINITY),
+        glam::Vec2::splat(f32::NEG_INFINITY),
+    );
+    for corner in bounds.corners() {
+        let v = camera.to_view(corner);
+        let pixel = glam::Vec2::new(
+            (v.x / v.z / (tan_half * w / h) + 1.0) * 0.5 * w,
+            (1.0 - v.y / v.z / tan_half) * 0.5 * h,
+        );
+        (lo, hi) = (lo.min(pixel), hi.max(pixel));
+    }
+    let (lo, hi) = (lo.max(glam::Vec2::ZERO), hi.min(glam::Vec2::new(w, h)));
+    ((hi.x - lo.x).max(0.0) * (hi.y - lo.y).max(0.0)).max(0.0)
+}
+
+/// Beams pay where an object's triangles are few beside the samples it spans: a beam
+/// projects every triangle in its block, a ray visits a few. Past this many triangles
+/// a sample (over the bounds' screen rectangle), its rays are cast one at a time: at
+/// 1 sample a pixel, the default scene's million-triangle rock from afar was slower
+/// as beams.
+const BEAM_MAX_TRIANGLES_PER_SAMPLE: f32 = 4.0;
+
+/// Relative margin on an object's far depth, for its beams' `t_max`: no hit on its
+/// bounds' far side is lost to rounding.
+const BEAM_DEPTH_MARGIN: f32 = 1e-4;
