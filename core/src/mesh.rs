@@ -75,6 +75,16 @@ pub struct Mesh {
     pub materials: Vec<Material>,
 }
 
+/// How a mesh's edges are shared ([`Mesh::edge_census`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EdgeCensus {
+    /// Every edge shared by exactly two triangles.
+    pub closed: bool,
+    /// The share of edges that bound one triangle only: the rim of an open surface.
+    /// Near 1 for leaves and sheets, near 0 for a solid with a few holes.
+    pub rim_share: f32,
+}
+
 /// What makes a mesh unusable; vertices and triangles are counted from 1.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum MeshError {
@@ -147,11 +157,17 @@ impl Mesh {
     }
 
     /// Whether the mesh is closed: every edge is shared by exactly two triangles, so it
-    /// bounds a solid and no back face of it can show from outside. Vertices within a
+    /// bounds a solid and no back face of it can show from outside (see
+    /// [`Mesh::edge_census`]).
+    pub fn is_closed(&self) -> bool {
+        self.edge_census().closed
+    }
+
+    /// How the mesh's edges are shared between its triangles. Vertices within a
     /// millionth of the mesh's size of one another count as one (a generator's faces
     /// may each keep their own copy of a seam, a rounding apart); a mesh whose seams do
     /// not meet counts as open, the safe answer.
-    pub fn is_closed(&self) -> bool {
+    pub fn edge_census(&self) -> EdgeCensus {
         let bounds = self.bounds();
         let cell = (bounds.extent().length() * 1e-6).max(f32::MIN_POSITIVE);
         let key = |p: Vec3| ((p - bounds.min) / cell).round().to_array().map(|c| c as i64);
@@ -171,7 +187,20 @@ impl Mesh {
             .map(|(p, q)| (u64::from(p.min(q)) << 32) | u64::from(p.max(q)))
             .collect();
         edges.par_sort_unstable();
-        !edges.is_empty() && edges.chunk_by(|x, y| x == y).all(|shared| shared.len() == 2)
+        let (mut distinct, mut rim, mut paired) = (0usize, 0usize, 0usize);
+        for shared in edges.chunk_by(|x, y| x == y) {
+            distinct += 1;
+            rim += usize::from(shared.len() == 1);
+            paired += usize::from(shared.len() == 2);
+        }
+        EdgeCensus {
+            closed: distinct > 0 && paired == distinct,
+            rim_share: if distinct == 0 {
+                0.0
+            } else {
+                rim as f32 / distinct as f32
+            },
+        }
     }
 
     /// Bounds of the vertices that triangles use.

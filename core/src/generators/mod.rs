@@ -219,6 +219,13 @@ mod tests {
         let mut holed = sphere.clone();
         holed.triangles.pop();
         assert!(!holed.is_closed());
+        // ... but leaves it nearly all paired: its rim is that triangle's three edges,
+        // where a sheet is mostly rim (the plane's 3×3 cells: 12 of 33 edges).
+        let rim = |m: &Mesh| m.edge_census().rim_share;
+        assert_eq!(rim(&holed), 3.0 / (sphere.triangle_count() as f32 * 1.5));
+        assert_eq!(rim(&plane), 12.0 / 33.0);
+        assert!(rim(&tree) > 0.5, "the tree's leaves: {}", rim(&tree));
+        assert_eq!(rim(&sphere), 0.0);
     }
 
     #[test]

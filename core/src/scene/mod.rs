@@ -15,7 +15,7 @@ use crate::bounds::Aabb;
 use crate::camera::{CameraPath, PathSegment};
 use crate::error::{Error, Result};
 use crate::hash::{ContentHash, mesh_hash};
-use crate::mesh::Mesh;
+use crate::mesh::{EdgeCensus, Mesh};
 use crate::reach::Reach;
 use crate::shading::{Light, Lighting, Specular};
 
@@ -127,16 +127,22 @@ pub struct SceneObject {
     pub specular: Specular,
     /// Content hash of the world-space mesh.
     pub hash: ContentHash,
-    /// [`SceneObject::is_closed`], found the first time it is asked (only a client
-    /// drawing impostors needs it, and it costs a pass over the mesh).
-    closed: std::sync::OnceLock<bool>,
+    /// How the mesh's edges are shared ([`Mesh::edge_census`]), found the first time it
+    /// is asked (only a client drawing impostors needs it, and it costs a pass over the
+    /// mesh).
+    edges: std::sync::OnceLock<EdgeCensus>,
 }
 
 impl SceneObject {
     /// Whether the mesh is closed ([`Mesh::is_closed`]): from outside, its back faces
     /// never show.
     pub fn is_closed(&self) -> bool {
-        *self.closed.get_or_init(|| self.mesh.is_closed())
+        self.edge_census().closed
+    }
+
+    /// How the mesh's edges are shared ([`Mesh::edge_census`]).
+    pub fn edge_census(&self) -> EdgeCensus {
+        *self.edges.get_or_init(|| self.mesh.edge_census())
     }
 
     /// Places `mesh` (already in world space) in a scene object.
@@ -145,7 +151,7 @@ impl SceneObject {
             name: name.into(),
             bounds: mesh.bounds(),
             hash: mesh_hash(&mesh),
-            closed: std::sync::OnceLock::new(),
+            edges: std::sync::OnceLock::new(),
             mesh: Arc::new(mesh),
             specular,
         }
