@@ -321,16 +321,6 @@ impl SourceCamera {
         }
     }
 
-    /// The ray of texel `(i, j)`: its point at displacement `depth_near` and a
-    /// direction whose component along `f` is 1, so that the ray's parameter is the
-    /// displacement past `depth_near`.
-    #[inline]
-    pub fn texel_ray(&self, i: u32, j: u32) -> (Vec3, Vec3) {
-        let q = self.texel_origin(i, j);
-        let direction = self.ray_direction(q);
-        (q + direction * self.depth_near, direction)
-    }
-
     /// The centre of the image plane (`t = 0`).
     pub fn plane_centre(&self) -> Vec3 {
         self.origin + self.a * (self.width as f32 * 0.5) + self.b * (self.height as f32 * 0.5)
@@ -709,11 +699,15 @@ mod tests {
                 c.point(u, v, t)
             );
         }
-        // A texel's ray is scaled to 1 along `f`, from its point at `depth_near`.
-        let (start, direction) = c.texel_ray(10, 20);
-        assert!((direction.dot(c.f) - 1.0).abs() < 1e-5);
-        assert!((start + direction * 0.7).abs_diff_eq(c.point(10.5, 20.5, c.depth_near + 0.7), 1e-5));
-        assert!(direction.normalize().abs_diff_eq((start - eye).normalize(), 1e-5));
+        // A texel's point moves along the ray from the centre, `t` its displacement
+        // along `f`.
+        let (start, further) = (c.point(10.5, 20.5, 0.0), c.point(10.5, 20.5, 0.7));
+        assert!(((further - start).dot(c.f) - 0.7).abs() < 1e-5);
+        assert!(
+            (further - start)
+                .normalize()
+                .abs_diff_eq((start - eye).normalize(), 1e-5)
+        );
         // Texels grow with the distance from the centre; an orthographic one does not.
         assert!((c.texel_size_at(h) - 2.0 * c.texel_size_at(0.0)).abs() < 1e-5);
         let parallel =

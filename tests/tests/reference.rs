@@ -178,8 +178,7 @@ fn a_bad_output_path_fails_before_the_work_and_leaves_nothing() {
 #[test]
 fn each_pixel_shows_the_object_the_oracle_finds() {
     use glam::Vec3;
-    use relief_core::{camera::Camera, frame::NO_OBJECT, scene::Scene};
-    use relief_tests::oracle::nearest_hit;
+    use relief_core::{camera::Camera, scene::Scene};
     use relief_trace::{SceneTracer, render_reference};
 
     let dir = scratch("reference-objects");
@@ -212,7 +211,22 @@ fn each_pixel_shows_the_object_the_oracle_finds() {
         90,
     )
     .unwrap();
-    let frame = render_reference(&SceneTracer::new(&scene), &camera, 1);
+    let tracer = SceneTracer::new(&scene);
+    // (With 3×3 samples the pixel's object is its middle sample's: the centre ray's.)
+    for samples in [1, 3] {
+        each_pixel_object_matches(&scene, &render_reference(&tracer, &camera, samples), &camera);
+    }
+}
+
+/// Every pixel of `frame` names the object the oracle's centre ray finds (see
+/// [`each_pixel_shows_the_object_the_oracle_finds`]).
+fn each_pixel_object_matches(
+    scene: &relief_core::scene::Scene,
+    frame: &relief_core::frame::Frame,
+    camera: &relief_core::camera::Camera,
+) {
+    use relief_core::frame::NO_OBJECT;
+    use relief_tests::oracle::nearest_hit;
     let (mut objects_seen, mut differ) = ([0usize; 3], Vec::new());
     for y in 0..camera.height {
         for x in 0..camera.width {

@@ -107,12 +107,15 @@ pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32
 /// requests as many: the band, not the gaps, retired the textures.) The turns are where
 /// the warp stops being the object's near side, whatever the tolerance.
 pub(super) fn may_show(grade: &Grade, turn: f32, partnered: bool, margin: f32, tolerance: f32) -> bool {
-    let (band, turn_limit) = match partnered {
-        false => (LONE_BAND, LONE_MAX_TURN),
-        true => (PARTNERED_BAND, MAX_TURN),
-    };
-    let band = band * tolerance / DEFAULT_TOLERANCE;
-    grade.band <= margin * band && turn <= margin * turn_limit
+    let turn_limit = if partnered { MAX_TURN } else { LONE_MAX_TURN };
+    grade.band <= margin * band_limit(partnered, tolerance) && turn <= margin * turn_limit
+}
+
+/// The widest band past its rim a texture may leave open, alone or `partnered`, at
+/// `tolerance` ([`may_show`]).
+pub(super) fn band_limit(partnered: bool, tolerance: f32) -> f32 {
+    let band = if partnered { PARTNERED_BAND } else { LONE_BAND };
+    band * tolerance / DEFAULT_TOLERANCE
 }
 
 /// Which of an object's held textures (graded `grades` at the eye, `turn(i)` radians
@@ -257,7 +260,9 @@ impl Manager {
     ) -> Option<(usize, usize)> {
         let held = &self.objects[k].held;
         let (from, eye) = (held[shown].eye - centre, camera.eye - centre);
-        if from.angle_between(eye) < PARTNER_FROM && grades[shown].band <= LONE_BAND {
+        // (Wanted where the texture could not be shown alone: as `may_show` rules.)
+        if from.angle_between(eye) < PARTNER_FROM && grades[shown].band <= band_limit(false, self.tolerance())
+        {
             return None;
         }
         held.iter()

@@ -15,7 +15,6 @@ use glam::Vec3;
 use relief_core::camera::Camera;
 use relief_core::relief::{DepthBits, SourceCamera, SourceProjection};
 use relief_core::scene::SceneObject;
-use relief_render::impostor::Faces;
 use relief_render::validity::schaufler::resolution_for;
 
 pub use relief_render::geometry::{CHEAP_TRIANGLES, NEAR_MARGIN};
@@ -134,7 +133,7 @@ pub const TEXTURE_LADDER: [u32; 9] = [32, 48, 64, 88, 128, 184, 256, 360, 512];
 pub const REQUESTED_DEPTH_BITS: DepthBits = DepthBits::Eight;
 
 /// The projection a texture of `object` is asked in for `eye`. From the eye itself
-/// for open surfaces (leaves, sheets — [`Faces::Both`]): it holds the leaves that
+/// for open surfaces (leaves, sheets — [`SHEET_RIM_SHARE`]): it holds the leaves that
 /// parallel rays graze edge-on (the tree at its texture's own eye: 24–25 dB against
 /// exact geometry's 26–29, where an orthographic texture scores 12–16; from an eye
 /// moved by 3–10 % of its distance, 15–20 dB against 11.5–16). Orthographic for closed
@@ -147,7 +146,7 @@ pub const REQUESTED_DEPTH_BITS: DepthBits = DepthBits::Eight;
 /// ([`MAX_PERSPECTIVE_TANGENT`](relief_core::relief::MAX_PERSPECTIVE_TANGENT)), and for
 /// a solid with a few holes, whose rim is under [`SHEET_RIM_SHARE`] of its edges.
 pub fn projection_for(object: &SceneObject, eye: Vec3) -> SourceProjection {
-    let sheets = Faces::of(object) == Faces::Both && object.edge_census().rim_share > SHEET_RIM_SHARE;
+    let sheets = object.edge_census().rim_share > SHEET_RIM_SHARE;
     if sheets && SourceCamera::facing(eye, &object.bounds, 1, 1, SourceProjection::Perspective).is_ok() {
         SourceProjection::Perspective
     } else {
@@ -157,11 +156,12 @@ pub fn projection_for(object: &SceneObject, eye: Vec3) -> SourceProjection {
 
 /// An open mesh is taken for leaves or sheets, and its textures asked in perspective
 /// ([`projection_for`]), when more than this share of its edges bound one triangle
-/// only. The tree's rim is 67 % of its edges; the rock's (open underneath) 0.5 %, the
-/// scanned bunny's (a few holes) 0.2 %: orthographic, they came 0.7–1.2 dB and 0.6 dB
-/// nearer geometry's median in the demo than in perspective, and their worst frames
-/// 2.5–3 dB and 5 dB nearer.
-pub const SHEET_RIM_SHARE: f32 = 0.2;
+/// only. The tree's rim is 67 % of its edges; the rock's (its seams unwelded) 0.5 %,
+/// the scanned bunny's (a few holes) 0.2 %: orthographic, they came 0.7–1.2 dB and
+/// 0.6 dB nearer geometry's median in the demo than in perspective, and their worst
+/// frames 2.5–3 dB and 5 dB nearer. A sheet of N × N cells has a rim of about 4/(3N)
+/// of its edges: one cut finer than about 27 × 27 cells counts as a solid here.
+pub const SHEET_RIM_SHARE: f32 = 0.05;
 
 /// The texel, in pixels' angles, asked for and shown where the texture stays within
 /// [`FINE_TEXEL_MAX_EDGE`]: a texel of a pixel

@@ -161,6 +161,11 @@ pub fn trace_texels(
     Ok(covered.into_iter().filter(|&c| c).count())
 }
 
+/// How far before its image plane (and past its far depth) a texture's rays search, as
+/// a share of its depth span: the plane touches the object's bounds, and a surface
+/// lying in it must not be lost to rounding.
+const PLANE_MARGIN: f32 = 1e-4;
+
 /// A texture's rays, one per texel, traced a block at a time as one beam.
 struct TexelRays {
     camera: SourceCamera,
@@ -181,15 +186,14 @@ impl TexelRays {
         let camera =
             SourceCamera::facing(eye, &target.object.bounds, size, size, projection).map_err(error)?;
         let span = camera.depth_far - camera.depth_near;
-        // The plane touches the bounds; start a little before it so surfaces lying in it
-        // are not lost to rounding.
-        let margin = span * 1e-4;
+        let margin = span * PLANE_MARGIN;
         let (t_min, t_max) = (-margin, span + margin);
         let (origin, a, b, f) = (camera.origin, camera.a, camera.b, camera.f);
+        // (Rays start at `depth_near`, 0 for every camera `facing` makes.)
+        let start = origin + f * camera.depth_near;
         let beam = match camera.centre {
-            // (Rays start at `depth_near`, 0 for every camera `facing` makes.)
-            None => PlaneRays::parallel(origin + f * camera.depth_near, a, b, f, t_min, t_max),
-            Some(centre) => PlaneRays::from_centre(centre, origin, a, b, f, t_min, t_max),
+            None => PlaneRays::parallel(start, a, b, f, t_min, t_max),
+            Some(centre) => PlaneRays::from_centre(centre, start, a, b, f, t_min, t_max),
         }
         .ok_or(error(FacingError::OutOfRange(eye)))?;
         Ok(TexelRays { camera, beam })

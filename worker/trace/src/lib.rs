@@ -5,10 +5,10 @@
 //! # Brief overview
 //!
 //! The principal type is [`ObjectTracer`](tracer::ObjectTracer): one object and the
-//! [`Bvh`](bvh::Bvh) over its mesh, ready for rays. [`bake`](fn@bake) casts one orthographic ray
-//! per texel from it into a [`ReliefTexture`](relief_core::relief::ReliefTexture); a
-//! [`SceneTracer`] holds every object of a scene for [`render_reference`], one or
-//! N×N perspective rays per pixel.
+//! [`Bvh`](bvh::Bvh) over its mesh, ready for rays. [`bake`](fn@bake) casts one ray per
+//! texel from it (parallel, or from the eye) into a
+//! [`ReliefTexture`](relief_core::relief::ReliefTexture); a [`SceneTracer`] holds every
+//! object of a scene for [`render_reference`], one or N×N perspective rays per pixel.
 //!
 //! ```
 //! use glam::Vec3;
@@ -29,9 +29,9 @@
 //! ```
 //!
 //! - [`bvh`] — bounding-volume hierarchy over one mesh: binned-SAH build (parallel),
-//!   closest-hit traversal of single rays, and of a block of a texture's rays as one
-//!   beam ([`PlaneRays`](bvh::PlaneRays)) for bakes (both checked against an
-//!   independent ray caster in `tests/tests/bvh_oracle.rs`).
+//!   closest-hit traversal of single rays, and of a block of an image plane's rays as
+//!   one beam ([`PlaneRays`](bvh::PlaneRays)) for bakes and references (both checked
+//!   against an independent ray caster in `tests/tests/bvh_oracle.rs`).
 //! - [`tracer`] — a scene ready for ray casting: one BVH per object.
 //! - [`tiles`] — the one way images are split across threads.
 //! - [`bake`](mod@bake) — the relief texture of one object for an eye.

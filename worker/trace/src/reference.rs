@@ -95,12 +95,12 @@ type Sample = Option<(usize, Hit, Vec3)>;
 
 impl<'a> SampleGrid<'a> {
     fn new(tracer: &SceneTracer, camera: &'a Camera, n: u32) -> Self {
-        let (w, h) = (camera.width as f32, camera.height as f32);
+        let h = camera.height as f32;
         let tan_half = camera.tan_half_fov();
         // `Camera::ray` at pixel position (0, 0), and per fine cell.
-        let origin = camera.eye + camera.ray(0.0, 0.0);
-        let a = camera.right * (2.0 * tan_half * w / h / w / n as f32);
-        let b = -camera.up * (2.0 * tan_half / h / n as f32);
+        let origin = camera.eye + camera.ray(0.0, 0.0) * PLANE_DEPTH;
+        let a = camera.ray_x_step() * (PLANE_DEPTH / n as f32);
+        let b = -camera.up * (2.0 * tan_half / h * PLANE_DEPTH / n as f32);
         let depths: Vec<(f32, f32)> = tracer
             .objects
             .iter()
@@ -117,15 +117,20 @@ impl<'a> SampleGrid<'a> {
             .iter()
             .zip(&depths)
             .map(|(o, &(near, far))| {
-                // (`t` is the depth past the plane at depth 1.)
-                let t_max = (far - 1.0) * (1.0 + BEAM_DEPTH_MARGIN) + BEAM_DEPTH_MARGIN;
+                // (`t` is the depth past the plane.)
+                let t_max = (far - PLANE_DEPTH) * (1.0 + BEAM_DEPTH_MARGIN) + BEAM_DEPTH_MARGIN;
                 let fine_enough = || {
                     let samples = footprint_pixels(camera, &o.object.bounds) * (n * n) as f32;
                     o.object.mesh.triangle_count() as f32 <= BEAM_MAX_TRIANGLES_PER_SAMPLE * samples.max(1.0)
                 };
-                (near > 0.0 && far.is_finite() && fine_enough())
-                    .then(|| PlaneRays::from_centre(camera.eye, origin, a, b, camera.forward, -1.0, t_max))
-                    .flatten()
+                (near > 0.0
+                    && far.is_finite()
+                    && within_beam_tangent(camera, &o.object.bounds)
+                    && fine_enough())
+                .then(|| {
+                    PlaneRays::from_centre(camera.eye, origin, a, b, camera.forward, -PLANE_DEPTH, t_max)
+                })
+                .flatten()
             })
             .collect();
         SampleGrid {
@@ -230,21 +235,17 @@ impl<'a> SampleGrid<'a> {
 /// for bounds wholly before the eye.
 fn footprint_pixels(camera: &Camera, bounds: &relief_core::bounds::Aabb) -> f32 {
     let (w, h) = (camera.width as f32, camera.height as f32);
-    let tan_half = camera.tan_half_fov();
+    let projection = camera.projection();
     let (mut lo, mut hi) = (
         glam::Vec2::splat(f32::INFINITY),
         glam::Vec2::splat(f32::NEG_INFINITY),
     );
     for corner in bounds.corners() {
-        let v = camera.to_view(corner);
-        let pixel = glam::Vec2::new(
-            (v.x / v.z / (tan_half * w / h) + 1.0) * 0.5 * w,
-            (1.0 - v.y / v.z / tan_half) * 0.5 * h,
-        );
+        let pixel = glam::Vec2::from(projection.view_to_pixel(camera.to_view(corner)));
         (lo, hi) = (lo.min(pixel), hi.max(pixel));
     }
     let (lo, hi) = (lo.max(glam::Vec2::ZERO), hi.min(glam::Vec2::new(w, h)));
-    ((hi.x - lo.x).max(0.0) * (hi.y - lo.y).max(0.0)).max(0.0)
+    (hi.x - lo.x).max(0.0) * (hi.y - lo.y).max(0.0)
 }
 
 /// Beams pay where an object's triangles are few beside the samples it spans: a beam
@@ -253,6 +254,25 @@ fn footprint_pixels(camera: &Camera, bounds: &relief_core::bounds::Aabb) -> f32 
 /// 1 sample a pixel, the default scene's million-triangle rock from afar was slower
 /// as beams.
 const BEAM_MAX_TRIANGLES_PER_SAMPLE: f32 = 4.0;
+
+/// Whether all of `bounds` (wholly before the eye) lies within
+/// [`BEAM_MAX_TANGENT`] of the view axis.
+fn within_beam_tangent(camera: &Camera, bounds: &relief_core::bounds::Aabb) -> bool {
+    bounds.corners().iter().all(|&corner| {
+        let v = camera.to_view(corner);
+        v.x.abs().max(v.y.abs()) <= BEAM_MAX_TANGENT * v.z
+    })
+}
+
+/// The widest a reference beam may see an object: the tangent of the largest angle
+/// between the view axis and a ray to its bounds (about 84°). Nearer the eye's plane a
+/// vertex projects so far out on the plane at depth 1 that its edge functions lose the
+/// texel; such an object is cast ray by ray.
+const BEAM_MAX_TANGENT: f32 = 10.0;
+
+/// The view depth of the plane a reference's beams are cast through: where
+/// [`Camera::ray`] reaches.
+const PLANE_DEPTH: f32 = 1.0;
 
 /// Relative margin on an object's far depth, for its beams' `t_max`: no hit on its
 /// bounds' far side is lost to rounding.

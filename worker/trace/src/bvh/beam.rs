@@ -1,6 +1,7 @@
-//! Beam traversal: a block of a texture's rays through the tree at once.
+//! Beam traversal: a block of an image plane's rays through the tree at once.
 //!
-//! A bake casts one ray through each texel centre of the texture's image plane: all
+//! A bake casts one ray through each texel centre of the texture's image plane (and a
+//! reference frame one through each sample of its pixels, from the eye): all
 //! along `f` (orthographic), or all from a centre of projection `C` (perspective). In
 //! the plane's own coordinates — `u` and `v` along the texel axes `a` and `b`, in
 //! texels — a ray is a point `(i + ½, j + ½)`, and a triangle is hit where its
@@ -29,7 +30,7 @@
 
 use glam::{Mat3, Vec3, Vec4};
 
-use super::{Bvh, COUNT_SHIFT, FIRST_MASK, Hit, LEAF, STACK, leaf_range};
+use super::{Bvh, FIRST_MASK, Hit, LEAF, STACK, children_farthest_first, leaf_range};
 use crate::prefetch::prefetch_lines;
 use crate::tiles::{Block, TILE};
 
@@ -41,7 +42,11 @@ const DEPTH_SLACK: f32 = 16.0 * f32::EPSILON;
 /// division that projects a vertex: a hundredth of a texel or so at the plane.
 const PERSPECTIVE_SLACK: f32 = 1e-5;
 
-/// The rays of a texture's image plane, one through each texel centre
+/// How far from square to `f` (cosine) the texel axes of a perspective beam may be:
+/// its planes through the centre take `f` for the plane's normal.
+const SQUARE_TOLERANCE: f32 = 1e-4;
+
+/// The rays of an image plane (a texture's, or a reference frame's samples), one through each texel centre
 /// `origin + a·(i + ½) + b·(j + ½)`: along `f`, or from a centre of projection. A ray's
 /// parameter `t` is its displacement along `f` past the plane (its direction has
 /// component 1 along `f`), searched in `[t_min, t_max)`.
@@ -105,7 +110,8 @@ impl PlaneRays {
         let mut rays = Self::parallel(origin, a, b, f, t_min, t_max)?;
         let f = f.normalize_or_zero();
         let h = (origin - centre).dot(f);
-        let square = a.dot(f).abs() <= 1e-4 * a.length() && b.dot(f).abs() <= 1e-4 * b.length();
+        let square = a.dot(f).abs() <= SQUARE_TOLERANCE * a.length()
+            && b.dot(f).abs() <= SQUARE_TOLERANCE * b.length();
         if !(centre.is_finite() && h.is_normal() && h > 0.0 && square) {
             return None;
         }
@@ -303,38 +309,18 @@ impl Bvh {
                 inside &= (t_lo.cmple(Vec4::splat(state.far + slack))
                     & t_hi.cmpge(Vec4::splat(rays.t_min - slack)))
                 .bitmask();
-                let mut mask = inside;
-                let t_lo = t_lo.to_array();
-                let mut children = [(0u32, 0f32); 4];
-                let mut n = 0;
-                while mask != 0 {
-                    let lane = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    let count = node.count[lane];
-                    let child = if count == 0 {
-                        node.child[lane]
-                    } else {
-                        LEAF | count << COUNT_SHIFT | node.child[lane]
-                    };
-                    children[n] = (child, t_lo[lane]);
-                    n += 1;
+                let (children, n) = children_farthest_first(node, inside, t_lo.to_array());
+                let mut next = None;
+                for &(child, t_near) in &children[..n] {
                     // A beam visits most children it enters, soon: start their fetches
                     // now, so the misses overlap instead of following one another.
-                    if count == 0 {
-                        prefetch_lines(std::slice::from_ref(&self.nodes[node.child[lane] as usize]));
+                    if child & LEAF != 0 {
+                        prefetch_lines(&self.triangles[leaf_range(child)]);
                     } else {
-                        let first = node.child[lane] as usize;
-                        prefetch_lines(&self.triangles[first..first + count as usize]);
+                        prefetch_lines(std::slice::from_ref(&self.nodes[child as usize]));
                     }
-                }
-                // Nearest child next; the others onto the stack, farthest first.
-                let children = &mut children[..n];
-                if n > 1 {
-                    children.sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
-                }
-                let mut next = None;
-                for &child in children.iter() {
-                    if let Some(pending) = next.replace(child) {
+                    // Nearest child next; the others onto the stack, farthest first.
+                    if let Some(pending) = next.replace((child, t_near)) {
                         stack[depth] = pending;
                         depth += 1;
                     }
@@ -431,8 +417,10 @@ impl Bvh {
                         Some(inv_d) => {
                             let (q0, q1, q2) = ((1.0 - w1 - w2) * inv_d[0], w1 * inv_d[1], w2 * inv_d[2]);
                             let inv = q0 + q1 + q2;
-                            let c = rays.centre.map_or(0.0, |c| c.h);
-                            (1.0 / inv - c, q1 / inv, q2 / inv)
+                            // t = 1/Σ(wᵢ/dᵢ) − h, written Σ(wᵢtᵢ/dᵢ)/Σ(wᵢ/dᵢ) (as Σwᵢ = 1 and
+                            // tᵢ = dᵢ − h): no cancellation when `h` dwarfs the depths.
+                            let t = (q0 * p.t[0] + q1 * p.t[1] + q2 * p.t[2]) / inv;
+                            (t, q1 / inv, q2 / inv)
                         }
                     };
                     let texel = ((j - block.y0) * block.width + (i - block.x0)) as usize;

@@ -8,7 +8,7 @@
 //! Two traversals read it: one ray at a time ([`Bvh::intersect_batch`], several
 //! interleaved), for rays from anywhere; and a block of a texture's rays — parallel, or
 //! from its centre of projection — as one beam ([`Bvh::intersect_block`], `beam.rs`),
-//! for bakes.
+//! for bakes and reference frames.
 
 mod beam;
 mod build;
@@ -79,6 +79,31 @@ const FIRST_MASK: u32 = (1 << COUNT_SHIFT) - 1;
 fn leaf_range(item: u32) -> std::ops::Range<usize> {
     let first = (item & FIRST_MASK) as usize;
     first..first + (item >> COUNT_SHIFT & COUNT_MASK) as usize
+}
+
+/// The children of `node` whose lanes `mask` sets, as traversal items (a node index, or
+/// a leaf packed by [`LEAF`]) with their near distance from `near`, farthest first: the
+/// order to push them in, so that the nearest is visited first.
+#[inline(always)]
+fn children_farthest_first(node: &Node4, mut mask: u32, near: [f32; 4]) -> ([(u32, f32); 4], usize) {
+    let mut children = [(0u32, 0f32); 4];
+    let mut n = 0;
+    while mask != 0 {
+        let lane = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        let count = node.count[lane];
+        let child = if count == 0 {
+            node.child[lane]
+        } else {
+            LEAF | count << COUNT_SHIFT | node.child[lane]
+        };
+        children[n] = (child, near[lane]);
+        n += 1;
+    }
+    if n > 1 {
+        children[..n].sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
+    }
+    (children, n)
 }
 
 /// Deepest binary tree the builder makes; the 4-wide traversal stack holds three
@@ -285,28 +310,10 @@ impl Traversal {
                 .max(az.min(bz))
                 .max(Vec4::splat(self.t_min));
             let far = (ax.max(bx).min(ay.max(by)).min(az.max(bz)) * SLAB_WIDEN).min(Vec4::splat(self.best_t));
-            let mut mask = near.cmple(far).bitmask() & node.lanes;
-            let near = near.to_array();
-            let mut children = [(0u32, 0f32); 4];
-            let mut n = 0;
-            while mask != 0 {
-                let lane = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                let count = node.count[lane];
-                let child = if count == 0 {
-                    node.child[lane]
-                } else {
-                    LEAF | count << COUNT_SHIFT | node.child[lane]
-                };
-                children[n] = (child, near[lane]);
-                n += 1;
-            }
+            let mask = near.cmple(far).bitmask() & node.lanes;
+            let (children, n) = children_farthest_first(node, mask, near.to_array());
             // Nearest child next; the others onto the stack, farthest first.
-            let children = &mut children[..n];
-            if n > 1 {
-                children.sort_unstable_by(|a, b| b.1.total_cmp(&a.1));
-            }
-            for &child in children.iter() {
+            for &child in &children[..n] {
                 if let Some(pending) = next.replace(child) {
                     self.stack[self.depth] = pending;
                     self.depth += 1;

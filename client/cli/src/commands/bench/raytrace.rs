@@ -119,7 +119,7 @@ pub fn run(args: RaytraceArgs) -> Result<()> {
         rays_per_s_1t: rays / (bake_ms_1t * 1e-3),
         rays_per_s_mt: rays / (bake_ms_mt * 1e-3),
         trace_ms,
-        shade_ms: bake_ms_mt - trace_ms,
+        shade_ms: (bake_ms_mt - trace_ms).max(0.0),
         trace_rays_per_s: rays / (trace_ms * 1e-3),
         covered,
         threads: rayon::current_num_threads(),
