@@ -12,7 +12,7 @@ use relief_core::generators::Generator;
 use relief_core::mesh::{Material, Mesh};
 use relief_tests::oracle::{nearest_hit, ray_triangle};
 use relief_trace::bvh::{Bvh, Hit, PlaneRays};
-use relief_trace::tiles::{Block, TILE};
+use relief_trace::tiles::Block;
 
 /// A small deterministic generator (xorshift64*).
 struct Rng(u64);
@@ -96,6 +96,18 @@ fn check_hit(mesh: &Mesh, got: Option<Hit>, origin: Vec3, direction: Vec3, t_max
     }
 }
 
+/// The knot the tests trace: a tube of 96 × 12 segments.
+fn test_knot() -> Mesh {
+    Generator::Knot {
+        p: 2,
+        q: 3,
+        segments: 96,
+        sides: 12,
+        tube_radius: 0.25,
+    }
+    .build()
+}
+
 /// Random triangles in a cube, some tiny, some degenerate, some sharing corners.
 fn random_mesh(rng: &mut Rng, count: usize) -> Mesh {
     let mut positions = Vec::new();
@@ -163,17 +175,7 @@ fn generated_meshes_match_the_oracle() {
     // Each with the share of rays that must hit for the test to mean something (the
     // tree's leaves are sparse).
     let meshes = [
-        (
-            Generator::Knot {
-                p: 2,
-                q: 3,
-                segments: 96,
-                sides: 12,
-                tube_radius: 0.25,
-            }
-            .build(),
-            10,
-        ),
+        (test_knot(), 10),
         (
             Generator::Tree {
                 seed: 3,
@@ -224,7 +226,7 @@ fn parallel_frame(mesh: &Mesh, f: Vec3, texel: f32, size: u32) -> (Vec3, Vec3, V
     (origin, a, b, f)
 }
 
-/// Every texel of a `size²` texture traced in beams of [`TILE`]², parallel or from a
+/// Every texel of a `size²` texture traced in beams of [`Block::tiles`], parallel or from a
 /// centre set back from the plane by three of the mesh's radii, then each checked
 /// against the oracle as its own ray.
 fn check_beams(
@@ -245,27 +247,25 @@ fn check_beams(
     }
     .expect("a frame spanning space");
     let mut hits = Vec::new();
-    for y0 in (0..size).step_by(TILE) {
-        for x0 in (0..size).step_by(TILE) {
-            let block = Block {
-                x0,
-                y0,
-                width: (size - x0).min(TILE as u32),
-                height: (size - y0).min(TILE as u32),
+    let texture = Block {
+        x0: 0,
+        y0: 0,
+        width: size,
+        height: size,
+    };
+    for block in texture.tiles() {
+        hits.clear();
+        hits.resize((block.width * block.height) as usize, None);
+        bvh.intersect_block(&rays, block, &mut hits);
+        for ((i, j), &hit) in block.pixels().zip(&hits) {
+            let start = origin + a * (i as f32 + 0.5) + b * (j as f32 + 0.5);
+            // (From the centre: scaled to 1 along `f`, so `t` is the displacement.)
+            let direction = if perspective {
+                (start - centre) / (3.0 * radius)
+            } else {
+                f
             };
-            hits.clear();
-            hits.resize((block.width * block.height) as usize, None);
-            bvh.intersect_block(&rays, block, &mut hits);
-            for ((i, j), &hit) in block.pixels().zip(&hits) {
-                let start = origin + a * (i as f32 + 0.5) + b * (j as f32 + 0.5);
-                // (From the centre: scaled to 1 along `f`, so `t` is the displacement.)
-                let direction = if perspective {
-                    (start - centre) / (3.0 * radius)
-                } else {
-                    f
-                };
-                check_hit(mesh, hit, start, direction, t_max, tally);
-            }
+            check_hit(mesh, hit, start, direction, t_max, tally);
         }
     }
 }
@@ -305,17 +305,7 @@ fn beams_match_the_oracle() {
         }
         assert!(tally.grazing <= tally.rays / 1000, "{count} triangles: {tally:?}");
     }
-    for mesh in [
-        Generator::Knot {
-            p: 2,
-            q: 3,
-            segments: 96,
-            sides: 12,
-            tube_radius: 0.25,
-        }
-        .build(),
-        Generator::Sphere { subdivisions: 3 }.build(),
-    ] {
+    for mesh in [test_knot(), Generator::Sphere { subdivisions: 3 }.build()] {
         let bvh = Bvh::build(&mesh);
         let mut tally = Tally::default();
         let texel = mesh.bounds().extent().length() / 64.0;

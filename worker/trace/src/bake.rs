@@ -15,7 +15,7 @@ use relief_core::shading::to_rgb8;
 
 use crate::bvh::{Bvh, Hit, PlaneRays};
 use crate::prefetch::prefetch_lines;
-use crate::tiles::{Block, TILE, band_blocks, par_fill_blocks};
+use crate::tiles::{Block, TILE, band_blocks};
 use crate::tracer::ObjectTracer;
 
 /// Why a texture could not be baked.
@@ -152,13 +152,24 @@ pub fn trace_texels(
     projection: SourceProjection,
 ) -> Result<usize, BakeError> {
     let rays = TexelRays::new(target, eye, size, projection)?;
-    let mut covered = vec![false; size as usize * size as usize];
-    par_fill_blocks(size, size, &mut covered, |block, values| {
-        let mut hits = Vec::new();
-        rays.trace(&target.bvh, block, &mut hits);
-        values.extend(hits.iter().map(Option::is_some));
-    });
-    Ok(covered.into_iter().filter(|&c| c).count())
+    // The bake's bands and blocks, each core with one buffer of hits, as the bake's.
+    let bands = (size as usize).div_ceil(TILE);
+    let covered = (0..bands)
+        .into_par_iter()
+        .map_init(
+            || Vec::with_capacity(TILE * TILE),
+            |hits, band| {
+                let band_height = TILE.min(size as usize - band * TILE);
+                band_blocks(size, band, band_height)
+                    .map(|block| {
+                        rays.trace(&target.bvh, block, hits);
+                        hits.iter().flatten().count()
+                    })
+                    .sum::<usize>()
+            },
+        )
+        .sum();
+    Ok(covered)
 }
 
 /// How far before its image plane (and past its far depth) a texture's rays search, as

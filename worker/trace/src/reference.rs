@@ -15,7 +15,7 @@ use relief_core::frame::{Frame, NO_OBJECT};
 use relief_core::shading::{SurfacePoint, to_rgb8};
 
 use crate::bvh::{Hit, PlaneRays, Ray};
-use crate::tiles::{Block, TILE, par_fill_blocks};
+use crate::tiles::{Block, par_fill_blocks};
 use crate::tracer::SceneTracer;
 
 /// Rays per pixel edge of the anti-aliased reference the reports and the demo compare
@@ -83,10 +83,18 @@ pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> 
 struct SampleGrid<'a> {
     camera: &'a Camera,
     n: u32,
-    /// Per object: its beams, or `None` to cast its rays one at a time — or to skip it,
-    /// wholly behind the eye (`behind`).
-    beams: Vec<Option<PlaneRays>>,
-    behind: Vec<bool>,
+    /// How each object is traced.
+    tracing: Vec<Tracing>,
+}
+
+/// How a reference traces one object.
+enum Tracing {
+    /// Block by block, as beams from the eye.
+    Beams(PlaneRays),
+    /// One ray at a time.
+    RayByRay,
+    /// Not at all: it lies wholly behind the eye.
+    Behind,
 }
 
 /// A sample's nearest hit: the object, the hit (`t` in view depth, so that the point
@@ -112,7 +120,7 @@ impl<'a> SampleGrid<'a> {
                 (near, far)
             })
             .collect();
-        let beams = tracer
+        let tracing = tracer
             .objects
             .iter()
             .zip(&depths)
@@ -123,22 +131,22 @@ impl<'a> SampleGrid<'a> {
                     let samples = footprint_pixels(camera, &o.object.bounds) * (n * n) as f32;
                     o.object.mesh.triangle_count() as f32 <= BEAM_MAX_TRIANGLES_PER_SAMPLE * samples.max(1.0)
                 };
-                (near > 0.0
+                let beams = (near > 0.0
                     && far.is_finite()
                     && within_beam_tangent(camera, &o.object.bounds)
                     && fine_enough())
                 .then(|| {
                     PlaneRays::from_centre(camera.eye, origin, a, b, camera.forward, -PLANE_DEPTH, t_max)
                 })
-                .flatten()
+                .flatten();
+                match beams {
+                    Some(beams) => Tracing::Beams(beams),
+                    None if far <= 0.0 => Tracing::Behind,
+                    None => Tracing::RayByRay,
+                }
             })
             .collect();
-        SampleGrid {
-            camera,
-            n,
-            beams,
-            behind: depths.iter().map(|&(_, far)| far <= 0.0).collect(),
-        }
+        SampleGrid { camera, n, tracing }
     }
 
     /// The nearest hit of each sample of the pixels of `block`, pixel by pixel (in
@@ -169,37 +177,27 @@ impl<'a> SampleGrid<'a> {
             }
         };
         let mut hits = Vec::new();
-        for (k, o) in tracer.objects.iter().enumerate() {
-            if self.behind[k] {
-                continue;
-            }
-            match &self.beams[k] {
-                Some(beam) => {
-                    for y0 in (fine.y0..fine.y0 + fine.height).step_by(TILE) {
-                        for x0 in (fine.x0..fine.x0 + fine.width).step_by(TILE) {
-                            let sub = Block {
-                                x0,
-                                y0,
-                                width: (TILE as u32).min(fine.x0 + fine.width - x0),
-                                height: (TILE as u32).min(fine.y0 + fine.height - y0),
-                            };
-                            hits.clear();
-                            hits.resize((sub.width * sub.height) as usize, None);
-                            o.bvh.intersect_block(beam, sub, &mut hits);
-                            for ((fx, fy), hit) in sub.pixels().zip(&hits) {
-                                if let Some(hit) = hit {
-                                    // Depth past the plane at depth 1 to view depth.
-                                    let hit = Hit {
-                                        t: hit.t + 1.0,
-                                        ..*hit
-                                    };
-                                    keep(index(fx, fy), k, hit, ray_of(fx, fy));
-                                }
+        for ((k, o), tracing) in tracer.objects.iter().enumerate().zip(&self.tracing) {
+            match tracing {
+                Tracing::Behind => {}
+                Tracing::Beams(beam) => {
+                    for sub in fine.tiles() {
+                        hits.clear();
+                        hits.resize((sub.width * sub.height) as usize, None);
+                        o.bvh.intersect_block(beam, sub, &mut hits);
+                        for ((fx, fy), hit) in sub.pixels().zip(&hits) {
+                            if let Some(hit) = hit {
+                                // Depth past the plane to view depth.
+                                let hit = Hit {
+                                    t: hit.t + PLANE_DEPTH,
+                                    ..*hit
+                                };
+                                keep(index(fx, fy), k, hit, ray_of(fx, fy));
                             }
                         }
                     }
                 }
-                None => {
+                Tracing::RayByRay => {
                     let cells: Vec<(u32, u32)> = fine.pixels().collect();
                     let rays: Vec<Ray> = cells
                         .iter()

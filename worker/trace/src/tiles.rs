@@ -22,6 +22,21 @@ impl Block {
         (self.y0..self.y0 + self.height)
             .flat_map(move |y| (self.x0..self.x0 + self.width).map(move |x| (x, y)))
     }
+
+    /// The block cut into blocks of at most `TILE × TILE`, row by row, each row left to
+    /// right.
+    pub fn tiles(self) -> impl Iterator<Item = Block> {
+        let tile = TILE as u32;
+        let (x_end, y_end) = (self.x0 + self.width, self.y0 + self.height);
+        (self.y0..y_end).step_by(TILE).flat_map(move |y0| {
+            (self.x0..x_end).step_by(TILE).map(move |x0| Block {
+                x0,
+                y0,
+                width: tile.min(x_end - x0),
+                height: tile.min(y_end - y0),
+            })
+        })
+    }
 }
 
 /// Fills the row-major `width × height` image `out` block by block: `shade(block,
@@ -59,17 +74,36 @@ where
 /// `width` wide, left to right: how [`par_fill_blocks`] cuts each band, for callers
 /// that fill several planes at once.
 pub fn band_blocks(width: u32, band: usize, band_height: usize) -> impl Iterator<Item = Block> {
-    (0..width).step_by(TILE).map(move |x0| Block {
-        x0,
+    Block {
+        x0: 0,
         y0: (band * TILE) as u32,
-        width: (TILE as u32).min(width - x0),
+        width,
         height: band_height as u32,
-    })
+    }
+    .tiles()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tiles_cover_a_block_once_within_tile() {
+        let block = Block {
+            x0: 5,
+            y0: 3,
+            width: 19,
+            height: 9,
+        };
+        let mut seen: Vec<(u32, u32)> = block.tiles().flat_map(Block::pixels).collect();
+        assert!(
+            block
+                .tiles()
+                .all(|t| t.width as usize <= TILE && t.height as usize <= TILE)
+        );
+        seen.sort_by_key(|&(x, y)| (y, x));
+        assert_eq!(seen, block.pixels().collect::<Vec<_>>());
+    }
 
     #[test]
     fn every_pixel_once() {
