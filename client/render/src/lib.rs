@@ -19,7 +19,8 @@
 //! - [`impostor`] — a relief texture prepared for display (texel connectivity).
 //! - [`pyramid`] — multi-resolution relief textures.
 //! - [`warp`] — the pre-warp (eq. 3-1/3-2) and texture mapping; sprites.
-//! - [`validity`] — Schaufler's sprite and resolution tests; the critical-point error.
+//! - [`validity`] — Schaufler's sprite and resolution tests; the critical-point error;
+//!   the band past a rim; the weight of a texture's edges.
 //!
 //! # Example
 //!

@@ -11,6 +11,7 @@ use relief_core::scene::Scene;
 use relief_render::impostor::Faces;
 use relief_render::pyramid::Pyramid;
 use relief_render::validity::critical::CriticalPoints;
+use relief_render::validity::edges::EdgeError;
 use relief_render::validity::rim::Rim;
 use relief_render::warp::params::WarpParams;
 
@@ -18,18 +19,20 @@ use super::around::angle_between;
 use super::choose::growth;
 use super::messages::{Arrival, Failure};
 use super::policy::{
-    CRITICAL_REGIONS, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, SHED_QUIET,
+    CRITICAL_REGIONS, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, SHED_QUIET, growth_weight,
 };
 use super::{Manager, TextureLifetimes};
 
 /// A texture made ready for the frame loop: its pyramid (with texel connectivity),
-/// critical points, the gaps it shows at its own eye and its rim. Building this takes
-/// milliseconds for big textures, so the texture sources do it on their own threads.
+/// critical points, the gaps it shows at its own eye, its rim and the weight of its
+/// gaps' growth. Building this takes milliseconds for big textures, so the texture
+/// sources do it on their own threads.
 pub struct ReadyTexture {
     pyramid: Pyramid,
     critical: CriticalPoints,
     baseline: Vec<f32>,
     rim: Rim,
+    growth_weight: f32,
     /// When the texture reached the client, before it was made ready.
     arrived: Instant,
 }
@@ -44,9 +47,11 @@ impl ReadyTexture {
             |_| vec![0.0; critical.pairs.len()],
             |params| critical.region_gaps(&params),
         );
+        let pyramid = Pyramid::new(texture, MIN_LEVEL_EDGE).with_faces(faces);
         ReadyTexture {
-            rim: Rim::find(&texture),
-            pyramid: Pyramid::new(texture, MIN_LEVEL_EDGE).with_faces(faces),
+            rim: Rim::find(&pyramid.levels[0].texture),
+            growth_weight: growth_weight(EdgeError::of(&pyramid.levels[0])),
+            pyramid,
             critical,
             baseline,
             arrived,
@@ -69,6 +74,8 @@ pub(super) struct Held {
     pub(super) baseline: Vec<f32>,
     /// Its rim's curvature: the band past the outline it cannot show from a turned eye.
     pub(super) rim: Rim,
+    /// What a pixel of its gaps' growth counts for ([`growth_weight`]).
+    pub(super) growth_weight: f32,
     pub(super) eye: Vec3,
     pub(super) is_final: bool,
     /// When it reached the client, and the last frame it was shown in (as the shown
@@ -131,6 +138,7 @@ impl Manager {
                         critical,
                         baseline,
                         rim,
+                        growth_weight,
                         arrived,
                     } = *texture;
                     if is_final {
@@ -148,6 +156,7 @@ impl Manager {
                         critical,
                         baseline,
                         rim,
+                        growth_weight,
                         is_final,
                         arrived,
                         last_shown: None,

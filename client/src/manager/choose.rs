@@ -42,7 +42,8 @@ pub struct ShownTexture {
     pub distance_ratio: f32,
     /// The level drawn's texel, in pixels' angles.
     pub texel_pixels: f32,
-    /// The growth of the widest gap its warp opens, pixels (the critical-point error).
+    /// The growth of the widest gap its warp opens, pixels (the critical-point error),
+    /// counted [`growth_weight`](super::policy::growth_weight) times over.
     pub growth_pixels: f32,
     /// The band past the texture's rim it cannot show alone, pixels (see
     /// [`Rim::band`](relief_render::validity::rim::Rim::band)).
@@ -54,7 +55,7 @@ pub struct ShownTexture {
 /// How well a held texture serves an eye.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Grade {
-    /// Growth of the widest predicted gap, screen pixels.
+    /// Growth of the widest predicted gap, screen pixels, weighted ([`growth`]).
     pub(super) growth: f32,
     /// The band past its rim it cannot show alone, screen pixels
     /// ([`Rim::band`](relief_render::validity::rim::Rim::band)).
@@ -67,7 +68,8 @@ pub(super) struct Grade {
     pub(super) finer_available: bool,
 }
 
-/// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`.
+/// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`,
+/// counted [`growth_weight`](super::policy::growth_weight) times over.
 pub(super) fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     let texture = &held.pyramid.levels[0].texture;
     let c = &texture.camera;
@@ -84,7 +86,7 @@ pub(super) fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     // widest.)
     let pixels_per_texel =
         c.a.length().max(c.b.length()) * focal / centre.distance(eye).max(f32::MIN_POSITIVE);
-    held.critical.worst_growth(&params, &held.baseline) * pixels_per_texel
+    held.critical.worst_growth(&params, &held.baseline) * pixels_per_texel * held.growth_weight
 }
 
 /// The band (screen pixels) past `held`'s rim that it cannot show alone at `eye`, about

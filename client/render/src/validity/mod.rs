@@ -8,7 +8,10 @@
 //!   new eye opens, predicted from the texture alone, per N×M region.
 //! - [`rim`] — the band past a closed surface's outline that an eye turned from the
 //!   texture's sees and the texture alone cannot show, from its rim's curvature.
+//! - [`edges`] — how much the image changes where the texture's surfaces part: the
+//!   squared colour steps across its edges between surfaces, per texel.
 
 pub mod critical;
+pub mod edges;
 pub mod rim;
 pub mod schaufler;
