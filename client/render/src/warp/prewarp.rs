@@ -21,7 +21,7 @@
 //! whole pixel it lands in grows a silhouette by half a pixel on average where the
 //! pre-warp compresses the surface, at a curved object's rim.) A texel alone produces
 //! the pixel it lands in. Neighbours of different surfaces that part leave a crack
-//! between them, which the deeper of the two fills ([`crack`]). The column pass does
+//! between them, which the deeper of the two fills (`crack`). The column pass does
 //! the same with consecutive samples of a column. The variants differ in what reaches
 //! the column pass (table 8.1):
 //!
