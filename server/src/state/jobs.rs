@@ -65,6 +65,15 @@ impl JobKey {
 /// waits for it (a hung worker's one unanswered stop turned preemption off for good).
 pub const STOP_GRACE: Duration = Duration::from_secs(2);
 
+/// Jobs of at most this many texels may run on a worker beside the jobs filling its
+/// slots, one at a time, for a client with nothing running (`State::express_worker`):
+/// such a bake takes about a millisecond on one core, so it slows the others by that
+/// much, where taking a slot back (`State::preempt_for`) loses the work of the bake
+/// stopped and costs a round trip — and a job taken back once is never taken back
+/// again, so a second client's requests one after another waited, every other one,
+/// for a whole restarted 1024² bake (a 32² request 2.3–15.9× its idle latency).
+pub const EXPRESS_MAX_TEXELS: u32 = 64 * 64;
+
 /// How many times a request's edge a texture that serves it may be: 2 (4× the texels).
 /// A far bigger one would cost a small request's client far more bytes — and, still
 /// being made, far more waiting than a bake of its own.
@@ -137,11 +146,17 @@ impl State {
             let Some((owner, first)) = self.queue.next() else {
                 return;
             };
-            let Some((&worker_id, worker)) = self
-                .workers
-                .iter_mut()
+            let free = (self.workers.iter())
                 .filter(|(_, w)| !w.draining && w.busy() < w.slots)
                 .min_by_key(|(_, w)| w.busy())
+                .map(|(&id, _)| id);
+            let express = free
+                .is_none()
+                .then(|| self.express_worker(&owner, first))
+                .flatten();
+            let Some((worker_id, worker)) = free
+                .or(express)
+                .and_then(|id| Some(id).zip(self.workers.get_mut(&id)))
             else {
                 // (A slot taken back is lent at once: hand it out.)
                 if self.preempt_for(&owner, first) {
@@ -153,6 +168,10 @@ impl State {
             let Some(job) = self.jobs.get_mut(&first.id) else {
                 continue;
             };
+            if express.is_some() {
+                worker.beside.retain(|id| worker.running.contains(id));
+                worker.beside.insert(first.id);
+            }
             let message = pb::ServerMessage {
                 kind: Some(pb::server_message::Kind::Job(job.spec.clone())),
             };
@@ -332,6 +351,23 @@ impl State {
                 self.counters.stalled += 1;
             }
         }
+    }
+
+    /// When no slot is free for `head`, the next job of `owner`: a worker to run it
+    /// beside the jobs filling its slots, if it is needed now, small (at most
+    /// [`EXPRESS_MAX_TEXELS`]), `owner` has nothing running, and the worker no other
+    /// such job — so one client's long bakes hold another's small request neither for
+    /// their length nor for a stop.
+    fn express_worker(&self, owner: &Arc<str>, head: Priority) -> Option<u64> {
+        let small = (self.jobs.get(&head.id))
+            .is_some_and(|job| job.spec.size.saturating_mul(job.spec.size) <= EXPRESS_MAX_TEXELS);
+        if head.predicted || !small || self.queue.running_of(owner) > 0 {
+            return None;
+        }
+        (self.workers.iter())
+            .filter(|(_, w)| !w.draining && w.running_beside() == 0)
+            .min_by_key(|(_, w)| w.busy())
+            .map(|(&id, _)| id)
     }
 
     /// When no slot is free for `head`, the next job of `owner`: if it is needed now

@@ -42,7 +42,7 @@ fn request(scene: ContentHash, id: u64, eye: Vec3, urgency: Urgency) -> Request 
         scene,
         object: "ball".into(),
         eye,
-        size: 16,
+        size: 128,
         depth_bits: DepthBits::Eight,
         urgency,
         client_id: "c".into(),
@@ -391,17 +391,17 @@ fn results_must_be_the_jobs_and_scenes_their_owners() {
     let check = |camera: &SourceCamera, bits: DepthBits, eye: Vec3, is_final: bool| {
         s.check_result(job.job_id, camera, bits, eye, is_final)
     };
-    assert_eq!(check(&framed(16), DepthBits::Eight, eye, true), Ok(()));
+    assert_eq!(check(&framed(128), DepthBits::Eight, eye, true), Ok(()));
     assert_eq!(check(&framed(4), DepthBits::Eight, eye, false), Ok(()));
     let refusals = [
         check(&framed(4), DepthBits::Eight, eye, true),
-        check(&framed(32), DepthBits::Eight, eye, false),
-        check(&framed(16), DepthBits::Sixteen, eye, true),
-        check(&framed(16), DepthBits::Eight, eye + Vec3::X, true),
+        check(&framed(256), DepthBits::Eight, eye, false),
+        check(&framed(128), DepthBits::Sixteen, eye, true),
+        check(&framed(128), DepthBits::Eight, eye + Vec3::X, true),
         check(
             &SourceCamera {
-                origin: framed(16).origin + Vec3::splat(0.01),
-                ..framed(16)
+                origin: framed(128).origin + Vec3::splat(0.01),
+                ..framed(128)
             },
             DepthBits::Eight,
             eye,
@@ -682,6 +682,57 @@ fn a_needed_now_request_takes_a_slot_back_once() {
     s.dispatch();
     assert!(wrx.try_recv().is_err(), "a job was taken back twice");
     assert_eq!(s.stats().jobs_preempted, 1);
+}
+
+/// With no slot free, a small needed-now request of a client with nothing running runs
+/// on a worker beside the job filling its slot — nothing taken back, nothing stopped —
+/// one such job at a time per worker; a predicted one waits, and so does the next of
+/// that client while its first runs. The slot stays the other client's: its next job
+/// takes it when its bake ends, not the one beside. (Fails with `EXPRESS_MAX_TEXELS`
+/// under 32²: the running job is taken back instead; and with the job beside counted
+/// in the slots: the other client's next job takes it back.)
+#[test]
+fn a_small_request_runs_beside_a_full_worker() {
+    let (mut s, hash) = state_with_scene();
+    s.add_owner(hash, &"client-2".into());
+    let (tx, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 1.0, tx.clone());
+    admit_now(&mut s, hash, 5, 5.0, tx.clone());
+    let (wtx, mut wrx) = unbounded_channel();
+    let worker = s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    s.dispatch();
+    let running = next_job(&mut wrx).unwrap();
+    let small = |id: u64, urgency: Urgency| Request {
+        client_id: "b".into(),
+        size: 32,
+        ..request(hash, id, Vec3::new(id as f32, 0.0, 5.0), urgency)
+    };
+    s.admit(
+        &small(2, Urgency::Predicted { in_ms: 10 }),
+        "client-2",
+        tx.clone(),
+    )
+    .unwrap();
+    s.dispatch();
+    assert!(wrx.try_recv().is_err(), "a predicted request ran beside");
+    s.admit(&small(3, Urgency::Now), "client-2", tx.clone()).unwrap();
+    s.admit(&small(4, Urgency::Now), "client-2", tx.clone()).unwrap();
+    s.dispatch();
+    let beside = next_job(&mut wrx).expect("a job, not a stop");
+    assert_eq!(beside.eye.unwrap().x, 3.0);
+    assert!(wrx.try_recv().is_err(), "a second job ran beside");
+    assert_eq!(s.stats().jobs_preempted, 0);
+    assert!(s.holds(worker, running.job_id) && s.holds(worker, beside.job_id));
+    // The slot's bake ends: the slot goes to its client's next job.
+    s.result(running.job_id, pb::ReliefTexture::default(), true, 1);
+    s.dispatch();
+    assert_eq!(next_job(&mut wrx).expect("a job, not a stop").eye.unwrap().x, 5.0);
+    assert_eq!(s.stats().jobs_preempted, 0);
+    // Done, the next of the second client runs beside in turn.
+    s.result(beside.job_id, pb::ReliefTexture::default(), true, 1);
+    s.dispatch();
+    assert_eq!(next_job(&mut wrx).unwrap().eye.unwrap().x, 4.0);
+    assert_eq!(s.stats().jobs_preempted, 0);
 }
 
 /// A worker that never answers a stop (it heartbeats, but hangs on the job) keeps that

@@ -25,6 +25,9 @@ pub(super) struct Worker {
     /// that request has at once, for [`STOP_GRACE`] (a bake stops within a block of
     /// rays: waiting for the worker to say so cost the request a round trip).
     pub(super) lent: HashSet<u64>,
+    /// Jobs it was handed beside the ones filling its slots (see
+    /// `State::express_worker`); those no longer running are dropped at the next.
+    pub(super) beside: HashSet<u64>,
     /// It said it is stopping: no new jobs.
     pub(super) draining: bool,
     pub(super) tx: JobSender,
@@ -33,13 +36,19 @@ pub(super) struct Worker {
 
 impl Worker {
     /// Slots taken: jobs running, and cancelled ones it has not answered for — but
-    /// not a slot lent on within [`STOP_GRACE`] of the stop.
+    /// not a slot lent on within [`STOP_GRACE`] of the stop, nor a job running beside
+    /// its slots.
     pub(super) fn busy(&self) -> usize {
         let now = Instant::now();
         let lent = (self.stopping.iter())
             .filter(|&(id, &told)| self.lent.contains(id) && now.saturating_duration_since(told) < STOP_GRACE)
             .count();
-        self.running.len() + self.stopping.len() - lent
+        self.running.len() + self.stopping.len() - lent - self.running_beside()
+    }
+
+    /// Jobs running beside its slots.
+    pub(super) fn running_beside(&self) -> usize {
+        self.beside.iter().filter(|id| self.running.contains(id)).count()
     }
 }
 
@@ -64,6 +73,7 @@ impl State {
                 running: HashSet::new(),
                 stopping: HashMap::new(),
                 lent: HashSet::new(),
+                beside: HashSet::new(),
                 draining: false,
                 tx,
                 last_seen: Instant::now(),
