@@ -154,9 +154,8 @@ impl State {
                 .is_none()
                 .then(|| self.express_worker(&owner, first))
                 .flatten();
-            let Some((worker_id, worker)) = free
-                .or(express)
-                .and_then(|id| Some(id).zip(self.workers.get_mut(&id)))
+            let chosen = free.or(express);
+            let Some((worker_id, worker)) = chosen.and_then(|id| self.workers.get_mut(&id).map(|w| (id, w)))
             else {
                 // (A slot taken back is lent at once: hand it out.)
                 if self.preempt_for(&owner, first) {
