@@ -334,12 +334,12 @@ async fn a_flood_from_one_client_does_not_starve_another() {
     };
     // (The first request loads the scene on the worker.)
     timed(single.request(at(0)).await.expect("queued")).await;
+    const REPEATS: u64 = 7;
     let mut idle = Vec::new();
     for k in 1..=REPEATS {
         idle.push(timed(single.request(at(k)).await.expect("queued")).await);
     }
     const FLOOD: u64 = 20;
-    const REPEATS: u64 = 7;
     let mut flooding = Vec::new();
     for k in 0..FLOOD {
         let request = pb::ImpostorRequest {
