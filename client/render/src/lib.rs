@@ -59,6 +59,8 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+#[cfg(test)]
+mod fixtures;
 pub mod gbuffer;
 pub mod geometry;
 pub mod impostor;

@@ -89,9 +89,7 @@ impl EdgeError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Vec3;
-    use relief_core::bounds::Aabb;
-    use relief_core::relief::{DepthBits, ReliefTexture, SourceCamera, SourceProjection, encode_normal_rgb8};
+    use crate::fixtures::{PLANE, square_over_plane};
 
     /// Against the definition counted by hand: a plane with a nearer square on it has
     /// its square's outline as edges, each pair stepping from one albedo to the other
@@ -99,28 +97,12 @@ mod tests {
     /// square of the plane's own colour has edges of no step.
     #[test]
     fn edges_are_the_steps_between_surfaces() {
-        let bounds = Aabb::from_points([Vec3::splat(-1.0), Vec3::splat(1.0)]);
-        let eye = Vec3::new(0.0, 0.0, 10.0);
         let n = 16;
-        let camera =
-            SourceCamera::facing(eye, &bounds, n, n, SourceProjection::Orthographic).expect("camera");
-        let texture = |square_albedo: [u8; 3], square_level: u16| {
-            let mut texture = ReliefTexture::empty(camera, DepthBits::Eight, eye);
-            for j in 0..n {
-                for i in 0..n {
-                    let k = texture.index(i, j);
-                    let square = (4..8).contains(&i) && (4..8).contains(&j);
-                    texture.albedo[k] = if square { square_albedo } else { [255, 0, 0] };
-                    texture.normal[k] = encode_normal_rgb8(-camera.f);
-                    texture.depth[k] = if square { square_level } else { 200 };
-                }
-            }
-            EdgeError::of(&Impostor::new(texture)).per_texel
-        };
+        let texture = |square| EdgeError::of(&Impostor::new(square_over_plane(n, 4..8, square))).per_texel;
         // A 4×4 square: 4 pairs across each of its four sides.
         let drawn = (n * n) as f32;
-        assert_eq!(texture([0, 255, 0], 40), 16.0 / drawn);
-        assert_eq!(texture([0, 255, 0], 200), 0.0);
-        assert_eq!(texture([255, 0, 0], 40), 0.0);
+        assert_eq!(texture(([0, 255, 0], 40)), 16.0 / drawn);
+        assert_eq!(texture(([0, 255, 0], PLANE.1)), 0.0);
+        assert_eq!(texture((PLANE.0, 40)), 0.0);
     }
 }

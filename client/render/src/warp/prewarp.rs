@@ -1072,26 +1072,10 @@ mod tests {
     /// not reach show the plane (fails filling with the nearer surface).
     #[test]
     fn cracks_behind_a_nearer_edge_show_the_surface_behind() {
-        use relief_core::bounds::Aabb;
-        use relief_core::relief::{DepthBits, ReliefTexture, SourceProjection, encode_normal_rgb8};
-        let bounds = Aabb::from_points([Vec3::splat(-1.0), Vec3::splat(1.0)]);
-        let eye = Vec3::new(0.0, 0.0, 10.0);
+        use crate::fixtures::{EYE, PLANE, square_over_plane};
         let n = 32;
-        let camera =
-            SourceCamera::facing(eye, &bounds, n, n, SourceProjection::Orthographic).expect("camera");
-        let mut texture = ReliefTexture::empty(camera, DepthBits::Eight, eye);
-        let (plane, square) = (([255, 0, 0], 200), ([0, 255, 0], 40));
-        let inside = |i: u32| (10..22).contains(&i);
-        for j in 0..n {
-            for i in 0..n {
-                let k = texture.index(i, j);
-                let (albedo, level) = if inside(i) && inside(j) { square } else { plane };
-                texture.albedo[k] = albedo;
-                texture.normal[k] = encode_normal_rgb8(-camera.f);
-                texture.depth[k] = level;
-            }
-        }
-        let impostor = Impostor::new(texture);
+        let (plane, square) = (PLANE, ([0, 255, 0], 40));
+        let impostor = Impostor::new(square_over_plane(n, 10..22, square));
         // The eye moved towards the plane's lower left until the plane parts from the
         // square's left edge by more than a texel.
         let parted = |params: &WarpParams| {
@@ -1099,7 +1083,7 @@ mod tests {
         };
         let params = (1..100)
             .map(|step| {
-                let moved = eye + Vec3::new(-1.0, -1.0, 0.0) * 0.1 * step as f32;
+                let moved = EYE + Vec3::new(-1.0, -1.0, 0.0) * 0.1 * step as f32;
                 WarpParams::new(&impostor.texture, moved).expect("params")
             })
             .find(|params| parted(params) > 1.2)
