@@ -27,7 +27,7 @@ use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 use std::time::{Duration, Instant};
 
-use glam::Vec3;
+use glam::DVec3;
 
 use relief_core::camera::{Camera, CameraError, PathSegment};
 use relief_core::frame::Frame;
@@ -137,7 +137,7 @@ pub struct OrbitLog {
     pub name: String,
     /// The segment's path frames and turns.
     pub frames: std::ops::Range<u32>,
-    pub turns: f32,
+    pub turns: f64,
     /// Final textures of the object received before the flight reached the orbit, and
     /// by the last frame it showed of it; `None` while the flight never reached it.
     received_before: Option<u64>,
@@ -156,10 +156,7 @@ impl FlightLog {
                 let before = orbit.received_before?;
                 let flown = (orbit.last_frame + 1 - orbit.frames.start) as f64 / orbit.frames.len() as f64;
                 let count = orbit.received - before;
-                Some((
-                    orbit.name.clone(),
-                    count as f64 / (orbit.turns.max(1e-3) as f64 * flown),
-                ))
+                Some((orbit.name.clone(), count as f64 / (orbit.turns.max(1e-3) * flown)))
             })
             .collect()
     }
@@ -255,7 +252,7 @@ impl Flight<'_> {
         for segment in &scene.path.segments {
             let n = segment.frames();
             if let PathSegment::Orbit { center, turns, .. } = segment
-                && let Some(object) = orbited(scene, Vec3::from_array(*center))
+                && let Some(object) = orbited(scene, DVec3::from_array(*center))
             {
                 orbits.push(OrbitLog {
                     object,
@@ -275,9 +272,9 @@ impl Flight<'_> {
 
 /// The object an orbit about `center` circles: one that may be an impostor, whose
 /// bounds hold the centre.
-fn orbited(scene: &Scene, center: Vec3) -> Option<usize> {
+fn orbited(scene: &Scene, center: DVec3) -> Option<usize> {
     scene
         .objects
         .iter()
-        .position(|o| o.bounds.expanded(1e-3).contains(center) && !is_cheap(o))
+        .position(|o| o.local_bounds.expanded(1e-3).contains(o.to_local(center)) && !is_cheap(o))
 }

@@ -7,7 +7,7 @@
 
 use std::collections::VecDeque;
 
-use glam::Vec3;
+use glam::DVec3;
 
 /// How many recent samples the fit uses.
 const WINDOW: usize = 8;
@@ -17,17 +17,18 @@ const WINDOW: usize = 8;
 const CUT_SPEED_RATIO: f64 = 4.0;
 const CUT_MIN_STEP: f64 = 0.5;
 
-/// Recent eye positions with their times (seconds).
+/// Recent eye positions in the world (as [`Camera::eye`](relief_core::camera::Camera::eye))
+/// with their times (seconds).
 #[derive(Debug, Clone, Default)]
 pub struct Predictor {
-    samples: VecDeque<(f64, Vec3)>,
+    samples: VecDeque<(f64, DVec3)>,
 }
 
 impl Predictor {
     /// Records the eye at time `t` (seconds, increasing). A jump far faster than the
     /// eye has been moving (a camera cut) starts the history afresh: a fit across it
     /// would extrapolate the jump.
-    pub fn observe(&mut self, t: f64, eye: Vec3) {
+    pub fn observe(&mut self, t: f64, eye: DVec3) {
         let Some(&(last_t, last)) = self.samples.back() else {
             self.samples.push_back((t, eye));
             return;
@@ -36,8 +37,8 @@ impl Predictor {
             return;
         }
         if let Some(&(before_t, before)) = self.samples.iter().rev().nth(1) {
-            let speed = last.distance(before) as f64 / (last_t - before_t);
-            let step = eye.distance(last) as f64;
+            let speed = last.distance(before) / (last_t - before_t);
+            let step = eye.distance(last);
             if step > CUT_SPEED_RATIO * speed * (t - last_t) + CUT_MIN_STEP {
                 self.samples.clear();
             }
@@ -49,14 +50,15 @@ impl Predictor {
     }
 
     /// The eye expected `dt` seconds after the last sample.
-    pub fn predict(&self, dt: f64) -> Option<Vec3> {
+    pub fn predict(&self, dt: f64) -> Option<DVec3> {
         let &(t_last, last) = self.samples.back()?;
         let n = self.samples.len();
         if n < 2 {
             return Some(last);
         }
-        // Fit x(τ) = c0 + c1·τ + c2·τ² (τ relative to the last sample) by least squares;
-        // with fewer than three samples, a line.
+        // Fit x(τ) = c0 + c1·τ + c2·τ² (τ relative to the last sample, x to its
+        // position: an eye far from the origin is fitted as precisely) by least
+        // squares; with fewer than three samples, a line.
         let degree = if n >= 3 { 2 } else { 1 };
         let mut ata = [[0f64; 3]; 3];
         let mut atb = [[0f64; 3]; 3];
@@ -68,20 +70,20 @@ impl Predictor {
                     ata[r][c] += basis[r] * basis[c];
                 }
                 for axis in 0..3 {
-                    atb[axis][r] += basis[r] * p[axis] as f64;
+                    atb[axis][r] += basis[r] * (p[axis] - last[axis]);
                 }
             }
         }
-        let mut out = [0f32; 3];
+        let mut out = [0f64; 3];
         for axis in 0..3 {
             let coefficients = solve(&ata, &atb[axis], degree + 1)?;
             let value = coefficients[0] + coefficients[1] * dt + coefficients[2] * dt * dt;
             if !value.is_finite() {
                 return Some(last);
             }
-            out[axis] = value as f32;
+            out[axis] = value;
         }
-        Some(Vec3::from_array(out))
+        Some(last + DVec3::from_array(out))
     }
 }
 
@@ -125,12 +127,12 @@ mod tests {
         let mut p = Predictor::default();
         for k in 0..6 {
             let t = k as f64 * 0.1;
-            p.observe(t, Vec3::new(1.0 + 2.0 * t as f32, 3.0, -(t * t) as f32));
+            p.observe(t, DVec3::new(1.0 + 2.0 * t, 3.0, -(t * t)));
         }
         let ahead = p.predict(0.5).unwrap();
-        let t = 1.0f32;
+        let t = 1.0f64;
         assert!(
-            ahead.abs_diff_eq(Vec3::new(1.0 + 2.0 * t, 3.0, -(t * t)), 1e-3),
+            ahead.abs_diff_eq(DVec3::new(1.0 + 2.0 * t, 3.0, -(t * t)), 1e-3),
             "{ahead}"
         );
     }
@@ -138,7 +140,7 @@ mod tests {
     #[test]
     fn an_orbit_is_followed_closely_over_short_horizons() {
         let mut p = Predictor::default();
-        let at = |t: f64| Vec3::new((t.cos() * 5.0) as f32, 1.0, (t.sin() * 5.0) as f32);
+        let at = |t: f64| DVec3::new(t.cos() * 5.0, 1.0, t.sin() * 5.0);
         for k in 0..8 {
             p.observe(k as f64 * 0.05, at(k as f64 * 0.05));
         }
@@ -153,18 +155,18 @@ mod tests {
     fn a_camera_cut_starts_the_fit_afresh() {
         let mut p = Predictor::default();
         for k in 0..8 {
-            p.observe(k as f64 * 0.03, Vec3::new(k as f32 * 0.1, 0.0, 0.0));
+            p.observe(k as f64 * 0.03, DVec3::new(k as f64 * 0.1, 0.0, 0.0));
         }
         // A cut 9 m away, then the eye still there a frame later.
-        p.observe(0.24, Vec3::new(0.0, 0.0, 9.0));
-        p.observe(0.27, Vec3::new(0.0, 0.0, 9.0));
+        p.observe(0.24, DVec3::new(0.0, 0.0, 9.0));
+        p.observe(0.27, DVec3::new(0.0, 0.0, 9.0));
         let ahead = p.predict(0.3).unwrap();
-        assert!(ahead.distance(Vec3::new(0.0, 0.0, 9.0)) < 1e-3, "{ahead}");
+        assert!(ahead.distance(DVec3::new(0.0, 0.0, 9.0)) < 1e-3, "{ahead}");
         // Speeding up smoothly, by up to 2.3 m a frame, is not a cut.
         let mut p = Predictor::default();
         for k in 0..8 {
             let t = k as f64 * 0.03;
-            p.observe(t, Vec3::new((200.0 * t * t) as f32, 0.0, 0.0));
+            p.observe(t, DVec3::new(200.0 * t * t, 0.0, 0.0));
         }
         assert_eq!(p.samples.len(), WINDOW);
     }

@@ -120,7 +120,8 @@ fn requests_from_frame(
             && r.object == object
             && r.needed_in_ms.is_some() == predicted
         {
-            eyes.push(r.eye);
+            // (Requests give eyes in the object's frame.)
+            eyes.push(scene.object(object).unwrap().to_world(r.eye).as_vec3());
         }
     }
     eyes
@@ -129,7 +130,7 @@ fn requests_from_frame(
 #[test]
 fn predicted_textures_are_made_for_eyes_past_the_predicted_one() {
     let scene = Scene::load("default").unwrap();
-    let centre = scene.objects[index(&scene, "sphere")].bounds.center();
+    let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
     let config = Config::default();
     let horizon = config.initial_latency + 0.05;
     let (mut manager, mut commands) = unanswered(&scene, config);
@@ -163,7 +164,7 @@ fn predicted_textures_are_made_for_eyes_past_the_predicted_one() {
 fn a_texture_far_too_coarse_for_the_screen_gives_way_to_geometry() {
     let scene = Arc::new(Scene::load("default").unwrap());
     let sphere = index(&scene, "sphere");
-    let centre = scene.objects[sphere].bounds.center();
+    let centre = scene.objects[sphere].world_bounds().center();
     let mut manager = served_locally(&scene, Config::default());
     let eye = centre + Vec3::new(0.0, 0.5, 8.0);
     // Textures sized for a small screen …
@@ -181,7 +182,7 @@ fn a_texture_far_too_coarse_for_the_screen_gives_way_to_geometry() {
 #[test]
 fn one_request_for_now_is_in_flight_per_object() {
     let scene = Scene::load("default").unwrap();
-    let centre = scene.objects[index(&scene, "sphere")].bounds.center();
+    let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
     // Nobody answers: every frame finds the sphere without a texture.
     let (mut manager, mut commands) = unanswered(&scene, Config::default());
     let mut now_requests = 0;
@@ -257,7 +258,7 @@ fn between_two_textures_the_other_is_drawn_behind() {
     let scene = Arc::new(Scene::load("default").unwrap());
     let mut manager = served_locally(&scene, Config::default());
     let sphere = index(&scene, "sphere");
-    let centre = scene.objects[sphere].bounds.center();
+    let centre = scene.objects[sphere].world_bounds().center();
     let camera_at = |degrees: f32| camera_round(centre, degrees);
     for degrees in [0.0, 70.0] {
         assert!(
@@ -294,7 +295,7 @@ fn between_two_textures_the_other_is_drawn_behind() {
 fn stale_object_frames_are_counted_by_cause() {
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
     let sphere = index(&scene, "sphere");
-    let centre = scene.objects[sphere].bounds.center();
+    let centre = scene.objects[sphere].world_bounds().center();
     let camera_at = |degrees: f32| camera_round(centre, degrees);
     let config = Config {
         predict: false,
@@ -329,7 +330,7 @@ fn a_lone_texture_goes_stale_when_its_rim_band_opens() {
 
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
     let sphere = index(&scene, "sphere");
-    let centre = scene.objects[sphere].bounds.center();
+    let centre = scene.objects[sphere].world_bounds().center();
     let config = Config {
         predict: false,
         ..Config::default()
@@ -337,8 +338,8 @@ fn a_lone_texture_goes_stale_when_its_rim_band_opens() {
     let mut manager = served_locally(&scene, config);
     let first = camera_round(centre, 0.0);
     assert!(manager.warm_up(&scene, &first, Duration::from_secs(60)));
-    let radius_px =
-        scene.objects[sphere].bounds.extent().x * 0.5 * first.focal_pixels() / first.eye.distance(centre);
+    let radius_px = scene.objects[sphere].world_bounds().extent().x * 0.5 * first.focal_pixels()
+        / first.eye.as_vec3().distance(centre);
     let expected = (1.0 - LONE_BAND / radius_px).acos().to_degrees();
     let stale_from = (1..40)
         .map(|degrees| degrees as f32)
@@ -361,7 +362,7 @@ fn a_lone_texture_goes_stale_when_its_rim_band_opens() {
 fn an_object_off_screen_is_not_needed_now() {
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
     let sphere = index(&scene, "sphere");
-    let centre = scene.objects[sphere].bounds.center();
+    let centre = scene.objects[sphere].world_bounds().center();
     let eye = around(centre, 0.0);
     let config = Config {
         predict: false,
@@ -402,7 +403,7 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
     let (arrivals, arrivals_rx) = unbounded_channel();
     let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
     let sphere = index(&scene, "sphere");
-    let centre = scene.objects[sphere].bounds.center();
+    let centre = scene.objects[sphere].world_bounds().center();
     let eye = centre + Vec3::new(0.0, 1.0, 4.5);
     let camera = Camera::look_at(eye, centre, Vec3::Y, 60.0, 160, 90).unwrap();
     // Made before the request, so that the wait below is all the latency.
@@ -478,7 +479,7 @@ fn failed_requests_are_counted_by_how_they_ended() {
     let (commands_tx, mut commands) = unbounded_channel();
     let (arrivals, arrivals_rx) = unbounded_channel();
     let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
-    let centre = scene.objects[index(&scene, "sphere")].bounds.center();
+    let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
     let mut asked_now = |manager: &mut Manager, t: f64| {
         let drawn = (centre + Vec3::new(0.0, 1.0, 4.5), centre, t);
         manager.frame(
@@ -523,7 +524,7 @@ fn a_saturated_server_lengthens_the_textures_lives() {
     let config = Config::default();
     let asked = config.tolerance;
     let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
-    let centre = scene.objects[index(&scene, "sphere")].bounds.center();
+    let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
     let report = |manager: &mut Manager, wait: Duration| {
         arrivals.send(Arrival::ServerLoad { wait }).unwrap();
         manager.frame(&scene, &camera_round(centre, 0.0), 0.0);

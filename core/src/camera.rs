@@ -1,8 +1,8 @@
 //! The perspective camera of a frame, and camera paths through a scene.
 
-use std::f32::consts::{PI, TAU};
+use std::f64::consts::{PI, TAU};
 
-use crate::vector::direction;
+use crate::vector::{direction, direction_f64};
 use glam::{DVec3, Vec3};
 use serde::Deserialize;
 
@@ -12,7 +12,10 @@ pub const MAX_FRAME_SIZE: u32 = 8192;
 /// A pinhole camera: eye, orthonormal basis, vertical field of view and resolution.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {
-    pub eye: Vec3,
+    /// Where the eye is, in the frame the camera is used in: the world's, or (made by
+    /// [`Camera::relative_to`]) an object's own. In `f64` because the world's
+    /// coordinates may be far too large for `f32` to place an eye to the millimetre.
+    pub eye: DVec3,
     /// Unit view direction.
     pub forward: Vec3,
     /// Unit vector to the right of the image.
@@ -56,23 +59,23 @@ pub enum CameraError {
     #[error("frame size {width}x{height} must be between 1x1 and {MAX_FRAME_SIZE}x{MAX_FRAME_SIZE}")]
     FrameSize { width: u32, height: u32 },
     #[error("eye and target are too far apart ({0}): the view direction overflows")]
-    TooFarApart(Vec3),
+    TooFarApart(DVec3),
     #[error("eye and target coincide: no view direction")]
     EyeAtTarget,
     #[error(
-        "eye and target are {distance} apart, too close for f32 at their distance from the origin: \
+        "eye and target are {distance} apart, too close for f64 at their distance from the origin: \
          the view direction could be off by {error_deg}° (at most {MAX_DIRECTION_ERROR_DEG}° is taken)"
     )]
-    ImpreciseDirection { distance: f32, error_deg: f32 },
+    ImpreciseDirection { distance: f64, error_deg: f64 },
     #[error("up vector is zero or parallel to the view direction")]
     UpAlongView,
 }
 
 /// The most the view direction may be off (degrees) because eye and target are
-/// rounded to f32: half a degree, a few pixels at common fields of view. Past it (an
-/// eye a few steps of f32 from its target) the direction is noise: a one-step offset
+/// rounded to f64: half a degree, a few pixels at common fields of view. Past it (an
+/// eye a few steps of f64 from its target) the direction is noise: a one-step offset
 /// pointed a camera straight away from what was meant, and drew an empty frame.
-pub const MAX_DIRECTION_ERROR_DEG: f32 = 0.5;
+pub const MAX_DIRECTION_ERROR_DEG: f64 = 0.5;
 
 /// A camera path segment that cannot be flown; the message names the field.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -92,17 +95,19 @@ pub enum PathError {
 }
 
 impl Camera {
-    /// A camera at `eye` looking at `target`. Errors name the bad argument.
+    /// A camera at `eye` looking at `target` (either in `f32` or `f64`). Errors name the
+    /// bad argument.
     pub fn look_at(
-        eye: Vec3,
-        target: Vec3,
+        eye: impl Into<DVec3>,
+        target: impl Into<DVec3>,
         up: Vec3,
         fov_y_degrees: f32,
         width: u32,
         height: u32,
     ) -> Result<Camera, CameraError> {
-        for (name, v) in [("eye", eye), ("target", target), ("up", up)] {
-            crate::vector::ensure_finite(name, v)?;
+        let (eye, target) = (eye.into(), target.into());
+        for (name, v) in [("eye", eye), ("target", target), ("up", up.as_dvec3())] {
+            crate::vector::ensure_finite_f64(name, v)?;
         }
         if !(fov_y_degrees.is_finite() && fov_y_degrees > 0.0 && fov_y_degrees < 180.0) {
             return Err(CameraError::FieldOfView(fov_y_degrees));
@@ -114,14 +119,14 @@ impl Camera {
         if !offset.is_finite() {
             return Err(CameraError::TooFarApart(offset));
         }
-        let forward = direction(offset).ok_or(CameraError::EyeAtTarget)?;
-        // Rounding the eye and the target to f32 moves each by up to half a step of
+        let forward = direction_f64(offset).ok_or(CameraError::EyeAtTarget)?;
+        // Rounding the eye and the target to f64 moves each by up to half a step of
         // their size; seen over `offset`, that turns the view by up to this much.
         // (In units of that size: squared lengths of tiny or huge offsets under- or
         // overflow.)
         let size = eye.abs().max(target.abs()).max_element();
         let relative = (offset / size).length();
-        let error_deg = (3f32.sqrt() * f32::EPSILON / relative).atan().to_degrees();
+        let error_deg = (3f64.sqrt() * f64::EPSILON / relative).atan().to_degrees();
         if error_deg > MAX_DIRECTION_ERROR_DEG {
             return Err(CameraError::ImpreciseDirection {
                 distance: offset.length(),
@@ -209,11 +214,29 @@ impl Camera {
         ]
     }
 
-    /// View-space coordinates `(right, up, forward)` of a world point; `forward` is the
-    /// depth the z-buffer stores.
+    /// A copy of this camera with its eye measured from `origin`: the same view, in
+    /// a frame whose origin lies at `origin` of this one (an object's own frame, in
+    /// which its mesh and textures are given). The subtraction is in `f64`, so the
+    /// eye keeps its precision however far both lie from this frame's origin.
+    pub fn relative_to(&self, origin: DVec3) -> Camera {
+        Camera {
+            eye: self.eye - origin,
+            ..*self
+        }
+    }
+
+    /// The eye rounded to `f32`: for cameras in an object's frame ([`Camera::relative_to`]),
+    /// where it is small enough.
+    #[inline]
+    pub fn eye_f32(&self) -> Vec3 {
+        self.eye.as_vec3()
+    }
+
+    /// View-space coordinates `(right, up, forward)` of a point of the camera's frame;
+    /// `forward` is the depth the z-buffer stores.
     #[inline]
     pub fn to_view(&self, p: Vec3) -> Vec3 {
-        let d = p - self.eye;
+        let d = (p.as_dvec3() - self.eye).as_vec3();
         Vec3::new(d.dot(self.right), d.dot(self.up), d.dot(self.forward))
     }
 
@@ -237,11 +260,12 @@ impl Camera {
         }
     }
 
-    /// The world point at view depth `depth` on the ray through pixel position `(x, y)`.
+    /// The point of the camera's frame at view depth `depth` on the ray through pixel
+    /// position `(x, y)`.
     #[inline]
     pub fn unproject(&self, x: f32, y: f32, depth: f32) -> Vec3 {
         let d = self.ray_direction(x, y);
-        self.eye + d * (depth / d.dot(self.forward))
+        (self.eye + (d * (depth / d.dot(self.forward))).as_dvec3()).as_vec3()
     }
 
     /// The angle one pixel subtends (Schaufler's β_screen).
@@ -256,33 +280,33 @@ impl Camera {
 pub enum PathSegment {
     /// Circle `turns` times around `center` at `radius`, `height` above it, looking at it.
     Orbit {
-        center: [f32; 3],
-        radius: f32,
-        height: f32,
+        center: [f64; 3],
+        radius: f64,
+        height: f64,
         #[serde(default = "one")]
-        turns: f32,
+        turns: f64,
         frames: u32,
     },
     /// Fly through `points` in order (piecewise linear), looking along the path (its
     /// direction over about a second, so corners turn the view gradually), or at
     /// `look_at` when given.
     Fly {
-        points: Vec<[f32; 3]>,
+        points: Vec<[f64; 3]>,
         #[serde(default)]
-        look_at: Option<[f32; 3]>,
+        look_at: Option<[f64; 3]>,
         frames: u32,
     },
 }
 
-fn one() -> f32 {
+fn one() -> f64 {
     1.0
 }
 
-/// Eye and target of one frame.
+/// Eye and target of one frame, in world coordinates (`f64`, as [`Camera::eye`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pose {
-    pub eye: Vec3,
-    pub target: Vec3,
+    pub eye: DVec3,
+    pub target: DVec3,
 }
 
 impl Pose {
@@ -312,7 +336,7 @@ impl PathSegment {
 
     /// Checks the segment; the error names the field.
     pub fn validate(&self) -> Result<(), PathError> {
-        let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
         if self.frames() == 0 || self.frames() > MAX_SEGMENT_FRAMES {
             return Err(PathError::Frames);
         }
@@ -345,7 +369,7 @@ impl PathSegment {
     }
 
     /// Pose at `t` in `[0, 1]`.
-    fn pose(&self, t: f32) -> Pose {
+    fn pose(&self, t: f64) -> Pose {
         match self {
             PathSegment::Orbit {
                 center,
@@ -354,29 +378,29 @@ impl PathSegment {
                 turns,
                 ..
             } => {
-                let c = Vec3::from_array(*center);
+                let c = DVec3::from_array(*center);
                 let angle = t * turns * TAU;
                 Pose {
-                    eye: c + Vec3::new(angle.cos() * radius, *height, angle.sin() * radius),
+                    eye: c + DVec3::new(angle.cos() * radius, *height, angle.sin() * radius),
                     target: c,
                 }
             }
             PathSegment::Fly { points, look_at, .. } => {
-                let at = |t: f32| {
-                    let s = t.clamp(0.0, 1.0) * (points.len() - 1) as f32;
+                let at = |t: f64| {
+                    let s = t.clamp(0.0, 1.0) * (points.len() - 1) as f64;
                     let i = (s.floor() as usize).min(points.len() - 2);
-                    Vec3::from_array(points[i]).lerp(Vec3::from_array(points[i + 1]), s - i as f32)
+                    DVec3::from_array(points[i]).lerp(DVec3::from_array(points[i + 1]), s - i as f64)
                 };
                 let eye = at(t);
                 let target = match look_at {
-                    Some(p) => Vec3::from_array(*p),
+                    Some(p) => DVec3::from_array(*p),
                     None => {
                         // Along the path from where the eye was [`FLY_LOOK_FRAMES`] ago
                         // to where it will be as long after (each clamped to the ends):
                         // a corner turns the view over that time, not at once.
-                        let window = (FLY_LOOK_FRAMES / self.frames() as f64) as f32;
+                        let window = FLY_LOOK_FRAMES / self.frames() as f64;
                         let along = (at(t + window) - at(t - window)).normalize_or_zero();
-                        if along != Vec3::ZERO {
+                        if along != DVec3::ZERO {
                             // (At least a metre, and more far from the origin: a
                             // target must not round back onto the eye.)
                             eye + along * (1.0 + eye.abs().max_element())
@@ -423,11 +447,11 @@ impl CameraPath {
         for (k, segment) in self.segments.iter().enumerate() {
             let n = segment.frames() as f64;
             if rest < n {
-                let pose = segment.pose((rest / n) as f32);
+                let pose = segment.pose(rest / n);
                 let turn = TURN_FRAMES.min(0.5 * n);
                 return Some(match k.checked_sub(1) {
                     Some(before) if rest < turn => {
-                        let s = (rest / turn) as f32;
+                        let s = rest / turn;
                         pose.turned_from(&self.segments[before].pose(1.0), s * s * (3.0 - 2.0 * s))
                     }
                     _ => pose,
@@ -457,19 +481,19 @@ impl Pose {
     /// Heading (about world +y) and pitch turn each on their own: the shortest arc
     /// between two directions can pass straight up or down, where the camera's "up",
     /// world +y, turns the image over.
-    fn turned_from(&self, before: &Pose, s: f32) -> Pose {
+    fn turned_from(&self, before: &Pose, s: f64) -> Pose {
         let to = self.target - self.eye;
         let from = (before.target - before.eye).normalize_or_zero();
         let distance = to.length();
-        if from == Vec3::ZERO || !distance.is_normal() {
+        if from == DVec3::ZERO || !distance.is_normal() {
             return *self;
         }
-        let angles = |d: Vec3| (d.x.atan2(d.z), d.y.clamp(-1.0, 1.0).asin());
+        let angles = |d: DVec3| (d.x.atan2(d.z), d.y.clamp(-1.0, 1.0).asin());
         let ((heading0, pitch0), (heading1, pitch1)) = (angles(from), angles(to / distance));
         // The shorter way round.
         let turn = (heading1 - heading0 + PI).rem_euclid(TAU) - PI;
         let (heading, pitch) = (heading0 + turn * s, pitch0 + (pitch1 - pitch0) * s);
-        let direction = Vec3::new(
+        let direction = DVec3::new(
             heading.sin() * pitch.cos(),
             pitch.sin(),
             heading.cos() * pitch.cos(),
@@ -485,24 +509,30 @@ impl Pose {
 mod tests {
     use super::*;
 
-    /// An eye a step of f32 from its target has no meaningful view direction and is
-    /// refused, naming the precision; eyes far from the origin looking at targets far
-    /// enough away, and ordinary cameras, are taken.
+    /// An eye a step of f64 from its target has no meaningful view direction and is
+    /// refused, naming the precision; an eye a step of f32 from it (a millionth of a
+    /// metre at a metre), eyes far from the origin looking at targets a millimetre
+    /// away, and ordinary cameras, are taken.
     #[test]
-    fn a_view_direction_below_f32_precision_is_refused() {
-        let camera = |eye: Vec3, target: Vec3| Camera::look_at(eye, target, Vec3::Y, 40.0, 64, 64);
-        let eye = Vec3::new(1.0, 1.0, 1.0);
-        let one_step = Vec3::new(f32::from_bits(1.0f32.to_bits() + 1), 1.0, 1.0);
+    fn a_view_direction_below_f64_precision_is_refused() {
+        let camera = |eye: DVec3, target: DVec3| Camera::look_at(eye, target, Vec3::Y, 40.0, 64, 64);
+        let eye = DVec3::new(1.0, 1.0, 1.0);
+        let one_step = DVec3::new(f64::from_bits(1.0f64.to_bits() + 1), 1.0, 1.0);
         let err = camera(eye, one_step).unwrap_err();
         assert!(matches!(err, CameraError::ImpreciseDirection { .. }), "{err}");
-        assert!(err.to_string().contains("too close for f32"), "{err}");
+        assert!(err.to_string().contains("too close for f64"), "{err}");
         // Fifty steps at the scale of a millimetre: still noise.
-        let tiny = Vec3::splat(1e-3);
-        assert!(camera(tiny, tiny + Vec3::X * 1e-3 * f32::EPSILON * 50.0).is_err());
-        // Far from the origin, a target a kilometre away is fine; an ordinary camera too.
-        let far = Vec3::new(1e6, 0.0, 0.0);
-        assert!(camera(far, far - Vec3::new(1000.0, 0.0, 0.0)).is_ok());
-        assert!(camera(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO).is_ok());
+        let tiny = DVec3::splat(1e-3);
+        assert!(camera(tiny, tiny + DVec3::X * 1e-3 * f64::EPSILON * 50.0).is_err());
+        // One step of f32 is fine now.
+        let f32_step = DVec3::new(f32::from_bits(1.0f32.to_bits() + 1) as f64, 1.0, 1.0);
+        assert!(camera(eye, f32_step).is_ok());
+        // 10⁶ m from the origin, a target a millimetre away is fine (in f32 the two
+        // would coincide); an ordinary camera too.
+        let far = DVec3::new(1e6, 0.0, 0.0);
+        let c = camera(far, far - DVec3::new(1e-3, 0.0, 0.0)).unwrap();
+        assert_eq!(c.forward, -Vec3::X);
+        assert!(camera(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO).is_ok());
     }
 
     /// A box is seen when one of its points projects onto the screen in front of the
@@ -571,7 +601,7 @@ mod tests {
     fn the_view_turns_smoothly_between_segments() {
         // An orbit round the origin, 5 m out, `height` up, ending at (5, height, 0);
         // then a fly from there to `to`, looking ahead.
-        let orbit_then_fly = |height: f32, to: [f32; 3]| {
+        let orbit_then_fly = |height: f64, to: [f64; 3]| {
             let orbit = PathSegment::Orbit {
                 center: [0.0; 3],
                 radius: 5.0,
@@ -599,14 +629,14 @@ mod tests {
                     let [a, b] = [f - 1, f].map(|f| direction(path.pose(f).unwrap()));
                     a.angle_between(b).to_degrees()
                 })
-                .fold(0.0, f32::max)
+                .fold(0.0, f64::max)
         };
         // The orbit ends heading +z: fly on that way.
         let (path, orbit, fly) = orbit_then_fly(1.0, [5.0, 1.0, 10.0]);
         let jump = direction(orbit.pose(1.0))
             .angle_between(direction(fly.pose(0.0)))
             .to_degrees();
-        assert!(jump > 90.0, "{jump}");
+        assert!(jump > 89.9, "{jump}");
         // 90°+ over 30 frames, smoothstep's steepest slope 1.5: about 5° a frame.
         assert!(largest(&path) < 6.0, "{}°", largest(&path));
         assert_eq!(path.pose(120 + 30), Some(fly.pose(30.0 / 60.0)));
@@ -640,7 +670,10 @@ mod tests {
         // Projection inverts ray directions, and unprojection inverts both.
         let p = Vec3::new(0.7, -0.4, -2.0);
         let (x, y) = ok.view_to_pixel(ok.to_view(p));
-        assert!(ok.ray_direction(x, y).abs_diff_eq((p - ok.eye).normalize(), 1e-5));
+        assert!(
+            ok.ray_direction(x, y)
+                .abs_diff_eq((p - ok.eye_f32()).normalize(), 1e-5)
+        );
         assert!(ok.unproject(x, y, ok.to_view(p).z).abs_diff_eq(p, 1e-4));
         assert!(Camera::look_at(Vec3::Y, Vec3::ZERO, Vec3::Y, 60.0, 4, 4).is_err());
         assert!(Camera::look_at(Vec3::Z, Vec3::ZERO, Vec3::Y, 180.0, 4, 4).is_err());
@@ -656,7 +689,7 @@ mod tests {
         );
         assert!(Camera::look_at(Vec3::Z * 1e-30, Vec3::ZERO, Vec3::Y * 1e-30, 60.0, 4, 4).is_ok());
         // Eye and target on opposite ends of the float range: the offset overflows.
-        let err = Camera::look_at(Vec3::X * 3e38, Vec3::X * -3e38, Vec3::Y, 60.0, 4, 4)
+        let err = Camera::look_at(DVec3::X * 1e308, DVec3::X * -1e308, Vec3::Y, 60.0, 4, 4)
             .unwrap_err()
             .to_string();
         assert!(err.contains("too far apart"), "{err}");
@@ -682,9 +715,9 @@ mod tests {
         };
         assert_eq!(path.frame_count(), 8);
         let p0 = path.pose(0).unwrap();
-        assert!(p0.eye.abs_diff_eq(Vec3::new(2.0, 1.0, 0.0), 1e-6));
+        assert!(p0.eye.abs_diff_eq(DVec3::new(2.0, 1.0, 0.0), 1e-12));
         let p5 = path.pose(5).unwrap();
-        assert!(p5.eye.abs_diff_eq(Vec3::new(1.0, 0.0, 0.0), 1e-6));
+        assert!(p5.eye.abs_diff_eq(DVec3::new(1.0, 0.0, 0.0), 1e-12));
         // (Past the turn from the orbit's view: looking along the fly.)
         let p6 = path.pose(6).unwrap();
         assert!(p6.target.x > p6.eye.x);
@@ -694,7 +727,7 @@ mod tests {
 
     #[test]
     fn fly_paths_with_a_zero_leg_are_refused() {
-        let fly = |points: Vec<[f32; 3]>, look_at| PathSegment::Fly {
+        let fly = |points: Vec<[f64; 3]>, look_at| PathSegment::Fly {
             points,
             look_at,
             frames: 4,

@@ -42,6 +42,29 @@ pub struct Lighting {
     pub lights: Vec<Light>,
 }
 
+impl Lighting {
+    /// This lighting in a frame whose origin lies at `origin` of the world: point
+    /// lights moved by it (in `f64`), so that points given relative to an eye far
+    /// from the world's origin are lit as precisely as near it.
+    pub fn relative_to(&self, origin: glam::DVec3) -> Lighting {
+        let lights = self
+            .lights
+            .iter()
+            .map(|light| match *light {
+                Light::Point { position, color } => Light::Point {
+                    position: (position.as_dvec3() - origin).as_vec3(),
+                    color,
+                },
+                directional => directional,
+            })
+            .collect();
+        Lighting {
+            ambient: self.ambient,
+            lights,
+        }
+    }
+}
+
 /// A surface point to light: everything [`Lighting::shade`] reads.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SurfacePoint {
@@ -49,7 +72,8 @@ pub struct SurfacePoint {
     pub albedo: Vec3,
     /// Unit surface normal, either side.
     pub normal: Vec3,
-    /// World position (point lights only read it).
+    /// Position, in the frame the lighting is given in ([`Lighting::relative_to`]; point
+    /// lights only read it).
     pub position: Vec3,
     /// From the point towards the eye, any length: the view ray's direction negated
     /// will do.

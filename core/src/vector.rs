@@ -1,6 +1,6 @@
 //! Parsing and validation of vectors given by users (`--eye 1,2,3`) and files.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 /// A vector that is not three finite numbers; the message names what is wrong.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -13,18 +13,37 @@ pub enum VectorError {
     NotFiniteComponent { axis: &'static str, part: String },
     /// `what` (the vector's name) holds NaN or infinity.
     #[error("{what} ({}, {}, {}) is not finite", value.x, value.y, value.z)]
-    NotFinite { what: String, value: Vec3 },
+    NotFinite { what: String, value: DVec3 },
 }
 
 /// Parses `"X,Y,Z"` into a finite vector. The error names the bad component.
 pub fn parse_vec3(text: &str) -> Result<Vec3, VectorError> {
+    let v = parse_dvec3(text)?;
+    // (A component finite in f64 but past f32's range is named as not finite.)
+    for (axis, (x, part)) in ["x", "y", "z"]
+        .into_iter()
+        .zip(v.to_array().into_iter().zip(text.split(',')))
+    {
+        if !(x as f32).is_finite() {
+            return Err(VectorError::NotFiniteComponent {
+                axis,
+                part: part.trim().to_string(),
+            });
+        }
+    }
+    Ok(v.as_vec3())
+}
+
+/// Parses `"X,Y,Z"` into a finite vector of `f64`s: a position, which may lie far
+/// from the origin. The error names the bad component.
+pub fn parse_dvec3(text: &str) -> Result<DVec3, VectorError> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
     if parts.len() != 3 {
         return Err(VectorError::NotThree(text.to_string()));
     }
-    let mut xyz = [0.0f32; 3];
+    let mut xyz = [0.0f64; 3];
     for (axis, (part, out)) in ["x", "y", "z"].into_iter().zip(parts.iter().zip(&mut xyz)) {
-        let value: f32 = part.parse().map_err(|_| VectorError::NotANumber {
+        let value: f64 = part.parse().map_err(|_| VectorError::NotANumber {
             axis,
             part: part.to_string(),
         })?;
@@ -36,11 +55,16 @@ pub fn parse_vec3(text: &str) -> Result<Vec3, VectorError> {
         }
         *out = value;
     }
-    Ok(Vec3::from_array(xyz))
+    Ok(DVec3::from_array(xyz))
 }
 
 /// Checks that every component of `v` is finite; the error names `what`.
 pub fn ensure_finite(what: &str, v: Vec3) -> Result<Vec3, VectorError> {
+    ensure_finite_f64(what, v.as_dvec3()).map(|_| v)
+}
+
+/// As [`ensure_finite`], for a vector of `f64`s.
+pub fn ensure_finite_f64(what: &str, v: DVec3) -> Result<DVec3, VectorError> {
     if v.is_finite() {
         Ok(v)
     } else {
@@ -61,6 +85,17 @@ pub fn direction(v: Vec3) -> Option<Vec3> {
     }
     let largest = v.abs().max_element();
     (largest > 0.0 && largest.is_finite()).then(|| (v / largest).normalize())
+}
+
+/// The unit vector along `v` (rounded to `f32`), or `None` for a zero or non-finite
+/// one; as [`direction`], scaled first when its squared length would over- or
+/// underflow.
+pub fn direction_f64(v: DVec3) -> Option<Vec3> {
+    if v.length_squared().is_normal() {
+        return Some(v.normalize().as_vec3());
+    }
+    let largest = v.abs().max_element();
+    (largest > 0.0 && largest.is_finite()).then(|| (v / largest).normalize().as_vec3())
 }
 
 #[cfg(test)]

@@ -215,7 +215,11 @@ impl pb::scenes_server::Scenes for Service {
                 )));
             }
         };
-        let objects = scene.objects.iter().map(|o| (o.name.clone(), o.bounds)).collect();
+        let objects = scene
+            .objects
+            .iter()
+            .map(|o| (o.name.clone(), o.local_bounds))
+            .collect();
         let stored = StoredScene {
             encoded: Arc::new(encoded),
             objects,

@@ -57,8 +57,10 @@ fn check_in(scene_spec: &str, object: &str, eye: &str, size: u32, bits: u32, pro
     let c = texture.camera;
     assert_eq!((c.width, c.height), (size, size));
     assert!(c.f.dot(c.a.cross(c.b).normalize()) > 0.9999, "f = a×b/|a×b|");
-    let eye_v = relief_core::vector::parse_vec3(eye).unwrap();
-    assert!(c.f.dot((scene.object(object).unwrap().bounds.center() - eye_v).normalize()) > 0.9999);
+    // (`--eye` is in the world; the texture in the object's own frame.)
+    let target = scene.object(object).unwrap();
+    let eye_v = target.to_local(relief_core::vector::parse_dvec3(eye).unwrap());
+    assert!(c.f.dot((target.local_bounds.center() - eye_v).normalize()) > 0.9999);
     assert_eq!(
         c.centre,
         (projection == "perspective").then_some(eye_v),
@@ -176,7 +178,7 @@ fn shared_real_meshes_round_trip() {
         let path = models.join(format!("{name}.obj"));
         assert!(path.is_file(), "{} is missing", path.display());
         let scene = Scene::load(path.to_str().unwrap()).unwrap();
-        let b = scene.objects[0].bounds;
+        let b = scene.objects[0].local_bounds;
         let eye = b.center() + Vec3::new(0.7, 0.5, 1.0).normalize() * b.extent().length() * 2.0;
         let eye = format!("{},{},{}", eye.x, eye.y, eye.z);
         let a = check(path.to_str().unwrap(), name, &eye, 40, 8);

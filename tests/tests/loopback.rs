@@ -135,7 +135,13 @@ async fn bad_requests_are_refused_with_the_field_named() {
     );
     assert_eq!(e.code(), Code::InvalidArgument);
     assert!(e.message().contains("teapot"), "{}", e.message());
-    let inside = Vec3::new(3.0, 1.3, 0.0);
+    // (An eye at the knot's centre: eyes are given in the object's own frame.)
+    let inside = relief_core::scene::Scene::load("default")
+        .unwrap()
+        .object("knot")
+        .unwrap()
+        .local_bounds
+        .center();
     let e = refused(
         remote
             .request(request(&hash, "knot", inside, 64, 3, pb::Urgency::Now))

@@ -235,7 +235,7 @@ fn each_pixel_object_matches(
                 .objects
                 .iter()
                 .enumerate()
-                .filter_map(|(k, o)| Some((k, nearest_hit(&o.mesh, camera.eye, direction)?)))
+                .filter_map(|(k, o)| Some((k, nearest_hit(&o.mesh, o.to_local(camera.eye), direction)?)))
                 .min_by(|a, b| a.1.t.total_cmp(&b.1.t));
             let want = nearest.map_or(NO_OBJECT, |(k, _)| k as u32);
             let got = frame.object[(y * camera.width + x) as usize];

@@ -2,7 +2,7 @@
 
 use anyhow::anyhow;
 use clap::Args;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
@@ -13,6 +13,12 @@ use relief_core::relief::MAX_TEXTURE_SIZE;
 /// `X,Y,Z`, finite.
 pub fn vec3(text: &str) -> Result<Vec3, String> {
     relief_core::vector::parse_vec3(text).map_err(|e| e.to_string())
+}
+
+/// A position `X,Y,Z` in the world, finite: `f64`, since a world may lie far from its
+/// origin.
+pub fn position(text: &str) -> Result<DVec3, String> {
+    relief_core::vector::parse_dvec3(text).map_err(|e| e.to_string())
 }
 
 /// A finite number.
@@ -131,11 +137,11 @@ pub struct View {
     #[arg(long, default_value = "default")]
     pub scene: String,
     /// Camera position, X,Y,Z.
-    #[arg(long, value_parser = vec3, allow_hyphen_values = true)]
-    pub eye: Vec3,
+    #[arg(long, value_parser = position, allow_hyphen_values = true)]
+    pub eye: DVec3,
     /// Point the camera looks at, X,Y,Z.
-    #[arg(long, value_parser = vec3, allow_hyphen_values = true)]
-    pub target: Vec3,
+    #[arg(long, value_parser = position, allow_hyphen_values = true)]
+    pub target: DVec3,
     /// Up direction, X,Y,Z.
     #[arg(long, default_value = "0,1,0", value_parser = vec3, allow_hyphen_values = true)]
     pub up: Vec3,
@@ -147,8 +153,9 @@ pub struct View {
     pub size: (u32, u32),
 }
 
-/// Loads the scene `spec` (`--scene`), saying on stderr which of its objects lie too
-/// far from the origin for `f32` to place finely ([`Scene::precision_warnings`]).
+/// Loads the scene `spec` (`--scene`), saying on stderr which of its objects' meshes
+/// lie too far from their own origin for `f32` to place finely
+/// ([`Scene::precision_warnings`]).
 pub fn load_scene(spec: &str) -> anyhow::Result<Scene> {
     let scene = Scene::load(spec)?;
     for warning in scene.precision_warnings() {

@@ -70,16 +70,17 @@ impl FramePlan {
         let baked: Vec<(usize, Option<ImpostorObject>)> = wanted
             .into_par_iter()
             .map(|k| {
+                // (In the object's frame: see `SceneObject`.)
                 let object = &scene.objects[k];
-                let centre = object.bounds.center();
+                let (camera, centre) = (object.local_camera(camera), object.local_bounds.center());
                 let turn = Quat::from_rotation_y(source_angle_deg.to_radians());
-                let source_eye = centre + turn * (camera.eye - centre);
+                let source_eye = centre + turn * (camera.eye_f32() - centre);
                 // (Its volume centre is as far from the source eye as from the eye.)
                 let size = resolution_for(
-                    &object.bounds,
+                    &object.local_bounds,
                     source_eye,
                     SourceProjection::Orthographic,
-                    camera,
+                    &camera,
                     MAX_TEXEL_PIXELS,
                 )
                 .unwrap_or(MAX_TEXTURE_EDGE)
@@ -127,14 +128,20 @@ impl FramePlan {
             .iter()
             .map(|&(k, _)| (k, &scene.objects[k as usize]))
             .collect();
-        let shown: Vec<&Impostor> = self
-            .impostors
-            .iter()
-            .map(|imp| &imp.pyramid.levels[imp.pyramid.level_for(camera, MAX_TEXEL_PIXELS)])
+        // Each impostor in its object's frame (see `SceneObject`).
+        let cameras: Vec<Camera> = (self.impostors.iter())
+            .map(|imp| scene.objects[imp.index as usize].local_camera(camera))
+            .collect();
+        let shown: Vec<&Impostor> = (self.impostors.iter().zip(&cameras))
+            .map(|(imp, camera)| &imp.pyramid.levels[imp.pyramid.level_for(camera, MAX_TEXEL_PIXELS)])
             .collect();
         // Every impostor's pre-warp at once, then each drawn.
-        let prepared: Vec<_> = shown.par_iter().map(|i| prepare(method, i, camera)).collect();
-        for ((imp, impostor), prepared) in self.impostors.iter().zip(shown).zip(prepared) {
+        let prepared: Vec<_> = (shown.par_iter().zip(&cameras))
+            .map(|(i, camera)| prepare(method, i, camera))
+            .collect();
+        for (((imp, impostor), prepared), camera) in
+            self.impostors.iter().zip(shown).zip(prepared).zip(&cameras)
+        {
             stats.texels_baked += imp.pyramid.levels[0].texture.depth.len();
             let drawn = prepared.and_then(|p| {
                 let texels = p.texels_warped(impostor);

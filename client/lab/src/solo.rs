@@ -29,7 +29,9 @@ pub enum SoloError {
     Bake(#[from] relief_trace::BakeError),
 }
 
-/// One object of a scene, alone, ready to be baked and ray-traced.
+/// One object of a scene, alone, ready to be baked and ray-traced. Its frame is the
+/// world's (moved to the origin, its lights with it), so that eyes and textures here
+/// are in both.
 pub struct Solo {
     /// A scene holding only the object (index 0), with the original lights.
     pub scene: Scene,
@@ -45,8 +47,10 @@ impl Solo {
     /// spare, is narrower than 180°). An object without extent (every vertex at one
     /// point) cannot be orbited: an error naming it.
     pub fn new(scene: &Scene, name: &str, distance_factor: f32) -> Result<Solo, SoloError> {
-        let object = scene.object(name)?.clone();
-        let radius = object.bounds.extent().length() * 0.5;
+        let mut object = scene.object(name)?.clone();
+        let lighting = scene.lighting.relative_to(object.origin);
+        object.origin = glam::DVec3::ZERO;
+        let radius = object.local_bounds.extent().length() * 0.5;
         let distance = radius * distance_factor;
         if distance_factor.is_nan() || distance_factor <= 1.1 {
             return Err(SoloError::OrbitInside(distance_factor));
@@ -60,6 +64,7 @@ impl Solo {
         }
         let solo = Scene {
             objects: vec![object],
+            lighting,
             ..scene.clone()
         };
         let tracer = SceneTracer::new(&solo);
@@ -73,7 +78,7 @@ impl Solo {
     /// The eye `angle_deg` around the vertical axis through the object's centre,
     /// slightly above it.
     pub fn eye(&self, angle_deg: f32) -> Vec3 {
-        let centre = self.scene.objects[0].bounds.center();
+        let centre = self.scene.objects[0].local_bounds.center();
         let a = angle_deg.to_radians();
         let dir = Vec3::new(a.sin(), 0.25, a.cos()).normalize();
         centre + dir * self.distance
@@ -83,10 +88,17 @@ impl Solo {
     /// wide enough for the object's bounding sphere (with 10 % to spare) from the
     /// orbit; an error for an eye or size no camera can have.
     pub fn camera(&self, eye: Vec3, size: u32) -> Result<Camera, SoloError> {
-        let centre = self.scene.objects[0].bounds.center();
-        let radius = self.scene.objects[0].bounds.extent().length() * 0.5;
+        let bounds = self.scene.objects[0].local_bounds;
+        let radius = bounds.extent().length() * 0.5;
         let fov = 2.0 * (radius * 1.1 / self.distance).asin().to_degrees();
-        Ok(Camera::look_at(eye, centre, Vec3::Y, fov, size, size)?)
+        Ok(Camera::look_at(
+            eye.as_dvec3(),
+            bounds.center().as_dvec3(),
+            Vec3::Y,
+            fov,
+            size,
+            size,
+        )?)
     }
 
     /// Bakes the object's relief texture for `eye`, orthographic as the thesis's (an

@@ -219,8 +219,8 @@ fn the_window_a_camera_sees_leaves_out_only_what_it_cannot_show() {
     let solo = Solo::new(&scene, "knot", 3.0).expect("solo");
     let impostor = Impostor::new(solo.bake(solo.eye(0.0), 128, DepthBits::Eight).expect("bake"));
     let c = impostor.texture.camera;
-    let centre = solo.scene.objects[0].bounds.center();
-    let radius = solo.scene.objects[0].bounds.extent().length() / 2.0;
+    let centre = solo.scene.objects[0].local_bounds.center();
+    let radius = solo.scene.objects[0].local_bounds.extent().length() / 2.0;
     let mut tested = 0;
     // Eye distance and aim (in radii from the centre), and the most of the image the
     // window may keep (measured when written: all, 63 %, 54 %, 44 %, one texel twice).
@@ -341,7 +341,7 @@ fn texture_mapping_covers_a_full_texture_to_its_edges() {
         materials: vec![Material::default()],
         ..Default::default()
     };
-    let object = SceneObject::new("square", square, Specular::default());
+    let object = SceneObject::new("square", square, glam::DVec3::ZERO, Specular::default());
     let eye = Vec3::new(0.0, 0.0, 4.0);
     let texture = bake(
         &ObjectTracer::new(&object),
@@ -574,7 +574,7 @@ fn a_perspective_texture_shows_its_nearest_surfaces_from_any_eye() {
         .bake_in(source, 128, DepthBits::Eight, SourceProjection::Perspective)
         .expect("bake");
     let impostor = Impostor::new(texture.clone());
-    let towards = solo.scene.objects[0].bounds.center() - source;
+    let towards = solo.scene.objects[0].local_bounds.center() - source;
     let side = towards.cross(Vec3::Y).normalize() * towards.length();
     let size = 192;
     let tolerance = 0.1 * (texture.camera.depth_far - texture.camera.depth_near);
@@ -648,7 +648,8 @@ fn a_perspective_texture_shows_the_leaves_parallel_rays_miss() {
     rasterize(&[(0, tree)], &camera, 0.01, &mut exact);
     let geometry_db = object_psnr(&exact.shade(&solo.scene, &camera), &reference, 0).expect("the tree");
     let shown_db = |projection| {
-        let edge = resolution_for(&tree.bounds, eye, projection, &camera, MAX_TEXEL_PIXELS).expect("edge");
+        let edge =
+            resolution_for(&tree.local_bounds, eye, projection, &camera, MAX_TEXEL_PIXELS).expect("edge");
         let texture = solo
             .bake_in(eye, edge, DepthBits::Eight, projection)
             .expect("bake");
@@ -695,7 +696,7 @@ fn the_band_past_the_rim_is_what_the_warp_leaves_empty() {
 
     let scene = Scene::load("default").expect("default scene");
     let solo = Solo::new(&scene, "sphere", 3.0).expect("solo");
-    let centre = solo.scene.objects[0].bounds.center();
+    let centre = solo.scene.objects[0].local_bounds.center();
     let size = 256;
     let texture = solo.bake(solo.eye(0.0), 256, DepthBits::Eight).expect("bake");
     let rim = Rim::find(&texture);

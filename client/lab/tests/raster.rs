@@ -82,7 +82,12 @@ fn shared_edges_leave_no_cracks() {
     .build();
     let scene = Scene {
         name: "plane".into(),
-        objects: vec![SceneObject::new("plane", plane, Specular::default())],
+        objects: vec![SceneObject::new(
+            "plane",
+            plane,
+            glam::DVec3::ZERO,
+            Specular::default(),
+        )],
         lighting: default_lighting(),
         background: Vec3::ZERO,
         fov_y_degrees: 60.0,

@@ -65,7 +65,7 @@ fn predicted_gap_tracks_the_hole_fraction() {
         let mut last = (0.0f32, 0.0f64);
         for angle in [5.0f32, 10.0, 20.0, 40.0] {
             let camera = solo.camera(solo.eye(angle), 256).expect("orbit camera");
-            let params = WarpParams::new(&impostor.texture, camera.eye).unwrap();
+            let params = WarpParams::new(&impostor.texture, camera.eye_f32()).unwrap();
             let predicted = critical.worst_region_gap(&params);
             let mut gbuffer = GBuffer::new(camera.width, camera.height);
             display(Method::Interleaved, &impostor, 0, &camera, &mut gbuffer).unwrap();
@@ -86,7 +86,7 @@ fn predicted_gap_tracks_the_hole_fraction() {
 fn schaufler_tests_on_an_orbit() {
     let scene = Scene::load("default").unwrap();
     let solo = Solo::new(&scene, "sphere", 3.0).unwrap();
-    let bounds = solo.scene.objects[0].bounds;
+    let bounds = solo.scene.objects[0].local_bounds;
     let source = solo.eye(0.0);
     let camera = solo.camera(source, 512).expect("orbit camera");
     assert!(sprite_still_valid(&bounds, &camera, &camera));

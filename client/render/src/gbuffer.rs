@@ -477,17 +477,18 @@ impl GBuffer {
 }
 
 /// What lighting one row of a G-buffer needs: the planes, the scene's terms and the
-/// camera's rays (the buffer holds the camera's pixels).
+/// camera's rays (the buffer holds the camera's pixels). Points are lit relative to the
+/// eye, which may lie far from the world's origin (see `SceneObject`'s frames).
 struct RowShader<'a> {
     gbuffer: &'a GBuffer,
-    lighting: &'a relief_core::shading::Lighting,
+    /// The scene's lighting, relative to the eye.
+    lighting: relief_core::shading::Lighting,
     /// Specular strength and exponent of each object, by index.
     specular: Vec<(f32, f32)>,
     /// The object count, in every lane (a scene's count fits its `u32` ids).
     objects: u32x8,
     background: [u8; 3],
     camera: &'a Camera,
-    eye: Vec3x8,
     /// [`Camera::ray`]'s step from one pixel to the next in a row.
     x_step: Vec3,
 }
@@ -496,7 +497,7 @@ impl<'a> RowShader<'a> {
     fn new(gbuffer: &'a GBuffer, scene: &'a Scene, camera: &'a Camera) -> Self {
         RowShader {
             gbuffer,
-            lighting: &scene.lighting,
+            lighting: scene.lighting.relative_to(camera.eye),
             specular: scene
                 .objects
                 .iter()
@@ -505,7 +506,6 @@ impl<'a> RowShader<'a> {
             objects: u32x8::splat(u32::try_from(scene.objects.len()).unwrap_or(u32::MAX)),
             background: to_rgb8(scene.background),
             camera,
-            eye: Vec3x8::splat(camera.eye),
             x_step: camera.ray_x_step(),
         }
     }
@@ -514,9 +514,9 @@ impl<'a> RowShader<'a> {
     fn row(&self, y: usize, color: &mut [[u8; 3]], object: &mut [u32]) {
         let g = self.gbuffer;
         let w = g.width as usize;
-        // A pixel's position is `eye + ray · depth`; rays are linear in x.
+        // A pixel's position from the eye is `ray · depth`; rays are linear in x.
         let row_start = self.camera.ray(0.5, y as f32 + 0.5);
-        let (eye, objects) = (self.eye, self.objects);
+        let objects = self.objects;
         let row = y * w;
         for x in (0..w).step_by(LANES) {
             let n = LANES.min(w - x);
@@ -575,7 +575,7 @@ impl<'a> RowShader<'a> {
                     z: component(2),
                 }
                 .normalize_or_zero(),
-                position: eye.zip(direction.scale(depth), |e, d| e + d),
+                position: direction.scale(depth),
                 towards_eye: direction.map(|d| -d),
                 strength,
                 shininess,
@@ -629,7 +629,7 @@ impl RowShader<'_> {
                 SurfacePoint {
                     albedo: Vec3::new(channel(0), channel(8), channel(16)),
                     normal: Vec3::from(f.stored.normal.map(f32::from)).normalize_or_zero(),
-                    position: self.camera.eye + ray * f.depth,
+                    position: ray * f.depth,
                     towards_eye: -ray,
                     specular: Specular { strength, shininess },
                 }
@@ -829,11 +829,11 @@ mod tests {
                 let point = relief_core::shading::SurfacePoint {
                     albedo: Vec3::from(p.albedo.map(f32::from)) / 255.0,
                     normal: p.normal,
-                    position: camera.eye + direction * p.depth,
+                    position: direction * p.depth,
                     towards_eye: -direction,
                     specular: o.specular,
                 };
-                let expected = to_rgb8(scene.lighting.shade(&point));
+                let expected = to_rgb8(scene.lighting.relative_to(camera.eye).shade(&point));
                 let close = frame.color[at]
                     .iter()
                     .zip(expected)

@@ -1,7 +1,7 @@
 //! Which objects a frame draws as exact geometry, and frames drawn all as geometry:
 //! the baseline every impostor figure is compared with.
 
-use glam::Vec3;
+use glam::DVec3;
 
 use relief_core::camera::Camera;
 use relief_core::frame::Frame;
@@ -33,16 +33,16 @@ pub fn is_cheap(object: &SceneObject) -> bool {
     object.mesh.triangle_count() < CHEAP_TRIANGLES
 }
 
-/// Why `object` is drawn as geometry from `eye`; `None` when it may be an impostor.
-pub fn geometry_reason(object: &SceneObject, eye: Vec3) -> Option<GeometryReason> {
+/// Why `object` is drawn as geometry from `eye` (in the world); `None` when it may be
+/// an impostor.
+pub fn geometry_reason(object: &SceneObject, eye: DVec3) -> Option<GeometryReason> {
     if is_cheap(object) {
         return Some(GeometryReason::Cheap);
     }
-    let margin = object.bounds.extent().length() * NEAR_MARGIN;
-    object
-        .bounds
-        .expanded(margin)
-        .contains(eye)
+    let bounds = object.local_bounds;
+    bounds
+        .expanded(bounds.extent().length() * NEAR_MARGIN)
+        .contains(object.to_local(eye))
         .then_some(GeometryReason::TooNear)
 }
 

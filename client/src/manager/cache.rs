@@ -122,7 +122,6 @@ pub(super) fn probe_valid_angle(held: &Held, centre: Vec3, camera: &Camera, tole
 impl Manager {
     /// Takes in what has arrived (never waits).
     pub(super) fn drain(&mut self, camera: &Camera, scene: &Scene) {
-        let eye = camera.eye;
         while let Ok(arrival) = self.arrivals.try_recv() {
             match arrival {
                 Arrival::Texture {
@@ -161,9 +160,10 @@ impl Manager {
                         arrived,
                         last_shown: None,
                     };
+                    let object = &scene.objects[p.object];
+                    let (camera, centre) = (object.local_camera(camera), object.local_bounds.center());
                     if is_final {
-                        let centre = scene.objects[p.object].bounds.center();
-                        let angle = probe_valid_angle(&held, centre, camera, tolerance);
+                        let angle = probe_valid_angle(&held, centre, &camera, tolerance);
                         state.valid_angle = Some(angle);
                         tracing::debug!(
                             object = p.object,
@@ -174,7 +174,7 @@ impl Manager {
                     state.held.push(held);
                     // Keep the textures nearest the eye.
                     if state.held.len() > self.config.keep {
-                        let centre = scene.objects[p.object].bounds.center();
+                        let eye = camera.eye_f32();
                         state.held.sort_by(|a, b| {
                             angle_between(centre, a.eye, eye).total_cmp(&angle_between(centre, b.eye, eye))
                         });

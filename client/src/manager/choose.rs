@@ -199,8 +199,11 @@ impl Manager {
         camera: &'a Camera,
     ) -> impl Iterator<Item = Grade> + 'a {
         let (wanted, _) = Self::size_for(&scene.objects[object], eye, camera);
-        let centre = scene.objects[object].bounds.center();
-        let at_eye = Camera { eye, ..*camera };
+        let centre = scene.objects[object].local_bounds.center();
+        let at_eye = Camera {
+            eye: eye.as_dvec3(),
+            ..*camera
+        };
         self.objects[object].held.iter().map(move |h| {
             let texture = &h.pyramid.levels[0].texture.camera;
             let too_coarse = needs_finer_texture(texture, &at_eye, COARSEST_SHOWN);
@@ -213,8 +216,8 @@ impl Manager {
         })
     }
 
-    /// How `show` draws object `k` from `camera`: `None` for geometry (or a texture no
-    /// longer held).
+    /// How `show` draws object `k` from `camera` (in the world): `None` for geometry (or
+    /// a texture no longer held).
     pub fn describe(&self, scene: &Scene, k: usize, show: &Show, camera: &Camera) -> Option<ShownTexture> {
         let Show::Impostor {
             texture,
@@ -225,16 +228,18 @@ impl Manager {
             return None;
         };
         let held = &self.objects.get(k)?.held;
-        let centre = scene.objects.get(k)?.bounds.center();
-        let turn = |i: usize| Some(angle_between(centre, held.get(i)?.eye, camera.eye).to_degrees());
+        let object = scene.objects.get(k)?;
+        let (camera, centre) = (&object.local_camera(camera), object.local_bounds.center());
+        let eye = camera.eye_f32();
+        let turn = |i: usize| Some(angle_between(centre, held.get(i)?.eye, eye).to_degrees());
         let shown = held.get(texture)?;
         let drawn = &shown.pyramid.levels.get(level)?.texture.camera;
         Some(ShownTexture {
             turn_deg: turn(texture)?,
-            distance_ratio: (shown.eye - centre).length() / (camera.eye - centre).length(),
-            texel_pixels: texel_angle(drawn, camera.eye) / camera.pixel_angle(),
-            growth_pixels: growth(shown, camera.eye, camera),
-            band_pixels: band(shown, centre, camera.eye, camera),
+            distance_ratio: (shown.eye - centre).length() / (eye - centre).length(),
+            texel_pixels: texel_angle(drawn, eye) / camera.pixel_angle(),
+            growth_pixels: growth(shown, eye, camera),
+            band_pixels: band(shown, centre, eye, camera),
             partner_turn_deg: partner.and_then(|(i, _)| turn(i)),
         })
     }
@@ -261,7 +266,7 @@ impl Manager {
         grades: &[Grade],
     ) -> Option<(usize, usize)> {
         let held = &self.objects[k].held;
-        let (from, eye) = (held[shown].eye - centre, camera.eye - centre);
+        let (from, eye) = (held[shown].eye - centre, camera.eye_f32() - centre);
         // (Wanted where the texture could not be shown alone: as `may_show` rules.)
         if from.angle_between(eye) < PARTNER_FROM && grades[shown].band <= band_limit(false, self.tolerance())
         {
@@ -271,8 +276,9 @@ impl Manager {
             .zip(grades)
             .enumerate()
             .filter_map(|(i, (h, g))| {
-                let usable =
-                    i != shown && !g.too_coarse && can_partner(centre, held[shown].eye, camera.eye, h.eye);
+                let usable = i != shown
+                    && !g.too_coarse
+                    && can_partner(centre, held[shown].eye, camera.eye_f32(), h.eye);
                 usable.then_some((i, h, g.growth, (h.eye - centre).angle_between(eye)))
             })
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))

@@ -79,7 +79,13 @@ impl Manager {
             .enumerate()
             .map(|(k, key)| match (key, &self.sprites[k]) {
                 (Some(key), Some(kept)) => {
-                    kept.key == *key && sprite_still_valid(&scene.objects[k].bounds, &kept.camera, camera)
+                    let o = &scene.objects[k];
+                    kept.key == *key
+                        && sprite_still_valid(
+                            &o.local_bounds,
+                            &o.local_camera(&kept.camera),
+                            &o.local_camera(camera),
+                        )
                 }
                 _ => false,
             })
@@ -106,11 +112,13 @@ impl Manager {
                 }
             }
         }
-        let behind = |k: usize| partner_depth_factor(&scene.objects[k].bounds, camera.eye);
+        // Each object's textures are warped in its own frame (see `SceneObject`).
+        let local = |k: usize| scene.objects[k].local_camera(camera);
+        let behind = |k: usize| partner_depth_factor(&scene.objects[k].local_bounds, local(k).eye_f32());
         let prewarps: Vec<_> = warps
             .par_iter()
             .map(|&(k, impostor, is_partner)| {
-                let prewarped = Prewarped::new(Variant::Interleaved, impostor, camera);
+                let prewarped = Prewarped::new(Variant::Interleaved, impostor, &local(k));
                 if is_partner {
                     prewarped.and_then(|p| p.behind(behind(k)))
                 } else {
@@ -146,6 +154,7 @@ impl Manager {
                     continue;
                 }
                 if let Ok(prewarped) = ready {
+                    let camera = &local(k);
                     prewarped.draw(impostor, k as u32, camera, gbuffer);
                     partner_drawn |= is_partner;
                     self.counters.partners += u64::from(is_partner);
@@ -164,10 +173,10 @@ impl Manager {
             // Kept only while the view moves by less than the sprite test allows
             // per frame (or has not moved yet): else the next frame warps anyway,
             // and the copy (about a seventh of a frame's time) is wasted.
-            let bounds = &scene.objects[k].bounds;
+            let o = &scene.objects[k];
             if self
                 .last_camera
-                .is_some_and(|last| !sprite_still_valid(bounds, &last, camera))
+                .is_some_and(|last| !sprite_still_valid(&o.local_bounds, &o.local_camera(&last), &local(k)))
             {
                 self.sprites[k] = None;
                 continue;

@@ -195,8 +195,11 @@ impl Manager {
         // (When this frame shows its impostors: their textures' last use.)
         let shown_at = Some(Instant::now());
         let mut shows = Vec::with_capacity(scene.objects.len());
+        let world_camera = camera;
         for (k, object) in scene.objects.iter().enumerate() {
-            match geometry_reason(object, camera.eye) {
+            // Each object is decided about in its own frame (see `SceneObject`).
+            let camera = &object.local_camera(world_camera);
+            match geometry_reason(object, world_camera.eye) {
                 Some(GeometryReason::Cheap) => {
                     shows.push(Show::Geometry);
                     continue;
@@ -210,7 +213,7 @@ impl Manager {
                 }
                 None => {}
             }
-            if !camera.may_see(&object.bounds) {
+            if !camera.may_see(&object.local_bounds) {
                 // Off screen: nothing shown, so nothing stale and nothing needed now
                 // (drawn as geometry, which the rasterizer leaves out at once); the
                 // textures for where the eye is going are still asked for.
@@ -218,20 +221,18 @@ impl Manager {
                 shows.push(Show::Geometry);
                 continue;
             }
-            let centre = object.bounds.center();
-            let grades: Vec<Grade> = self.grades(scene, k, camera.eye, camera).collect();
+            let (centre, eye) = (object.local_bounds.center(), camera.eye_f32());
+            let grades: Vec<Grade> = self.grades(scene, k, eye, camera).collect();
             self.counters.needs += 1;
             let held = &self.objects[k].held;
-            let best = shown_texture(&grades, tolerance, |i| {
-                angle_between(centre, held[i].eye, camera.eye)
-            });
+            let best = shown_texture(&grades, tolerance, |i| angle_between(centre, held[i].eye, eye));
             let within = |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= tolerance);
             // Valid: some texture is within tolerance (when only one too coarse to be
             // shown is, a finer one is asked for if it can be had: `want_finer`), and the one
             // shown is not too far from its eye for it to be shown alone or with the
             // partner it has: alone, a texture misses the side the eye has turned to see
             // (`may_show`).
-            let shown_turn = best.map(|(i, _)| angle_between(centre, held[i].eye, camera.eye));
+            let shown_turn = best.map(|(i, _)| angle_between(centre, held[i].eye, eye));
             let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
             let too_far = best
                 .zip(shown_turn)
@@ -240,7 +241,7 @@ impl Manager {
             let valid = within_any && !too_far;
             let want_finer =
                 !within(best) && grades.iter().any(|g| g.growth <= tolerance && g.finer_available);
-            let asked_for = self.pending_covers(k, centre, camera.eye);
+            let asked_for = self.pending_covers(k, centre, eye);
             if valid || asked_for {
                 self.counters.prediction_hits += 1;
             }
@@ -260,7 +261,7 @@ impl Manager {
                         .values()
                         .filter(|p| p.object == k)
                         .map(|p| {
-                            let degrees = angle_between(centre, p.eye, camera.eye).to_degrees();
+                            let degrees = angle_between(centre, p.eye, eye).to_degrees();
                             (p.sent.elapsed().as_millis(), p.predicted, degrees)
                         })
                         .collect();
@@ -284,7 +285,7 @@ impl Manager {
             // queue textures that are stale on arrival.
             let asking_now = self.pending.values().any(|p| p.object == k && !p.predicted);
             if (!valid || want_finer) && !asked_for && !asking_now {
-                self.request(scene, k, camera.eye, camera, None);
+                self.request(scene, k, eye, camera, None);
             }
             self.predict_for(scene, k, camera);
             shows.push(match best {

@@ -164,9 +164,13 @@ pub const REQUESTED_DEPTH_BITS: DepthBits = DepthBits::Eight;
 /// Orthographic too where the eye is too near the bounds for a perspective texture
 /// ([`MAX_PERSPECTIVE_TANGENT`](relief_core::relief::MAX_PERSPECTIVE_TANGENT)), and for
 /// a solid with a few holes, whose rim is under [`SHEET_RIM_SHARE`] of its edges.
+///
+/// `eye`, here and in the other functions of an object and a camera below, is in the
+/// object's frame ([`SceneObject::local_camera`]).
 pub fn projection_for(object: &SceneObject, eye: Vec3) -> SourceProjection {
     let sheets = object.edge_census().rim_share > SHEET_RIM_SHARE;
-    if sheets && SourceCamera::facing(eye, &object.bounds, 1, 1, SourceProjection::Perspective).is_ok() {
+    if sheets && SourceCamera::facing(eye, &object.local_bounds, 1, 1, SourceProjection::Perspective).is_ok()
+    {
         SourceProjection::Perspective
     } else {
         SourceProjection::Orthographic
@@ -204,7 +208,7 @@ pub const FINE_TEXEL_MAX_EDGE: u32 = 360;
 /// `camera` ([`FINE_TEXEL_PIXELS`] while that keeps within [`FINE_TEXEL_MAX_EDGE`],
 /// else [`MAX_TEXEL_PIXELS`]).
 pub fn texel_pixels(object: &SceneObject, camera: &Camera) -> f32 {
-    let projection = projection_for(object, camera.eye);
+    let projection = projection_for(object, camera.eye_f32());
     match fine_edge(object, camera, projection) {
         Some(_) => FINE_TEXEL_PIXELS,
         None => MAX_TEXEL_PIXELS,
@@ -216,16 +220,23 @@ pub fn texel_pixels(object: &SceneObject, camera: &Camera) -> f32 {
 /// ([`texel_pixels`], eq. 5-1: [`resolution_for`]); no edge when no texture faces the
 /// eye.
 pub fn asked_for(object: &SceneObject, camera: &Camera) -> (SourceProjection, Option<u32>) {
-    let projection = projection_for(object, camera.eye);
+    let eye = camera.eye_f32();
+    let projection = projection_for(object, eye);
     let edge = fine_edge(object, camera, projection)
-        .or_else(|| resolution_for(&object.bounds, camera.eye, projection, camera, MAX_TEXEL_PIXELS));
+        .or_else(|| resolution_for(&object.local_bounds, eye, projection, camera, MAX_TEXEL_PIXELS));
     (projection, edge)
 }
 
 /// The edge at [`FINE_TEXEL_PIXELS`], if it keeps within [`FINE_TEXEL_MAX_EDGE`].
 fn fine_edge(object: &SceneObject, camera: &Camera, projection: SourceProjection) -> Option<u32> {
-    resolution_for(&object.bounds, camera.eye, projection, camera, FINE_TEXEL_PIXELS)
-        .filter(|&edge| edge <= FINE_TEXEL_MAX_EDGE)
+    resolution_for(
+        &object.local_bounds,
+        camera.eye_f32(),
+        projection,
+        camera,
+        FINE_TEXEL_PIXELS,
+    )
+    .filter(|&edge| edge <= FINE_TEXEL_MAX_EDGE)
 }
 
 /// Predicted textures are asked for once the eye's future leaves this fraction of the
@@ -354,7 +365,7 @@ mod tests {
             if holed {
                 mesh.triangles.pop();
             }
-            SceneObject::new("object", mesh, Default::default())
+            SceneObject::new("object", mesh, glam::DVec3::ZERO, Default::default())
         };
         let tree = object(
             Generator::Tree {
@@ -366,8 +377,9 @@ mod tests {
         );
         let sphere = object(Generator::Sphere { subdivisions: 3 }, false);
         let holed = object(Generator::Sphere { subdivisions: 3 }, true);
-        let far =
-            |o: &SceneObject| o.bounds.center() + Vec3::new(0.3, 0.2, 1.0) * 4.0 * o.bounds.extent().length();
+        let far = |o: &SceneObject| {
+            o.local_bounds.center() + Vec3::new(0.3, 0.2, 1.0) * 4.0 * o.local_bounds.extent().length()
+        };
         assert!(!holed.is_closed());
         assert_eq!(projection_for(&tree, far(&tree)), SourceProjection::Perspective);
         assert_eq!(
@@ -392,8 +404,8 @@ mod tests {
         let scene = Scene::load("default").expect("default scene");
         let weight = |name: &str| {
             let object = scene.object(name).expect("object");
-            let eye =
-                object.bounds.center() + Vec3::new(0.3, 0.4, 1.0) * 3.0 * object.bounds.extent().length();
+            let eye = object.local_bounds.center()
+                + Vec3::new(0.3, 0.4, 1.0) * 3.0 * object.local_bounds.extent().length();
             let texture = bake(
                 &ObjectTracer::new(object),
                 eye,
@@ -417,20 +429,20 @@ mod tests {
         let (sphere, tree) = (object("sphere"), object("tree"));
         let look = |eye: Vec3, at: Vec3| Camera::look_at(eye, at, Vec3::Y, 60.0, 640, 360).expect("camera");
         let far = look(
-            sphere.bounds.center() + Vec3::new(0.0, 1.0, 12.0),
-            sphere.bounds.center(),
+            sphere.local_bounds.center() + Vec3::new(0.0, 1.0, 12.0),
+            sphere.local_bounds.center(),
         );
         assert_eq!(texel_pixels(sphere, &far), FINE_TEXEL_PIXELS);
         let near = look(
-            tree.bounds.center() + Vec3::new(0.0, 1.0, 5.0),
-            tree.bounds.center(),
+            tree.local_bounds.center() + Vec3::new(0.0, 1.0, 5.0),
+            tree.local_bounds.center(),
         );
         assert_eq!(
             texel_pixels(tree, &near),
             relief_render::pyramid::MAX_TEXEL_PIXELS
         );
         // Inside the bounds no texture is asked for: the coarser texel, no panic.
-        let inside = look(sphere.bounds.center(), Vec3::ZERO);
+        let inside = look(sphere.local_bounds.center(), Vec3::new(10.0, 0.0, 0.0));
         assert_eq!(
             texel_pixels(sphere, &inside),
             relief_render::pyramid::MAX_TEXEL_PIXELS

@@ -111,7 +111,13 @@ impl Manager {
     /// object ([`asked_for`]), rounded up to the [`texture_ladder`] — and its
     /// projection.
     pub(super) fn size_for(object: &SceneObject, eye: Vec3, camera: &Camera) -> (u32, SourceProjection) {
-        let (projection, edge) = asked_for(object, &Camera { eye, ..*camera });
+        let (projection, edge) = asked_for(
+            object,
+            &Camera {
+                eye: eye.as_dvec3(),
+                ..*camera
+            },
+        );
         (texture_ladder(edge.unwrap_or(u32::MAX)), projection)
     }
 
@@ -202,7 +208,7 @@ impl Manager {
 
     /// Asks ahead (when predicting) for the texture the eye will need once a request
     /// for object `k` made now comes back, and withdraws predictions the motion has
-    /// left behind.
+    /// left behind. `camera` in the object's frame.
     pub(super) fn predict_for(&mut self, scene: &Scene, k: usize, camera: &Camera) {
         if !self.config.predict {
             return;
@@ -213,11 +219,12 @@ impl Manager {
             return;
         };
         let object = &scene.objects[k];
-        let centre = object.bounds.center();
+        let centre = object.local_bounds.center();
         // Drawn as geometry from there: nothing to ask for.
         if geometry_reason(object, future) == Some(GeometryReason::TooNear) {
             return;
         }
+        let (future, eye) = (object.to_local(future), camera.eye_f32());
         let held: Vec<(Vec3, Grade)> = (self.objects[k].held.iter().map(|h| h.eye))
             .zip(self.grades(scene, k, future, camera))
             .collect();
@@ -227,13 +234,13 @@ impl Manager {
             .collect();
         let covered = held_covers(centre, future, &held, &asked, self.tolerance())
             || self.pending_covers(k, centre, future);
-        let ahead = self.ahead(k, centre, camera.eye, future);
+        let ahead = self.ahead(k, centre, eye, future);
         let deadline = Some((horizon * 1e3) as u64);
         // (Quiet a while after the saturated server refused one: see `SHED_QUIET`.)
         let quiet = self.objects[k].quiet_until.is_some_and(|t| Instant::now() < t);
         let ask = match (quiet, covered, ahead) {
             (true, _, _) => None,
-            (false, false, _) => Some(self.lead(k, centre, camera.eye, future)),
+            (false, false, _) => Some(self.lead(k, centre, eye, future)),
             (false, true, Ahead::AskAt(eye)) => Some(eye),
             (false, true, _) => None,
         };
@@ -247,8 +254,7 @@ impl Manager {
             .iter()
             .filter(|(_, p)| p.object == k && p.predicted)
             .filter(|(_, p)| {
-                angle_between(centre, p.eye, camera.eye) > reach
-                    && angle_between(centre, p.eye, future) > reach
+                angle_between(centre, p.eye, eye) > reach && angle_between(centre, p.eye, future) > reach
             })
             .map(|(&id, _)| id)
             .collect();

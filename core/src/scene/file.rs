@@ -35,7 +35,7 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::{Affine3A, EulerRot, Quat, Vec3};
+use glam::{Affine3A, DVec3, EulerRot, Quat, Vec3};
 use rayon::prelude::*;
 use serde::Deserialize;
 
@@ -105,7 +105,7 @@ struct ObjectFile {
     obj: Option<PathBuf>,
     generator: Option<Generator>,
     #[serde(default)]
-    translate: [f32; 3],
+    translate: [f64; 3],
     #[serde(default)]
     rotate_deg: [f32; 3],
     #[serde(default = "one")]
@@ -268,14 +268,15 @@ fn convert_light(light: LightFile) -> Result<Light> {
     })
 }
 
-/// The farthest a vertex may lie from the origin, metres: past it, squared distances
-/// overflow `f32`.
-const MAX_COORDINATE: f32 = 1e12;
+/// The farthest a vertex may lie from its mesh's origin, and an object's origin from
+/// the world's, metres: past it, squared distances overflow `f32`, and `f64` steps by
+/// more than a tenth of a millimetre.
+const MAX_COORDINATE: f64 = 1e12;
 
-/// Whether a world-space mesh lies within [`MAX_COORDINATE`] of the origin.
+/// Whether a mesh lies within [`MAX_COORDINATE`] of its origin.
 pub(super) fn check_extent(mesh: &Mesh) -> Result<()> {
     let bounds = mesh.bounds();
-    if bounds.min.abs().max(bounds.max.abs()).max_element() > MAX_COORDINATE {
+    if bounds.min.abs().max(bounds.max.abs()).max_element() as f64 > MAX_COORDINATE {
         return Err(invalid(format!(
             "beyond {MAX_COORDINATE:e} m from the origin, past what f32 rendering can hold"
         )));
@@ -322,7 +323,12 @@ fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<SceneObject>
         }
         _ => return Err(invalid("give exactly one of `obj` or `generator`")),
     };
-    let translate = crate::vector::ensure_finite("translate", Vec3::from(o.translate)).map_err(invalid)?;
+    let origin = crate::vector::ensure_finite_f64("translate", DVec3::from(o.translate)).map_err(invalid)?;
+    if origin.abs().max_element() > MAX_COORDINATE {
+        return Err(invalid(format!(
+            "translate {origin} lies beyond {MAX_COORDINATE:e} m from the origin"
+        )));
+    }
     let rotate = crate::vector::ensure_finite("rotate_deg", Vec3::from(o.rotate_deg)).map_err(invalid)?;
     if !(o.scale.is_finite() && o.scale > 0.0) {
         return Err(invalid(format!("scale {} must be positive and finite", o.scale)));
@@ -343,11 +349,16 @@ fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<SceneObject>
         rotate.y.to_radians(),
         rotate.z.to_radians(),
     );
-    let transform = Affine3A::from_scale_rotation_translation(Vec3::splat(o.scale), rotation, translate);
-    let world = mesh.transformed(transform);
-    world.validate().map_err(invalid)?;
-    check_extent(&world).map_err(|m| invalid(format!("scale and translate place it {m}")))?;
-    Ok(SceneObject::new(o.name, world, specular))
+    // Scale and rotation make the object's own frame; `translate` places that
+    // frame's origin in the world, in f64 (see [`SceneObject`]).
+    let local = mesh.transformed(Affine3A::from_scale_rotation_translation(
+        Vec3::splat(o.scale),
+        rotation,
+        Vec3::ZERO,
+    ));
+    local.validate().map_err(invalid)?;
+    check_extent(&local).map_err(|m| invalid(format!("scaled, its vertices lie {m}")))?;
+    Ok(SceneObject::new(o.name, local, origin, specular))
 }
 
 #[cfg(test)]
@@ -431,7 +442,14 @@ mod tests {
         )
         .unwrap();
         let ball = scene.object("ball").unwrap();
-        assert!(ball.bounds.min.abs_diff_eq(Vec3::new(-2.0, 0.0, -2.0), 1e-4));
+        // (Scaled about its own origin, which `translate` places.)
+        assert!(ball.local_bounds.min.abs_diff_eq(Vec3::splat(-2.0), 1e-4));
+        assert!(
+            ball.world_bounds()
+                .min
+                .abs_diff_eq(Vec3::new(-2.0, 0.0, -2.0), 1e-4)
+        );
+        assert_eq!(ball.origin, DVec3::new(0.0, 2.0, 0.0));
         assert_eq!(scene.lighting.lights.len(), 1);
         assert_eq!(scene.path.frame_count(), 120);
     }

@@ -9,10 +9,10 @@ pub mod file;
 use std::path::Path;
 use std::sync::Arc;
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 use crate::bounds::Aabb;
-use crate::camera::{CameraPath, PathSegment};
+use crate::camera::{Camera, CameraPath, PathSegment};
 use crate::error::{Error, Result};
 use crate::hash::{ContentHash, mesh_hash};
 use crate::mesh::{EdgeCensus, Mesh};
@@ -117,15 +117,30 @@ fn name_char(c: char) -> bool {
     c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.')
 }
 
-/// One object of a scene, its mesh already placed in world space.
+/// One object of a scene: its mesh in the object's own frame, and where that frame
+/// lies in the world.
+///
+/// # Frames
+///
+/// A world may lie far from its origin (a city in survey coordinates, 10⁶ m out),
+/// where an `f32` steps by centimetres: meshes, bakes and warps there lost whole depth
+/// levels. So everything about one object — its mesh, its bounds, its relief
+/// textures and the eyes they are made for — is given in the object's own frame,
+/// whose origin lies at [`SceneObject::origin`] (in `f64`) and whose axes are the
+/// world's. Scene-wide code moves a camera into it with [`SceneObject::local_camera`]:
+/// one `f64` subtraction, after which all is `f32` near the origin, as precise
+/// wherever the object stands.
 #[derive(Debug, Clone)]
 pub struct SceneObject {
     pub name: String,
+    /// The mesh, in the object's frame.
     pub mesh: Arc<Mesh>,
-    /// World-space bounds of the mesh.
-    pub bounds: Aabb,
+    /// Where the object's frame's origin lies in the world.
+    pub origin: DVec3,
+    /// Bounds of the mesh, in the object's frame.
+    pub local_bounds: Aabb,
     pub specular: Specular,
-    /// Content hash of the world-space mesh.
+    /// Content hash of the mesh in the object's frame.
     pub hash: ContentHash,
     /// How the mesh's edges are shared ([`Mesh::edge_census`]), found the first time it
     /// is asked (only a client drawing impostors needs it, and it costs a pass over the
@@ -145,11 +160,38 @@ impl SceneObject {
         *self.edges.get_or_init(|| self.mesh.edge_census())
     }
 
-    /// Places `mesh` (already in world space) in a scene object.
-    pub fn new(name: impl Into<String>, mesh: Mesh, specular: Specular) -> Self {
+    /// `camera` (in the world) moved into the object's frame.
+    pub fn local_camera(&self, camera: &Camera) -> Camera {
+        camera.relative_to(self.origin)
+    }
+
+    /// A world point in the object's frame.
+    pub fn to_local(&self, world: DVec3) -> Vec3 {
+        (world - self.origin).as_vec3()
+    }
+
+    /// A point of the object's frame in the world.
+    pub fn to_world(&self, local: Vec3) -> DVec3 {
+        self.origin + local.as_dvec3()
+    }
+
+    /// The object's bounds in the world, rounded out to `f32`: for scene-wide
+    /// decisions that need no more than that (the default path, what a view may see);
+    /// never for drawing.
+    pub fn world_bounds(&self) -> Aabb {
+        Aabb {
+            min: self.to_world(self.local_bounds.min).as_vec3().map(f32::next_down),
+            max: self.to_world(self.local_bounds.max).as_vec3().map(f32::next_up),
+        }
+    }
+
+    /// A scene object of `mesh` (in its own frame), that frame's origin placed at
+    /// `origin` in the world.
+    pub fn new(name: impl Into<String>, mesh: Mesh, origin: DVec3, specular: Specular) -> Self {
         SceneObject {
             name: name.into(),
-            bounds: mesh.bounds(),
+            origin,
+            local_bounds: mesh.bounds(),
             hash: mesh_hash(&mesh),
             edges: std::sync::OnceLock::new(),
             mesh: Arc::new(mesh),
@@ -219,7 +261,7 @@ impl Scene {
         } else {
             name
         };
-        let object = SceneObject::new(name.clone(), mesh, Specular::default());
+        let object = SceneObject::new(name.clone(), mesh, DVec3::ZERO, Specular::default());
         let mut scene = Scene {
             name,
             objects: vec![object],
@@ -232,9 +274,11 @@ impl Scene {
         Ok(scene)
     }
 
-    /// World bounds of all objects.
+    /// World bounds of all objects, rounded out to `f32` ([`SceneObject::world_bounds`]).
     pub fn bounds(&self) -> Aabb {
-        self.objects.iter().fold(Aabb::EMPTY, |b, o| b.union(o.bounds))
+        self.objects
+            .iter()
+            .fold(Aabb::EMPTY, |b, o| b.union(o.world_bounds()))
     }
 
     /// Total triangles.
@@ -242,24 +286,27 @@ impl Scene {
         self.objects.iter().map(|o| o.mesh.triangle_count()).sum()
     }
 
-    /// The objects that lie so far from the origin, for their size, that `f32`
-    /// coordinates cannot place them finely: one step of an `f32` there is more than
-    /// [`PRECISION_LIMIT`] of the object's extent. One sentence each, naming the figures.
+    /// The objects whose meshes lie so far from their own frame's origin, for their
+    /// size, that `f32` coordinates cannot place their vertices finely: one step of an
+    /// `f32` there is more than [`PRECISION_LIMIT`] of the object's extent (an OBJ file
+    /// in survey coordinates; where an object stands in the world costs nothing, see
+    /// [`SceneObject`]). One sentence each, naming the figures.
     pub fn precision_warnings(&self) -> Vec<String> {
         self.objects
             .iter()
             .filter_map(|o| {
-                let b = o.bounds;
+                let b = o.local_bounds;
                 let distance = b.min.abs().max(b.max.abs()).max_element();
                 let extent = b.extent().max_element();
                 // The spacing of f32 values at `distance`.
                 let step = distance * f32::EPSILON;
                 (extent > 0.0 && step > PRECISION_LIMIT * extent).then(|| {
                     format!(
-                        "object `{}` lies {distance:.3e} m from the origin, where f32 coordinates \
-                         step by {step:.2e} m, {:.4} % of its {extent:.3e} m extent (more than \
-                         one 16-bit depth level): its depths and positions lose precision; move \
-                         the scene towards the origin",
+                        "object `{}`'s vertices lie {distance:.3e} m from its mesh's origin, where \
+                         f32 coordinates step by {step:.2e} m, {:.4} % of its {extent:.3e} m extent \
+                         (more than one 16-bit depth level): its depths and positions lose \
+                         precision; move its vertices towards the origin and place it with \
+                         `translate`",
                         o.name,
                         100.0 * step / extent
                     )
@@ -305,11 +352,20 @@ impl Scene {
 
     /// One orbit around the whole scene, for scenes that give no path.
     pub fn default_path(&self) -> CameraPath {
-        let b = self.bounds();
-        let radius = b.extent().length().max(1e-6);
+        // (The centre in f64: a scene far from the origin is orbited as smoothly.)
+        let (min, max) = self
+            .objects
+            .iter()
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(min, max), o| {
+                (
+                    min.min(o.to_world(o.local_bounds.min)),
+                    max.max(o.to_world(o.local_bounds.max)),
+                )
+            });
+        let radius = (max - min).length().max(1e-6);
         CameraPath {
             segments: vec![PathSegment::Orbit {
-                center: b.center().to_array(),
+                center: ((min + max) * 0.5).to_array(),
                 radius: radius * 1.5,
                 height: radius * 0.4,
                 turns: 1.0,
@@ -340,29 +396,51 @@ pub fn default_lighting() -> Lighting {
 mod tests {
     use super::*;
 
-    /// The default scene's objects lie near the origin: no warning. One sphere moved
-    /// 10⁵ m away is warned about, with its distance; at 100 m it is not.
+    /// Where an object stands costs no precision: a sphere moved 10⁶ m away is not
+    /// warned about. A mesh whose own vertices lie 10⁵ m from its origin (an OBJ file
+    /// in survey coordinates) is, with its distance; one 100 m out is not.
     #[test]
-    fn objects_far_from_the_origin_for_their_size_are_warned_about() {
+    fn meshes_far_from_their_own_origin_for_their_size_are_warned_about() {
         assert!(Scene::load("default").unwrap().precision_warnings().is_empty());
-        let at = |x: f64| {
-            let text = format!(
-                "[[objects]]\nname = \"ball\"\ngenerator = {{ kind = \"sphere\", subdivisions = 2 }}\ntranslate = [{x}, 0, 0]\n"
-            );
+        let parse = |text: &str| {
             file::parse(
-                &text,
+                text,
                 "test",
                 Path::new("."),
                 Reach::Anywhere,
                 &SceneLimits::default(),
             )
             .unwrap()
-            .precision_warnings()
+        };
+        let moved = parse(
+            "[[objects]]\nname = \"ball\"\ngenerator = { kind = \"sphere\", subdivisions = 2 }\ntranslate = [1e6, 0, 0]\n",
+        );
+        assert!(
+            moved.precision_warnings().is_empty(),
+            "{:?}",
+            moved.precision_warnings()
+        );
+        let dir = std::env::temp_dir().join(crate::scratch::unique_name("relief-far-obj"));
+        std::fs::create_dir_all(&dir).unwrap();
+        let at = |x: f64| {
+            let path = dir.join(format!("far{x}.obj"));
+            std::fs::write(
+                &path,
+                format!("v {x} 0 0\nv {} 0 0\nv {x} 1 0\nf 1 2 3\n", x + 1.0),
+            )
+            .unwrap();
+            Scene::load(&path.display().to_string())
+                .unwrap()
+                .precision_warnings()
         };
         assert!(at(100.0).is_empty(), "{:?}", at(100.0));
         let far = at(1e5);
         assert_eq!(far.len(), 1, "{far:?}");
-        assert!(far[0].contains("`ball`") && far[0].contains("1.000e5"), "{far:?}");
+        assert!(
+            far[0].contains("`far100000`") && far[0].contains("1.000e5"),
+            "{far:?}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
@@ -389,7 +467,7 @@ mod tests {
                 panic!("{name}: no orbit");
             };
             assert!(
-                Vec3::from(*center).distance(original.bounds.center()) < 0.5,
+                DVec3::from(*center).distance(original.world_bounds().center().as_dvec3()) < 0.5,
                 "{name}"
             );
         }

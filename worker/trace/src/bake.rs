@@ -211,7 +211,7 @@ impl TexelRays {
             reason,
         };
         let camera =
-            SourceCamera::facing(eye, &target.object.bounds, size, size, projection).map_err(error)?;
+            SourceCamera::facing(eye, &target.object.local_bounds, size, size, projection).map_err(error)?;
         let span = camera.depth_far - camera.depth_near;
         let margin = span * PLANE_MARGIN;
         let (t_min, t_max) = (-margin, span + margin);

@@ -32,6 +32,8 @@ pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> 
     let middle = (n * n / 2) as usize;
     let grid = SampleGrid::new(tracer, camera, n);
     let background = to_rgb8(tracer.background);
+    // Points are lit relative to the eye (see [`SceneObject`](relief_core::scene::SceneObject)'s frames).
+    let lighting = tracer.lighting.relative_to(camera.eye);
     let mut pixels = vec![(background, NO_OBJECT); camera.width as usize * camera.height as usize];
     par_fill_blocks(camera.width, camera.height, &mut pixels, |block, values| {
         let nearest = grid.nearest(tracer, block);
@@ -45,14 +47,14 @@ pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> 
                 Some(SurfacePoint {
                     albedo: o.mesh.albedo(tri, hit.u, hit.v),
                     normal: o.mesh.shading_normal(tri, hit.u, hit.v),
-                    position: camera.eye + *ray * hit.t,
+                    position: *ray * hit.t,
                     towards_eye: -ray.normalize(),
                     specular: o.specular,
                 })
             })
             .collect();
         let mut lit = vec![Vec3::ZERO; points.len()];
-        tracer.lighting.shade_all(&points, &mut lit);
+        lighting.shade_all(&points, &mut lit);
         let mut lit = lit.into_iter();
         let shaded: Vec<(Vec3, u32)> = nearest
             .iter()
@@ -79,7 +81,7 @@ pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> 
 /// pixel `(x, y)` at fine cell `(n·x + i, n·y + j)`, its centre at pixel position
 /// `(x + (i + ½)/n, y + (j + ½)/n)`. Each object wholly before the eye is traced as
 /// beams from it ([`PlaneRays`] on the plane one unit before the eye); one reaching
-/// behind the eye's plane, ray by ray.
+/// behind the eye's plane, ray by ray. Each in its own frame: the eye moved into it.
 struct SampleGrid<'a> {
     camera: &'a Camera,
     n: u32,
@@ -91,8 +93,8 @@ struct SampleGrid<'a> {
 enum Tracing {
     /// Block by block, as beams from the eye.
     Beams(PlaneRays),
-    /// One ray at a time.
-    RayByRay,
+    /// One ray at a time from `eye`, in the object's frame.
+    RayByRay { eye: Vec3 },
     /// Not at all: it lies wholly behind the eye.
     Behind,
 }
@@ -106,43 +108,36 @@ impl<'a> SampleGrid<'a> {
         let h = camera.height as f32;
         let tan_half = camera.tan_half_fov();
         // `Camera::ray` at pixel position (0, 0), and per fine cell.
-        let origin = camera.eye + camera.ray(0.0, 0.0) * PLANE_DEPTH;
+        let corner_ray = camera.ray(0.0, 0.0) * PLANE_DEPTH;
         let a = camera.ray_x_step() * (PLANE_DEPTH / n as f32);
         let b = -camera.up * (2.0 * tan_half / h * PLANE_DEPTH / n as f32);
-        let depths: Vec<(f32, f32)> = tracer
-            .objects
-            .iter()
-            .map(|o| {
-                let depth = |p: &Vec3| (*p - camera.eye).dot(camera.forward);
-                let corners = o.object.bounds.corners();
-                let near = corners.iter().map(depth).fold(f32::INFINITY, f32::min);
-                let far = corners.iter().map(depth).fold(f32::NEG_INFINITY, f32::max);
-                (near, far)
-            })
-            .collect();
         let tracing = tracer
             .objects
             .iter()
-            .zip(&depths)
-            .map(|(o, &(near, far))| {
+            .map(|o| {
+                let (local, bounds) = (o.object.local_camera(camera), &o.object.local_bounds);
+                let corners = bounds.corners().map(|p| local.to_view(p).z);
+                let near = corners.iter().copied().fold(f32::INFINITY, f32::min);
+                let far = corners.iter().copied().fold(f32::NEG_INFINITY, f32::max);
                 // (`t` is the depth past the plane.)
                 let t_max = (far - PLANE_DEPTH) * (1.0 + BEAM_DEPTH_MARGIN) + BEAM_DEPTH_MARGIN;
                 let fine_enough = || {
-                    let samples = footprint_pixels(camera, &o.object.bounds) * (n * n) as f32;
+                    let samples = footprint_pixels(&local, bounds) * (n * n) as f32;
                     o.object.mesh.triangle_count() as f32 <= BEAM_MAX_TRIANGLES_PER_SAMPLE * samples.max(1.0)
                 };
+                let eye = local.eye_f32();
                 let beams = (near > 0.0
                     && far.is_finite()
-                    && within_beam_tangent(camera, &o.object.bounds)
+                    && within_beam_tangent(&local, bounds)
                     && fine_enough())
                 .then(|| {
-                    PlaneRays::from_centre(camera.eye, origin, a, b, camera.forward, -PLANE_DEPTH, t_max)
+                    PlaneRays::from_centre(eye, eye + corner_ray, a, b, camera.forward, -PLANE_DEPTH, t_max)
                 })
                 .flatten();
                 match beams {
                     Some(beams) => Tracing::Beams(beams),
                     None if far <= 0.0 => Tracing::Behind,
-                    None => Tracing::RayByRay,
+                    None => Tracing::RayByRay { eye },
                 }
             })
             .collect();
@@ -197,12 +192,12 @@ impl<'a> SampleGrid<'a> {
                         }
                     }
                 }
-                Tracing::RayByRay => {
+                Tracing::RayByRay { eye } => {
                     let cells: Vec<(u32, u32)> = fine.pixels().collect();
                     let rays: Vec<Ray> = cells
                         .iter()
                         .map(|&(fx, fy)| Ray {
-                            origin: self.camera.eye,
+                            origin: *eye,
                             direction: ray_of(fx, fy).normalize(),
                             t_min: 0.0,
                             t_max: f32::INFINITY,

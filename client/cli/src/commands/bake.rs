@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use glam::Vec3;
+use glam::DVec3;
 
 use relief_core::relief::DepthBits;
 use relief_trace::bake;
@@ -20,9 +20,11 @@ pub struct BakeArgs {
     /// Object to bake; may be omitted when the scene has one object.
     #[arg(long)]
     object: Option<String>,
-    /// Eye the texture is made for, X,Y,Z (outside the object's bounds).
-    #[arg(long, value_parser = args::vec3, allow_hyphen_values = true)]
-    eye: Vec3,
+    /// Eye the texture is made for, X,Y,Z in the world (outside the object's bounds).
+    /// The texture is written in the object's own frame: texture.json's coordinates
+    /// are measured from the object's origin (its `translate`).
+    #[arg(long, value_parser = args::position, allow_hyphen_values = true)]
+    eye: DVec3,
     /// Texture edge in texels (square), 1..=4096.
     #[arg(long, default_value = "256", value_parser = args::texture_size, allow_hyphen_values = true)]
     size: u32,
@@ -46,7 +48,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
     let tracer = ObjectTracer::new(object);
     let texture = bake(
         &tracer,
-        args.eye,
+        object.to_local(args.eye),
         args.size,
         DepthBits::from_bits(args.depth_bits)?,
         args.projection.into(),

@@ -40,7 +40,7 @@ struct Projection {
 fn project(impostor: &Impostor, camera: &Camera) -> Result<Option<Projection>, WarpError> {
     let texture = &impostor.texture;
     let c = &texture.camera;
-    ensure_finite(c, camera.eye)?;
+    ensure_finite(c, camera.eye_f32())?;
     let far = c.depth_far;
     let (x0, y0, x1, y1) = volume_rect(camera, c);
     if x1 <= x0 || y1 <= y0 {

@@ -27,13 +27,13 @@ pub fn display(
 ) -> Result<(), WarpError> {
     let texture = &impostor.texture;
     let c = &texture.camera;
-    ensure_finite(c, camera.eye)?;
+    ensure_finite(c, camera.eye_f32())?;
     let (w, h) = (c.width as f32, c.height as f32);
     let far = c.depth_far;
     let (x0, y0, x1, y1) = volume_rect(camera, c);
     let steps = steps.max(1);
     let (a_scale, b_scale) = (c.a / c.a.length_squared(), c.b / c.b.length_squared());
-    let rel = camera.eye - c.origin;
+    let rel = camera.eye_f32() - c.origin;
     // The eye in texture coordinates (u, v, d).
     let eye_t = Vec3::new(rel.dot(a_scale), rel.dot(b_scale), rel.dot(c.f));
     let empty = texture.depth_bits.empty();

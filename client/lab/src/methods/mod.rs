@@ -212,7 +212,7 @@ pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<P
     }
     let centre = volume_centre(&texture.camera);
     let turn_deg = (texture.eye - centre)
-        .angle_between(camera.eye - centre)
+        .angle_between(camera.eye_f32() - centre)
         .to_degrees();
     if turn_deg > MAX_SHOWN_TURN_DEG {
         return Err(DisplayError::FarSide {
@@ -220,7 +220,7 @@ pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<P
             max_deg: MAX_SHOWN_TURN_DEG,
         });
     }
-    let pixels = texel_angle(&texture.camera, camera.eye) / camera.pixel_angle();
+    let pixels = texel_angle(&texture.camera, camera.eye_f32()) / camera.pixel_angle();
     if let Some(fills) = fills
         && pixels > fills
     {

@@ -260,7 +260,7 @@ pub fn error_vs_time(
                     };
                     on_row(&row);
                     if method == Method::Interleaved
-                        && let Ok(params) = WarpParams::new(&impostor.texture, camera.eye)
+                        && let Ok(params) = WarpParams::new(&impostor.texture, camera.eye_f32())
                     {
                         predictions.push(Prediction {
                             object: name.clone(),

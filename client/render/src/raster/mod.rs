@@ -48,7 +48,9 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
     for (slot, &(_, object)) in objects.iter().enumerate() {
         // An object wholly off screen costs nothing (its vertices would all be
         // projected before the triangle cull throws them out).
-        if !camera.may_see(&object.bounds) {
+        // (In the object's frame: see `SceneObject`.)
+        let camera = object.local_camera(camera);
+        if !camera.may_see(&object.local_bounds) {
             continue;
         }
         // Each vertex projected once (a vertex is a corner of ~6 triangles); only the

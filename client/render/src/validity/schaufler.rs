@@ -31,14 +31,14 @@ pub fn parallax_angle(bounds: &Aabb, old_eye: Vec3, new_eye: Vec3) -> f32 {
 /// (β_transP ≤ β_screen). The sprite is those pixels copied, not a quad re-projected as
 /// Schaufler's: the view's own turn moves them as much as the eye's step, so it counts
 /// too (a camera turning on the spot slid the kept sphere 100 pixels off its place), and
-/// another frame size or field of view ends it.
+/// another frame size or field of view ends it. Both cameras in the frame of `bounds`.
 pub fn sprite_still_valid(bounds: &Aabb, old: &Camera, camera: &Camera) -> bool {
     let same_frame = (old.width, old.height, old.fov_y) == (camera.width, camera.height, camera.fov_y);
     let turn = old
         .forward
         .angle_between(camera.forward)
         .max(old.up.angle_between(camera.up));
-    same_frame && parallax_angle(bounds, old.eye, camera.eye) + turn <= camera.pixel_angle()
+    same_frame && parallax_angle(bounds, old.eye_f32(), camera.eye_f32()) + turn <= camera.pixel_angle()
 }
 
 /// β_impostor: the angle one texel subtends from `eye`, at the middle of the texture's
@@ -60,9 +60,10 @@ pub fn volume_centre(texture: &SourceCamera) -> Vec3 {
 }
 
 /// The resolution test (eq. 4-1): the texture is too coarse when a texel subtends more
-/// than `k` pixels' angle (`k ≥ 1` tolerates slightly blurry impostors).
+/// than `k` pixels' angle (`k ≥ 1` tolerates slightly blurry impostors). `camera` in the
+/// texture's frame.
 pub fn needs_finer_texture(texture: &SourceCamera, camera: &Camera, k: f32) -> bool {
-    texel_angle(texture, camera.eye) > k * camera.pixel_angle()
+    texel_angle(texture, camera.eye_f32()) > k * camera.pixel_angle()
 }
 
 /// The texture edge for the object with `bounds` seen from `eye` through `camera`: the
@@ -107,13 +108,13 @@ mod tests {
         // A sideways step that moves the extremes by less than a pixel's angle …
         let step = 10.0 * camera.pixel_angle() * 0.5;
         let near = Camera {
-            eye: eye + Vec3::X * step,
+            eye: (eye + Vec3::X * step).as_dvec3(),
             ..camera
         };
         assert!(sprite_still_valid(&bounds, &camera, &near));
         // … and one that moves them by several.
         let far = Camera {
-            eye: eye + Vec3::X * step * 8.0,
+            eye: (eye + Vec3::X * step * 8.0).as_dvec3(),
             ..camera
         };
         assert!(!sprite_still_valid(&bounds, &camera, &far));
@@ -174,7 +175,7 @@ mod tests {
         let inside = Camera::look_at(Vec3::new(0.0, 1.0, 0.0), Vec3::Z, Vec3::Y, 60.0, 64, 36).unwrap();
         for projection in [SourceProjection::Orthographic, SourceProjection::Perspective] {
             assert_eq!(
-                resolution_for(&bounds, inside.eye, projection, &inside, 1.0),
+                resolution_for(&bounds, inside.eye_f32(), projection, &inside, 1.0),
                 None
             );
         }

@@ -17,6 +17,13 @@
 //! at once, one per core, before drawing them in turn: impostors differ in size, and
 //! one pre-warp split at its epipole leaves a core idle when the epipole is near an edge.
 //!
+//! # Frames
+//!
+//! A relief texture is given in its object's own frame, and every camera these
+//! functions take must be too: a scene's camera moved there by
+//! [`SceneObject::local_camera`](relief_core::scene::SceneObject::local_camera), which
+//! keeps a warp as precise 10⁶ m from the world's origin as at it.
+//!
 //! ```
 //! use relief_core::relief::{DepthBits, ReliefTexture, SourceCamera, SourceProjection};
 //! use relief_render::gbuffer::GBuffer;
@@ -28,7 +35,7 @@
 //! # let source = SourceCamera::facing(eye, &bounds, 16, 16, SourceProjection::Orthographic)?;
 //! // (An empty texture: a baked one comes from `relief_trace::bake`.)
 //! let impostor = Impostor::new(ReliefTexture::empty(source, DepthBits::Eight, eye));
-//! let camera = Camera::look_at(glam::Vec3::new(1.0, 0.0, 5.0), glam::Vec3::ZERO, glam::Vec3::Y, 40.0, 64, 64)?;
+//! let camera = Camera::look_at(glam::DVec3::new(1.0, 0.0, 5.0), glam::DVec3::ZERO, glam::Vec3::Y, 40.0, 64, 64)?;
 //! let mut gbuffer = GBuffer::new(64, 64);
 //! Prewarped::new(Variant::Interleaved, &impostor, &camera)?.draw(&impostor, 0, &camera, &mut gbuffer);
 //! assert_eq!(gbuffer.covered(), 0);
@@ -80,8 +87,8 @@ pub enum WarpError {
     NonFinite,
 }
 
-/// Shows `impostor` of scene object `object` from `camera` into `gbuffer`: the pre-warp
-/// in `variant`, then its texture mapping.
+/// Shows `impostor` of scene object `object` from `camera` (in the texture's frame) into
+/// `gbuffer`: the pre-warp in `variant`, then its texture mapping.
 pub fn display(
     variant: Variant,
     impostor: &Impostor,
@@ -106,7 +113,7 @@ impl Prewarped {
     /// over two threads, of only what the screen can show (a texture partly off screen,
     /// or far larger than it, pre-warps only the texels that can land on it).
     pub fn new(variant: Variant, impostor: &Impostor, camera: &Camera) -> Result<Prewarped, WarpError> {
-        let params = params::WarpParams::new(&impostor.texture, camera.eye)?;
+        let params = params::WarpParams::new(&impostor.texture, camera.eye_f32())?;
         let seen = prewarp::PlaneWindow::seen_by(camera, &impostor.texture.camera);
         let image = prewarp::prewarp_split(impostor, &params, variant, seen.as_ref());
         Ok(Prewarped {

@@ -824,7 +824,7 @@ impl PlaneWindow {
     pub fn seen_by(camera: &Camera, c: &SourceCamera) -> Option<PlaneWindow> {
         // (In f64, the eye subtracted too: at large coordinates the points' offsets
         // from the eye lose f32 bits.)
-        let origin = c.origin.as_dvec3() - camera.eye.as_dvec3();
+        let origin = c.origin.as_dvec3() - camera.eye;
         let (a, b) = (c.a.as_dvec3(), c.b.as_dvec3());
         let (n, m) = (
             (c.width as f64) * MAX_MARGIN as f64,

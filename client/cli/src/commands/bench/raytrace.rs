@@ -88,8 +88,8 @@ pub fn run(args: RaytraceArgs) -> Result<()> {
     let bvh_build_ms = best_ms(runs.min(3), || drop(Bvh::build(mesh)));
     let tracer = ObjectTracer::new(object);
     // A fixed, oblique view from three bounding radii away.
-    let radius = object.bounds.extent().length() * 0.5;
-    let eye = object.bounds.center() + Vec3::new(0.45, 0.35, 0.82).normalize() * radius * 3.0;
+    let radius = object.local_bounds.extent().length() * 0.5;
+    let eye = object.local_bounds.center() + Vec3::new(0.45, 0.35, 0.82).normalize() * radius * 3.0;
     let bake_once = || bake(&tracer, eye, args.size, DepthBits::Eight, args.projection.into()).map(drop);
     bake_once()?;
     bar.set_message("tracing, all threads");

@@ -98,7 +98,8 @@ pub fn run(args: RpcArgs) -> Result<()> {
             stats.push(start.elapsed().as_secs_f64() * 1e6);
         }
         bar.set_message("impostor requests");
-        let object = Scene::load("default")?.object(&args.object)?.bounds;
+        // (Eyes in the object's frame, as requests give them.)
+        let object = Scene::load("default")?.object(&args.object)?.local_bounds;
         let (centre, radius) = (object.center(), object.extent().length() * 1.5);
         let mut latency = Vec::new();
         let mut bake = Vec::new();

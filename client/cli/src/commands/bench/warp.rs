@@ -122,7 +122,7 @@ pub fn run(args: WarpArgs) -> Result<()> {
     let solo = Solo::new(&scene, &args.object, 3.0)?;
     let impostor = Impostor::new(solo.bake(solo.eye(0.0), args.size, DepthBits::Eight)?);
     let camera = solo.camera(solo.eye(args.angle), args.frame_size)?;
-    let params = WarpParams::new(&impostor.texture, camera.eye)
+    let params = WarpParams::new(&impostor.texture, camera.eye_f32())
         .map_err(|e| anyhow::anyhow!("--angle {}: {e}", args.angle))?;
     let texture = &impostor.texture;
     let texels = texture.depth.len();
@@ -143,7 +143,7 @@ pub fn run(args: WarpArgs) -> Result<()> {
     let c = texture.camera;
     let (w, empty, bits) = (c.width as usize, texture.depth_bits.empty(), texture.depth_bits);
     let naive_ms = median_ms(runs, || {
-        let cc = c.origin - std::hint::black_box(camera.eye);
+        let cc = c.origin - std::hint::black_box(camera.eye_f32());
         for (k, out) in warped.iter_mut().enumerate() {
             let q = texture.depth[k];
             if q == empty {
@@ -265,10 +265,10 @@ pub fn run(args: WarpArgs) -> Result<()> {
     };
     bar.set_message("multi-resolution");
     let multires = {
-        let far_eye = solo.scene.objects[0].bounds.center()
-            + (solo.eye(args.angle) - solo.scene.objects[0].bounds.center()) * 4.0;
+        let far_eye = solo.scene.objects[0].local_bounds.center()
+            + (solo.eye(args.angle) - solo.scene.objects[0].local_bounds.center()) * 4.0;
         let far = relief_core::camera::Camera {
-            eye: far_eye,
+            eye: far_eye.as_dvec3(),
             ..camera
         };
         let pyramid = Pyramid::new(impostor.texture.clone(), MIN_LEVEL_EDGE);
