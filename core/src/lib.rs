@@ -4,8 +4,8 @@
 //! # Brief overview
 //!
 //! The principal type is [`Scene`](scene::Scene): objects placed in the world (each a
-//! triangle [`Mesh`](mesh::Mesh) with a content hash, the name under which machines
-//! agree on what they render), lights, and a camera path. A
+//! triangle [`Mesh`](mesh::Mesh) in the object's own frame with a content hash, the name
+//! under which machines agree on what they render), lights, and a camera path. A
 //! [`ReliefTexture`](relief::ReliefTexture) is what the workers make of one object for
 //! one eye, and [`Lighting`](shading::Lighting) the one model every image is lit with.
 //! No threads of its own but rayon's inside mesh generation and scene loading; no
@@ -18,7 +18,8 @@
 //! let knot = scene.object("knot")?;
 //! assert!(knot.mesh.triangle_count() > 1000);
 //! let camera = scene.path.pose(0).unwrap().camera(scene.fov_y_degrees, 640, 360)?;
-//! assert!(camera.may_see(&knot.bounds));
+//! // (Per object, in the object's own frame: see `SceneObject`.)
+//! assert!(knot.local_camera(&camera).may_see(&knot.local_bounds));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!

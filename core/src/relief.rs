@@ -1,5 +1,8 @@
 //! The relief texture: an image with per-texel albedo, normal and depth.
 //!
+//! A texture, its camera and its eye are given in its object's own frame (see
+//! [`SceneObject`](crate::scene::SceneObject)), never in the world's.
+//!
 //! # Source camera and depth mapping (the one place it is defined)
 //!
 //! A texture of `width × height` texels is seen by a [`SourceCamera`]

@@ -398,9 +398,11 @@ fn frame_writes_the_picture_and_the_promised_json() {
     assert_eq!((picture.width(), picture.height()), (64, 36));
 }
 
-/// At a field of view so narrow that a texel covers many pixels, pull–push would draw
-/// a grid of dots: the objects whose texels are too large are drawn as geometry,
-/// counted and explained, and the frame says so on stderr.
+/// At a field of view so narrow that a texel covers thousands of pixels, pull–push
+/// would draw a few dots or nothing: the objects whose texels are too large are drawn
+/// as geometry, counted and explained, the frame says so on stderr, and its error
+/// against the reference is a figure — `"inf"` where identical — never `null`, which
+/// would say there was nothing to compare.
 #[test]
 fn frame_falls_back_where_a_method_cannot_fill_its_texels() {
     let dir = scratch("frame-narrow");
@@ -411,8 +413,9 @@ fn frame_falls_back_where_a_method_cannot_fill_its_texels() {
         "3,2,9",
         "--target",
         "3,1.3,0",
+        "--compare",
         "--fov",
-        "0.3",
+        "0.001",
         "--size",
         "160x90",
         "--method",
@@ -435,6 +438,11 @@ fn frame_falls_back_where_a_method_cannot_fill_its_texels() {
     assert_eq!(v["fell_back"].as_u64(), Some(why.len() as u64), "{stdout}");
     assert!(why.iter().all(|w| w.contains("a texel covers")), "{why:?}");
     assert!(stderr.contains("drawn as geometry instead"), "{stderr}");
+    let psnr = &v["psnr_whole_db"];
+    assert!(
+        psnr.as_str() == Some("inf") || psnr.as_f64().is_some_and(|db| db > 60.0),
+        "{stdout}"
+    );
 }
 
 #[test]

@@ -28,7 +28,7 @@ pub const MAX_TEXTURE_EDGE: u32 = 1024;
 pub struct ImpostorObject {
     pub index: u32,
     pub pyramid: Pyramid,
-    /// The eye its texture was baked for.
+    /// The eye its texture was baked for, in the object's frame.
     pub source_eye: Vec3,
 }
 

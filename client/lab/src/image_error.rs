@@ -42,6 +42,17 @@ impl ImageError {
     }
 }
 
+/// Writes a PSNR for JSON: a number; `"inf"` for identical images, since JSON has no
+/// infinity and `null` is what "nothing to compare" (NaN) writes. Use with
+/// `#[serde(serialize_with = "serialize_psnr")]`.
+pub fn serialize_psnr<S: serde::Serializer>(db: &f64, s: S) -> Result<S::Ok, S::Error> {
+    if *db == f64::INFINITY {
+        s.serialize_str("inf")
+    } else {
+        s.serialize_f64(*db)
+    }
+}
+
 /// Compares `frame` with `reference` for `object` (or, with `None`, any object). Both
 /// frames must be the same size.
 pub fn compare(frame: &Frame, reference: &Frame, object: Option<u32>) -> ImageError {

@@ -28,7 +28,7 @@
 //! texture was baked 5° around it:
 //!
 //! ```
-//! use glam::{Quat, Vec3};
+//! use glam::{DVec3, Quat, Vec3};
 //! use relief_core::relief::{DepthBits, SourceProjection};
 //! use relief_core::{camera::Camera, scene::Scene};
 //! use relief_render::{gbuffer::GBuffer, geometry::render_geometry, impostor::Impostor};
@@ -37,12 +37,15 @@
 //!
 //! let scene = Scene::load("orbit-sphere")?;
 //! let sphere = scene.object("sphere")?;
-//! let centre = sphere.bounds.center();
-//! let eye = centre + Vec3::new(0.0, 1.0, 4.5);
-//! let camera = Camera::look_at(eye, centre, Vec3::Y, 40.0, 160, 90)?;
+//! let centre = sphere.to_world(sphere.local_bounds.center());
+//! let camera = Camera::look_at(centre + DVec3::new(0.0, 1.0, 4.5), centre, Vec3::Y, 40.0, 160, 90)?;
 //! let mut gbuffer = GBuffer::new(160, 90);
 //! let geometry = render_geometry(&scene, &camera, &mut gbuffer);
 //!
+//! // An impostor lives in its object's own frame: its texture, and the camera it is
+//! // shown through.
+//! let local = sphere.local_camera(&camera);
+//! let (centre, eye) = (sphere.local_bounds.center(), local.eye_f32());
 //! let source_eye = centre + Quat::from_rotation_y(5f32.to_radians()) * (eye - centre);
 //! let texture = bake(
 //!     &ObjectTracer::new(sphere),
@@ -53,7 +56,7 @@
 //! )?;
 //! let index = scene.objects.iter().position(|o| o.name == "sphere").unwrap() as u32;
 //! gbuffer.clear();
-//! display(Variant::Interleaved, &Impostor::new(texture), index, &camera, &mut gbuffer)?;
+//! display(Variant::Interleaved, &Impostor::new(texture), index, &local, &mut gbuffer)?;
 //! let impostor = gbuffer.shade(&scene, &camera);
 //! assert!(impostor.object.contains(&index) && geometry.object.contains(&index));
 //! # Ok::<(), Box<dyn std::error::Error>>(())

@@ -13,6 +13,7 @@ use super::cache::ReadyTexture;
 pub struct TextureRequest {
     pub id: u64,
     pub object: String,
+    /// In the object's frame.
     pub eye: Vec3,
     pub size: u32,
     pub depth_bits: DepthBits,

@@ -25,6 +25,7 @@ use super::policy::{
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Pending {
     pub(super) object: usize,
+    /// In the object's frame, as every eye the manager keeps.
     pub(super) eye: Vec3,
     pub(super) predicted: bool,
     pub(super) sent: Instant,

@@ -18,11 +18,13 @@
 //!
 //! let scene = Scene::load("orbit-sphere")?;
 //! let sphere = scene.object("sphere")?;
-//! let eye = sphere.bounds.center() + Vec3::new(0.0, 1.0, 4.0);
+//! // (A bake's eye is in the object's own frame; the reference's camera in the world.)
+//! let eye = sphere.local_bounds.center() + Vec3::new(0.0, 1.0, 4.0);
 //! let texture = bake(&ObjectTracer::new(sphere), eye, 64, DepthBits::Eight, SourceProjection::Orthographic)?;
 //! assert!(texture.covered_texels() > 64 * 64 / 2);
 //!
-//! let camera = Camera::look_at(eye, sphere.bounds.center(), Vec3::Y, 40.0, 96, 54)?;
+//! let (eye, centre) = (sphere.to_world(eye), sphere.to_world(sphere.local_bounds.center()));
+//! let camera = Camera::look_at(eye, centre, Vec3::Y, 40.0, 96, 54)?;
 //! let frame = render_reference(&SceneTracer::new(&scene), &camera, 1);
 //! assert_eq!(frame.color.len(), 96 * 54);
 //! # Ok::<(), Box<dyn std::error::Error>>(())

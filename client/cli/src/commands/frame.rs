@@ -62,8 +62,10 @@ struct FrameReport {
 #[derive(Serialize)]
 struct FrameError {
     /// Over the pixels both show.
+    #[serde(serialize_with = "relief_lab::image_error::serialize_psnr")]
     psnr_db: f64,
     /// Over every pixel either shows: coverage counts.
+    #[serde(serialize_with = "relief_lab::image_error::serialize_psnr")]
     psnr_whole_db: f64,
     ssim: f64,
     /// Of the pixels either shows, those only one does.

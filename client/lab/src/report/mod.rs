@@ -59,9 +59,11 @@ pub struct Row {
     /// only one does; `psnr_whole_db`: over every pixel either shows, so a method that
     /// leaves the object half empty cannot score as if it had drawn it (see
     /// [`ImageError`](crate::image_error::ImageError)).
+    #[serde(serialize_with = "crate::image_error::serialize_psnr")]
     pub psnr_db: f64,
     pub ssim: f64,
     pub hole_frac: f64,
+    #[serde(serialize_with = "crate::image_error::serialize_psnr")]
     pub psnr_whole_db: f64,
     /// `hole_frac` within [`MAX_HOLE_FRAC`](crate::image_error::MAX_HOLE_FRAC): only
     /// then does `psnr_db` speak for the method.
@@ -70,6 +72,7 @@ pub struct Row {
     /// Exact geometry sampled once per pixel does not reach it either: its
     /// `psnr_aa_db` is the floor that detail finer than a pixel sets for every
     /// one-sample display.
+    #[serde(serialize_with = "crate::image_error::serialize_psnr")]
     pub psnr_aa_db: f64,
 }
 
@@ -110,6 +113,7 @@ pub struct Prediction {
     /// The widest gap the pre-warp really opens (texels).
     pub measured_gap: f32,
     /// The interleaved warp's image error at this angle.
+    #[serde(serialize_with = "crate::image_error::serialize_psnr")]
     pub psnr_db: f64,
     pub hole_frac: f64,
 }
