@@ -4,26 +4,29 @@
 //! random edits, must give an answer — a value or an error naming the problem — never
 //! a panic or a hang.
 //!
-//! Each property runs [`CASES`] cases (seconds in all; `RELIEF_FUZZ_CASES=N` for a
-//! longer run); failing seeds are kept in `tests/proptest-regressions/` and replayed
-//! first.
+//! The valid inputs edited are the built-in scenes, wire messages made here, and the
+//! files of `tests/fuzz-corpus/` (every scene-file key and OBJ statement the loaders
+//! read). Each property runs [`CASES`] cases (`RELIEF_FUZZ_CASES=N` for a longer run);
+//! failing seeds are kept in `tests/tests/proptest-regressions/` and replayed first.
 
 use relief_core::relief::SourceProjection;
 use std::path::Path;
+use std::sync::LazyLock;
 
 use proptest::prelude::*;
 use prost::Message;
 
 use relief_core::obj::{count_triangles, load_obj};
 use relief_core::reach::Reach;
-use relief_core::scene::{SceneLimits, builtin_text, file::parse};
+use relief_core::scene::{SceneLimits, builtin_names, builtin_text, file::parse};
 use relief_proto::bundle::{Bundle, bundle_for};
 use relief_proto::convert::{check_register, request_from_pb, texture_from_pb, texture_to_pb};
 use relief_proto::pb;
 
-/// Cases per property: enough to reach every field's edge cases, few enough for CI
-/// (about ten seconds in all).
-const CASES: u32 = 8192;
+/// Cases per property: the issue asked for minutes of fuzzing in CI; this many take
+/// about a minute and a half on its 2 cores (65,536 took 11 s), most of it writing and
+/// reading OBJ files.
+const CASES: u32 = 524_288;
 
 /// Small limits, so that a random scene that happens to be valid builds in no time.
 const LIMITS: SceneLimits = SceneLimits {
@@ -64,6 +67,34 @@ fn config() -> ProptestConfig {
         ))),
         ..ProptestConfig::default()
     }
+}
+
+/// The scene files edited: the corpus's and the built-in scenes.
+static SCENES: LazyLock<Vec<Vec<u8>>> = LazyLock::new(|| {
+    let builtins = builtin_names().into_iter().filter_map(builtin_text);
+    corpus("toml")
+        .into_iter()
+        .chain(builtins.map(|text| text.as_bytes().to_vec()))
+        .collect()
+});
+
+/// The OBJ files edited: the corpus's.
+static OBJS: LazyLock<Vec<Vec<u8>>> = LazyLock::new(|| corpus("obj"));
+
+/// The contents of the corpus files whose names end in `extension`.
+fn corpus(extension: &str) -> Vec<Vec<u8>> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz-corpus");
+    let mut files: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|entry| entry.expect("corpus entry").path())
+        .filter(|path| path.extension().is_some_and(|e| e == extension))
+        .collect();
+    files.sort();
+    assert!(!files.is_empty(), "no .{extension} files in {}", dir.display());
+    files
+        .iter()
+        .map(|path| std::fs::read(path).expect("corpus file"))
+        .collect()
 }
 
 /// Decodes a bundle and, when it decodes, unpacks and loads it within its own
@@ -122,19 +153,19 @@ proptest! {
     }
 
     #[test]
-    fn scene_files_parse_or_refuse(edits in edits(), text in "[ -~\n]{0,200}") {
-        let valid = builtin_text("default").expect("default scene");
-        let edited = String::from_utf8_lossy(&edited(valid.as_bytes(), &edits)).into_owned();
+    fn scene_files_parse_or_refuse(seed in any::<usize>(), edits in edits(), text in "[ -~\n]{0,200}") {
+        let valid = &SCENES[seed % SCENES.len()];
+        let edited = String::from_utf8_lossy(&edited(valid, &edits)).into_owned();
         for text in [edited, text] {
             let _ = parse(&text, "fuzz", Path::new("."), Reach::Within(Path::new(".")), &LIMITS);
         }
     }
 
     #[test]
-    fn obj_files_load_or_refuse(edits in edits(), bytes in prop::collection::vec(any::<u8>(), 0..512)) {
-        let valid = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvn 0 0 1\nf 1//1 2//1 3//1\nf 1 2 4\nf 2 3 4 1\n";
+    fn obj_files_load_or_refuse(seed in any::<usize>(), edits in edits(), bytes in prop::collection::vec(any::<u8>(), 0..512)) {
+        let valid = &OBJS[seed % OBJS.len()];
         let dir = relief_tests::scratch("fuzz-obj");
-        for (k, content) in [edited(valid.as_bytes(), &edits), bytes].into_iter().enumerate() {
+        for (k, content) in [edited(valid, &edits), bytes].into_iter().enumerate() {
             let path = dir.join(format!("m{k}.obj"));
             std::fs::write(&path, content).expect("writing the OBJ");
             let _ = count_triangles(&path, Reach::Within(&dir));
