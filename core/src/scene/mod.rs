@@ -352,20 +352,13 @@ impl Scene {
 
     /// One orbit around the whole scene, for scenes that give no path.
     pub fn default_path(&self) -> CameraPath {
-        // (The centre in f64: a scene far from the origin is orbited as smoothly.)
-        let (min, max) = self
-            .objects
-            .iter()
-            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(min, max), o| {
-                (
-                    min.min(o.to_world(o.local_bounds.min)),
-                    max.max(o.to_world(o.local_bounds.max)),
-                )
-            });
-        let radius = (max - min).length().max(1e-6);
+        // (A centre rounded to f32 moves the orbit by at most a step of f32; its eyes
+        // are worked out in f64 from it, as smoothly far from the origin as near it.)
+        let b = self.bounds();
+        let radius = f64::from(b.extent().length().max(1e-6));
         CameraPath {
             segments: vec![PathSegment::Orbit {
-                center: ((min + max) * 0.5).to_array(),
+                center: b.center().as_dvec3().to_array(),
                 radius: radius * 1.5,
                 height: radius * 0.4,
                 turns: 1.0,
