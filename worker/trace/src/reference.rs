@@ -116,9 +116,9 @@ impl<'a> SampleGrid<'a> {
             .iter()
             .map(|o| {
                 let (local, bounds) = (o.object.local_camera(camera), &o.object.local_bounds);
-                let corners = bounds.corners().map(|p| local.to_view(p).z);
-                let near = corners.iter().copied().fold(f32::INFINITY, f32::min);
-                let far = corners.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+                let depths = bounds.corners().map(|p| local.to_view(p).z);
+                let near = depths.iter().copied().fold(f32::INFINITY, f32::min);
+                let far = depths.iter().copied().fold(f32::NEG_INFINITY, f32::max);
                 // (`t` is the depth past the plane.)
                 let t_max = (far - PLANE_DEPTH) * (1.0 + BEAM_DEPTH_MARGIN) + BEAM_DEPTH_MARGIN;
                 let fine_enough = || {
