@@ -120,6 +120,7 @@ fn the_demo_flies_and_summarises() {
         "psnr_aa_db",
         "geometry_psnr_aa_db",
         "pixels",
+        "drawn_px",
         "turn_deg",
         "texel_px",
         "growth_px",
@@ -131,12 +132,17 @@ fn the_demo_flies_and_summarises() {
     for line in lines {
         let row: Vec<&str> = line.split(',').collect();
         assert_eq!(row.len(), header.len(), "{line}");
-        if !row[knot[0]].is_empty() {
-            assert!(row[knot[2]].parse::<u32>().unwrap() > 0, "{line}");
-        }
-        if !row[knot[3]].is_empty() {
+        // A figure exactly where the reference or the frame shows the knot.
+        let pixels = |k: usize| row[knot[k]].parse::<u32>().unwrap();
+        assert_eq!(!row[knot[0]].is_empty(), pixels(2) + pixels(3) > 0, "{line}");
+        if !row[knot[4]].is_empty() {
             drawn += 1;
-            for k in &knot[4..] {
+            // Drawn as an impostor in full view, it covers about what the reference does.
+            if pixels(2) >= 400 {
+                let ratio = pixels(3) as f64 / pixels(2) as f64;
+                assert!((0.8..1.25).contains(&ratio), "{line}");
+            }
+            for k in &knot[5..] {
                 let v: f32 = row[*k].parse().unwrap();
                 assert!(v.is_finite() && v >= 0.0, "{line}");
             }

@@ -78,7 +78,7 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
     for (_, name) in &candidates {
         let name = column(name);
         log.push_str(&format!(
-            ",psnr_aa_db_{name},geometry_psnr_aa_db_{name},pixels_{name},turn_deg_{name},texel_px_{name},growth_px_{name},band_px_{name},partner_turn_deg_{name}"
+            ",psnr_aa_db_{name},geometry_psnr_aa_db_{name},pixels_{name},drawn_px_{name},turn_deg_{name},texel_px_{name},growth_px_{name},band_px_{name},partner_turn_deg_{name}"
         ));
     }
     log.push('\n');
@@ -124,7 +124,8 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
                     into.entry(name.to_string()).or_default().push(v);
                 }
             }
-            log.push_str(&format!(",{covered}"));
+            let drawn = image.object.iter().filter(|&&o| o == k).count();
+            log.push_str(&format!(",{covered},{drawn}"));
             let how = shown.get(k as usize).copied().flatten();
             let fields = how.map(|s| {
                 (
