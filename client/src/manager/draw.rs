@@ -54,6 +54,8 @@ impl Manager {
         let start = Instant::now();
         gbuffer.clear();
         self.sprites.resize_with(scene.objects.len(), || None);
+        // Each object is tested and drawn in its own frame (see `SceneObject`).
+        let locals: Vec<Camera> = scene.objects.iter().map(|o| o.local_camera(camera)).collect();
         // Which impostors are redrawn as sprites and which warped: the warps' pre-warps
         // all run at once, then everything is drawn in order.
         let keys: Vec<Option<ShownKey>> = shows
@@ -81,11 +83,7 @@ impl Manager {
                 (Some(key), Some(kept)) => {
                     let o = &scene.objects[k];
                     kept.key == *key
-                        && sprite_still_valid(
-                            &o.local_bounds,
-                            &o.local_camera(&kept.camera),
-                            &o.local_camera(camera),
-                        )
+                        && sprite_still_valid(&o.local_bounds, &o.local_camera(&kept.camera), &locals[k])
                 }
                 _ => false,
             })
@@ -112,13 +110,11 @@ impl Manager {
                 }
             }
         }
-        // Each object's textures are warped in its own frame (see `SceneObject`).
-        let local = |k: usize| scene.objects[k].local_camera(camera);
-        let behind = |k: usize| partner_depth_factor(&scene.objects[k].local_bounds, local(k).eye_f32());
+        let behind = |k: usize| partner_depth_factor(&scene.objects[k].local_bounds, locals[k].eye_f32());
         let prewarps: Vec<_> = warps
             .par_iter()
             .map(|&(k, impostor, is_partner)| {
-                let prewarped = Prewarped::new(Variant::Interleaved, impostor, &local(k));
+                let prewarped = Prewarped::new(Variant::Interleaved, impostor, &locals[k]);
                 if is_partner {
                     prewarped.and_then(|p| p.behind(behind(k)))
                 } else {
@@ -154,7 +150,7 @@ impl Manager {
                     continue;
                 }
                 if let Ok(prewarped) = ready {
-                    let camera = &local(k);
+                    let camera = &locals[k];
                     prewarped.draw(impostor, k as u32, camera, gbuffer);
                     partner_drawn |= is_partner;
                     self.counters.partners += u64::from(is_partner);
@@ -176,7 +172,7 @@ impl Manager {
             let o = &scene.objects[k];
             if self
                 .last_camera
-                .is_some_and(|last| !sprite_still_valid(&o.local_bounds, &o.local_camera(&last), &local(k)))
+                .is_some_and(|last| !sprite_still_valid(&o.local_bounds, &o.local_camera(&last), &locals[k]))
             {
                 self.sprites[k] = None;
                 continue;
