@@ -238,7 +238,8 @@ pub fn spawn_local(
             let Ok(pool) = rayon::ThreadPoolBuilder::new().num_threads(1).build() else {
                 return;
             };
-            let mut tracers: HashMap<String, ObjectTracer> = HashMap::new();
+            // By mesh: placements of one mesh bake alike (in the object's frame).
+            let mut tracers: HashMap<relief_core::hash::ContentHash, ObjectTracer> = HashMap::new();
             let mut queue: VecDeque<TextureRequest> = VecDeque::new();
             loop {
                 // Take everything that has come in; wait only when idle.
@@ -278,7 +279,7 @@ pub fn spawn_local(
                     },
                     Ok(object) => {
                         let tracer = tracers
-                            .entry(request.object.clone())
+                            .entry(object.hash)
                             .or_insert_with(|| pool.install(|| ObjectTracer::new(object)));
                         match pool.install(|| {
                             bake(

@@ -18,7 +18,7 @@ use relief_proto::limits::SCENE_CHUNK_BYTES;
 use relief_proto::pb;
 
 use crate::identity::{Caller, Role};
-use crate::state::{Admission, State, StoredScene};
+use crate::state::{Admission, State, StoredObject, StoredScene};
 
 /// The server: its state under one lock, and where received scenes are unpacked.
 pub struct Shared {
@@ -218,7 +218,13 @@ impl pb::scenes_server::Scenes for Service {
         let objects = scene
             .objects
             .iter()
-            .map(|o| (o.name.clone(), o.local_bounds))
+            .map(|o| {
+                let stored = StoredObject {
+                    bounds: o.local_bounds,
+                    mesh: o.hash,
+                };
+                (o.name.clone(), stored)
+            })
             .collect();
         let stored = StoredScene {
             encoded: Arc::new(encoded),

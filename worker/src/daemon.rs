@@ -8,7 +8,6 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, anyhow};
-use rayon::prelude::*;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 use tokio_stream::wrappers::UnboundedReceiverStream;
@@ -64,13 +63,13 @@ struct Loaded {
 }
 
 impl Loaded {
-    /// Builds every object's tracer, in parallel.
+    /// Builds every object's tracer, in parallel: each mesh's BVH once, shared by its
+    /// placements.
     fn new(scene: Scene) -> Loaded {
         let names = scene.object_names();
-        let tracers = scene
-            .objects
-            .into_par_iter()
-            .map(|o| (o.name.clone(), Arc::new(ObjectTracer::owning(o))))
+        let tracers = ObjectTracer::all(scene.objects)
+            .into_iter()
+            .map(|t| (t.object.name.clone(), Arc::new(t)))
             .collect();
         Loaded {
             name: scene.name,

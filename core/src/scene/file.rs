@@ -29,13 +29,27 @@
 //! diffuse = [0.8, 0.2, 0.2]     # optional: replaces the mesh's material colours
 //! specular = 0.3                # Phong k_s
 //! shininess = 40
+//!
+//! [[objects]]                   # one mesh, placed many times
+//! name = "statue"
+//! obj = "statue.obj"
+//! instances = [                 # each composed with the object's own transform
+//!   { translate = [4, 0, 2], rotate_deg = [0, 30, 0], scale = 1.5 },
+//!   { translate = [-6, 0, 9] },
+//! ]
 //! ```
 //!
 //! Paths are relative to the scene file. Unknown keys are errors, so typos are caught.
+//!
+//! An object with `instances` is that many objects, named `statue.1`, `statue.2`, …,
+//! sharing one mesh in memory for every rotation and scale they share (placements
+//! that differ only in `translate` share the mesh; see
+//! [`SceneObject::placed`](super::SceneObject::placed)). The scene's limits count
+//! each placement as an object, and each mesh built once.
 
 use std::path::{Path, PathBuf};
 
-use glam::{Affine3A, DVec3, EulerRot, Quat, Vec3};
+use glam::{Affine3A, DQuat, DVec3, EulerRot, Quat, Vec3};
 use rayon::prelude::*;
 use serde::Deserialize;
 
@@ -113,6 +127,77 @@ struct ObjectFile {
     diffuse: Option<[f32; 3]>,
     specular: Option<f32>,
     shininess: Option<f32>,
+    /// Where the mesh is placed, each placement an object; absent: once, as it is.
+    instances: Option<Vec<PlacementFile>>,
+}
+
+impl ObjectFile {
+    /// The object's placements: those listed, or one that leaves it as it is.
+    fn placements(&self) -> &[PlacementFile] {
+        self.instances.as_deref().unwrap_or(&[PlacementFile::AS_IT_IS])
+    }
+
+    /// Each placement's name: the object's own when it has no `instances`, else
+    /// `name.1`, `name.2`, ….
+    fn placement_names(&self) -> Vec<String> {
+        match &self.instances {
+            None => vec![self.name.clone()],
+            Some(list) => (1..=list.len()).map(|k| format!("{}.{k}", self.name)).collect(),
+        }
+    }
+}
+
+/// One placement of an object's mesh: scaled and rotated about the object's origin,
+/// then moved — applied after the object's own `translate`, `rotate_deg` and `scale`.
+#[derive(Debug, Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlacementFile {
+    #[serde(default)]
+    translate: [f64; 3],
+    #[serde(default)]
+    rotate_deg: [f32; 3],
+    #[serde(default = "one")]
+    scale: f32,
+}
+
+impl PlacementFile {
+    const AS_IT_IS: PlacementFile = PlacementFile {
+        translate: [0.0; 3],
+        rotate_deg: [0.0; 3],
+        scale: 1.0,
+    };
+
+    /// What of the placement shapes its mesh (its rotation and scale, bit for bit):
+    /// placements alike in it share one mesh.
+    fn shape(&self) -> [u32; 4] {
+        let [x, y, z] = self.rotate_deg.map(f32::to_bits);
+        [x, y, z, self.scale.to_bits()]
+    }
+
+    /// An error naming what is wrong with the placement, if anything.
+    fn check(&self) -> Result<()> {
+        let moved =
+            crate::vector::ensure_finite_f64("translate", DVec3::from(self.translate)).map_err(invalid)?;
+        if moved.abs().max_element() > MAX_COORDINATE {
+            return Err(invalid(format!(
+                "translate {moved} lies beyond {MAX_COORDINATE:e} m from the origin"
+            )));
+        }
+        crate::vector::ensure_finite("rotate_deg", Vec3::from(self.rotate_deg)).map_err(invalid)?;
+        if !(self.scale.is_finite() && self.scale > 0.0) {
+            return Err(invalid(format!(
+                "scale {} must be positive and finite",
+                self.scale
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// A rotation given as degrees about x, then y, then z.
+fn rotation_deg(degrees: [f32; 3]) -> Quat {
+    let [x, y, z] = degrees.map(f32::to_radians);
+    Quat::from_euler(EulerRot::XYZ, x, y, z)
 }
 
 /// Loads a scene file from disk; its OBJ files must lie within `reach`, and its cost
@@ -169,17 +254,35 @@ pub fn parse(text: &str, origin: &str, base: &Path, reach: Reach, limits: &Scene
     if file.objects.is_empty() {
         return Err(error("the scene has no objects".into()));
     }
-    limits
-        .check(0, file.objects.len())
-        .map_err(|e| error(e.to_string()))?;
-    let mut names = std::collections::HashSet::with_capacity(file.objects.len());
+    // Every placement is an object.
+    let placements = file
+        .objects
+        .iter()
+        .fold(0usize, |n, o| n.saturating_add(o.placements().len()));
+    limits.check(0, placements).map_err(|e| error(e.to_string()))?;
+    let mut names = std::collections::HashSet::with_capacity(placements);
     for (k, o) in file.objects.iter().enumerate() {
         if o.name.trim().is_empty() {
             return Err(error(format!("object {} has an empty name", k + 1)));
         }
-        super::check_object_name(&o.name).map_err(|m| error(format!("object {}: {m}", k + 1)))?;
-        if !names.insert(o.name.as_str()) {
-            return Err(error(format!("two objects are named `{}`", o.name)));
+        if o.instances.as_ref().is_some_and(Vec::is_empty) {
+            return Err(error(format!(
+                "object `{}`: `instances` is empty (leave it out to place the object once)",
+                o.name
+            )));
+        }
+        for (i, placement) in o.placements().iter().enumerate() {
+            placement
+                .check()
+                .map_err(|e| error(format!("object `{}`, instance {}: {e}", o.name, i + 1)))?;
+        }
+        for name in o.placement_names() {
+            super::check_object_name(&name).map_err(|m| error(format!("object {}: {m}", k + 1)))?;
+            if !names.contains(name.as_str()) {
+                names.insert(name);
+            } else {
+                return Err(error(format!("two objects are named `{name}`")));
+            }
         }
     }
     // The cost, before anything is built (a generator's parameters out of range are
@@ -190,17 +293,25 @@ pub fn parse(text: &str, origin: &str, base: &Path, reach: Reach, limits: &Scene
             Error::Invalid(m) => error(format!("object `{}`: {m}", o.name)),
             other => other,
         };
-        triangles = triangles.saturating_add(match (&o.obj, &o.generator) {
+        let mesh = match (&o.obj, &o.generator) {
             (Some(path), None) => crate::obj::count_triangles(&base.join(path), reach)?,
             (None, Some(generator)) => {
                 generator.validate().map_err(|e| named(invalid(e)))?;
                 generator.triangles()
             }
             _ => 0,
-        });
+        };
+        // (A mesh is built once for each rotation and scale its placements have.)
+        let shapes = o
+            .placements()
+            .iter()
+            .map(PlacementFile::shape)
+            .collect::<std::collections::HashSet<_>>()
+            .len();
+        triangles = triangles.saturating_add(mesh.saturating_mul(shapes as u64));
     }
     limits
-        .check(triangles, file.objects.len())
+        .check(triangles, placements)
         .map_err(|e| error(e.to_string()))?;
     let objects = file
         .objects
@@ -212,7 +323,10 @@ pub fn parse(text: &str, origin: &str, base: &Path, reach: Reach, limits: &Scene
                 other => other,
             })
         })
-        .collect::<Result<Vec<_>>>()?;
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .flatten()
+        .collect();
     let mut scene = Scene {
         name: file.name.unwrap_or_default(),
         objects,
@@ -314,7 +428,9 @@ fn invalid(what: impl std::fmt::Display) -> Error {
     Error::Invalid(what.to_string())
 }
 
-fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<SceneObject> {
+/// The object's placements, each a [`SceneObject`]: its mesh built once, and once more
+/// for each rotation and scale of its placements, shared by those alike in it.
+fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<Vec<SceneObject>> {
     let mut mesh: Mesh = match (&o.obj, &o.generator) {
         (Some(path), None) => crate::obj::load_obj(&base.join(path), reach)?,
         (None, Some(generator)) => {
@@ -323,16 +439,12 @@ fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<SceneObject>
         }
         _ => return Err(invalid("give exactly one of `obj` or `generator`")),
     };
-    let origin = crate::vector::ensure_finite_f64("translate", DVec3::from(o.translate)).map_err(invalid)?;
-    if origin.abs().max_element() > MAX_COORDINATE {
-        return Err(invalid(format!(
-            "translate {origin} lies beyond {MAX_COORDINATE:e} m from the origin"
-        )));
-    }
-    let rotate = crate::vector::ensure_finite("rotate_deg", Vec3::from(o.rotate_deg)).map_err(invalid)?;
-    if !(o.scale.is_finite() && o.scale > 0.0) {
-        return Err(invalid(format!("scale {} must be positive and finite", o.scale)));
-    }
+    let own = PlacementFile {
+        translate: o.translate,
+        rotate_deg: o.rotate_deg,
+        scale: o.scale,
+    };
+    own.check()?;
     if let Some(diffuse) = o.diffuse {
         let diffuse = crate::vector::ensure_finite("diffuse", Vec3::from(diffuse)).map_err(invalid)?;
         for m in &mut mesh.materials {
@@ -343,22 +455,40 @@ fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<SceneObject>
         strength: non_negative("specular", o.specular.unwrap_or(Specular::default().strength))?,
         shininess: non_negative("shininess", o.shininess.unwrap_or(Specular::default().shininess))?,
     };
-    let rotation = Quat::from_euler(
-        EulerRot::XYZ,
-        rotate.x.to_radians(),
-        rotate.y.to_radians(),
-        rotate.z.to_radians(),
-    );
-    // Scale and rotation make the object's own frame; `translate` places that
-    // frame's origin in the world, in f64 (see [`SceneObject`]).
-    let local = mesh.transformed(Affine3A::from_scale_rotation_translation(
-        Vec3::splat(o.scale),
-        rotation,
-        Vec3::ZERO,
-    ));
-    local.validate().map_err(invalid)?;
-    check_extent(&local).map_err(|m| invalid(format!("scaled, its vertices lie {m}")))?;
-    Ok(SceneObject::new(o.name, local, origin, specular))
+    let own_rotation = rotation_deg(own.rotate_deg);
+    let own_origin = DVec3::from(own.translate);
+    let mut shaped: std::collections::HashMap<[u32; 4], SceneObject> = std::collections::HashMap::new();
+    let mut objects = Vec::with_capacity(o.placements().len());
+    for (placement, name) in o.placements().iter().zip(o.placement_names()) {
+        // The placement after the object's own transform: x ↦ t + s·R·(t_o + s_o·R_o·x).
+        // Scale and rotation make the object's own frame (the mesh); the translations
+        // place that frame's origin in the world, in f64 (see [`SceneObject`]).
+        let [rx, ry, rz] = placement.rotate_deg.map(|d| (d as f64).to_radians());
+        let turn = DQuat::from_euler(EulerRot::XYZ, rx, ry, rz);
+        let origin = DVec3::from(placement.translate) + turn * own_origin * placement.scale as f64;
+        if origin.abs().max_element() > MAX_COORDINATE {
+            return Err(invalid(format!(
+                "{name} lies at {origin}, beyond {MAX_COORDINATE:e} m from the origin"
+            )));
+        }
+        let object = match shaped.get(&placement.shape()) {
+            Some(alike) => alike.placed(name, origin),
+            None => {
+                let local = mesh.transformed(Affine3A::from_scale_rotation_translation(
+                    Vec3::splat(placement.scale * own.scale),
+                    rotation_deg(placement.rotate_deg) * own_rotation,
+                    Vec3::ZERO,
+                ));
+                local.validate().map_err(invalid)?;
+                check_extent(&local).map_err(|m| invalid(format!("scaled, its vertices lie {m}")))?;
+                let object = SceneObject::new(name, local, origin, specular);
+                shaped.insert(placement.shape(), object.clone());
+                object
+            }
+        };
+        objects.push(object);
+    }
+    Ok(objects)
 }
 
 #[cfg(test)]
@@ -452,6 +582,114 @@ mod tests {
         assert_eq!(ball.origin, DVec3::new(0.0, 2.0, 0.0));
         assert_eq!(scene.lighting.lights.len(), 1);
         assert_eq!(scene.path.frame_count(), 120);
+    }
+
+    /// An object's `instances` are objects named `name.1`, `name.2`, …: each placement
+    /// composed with the object's own transform (`x ↦ t + s·R·(t_o + s_o·R_o·x)`),
+    /// those differing only in `translate` sharing one mesh in memory.
+    #[test]
+    fn instances_place_one_mesh_many_times() {
+        let scene = parse_str(
+            r#"
+            [[objects]]
+            name = "ball"
+            generator = { kind = "sphere", subdivisions = 2 }
+            translate = [0, 0, -4]
+            scale = 2
+            instances = [
+              {},
+              { translate = [1e6, 0, 0] },
+              { translate = [5, 0, -5], rotate_deg = [0, 90, 0], scale = 0.5 },
+            ]
+            [[objects]]
+            name = "lone"
+            generator = { kind = "sphere", subdivisions = 2 }
+            "#,
+        )
+        .unwrap();
+        let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(names, ["ball.1", "ball.2", "ball.3", "lone"]);
+        let [one, two, three, lone] = [0, 1, 2, 3].map(|k| &scene.objects[k]);
+        assert!(one.shares_mesh(two) && !one.shares_mesh(three) && !one.shares_mesh(lone));
+        assert_eq!(one.hash, two.hash);
+        assert_eq!(
+            (one.origin, two.origin),
+            (DVec3::new(0.0, 0.0, -4.0), DVec3::new(1e6, 0.0, -4.0))
+        );
+        // Turned 90° about y, (0, 0, −4)·0.5 goes to (−2, 0, 0).
+        assert!(
+            three.origin.abs_diff_eq(DVec3::new(3.0, 0.0, -5.0), 1e-12),
+            "{}",
+            three.origin
+        );
+        // The unit sphere scaled by 2 and by 0.5.
+        assert!(three.local_bounds.max.abs_diff_eq(Vec3::ONE, 1e-5));
+        assert!(one.local_bounds.max.abs_diff_eq(Vec3::splat(2.0), 1e-5));
+        // Without `instances`, the object as it was.
+        assert_eq!(lone.origin, DVec3::ZERO);
+    }
+
+    /// A placement's faults are named with the object and the instance's number, and
+    /// the placements count as objects against the scene's limits.
+    #[test]
+    fn bad_instances_are_named() {
+        let with = |instances: &str| {
+            let text = format!(
+                "[[objects]]\nname = \"a\"\ngenerator = {{ kind = \"sphere\", subdivisions = 0 }}\ninstances = {instances}\n"
+            );
+            parse_str(&text).unwrap_err().to_string()
+        };
+        let err = with("[{}, { scale = 0 }]");
+        assert!(
+            err.contains("object `a`, instance 2: scale 0 must be positive"),
+            "{err}"
+        );
+        let err = with("[{ translate = [nan, 0, 0] }]");
+        assert!(err.contains("instance 1") && err.contains("translate"), "{err}");
+        let err = with("[{ rotate_deg = [0, inf, 0] }]");
+        assert!(err.contains("rotate_deg"), "{err}");
+        let err = with("[{ translate = [2e12, 0, 0] }]");
+        assert!(err.contains("beyond"), "{err}");
+        assert!(with("[]").contains("`instances` is empty"));
+        assert!(with("[{ scale = 1, colour = 2 }]").contains("colour"));
+        // 100,001 placements of one object, past the default 100,000 objects.
+        let many = format!("[{}]", vec!["{}"; 100_001].join(","));
+        let err = with(&many);
+        assert!(err.contains("100001 objects"), "{err}");
+        // A placement's name clashing with another object's.
+        let clash = "[[objects]]\nname = \"a\"\ngenerator = { kind = \"sphere\", subdivisions = 0 }\ninstances = [{}, {}]\n[[objects]]\nname = \"a.2\"\ngenerator = { kind = \"sphere\", subdivisions = 0 }\n";
+        assert!(
+            parse_str(clash)
+                .unwrap_err()
+                .to_string()
+                .contains("two objects are named `a.2`")
+        );
+    }
+
+    /// The triangle limit counts each mesh built: once per rotation and scale of an
+    /// object's placements, not once per placement.
+    #[test]
+    fn the_triangle_limit_counts_meshes_built() {
+        let limits = SceneLimits {
+            max_triangles: 3 * 320,
+            max_objects: 1000,
+        };
+        let with = |instances: &str| {
+            let text = format!(
+                "[[objects]]\nname = \"a\"\ngenerator = {{ kind = \"sphere\", subdivisions = 2 }}\ninstances = {instances}\n"
+            );
+            parse(&text, "test", Path::new("."), Reach::Anywhere, &limits)
+        };
+        // 500 placements, 3 shapes: 3 × 320 triangles built.
+        let moved = vec!["{ translate = [1, 0, 0] }"; 498].join(",");
+        assert!(
+            with(&format!(
+                "[{moved}, {{ scale = 2 }}, {{ rotate_deg = [0, 1, 0] }}]"
+            ))
+            .is_ok()
+        );
+        let err = with("[{}, { scale = 2 }, { scale = 3 }, { scale = 4 }]").unwrap_err();
+        assert!(err.to_string().contains("1280 triangles"), "{err}");
     }
 
     #[test]

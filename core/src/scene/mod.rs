@@ -130,6 +130,12 @@ fn name_char(c: char) -> bool {
 /// world's. Scene-wide code moves a camera into it with [`SceneObject::local_camera`]:
 /// one `f64` subtraction, after which all is `f32` near the origin, as precise
 /// wherever the object stands.
+///
+/// # Placements
+///
+/// One mesh placed many times (a scene file's `instances`) is one [`Mesh`] in memory:
+/// each placement is a `SceneObject` of its own, named apart, sharing the mesh, its
+/// hash and its edge census ([`SceneObject::placed`]).
 #[derive(Debug, Clone)]
 pub struct SceneObject {
     pub name: String,
@@ -144,8 +150,8 @@ pub struct SceneObject {
     pub hash: ContentHash,
     /// How the mesh's edges are shared ([`Mesh::edge_census`]), found the first time it
     /// is asked (only a client drawing impostors needs it, and it costs a pass over the
-    /// mesh).
-    edges: std::sync::OnceLock<EdgeCensus>,
+    /// mesh); shared by the mesh's placements.
+    edges: Arc<std::sync::OnceLock<EdgeCensus>>,
 }
 
 impl SceneObject {
@@ -193,10 +199,25 @@ impl SceneObject {
             origin,
             local_bounds: mesh.bounds(),
             hash: mesh_hash(&mesh),
-            edges: std::sync::OnceLock::new(),
+            edges: Arc::default(),
             mesh: Arc::new(mesh),
             specular,
         }
+    }
+
+    /// Another placement of this object's mesh, named `name`, its frame's origin at
+    /// `origin`: the mesh (and what is known of it) shared, not copied.
+    pub fn placed(&self, name: impl Into<String>, origin: DVec3) -> SceneObject {
+        SceneObject {
+            name: name.into(),
+            origin,
+            ..self.clone()
+        }
+    }
+
+    /// Whether `other` is a placement of the same mesh in memory ([`SceneObject::placed`]).
+    pub fn shares_mesh(&self, other: &SceneObject) -> bool {
+        Arc::ptr_eq(&self.mesh, &other.mesh)
     }
 }
 

@@ -16,12 +16,13 @@ use relief_proto::pb;
 use super::queue::Priority;
 use super::{ResultSender, State};
 
-/// Where a texture is made from: the scene, the object and the eye. Textures of one
-/// view differ only in their texel count and depth bits.
+/// Where a texture is made from: the scene, the object's mesh and the eye (in the
+/// object's frame). Textures of one view differ only in their texel count and depth
+/// bits; placements of one mesh share them.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub(super) struct View {
     pub(super) scene: ContentHash,
-    pub(super) object: String,
+    pub(super) mesh: ContentHash,
     pub(super) eye: [u32; 3],
     pub(super) projection: SourceProjection,
 }
@@ -35,11 +36,12 @@ pub struct JobKey {
 }
 
 impl JobKey {
-    pub(super) fn of(r: &Request) -> JobKey {
+    /// The key of request `r` for an object whose mesh has content hash `mesh`.
+    pub(super) fn of(r: &Request, mesh: ContentHash) -> JobKey {
         JobKey {
             view: View {
                 scene: r.scene,
-                object: r.object.clone(),
+                mesh,
                 eye: r.eye.to_array().map(f32::to_bits),
                 projection: r.projection,
             },

@@ -42,7 +42,7 @@ use cache::Cached;
 use jobs::{Job, JobState, View, Waiter};
 use queue::{FairQueue, Priority};
 use scenes::Scenes;
-pub use scenes::{SceneRefusal, StoredScene};
+pub use scenes::{SceneRefusal, StoredObject, StoredScene};
 use workers::Worker;
 
 /// What a waiting client receives: results, or the error that ends its request.
@@ -157,7 +157,7 @@ impl State {
         let scene = self.scene_of(&request.scene, owner).ok_or_else(|| {
             Status::not_found(format!("no scene with hash {} (upload it first)", request.scene))
         })?;
-        let bounds = scene.objects.get(&request.object).ok_or_else(|| {
+        let object = scene.objects.get(&request.object).ok_or_else(|| {
             // (An argument the scene cannot take: `NOT_FOUND` is kept for a scene the
             // server does not hold, which a client mends by uploading it again.)
             Status::invalid_argument(format!(
@@ -167,9 +167,10 @@ impl State {
         })?;
         // The camera a worker would bake with: refused here, naming the field, rather
         // than failing on a worker.
+        let object = *object;
         match SourceCamera::facing(
             request.eye,
-            bounds,
+            &object.bounds,
             request.size,
             request.size,
             request.projection,
@@ -192,7 +193,7 @@ impl State {
             }
         }
         self.counters.requests += 1;
-        let key = JobKey::of(request);
+        let key = JobKey::of(request, object.mesh);
         self.clock += 1;
         let clock = self.clock;
         if let Some(hit) = self.cached_for(&key) {

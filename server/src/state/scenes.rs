@@ -10,12 +10,22 @@ use relief_core::hash::ContentHash;
 
 use super::State;
 
-/// A stored scene: its encoded bundle and the bounds of its objects (enough to check
-/// requests without loading meshes again).
+/// A stored scene: its encoded bundle and, by name, its objects' bounds and meshes
+/// (enough to check requests without loading meshes again).
 #[derive(Debug)]
 pub struct StoredScene {
     pub encoded: Arc<Vec<u8>>,
-    pub objects: HashMap<String, Aabb>,
+    pub objects: HashMap<String, StoredObject>,
+}
+
+/// What the server knows of one object of a stored scene.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StoredObject {
+    /// Its bounds, in its own frame.
+    pub bounds: Aabb,
+    /// Its mesh's content hash: placements of one mesh share textures (one eye in the
+    /// object's frame sees the same of each).
+    pub mesh: ContentHash,
 }
 
 /// Why a scene is not stored.
@@ -154,6 +164,6 @@ impl State {
 
     /// The bounds of `object` of scene `hash`, if both are stored.
     pub(super) fn object_bounds(&self, hash: &ContentHash, object: &str) -> Option<Aabb> {
-        self.scenes.stored.get(hash)?.scene.objects.get(object).copied()
+        Some(self.scenes.stored.get(hash)?.scene.objects.get(object)?.bounds)
     }
 }

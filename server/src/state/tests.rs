@@ -25,16 +25,50 @@ fn state_with_scene() -> (State, ContentHash) {
         min: Vec3::splat(-1.0),
         max: Vec3::splat(1.0),
     };
+    // Two placements of one mesh, and another mesh.
+    let placed = |name: &str, mesh: u8| {
+        let object = StoredObject {
+            bounds,
+            mesh: ContentHash([mesh; 32]),
+        };
+        (name.to_string(), object)
+    };
     s.add_scene(
         hash,
         StoredScene {
             encoded: Arc::new(vec![]),
-            objects: [("ball".to_string(), bounds)].into_iter().collect(),
+            objects: [placed("ball", 1), placed("ball.2", 1), placed("cube", 2)]
+                .into_iter()
+                .collect(),
         },
         &OWNER.into(),
     )
     .unwrap();
     (s, hash)
+}
+
+/// Placements of one mesh share textures: a request from the same eye (in the
+/// object's frame) for another placement joins the job queued for the first (the
+/// cache is keyed alike); the same eye on another mesh gets a job of its own.
+#[test]
+fn placements_of_one_mesh_share_jobs() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    let eye = Vec3::new(1.0, 0.0, 5.0);
+    let of = |id: u64, object: &str| Request {
+        object: object.into(),
+        ..request(hash, id, eye, Urgency::Now)
+    };
+    s.admit(&of(1, "ball"), OWNER, tx.clone()).unwrap();
+    s.admit(&of(2, "ball.2"), OWNER, tx.clone()).unwrap();
+    assert_eq!(s.counters.merged, 1, "the second placement joins the first's job");
+    s.admit(&of(3, "cube"), OWNER, tx.clone()).unwrap();
+    assert_eq!(s.counters.merged, 1, "another mesh's request gets its own job");
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 2, 1, wtx);
+    s.dispatch();
+    let jobs: Vec<pb::Job> = std::iter::from_fn(|| next_job(&mut wrx)).collect();
+    assert_eq!(jobs.len(), 2, "one job a mesh");
 }
 
 fn request(scene: ContentHash, id: u64, eye: Vec3, urgency: Urgency) -> Request {
@@ -349,7 +383,7 @@ fn a_vanished_workers_jobs_are_requeued_and_bad_requests_refused() {
         .unwrap_err();
     assert_eq!(inside.code(), tonic::Code::FailedPrecondition);
     let mut unknown = request(hash, 3, Vec3::new(0.0, 0.0, 5.0), Urgency::Now);
-    unknown.object = "cube".into();
+    unknown.object = "cone".into();
     assert_eq!(
         s.admit(&unknown, OWNER, tx.clone()).unwrap_err().code(),
         tonic::Code::InvalidArgument
@@ -493,9 +527,12 @@ fn the_scene_store_evicts_the_least_recently_used_scene_no_job_needs() {
         encoded: Arc::new(vec![0; bytes]),
         objects: [(
             "ball".to_string(),
-            Aabb {
-                min: Vec3::splat(-1.0),
-                max: Vec3::splat(1.0),
+            StoredObject {
+                bounds: Aabb {
+                    min: Vec3::splat(-1.0),
+                    max: Vec3::splat(1.0),
+                },
+                mesh: ContentHash([1; 32]),
             },
         )]
         .into_iter()

@@ -1,18 +1,24 @@
-//! Scenes made ready for ray casting: one BVH per object.
+//! Scenes made ready for ray casting: one BVH per mesh, shared by the objects that
+//! place it.
+
+use std::collections::HashMap;
+use std::sync::Arc;
 
 use glam::Vec3;
 use rayon::prelude::*;
 
+use relief_core::hash::ContentHash;
 use relief_core::scene::{Scene, SceneObject};
 use relief_core::shading::Lighting;
 
 use crate::bvh::Bvh;
 
-/// One object with its BVH.
+/// One object with its mesh's BVH.
 #[derive(Debug, Clone)]
 pub struct ObjectTracer {
     pub object: SceneObject,
-    pub bvh: Bvh,
+    /// Shared by the placements of one mesh ([`ObjectTracer::all`]).
+    pub bvh: Arc<Bvh>,
 }
 
 impl ObjectTracer {
@@ -24,9 +30,30 @@ impl ObjectTracer {
     /// As [`ObjectTracer::new`], taking the object.
     pub fn owning(object: SceneObject) -> Self {
         ObjectTracer {
-            bvh: Bvh::build(&object.mesh),
+            bvh: Arc::new(Bvh::build(&object.mesh)),
             object,
         }
+    }
+
+    /// A tracer for each of `objects`, in order, building each mesh's BVH once (in
+    /// parallel): placements of one mesh ([`SceneObject::placed`]), and objects of
+    /// meshes alike to the byte, share it.
+    pub fn all(objects: Vec<SceneObject>) -> Vec<ObjectTracer> {
+        let mut distinct: HashMap<ContentHash, &SceneObject> = HashMap::new();
+        for object in &objects {
+            distinct.entry(object.hash).or_insert(object);
+        }
+        let bvhs: HashMap<ContentHash, Arc<Bvh>> = distinct
+            .into_par_iter()
+            .map(|(hash, object)| (hash, Arc::new(Bvh::build(&object.mesh))))
+            .collect();
+        objects
+            .into_iter()
+            .map(|object| ObjectTracer {
+                bvh: bvhs[&object.hash].clone(),
+                object,
+            })
+            .collect()
     }
 }
 
@@ -39,10 +66,10 @@ pub struct SceneTracer {
 }
 
 impl SceneTracer {
-    /// Builds every object's BVH, in parallel.
+    /// Builds every mesh's BVH, in parallel ([`ObjectTracer::all`]).
     pub fn new(scene: &Scene) -> Self {
         SceneTracer {
-            objects: scene.objects.par_iter().map(ObjectTracer::new).collect(),
+            objects: ObjectTracer::all(scene.objects.clone()),
             lighting: scene.lighting.clone(),
             background: scene.background,
         }
