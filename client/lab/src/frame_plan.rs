@@ -136,8 +136,11 @@ impl FramePlan {
             .map(|(imp, camera)| &imp.pyramid.levels[imp.pyramid.level_for(camera, MAX_TEXEL_PIXELS)])
             .collect();
         // Every impostor's pre-warp at once, then each drawn.
-        let prepared: Vec<_> = (shown.par_iter().zip(&cameras))
-            .map(|(i, camera)| prepare(method, i, camera))
+        let prepared: Vec<_> = (shown.par_iter().zip(&cameras).zip(&self.impostors))
+            .map(|((i, camera), imp)| {
+                let scale = scene.objects[imp.index as usize].depth_scale();
+                prepare(method, i, camera).and_then(|p| p.in_world(method, scale))
+            })
             .collect();
         for (((imp, impostor), prepared), camera) in
             self.impostors.iter().zip(shown).zip(prepared).zip(&cameras)

@@ -47,9 +47,10 @@ impl Solo {
     /// spare, is narrower than 180°). An object without extent (every vertex at one
     /// point) cannot be orbited: an error naming it.
     pub fn new(scene: &Scene, name: &str, distance_factor: f32) -> Result<Solo, SoloError> {
-        let mut object = scene.object(name)?.clone();
-        let lighting = scene.lighting.relative_to(object.origin);
-        object.origin = glam::DVec3::ZERO;
+        // The object in its own frame, the lights moved into it: the same images.
+        let placed = scene.object(name)?;
+        let lighting = placed.local_lighting(&scene.lighting);
+        let object = placed.placed(placed.name.clone(), glam::DVec3::ZERO, glam::DQuat::IDENTITY, 1.0);
         let radius = object.local_bounds.extent().length() * 0.5;
         let distance = radius * distance_factor;
         if distance_factor.is_nan() || distance_factor <= 1.1 {

@@ -296,7 +296,19 @@ fn the_window_a_camera_sees_leaves_out_only_what_it_cannot_show() {
             "camera {k} keeps {kept}"
         );
         let mut expected = GBuffer::new(camera.width, camera.height);
-        texmap::map(&whole, &impostor.texture, &params, 1.0, 0, &camera, &mut expected);
+        let depths = texmap::Depths {
+            tested: 1.0,
+            world: 1.0,
+        };
+        texmap::map(
+            &whole,
+            &impostor.texture,
+            &params,
+            depths,
+            0,
+            &camera,
+            &mut expected,
+        );
         let mut got = GBuffer::new(camera.width, camera.height);
         display(Method::Interleaved, &impostor, 0, &camera, &mut got).expect("display");
         let (expected, got) = (

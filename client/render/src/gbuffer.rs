@@ -33,8 +33,10 @@ pub struct GPixel {
     pub object: u32,
     /// Linear albedo, 8 bits per channel.
     pub albedo: [u8; 3],
-    /// World-space unit normal (stored to 16 bits per component: within 2e-5). A
-    /// writer may give a shorter one, in its direction: it is normalised when read.
+    /// Unit normal in the object's frame (turned into the world when the buffer is
+    /// lit; see `SceneObject`'s placements), stored to 16 bits per component: within
+    /// 2e-5. A writer may give a shorter one, in its direction: it is normalised when
+    /// read.
     pub normal: Vec3,
 }
 
@@ -485,6 +487,10 @@ struct RowShader<'a> {
     lighting: relief_core::shading::Lighting,
     /// Specular strength and exponent of each object, by index.
     specular: Vec<(f32, f32)>,
+    /// Each object's frame's turn in the world, by index, where it has one (empty
+    /// when none has): the buffer holds normals in the objects' frames (see
+    /// `SceneObject`'s placements).
+    turns: Vec<Option<glam::Mat3>>,
     /// The object count, in every lane (a scene's count fits its `u32` ids).
     objects: u32x8,
     background: [u8; 3],
@@ -503,6 +509,14 @@ impl<'a> RowShader<'a> {
                 .iter()
                 .map(|o| (o.specular.strength, o.specular.shininess))
                 .collect(),
+            turns: if scene.objects.iter().all(|o| o.rotation == glam::DQuat::IDENTITY) {
+                Vec::new()
+            } else {
+                let turn = |o: &relief_core::scene::SceneObject| {
+                    (o.rotation != glam::DQuat::IDENTITY).then(|| glam::Mat3::from_quat(o.rotation.as_quat()))
+                };
+                scene.objects.iter().map(turn).collect()
+            },
             objects: u32x8::splat(u32::try_from(scene.objects.len()).unwrap_or(u32::MAX)),
             background: to_rgb8(scene.background),
             camera,
@@ -569,12 +583,16 @@ impl<'a> RowShader<'a> {
                     y: channel(8),
                     z: channel(16),
                 },
-                normal: Vec3x8 {
-                    x: component(0),
-                    y: component(1),
-                    z: component(2),
-                }
-                .normalize_or_zero(),
+                normal: self
+                    .to_world(
+                        Vec3x8 {
+                            x: component(0),
+                            y: component(1),
+                            z: component(2),
+                        },
+                        &ids[..n],
+                    )
+                    .normalize_or_zero(),
                 position: direction.scale(depth),
                 towards_eye: direction.map(|d| -d),
                 strength,
@@ -602,6 +620,26 @@ impl<'a> RowShader<'a> {
 }
 
 impl RowShader<'_> {
+    /// Normals of the objects `ids` (one a lane), each in its object's frame, turned
+    /// into the world.
+    #[inline(always)]
+    fn to_world(&self, normals: Vec3x8, ids: &[u32]) -> Vec3x8 {
+        let turn_of = |id: u32| self.turns.get(id as usize).copied().flatten();
+        if self.turns.is_empty() || ids.iter().all(|&id| turn_of(id).is_none()) {
+            return normals;
+        }
+        // (Rare: a frame turned by a placement. Lane by lane.)
+        let (x, y, z) = (normals.x.to_array(), normals.y.to_array(), normals.z.to_array());
+        let turned: [Vec3; LANES] = std::array::from_fn(|l| {
+            let n = Vec3::new(x[l], y[l], z[l]);
+            match ids.get(l).copied().and_then(turn_of) {
+                Some(turn) => turn * n,
+                None => n,
+            }
+        });
+        Vec3x8::gather(turned)
+    }
+
     /// Lights the buffer's fragments still in front of their pixels' surfaces and
     /// blends them over `frame` by their coverage, the farthest first; a pixel more
     /// than half covered by one is counted as its object's.
@@ -628,7 +666,14 @@ impl RowShader<'_> {
                 let channel = |shift: u32| ((f.stored.albedo >> shift) & 0xff) as f32 / 255.0;
                 SurfacePoint {
                     albedo: Vec3::new(channel(0), channel(8), channel(16)),
-                    normal: Vec3::from(f.stored.normal.map(f32::from)).normalize_or_zero(),
+                    normal: {
+                        let n = Vec3::from(f.stored.normal.map(f32::from));
+                        match self.turns.get(f.stored.object as usize).copied().flatten() {
+                            Some(turn) => turn * n,
+                            None => n,
+                        }
+                        .normalize_or_zero()
+                    },
                     position: ray * f.depth,
                     towards_eye: -ray,
                     specular: Specular { strength, shininess },

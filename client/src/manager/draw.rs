@@ -114,7 +114,8 @@ impl Manager {
         let prewarps: Vec<_> = warps
             .par_iter()
             .map(|&(k, impostor, is_partner)| {
-                let prewarped = Prewarped::new(Variant::Interleaved, impostor, &locals[k]);
+                let prewarped = Prewarped::new(Variant::Interleaved, impostor, &locals[k])
+                    .and_then(|p| p.in_world(scene.objects[k].depth_scale()));
                 if is_partner {
                     prewarped.and_then(|p| p.behind(behind(k)))
                 } else {

@@ -42,10 +42,9 @@
 //! Paths are relative to the scene file. Unknown keys are errors, so typos are caught.
 //!
 //! An object with `instances` is that many objects, named `statue.1`, `statue.2`, …,
-//! sharing one mesh in memory for every rotation and scale they share (placements
-//! that differ only in `translate` share the mesh; see
-//! [`SceneObject::placed`](super::SceneObject::placed)). The scene's limits count
-//! each placement as an object, and each mesh built once.
+//! sharing one mesh in memory: each placement turns, scales and moves the mesh's frame
+//! (see [`SceneObject::placed`](super::SceneObject::placed)). The scene's limits count
+//! each placement as an object, and each mesh's triangles once.
 
 use std::path::{Path, PathBuf};
 
@@ -166,13 +165,6 @@ impl PlacementFile {
         rotate_deg: [0.0; 3],
         scale: 1.0,
     };
-
-    /// What of the placement shapes its mesh (its rotation and scale, bit for bit):
-    /// placements alike in it share one mesh.
-    fn shape(&self) -> [u32; 4] {
-        let [x, y, z] = self.rotate_deg.map(f32::to_bits);
-        [x, y, z, self.scale.to_bits()]
-    }
 
     /// An error naming what is wrong with the placement, if anything.
     fn check(&self) -> Result<()> {
@@ -301,14 +293,8 @@ pub fn parse(text: &str, origin: &str, base: &Path, reach: Reach, limits: &Scene
             }
             _ => 0,
         };
-        // (A mesh is built once for each rotation and scale its placements have.)
-        let shapes = o
-            .placements()
-            .iter()
-            .map(PlacementFile::shape)
-            .collect::<std::collections::HashSet<_>>()
-            .len();
-        triangles = triangles.saturating_add(mesh.saturating_mul(shapes as u64));
+        // (Built once, however many placements.)
+        triangles = triangles.saturating_add(mesh);
     }
     limits
         .check(triangles, placements)
@@ -428,8 +414,9 @@ fn invalid(what: impl std::fmt::Display) -> Error {
     Error::Invalid(what.to_string())
 }
 
-/// The object's placements, each a [`SceneObject`]: its mesh built once, and once more
-/// for each rotation and scale of its placements, shared by those alike in it.
+/// The object's placements, each a [`SceneObject`], sharing one mesh: the object's own
+/// scale and rotation made into the mesh's frame, each placement turning, scaling and
+/// moving that frame.
 fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<Vec<SceneObject>> {
     let mut mesh: Mesh = match (&o.obj, &o.generator) {
         (Some(path), None) => crate::obj::load_obj(&base.join(path), reach)?,
@@ -455,40 +442,39 @@ fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<Vec<SceneObj
         strength: non_negative("specular", o.specular.unwrap_or(Specular::default().strength))?,
         shininess: non_negative("shininess", o.shininess.unwrap_or(Specular::default().shininess))?,
     };
-    let own_rotation = rotation_deg(own.rotate_deg);
+    // Scale and rotation make the object's own frame; `translate` places that
+    // frame's origin in the world, in f64 (see [`SceneObject`]).
+    let local = mesh.transformed(Affine3A::from_scale_rotation_translation(
+        Vec3::splat(own.scale),
+        rotation_deg(own.rotate_deg),
+        Vec3::ZERO,
+    ));
+    local.validate().map_err(invalid)?;
+    check_extent(&local).map_err(|m| invalid(format!("scaled, its vertices lie {m}")))?;
     let own_origin = DVec3::from(own.translate);
-    let mut shaped: std::collections::HashMap<[u32; 4], SceneObject> = std::collections::HashMap::new();
-    let mut objects = Vec::with_capacity(o.placements().len());
-    for (placement, name) in o.placements().iter().zip(o.placement_names()) {
-        // The placement after the object's own transform: x ↦ t + s·R·(t_o + s_o·R_o·x).
-        // Scale and rotation make the object's own frame (the mesh); the translations
-        // place that frame's origin in the world, in f64 (see [`SceneObject`]).
-        let [rx, ry, rz] = placement.rotate_deg.map(|d| (d as f64).to_radians());
-        let turn = DQuat::from_euler(EulerRot::XYZ, rx, ry, rz);
-        let origin = DVec3::from(placement.translate) + turn * own_origin * placement.scale as f64;
-        if origin.abs().max_element() > MAX_COORDINATE {
-            return Err(invalid(format!(
-                "{name} lies at {origin}, beyond {MAX_COORDINATE:e} m from the origin"
-            )));
-        }
-        let object = match shaped.get(&placement.shape()) {
-            Some(alike) => alike.placed(name, origin),
-            None => {
-                let local = mesh.transformed(Affine3A::from_scale_rotation_translation(
-                    Vec3::splat(placement.scale * own.scale),
-                    rotation_deg(placement.rotate_deg) * own_rotation,
-                    Vec3::ZERO,
-                ));
-                local.validate().map_err(invalid)?;
-                check_extent(&local).map_err(|m| invalid(format!("scaled, its vertices lie {m}")))?;
-                let object = SceneObject::new(name, local, origin, specular);
-                shaped.insert(placement.shape(), object.clone());
-                object
-            }
-        };
-        objects.push(object);
+    let mut names = o.placement_names().into_iter();
+    let first = SceneObject::new(names.next().unwrap_or_default(), local, own_origin, specular);
+    if o.instances.is_none() {
+        return Ok(vec![first]);
     }
-    Ok(objects)
+    o.placements()
+        .iter()
+        .zip(std::iter::once(first.name.clone()).chain(names))
+        .map(|(placement, name)| {
+            // The placement after the object's own transform, x ↦ t + s·R·(t_o + x):
+            // its frame's origin at t + s·R·t_o, turned by R, scaled by s.
+            let [rx, ry, rz] = placement.rotate_deg.map(|d| (d as f64).to_radians());
+            let rotation = DQuat::from_euler(EulerRot::XYZ, rx, ry, rz);
+            let scale = placement.scale as f64;
+            let origin = DVec3::from(placement.translate) + rotation * own_origin * scale;
+            if origin.abs().max_element() > MAX_COORDINATE {
+                return Err(invalid(format!(
+                    "{name} lies at {origin}, beyond {MAX_COORDINATE:e} m from the origin"
+                )));
+            }
+            Ok(first.placed(name, origin, rotation, scale))
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -585,8 +571,8 @@ mod tests {
     }
 
     /// An object's `instances` are objects named `name.1`, `name.2`, …: each placement
-    /// composed with the object's own transform (`x ↦ t + s·R·(t_o + s_o·R_o·x)`),
-    /// those differing only in `translate` sharing one mesh in memory.
+    /// composed with the object's own transform (`x ↦ t + s·R·(t_o + s_o·R_o·x)`), all
+    /// sharing one mesh in memory, each placement's frame turned and scaled.
     #[test]
     fn instances_place_one_mesh_many_times() {
         let scene = parse_str(
@@ -610,8 +596,8 @@ mod tests {
         let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
         assert_eq!(names, ["ball.1", "ball.2", "ball.3", "lone"]);
         let [one, two, three, lone] = [0, 1, 2, 3].map(|k| &scene.objects[k]);
-        assert!(one.shares_mesh(two) && !one.shares_mesh(three) && !one.shares_mesh(lone));
-        assert_eq!(one.hash, two.hash);
+        assert!(one.shares_mesh(two) && one.shares_mesh(three) && !one.shares_mesh(lone));
+        assert_eq!((one.hash, three.hash), (two.hash, two.hash));
         assert_eq!(
             (one.origin, two.origin),
             (DVec3::new(0.0, 0.0, -4.0), DVec3::new(1e6, 0.0, -4.0))
@@ -622,9 +608,22 @@ mod tests {
             "{}",
             three.origin
         );
-        // The unit sphere scaled by 2 and by 0.5.
-        assert!(three.local_bounds.max.abs_diff_eq(Vec3::ONE, 1e-5));
-        assert!(one.local_bounds.max.abs_diff_eq(Vec3::splat(2.0), 1e-5));
+        // The unit sphere scaled by 2 (its own scale, in the mesh), then by 0.5 (the
+        // placement's frame).
+        assert!(three.local_bounds.max.abs_diff_eq(Vec3::splat(2.0), 1e-5));
+        assert_eq!(three.scale, 0.5);
+        let world = three.world_bounds();
+        assert!(
+            world.min.abs_diff_eq(Vec3::new(2.0, -1.0, -6.0), 1e-4),
+            "{world:?}"
+        );
+        assert!(
+            world.max.abs_diff_eq(Vec3::new(4.0, 1.0, -4.0), 1e-4),
+            "{world:?}"
+        );
+        // A point of the frame goes out and back.
+        let p = Vec3::new(0.3, -1.2, 1.9);
+        assert!(three.to_local(three.to_world(p)).abs_diff_eq(p, 1e-6));
         // Without `instances`, the object as it was.
         assert_eq!(lone.origin, DVec3::ZERO);
     }
@@ -666,12 +665,11 @@ mod tests {
         );
     }
 
-    /// The triangle limit counts each mesh built: once per rotation and scale of an
-    /// object's placements, not once per placement.
+    /// The triangle limit counts each mesh once, however many placements.
     #[test]
     fn the_triangle_limit_counts_meshes_built() {
         let limits = SceneLimits {
-            max_triangles: 3 * 320,
+            max_triangles: 2 * 320,
             max_objects: 1000,
         };
         let with = |instances: &str| {
@@ -680,7 +678,7 @@ mod tests {
             );
             parse(&text, "test", Path::new("."), Reach::Anywhere, &limits)
         };
-        // 500 placements, 3 shapes: 3 × 320 triangles built.
+        // 500 placements of 320 triangles: 320 built.
         let moved = vec!["{ translate = [1, 0, 0] }"; 498].join(",");
         assert!(
             with(&format!(
@@ -688,7 +686,8 @@ mod tests {
             ))
             .is_ok()
         );
-        let err = with("[{}, { scale = 2 }, { scale = 3 }, { scale = 4 }]").unwrap_err();
+        let text = "[[objects]]\nname = \"b\"\ngenerator = { kind = \"sphere\", subdivisions = 3 }\n";
+        let err = parse(text, "test", Path::new("."), Reach::Anywhere, &limits).unwrap_err();
         assert!(err.to_string().contains("1280 triangles"), "{err}");
     }
 

@@ -9,7 +9,7 @@ pub mod file;
 use std::path::Path;
 use std::sync::Arc;
 
-use glam::{DVec3, Vec3};
+use glam::{DQuat, DVec3, Vec3};
 
 use crate::bounds::Aabb;
 use crate::camera::{Camera, CameraPath, PathSegment};
@@ -126,16 +126,23 @@ fn name_char(c: char) -> bool {
 /// where an `f32` steps by centimetres: meshes, bakes and warps there lost whole depth
 /// levels. So everything about one object — its mesh, its bounds, its relief
 /// textures and the eyes they are made for — is given in the object's own frame,
-/// whose origin lies at [`SceneObject::origin`] (in `f64`) and whose axes are the
-/// world's. Scene-wide code moves a camera into it with [`SceneObject::local_camera`]:
-/// one `f64` subtraction, after which all is `f32` near the origin, as precise
-/// wherever the object stands.
+/// whose origin lies at [`SceneObject::origin`] (in `f64`). Scene-wide code moves a
+/// camera into it with [`SceneObject::local_camera`]: one `f64` subtraction, after
+/// which all is `f32` near the origin, as precise wherever the object stands.
 ///
 /// # Placements
 ///
 /// One mesh placed many times (a scene file's `instances`) is one [`Mesh`] in memory:
 /// each placement is a `SceneObject` of its own, named apart, sharing the mesh, its
-/// hash and its edge census ([`SceneObject::placed`]).
+/// hash and its edge census ([`SceneObject::placed`]). A placement may also turn and
+/// scale its frame: a world point is `origin + scale · rotation · x` of a point `x`
+/// of the frame. A camera moved into the frame ([`SceneObject::local_camera`]) sees
+/// the same image (a similarity moves eye and object alike), so the textures, bakes,
+/// warps and every decision about the object are the mesh's own, shared by its
+/// placements. Three things leave the frame: depths a writer puts into a frame's
+/// buffer, in the world's metres (times [`SceneObject::depth_scale`]); normals,
+/// turned into the world where the frame is lit ([`SceneObject::normal_to_world`]);
+/// and a reference's rays and hits.
 #[derive(Debug, Clone)]
 pub struct SceneObject {
     pub name: String,
@@ -143,6 +150,10 @@ pub struct SceneObject {
     pub mesh: Arc<Mesh>,
     /// Where the object's frame's origin lies in the world.
     pub origin: DVec3,
+    /// How the object's frame is turned in the world (the identity for most).
+    pub rotation: DQuat,
+    /// World metres per metre of the object's frame (1 for most).
+    pub scale: f64,
     /// Bounds of the mesh, in the object's frame.
     pub local_bounds: Aabb,
     pub specular: Specular,
@@ -166,37 +177,101 @@ impl SceneObject {
         *self.edges.get_or_init(|| self.mesh.edge_census())
     }
 
-    /// `camera` (in the world) moved into the object's frame.
+    /// Whether the object's frame has the world's axes and metres: then moving into it
+    /// is one subtraction.
+    fn is_moved_only(&self) -> bool {
+        self.rotation == DQuat::IDENTITY && self.scale == 1.0
+    }
+
+    /// `camera` (in the world) moved into the object's frame: the same image (see
+    /// [Placements](SceneObject#placements)).
     pub fn local_camera(&self, camera: &Camera) -> Camera {
-        camera.relative_to(self.origin)
+        if self.is_moved_only() {
+            return camera.relative_to(self.origin);
+        }
+        let turn = self.rotation.inverse();
+        let axis = |v: Vec3| (turn * v.as_dvec3()).normalize().as_vec3();
+        Camera {
+            eye: turn * (camera.eye - self.origin) / self.scale,
+            forward: axis(camera.forward),
+            right: axis(camera.right),
+            up: axis(camera.up),
+            ..*camera
+        }
     }
 
     /// A world point in the object's frame.
     pub fn to_local(&self, world: DVec3) -> Vec3 {
-        (world - self.origin).as_vec3()
+        if self.is_moved_only() {
+            return (world - self.origin).as_vec3();
+        }
+        (self.rotation.inverse() * (world - self.origin) / self.scale).as_vec3()
     }
 
     /// A point of the object's frame in the world.
     pub fn to_world(&self, local: Vec3) -> DVec3 {
-        self.origin + local.as_dvec3()
+        self.origin + self.rotation * local.as_dvec3() * self.scale
+    }
+
+    /// World view depth per view depth in the object's frame: a writer seeing the
+    /// object through [`SceneObject::local_camera`] stores its depths times this.
+    pub fn depth_scale(&self) -> f32 {
+        self.scale as f32
+    }
+
+    /// A normal (or any direction) of the object's frame, turned into the world.
+    pub fn normal_to_world(&self, normal: Vec3) -> Vec3 {
+        self.rotation.as_quat() * normal
+    }
+
+    /// `lighting` (the world's) in the object's frame: point lights moved, turned and
+    /// scaled into it, directional ones turned. (Lights here do not fade with distance,
+    /// so what they light is the same in either frame.)
+    pub fn local_lighting(&self, lighting: &Lighting) -> Lighting {
+        if self.is_moved_only() {
+            return lighting.relative_to(self.origin);
+        }
+        let turn = self.rotation.inverse().as_quat();
+        let lights = (lighting.lights.iter())
+            .map(|light| match *light {
+                Light::Point { position, color } => Light::Point {
+                    position: self.to_local(position.as_dvec3()),
+                    color,
+                },
+                Light::Directional { direction, color } => Light::Directional {
+                    direction: turn * direction,
+                    color,
+                },
+            })
+            .collect();
+        Lighting {
+            ambient: lighting.ambient,
+            lights,
+        }
     }
 
     /// The object's bounds in the world, rounded out to `f32`: for scene-wide
     /// decisions that need no more than that (the default path, what a view may see);
     /// never for drawing.
     pub fn world_bounds(&self) -> Aabb {
+        let corners = self.local_bounds.corners().map(|c| self.to_world(c));
+        let (lo, hi) = corners
+            .iter()
+            .fold((corners[0], corners[0]), |(lo, hi), &c| (lo.min(c), hi.max(c)));
         Aabb {
-            min: self.to_world(self.local_bounds.min).as_vec3().map(f32::next_down),
-            max: self.to_world(self.local_bounds.max).as_vec3().map(f32::next_up),
+            min: lo.as_vec3().map(f32::next_down),
+            max: hi.as_vec3().map(f32::next_up),
         }
     }
 
     /// A scene object of `mesh` (in its own frame), that frame's origin placed at
-    /// `origin` in the world.
+    /// `origin` in the world, its axes and metres the world's.
     pub fn new(name: impl Into<String>, mesh: Mesh, origin: DVec3, specular: Specular) -> Self {
         SceneObject {
             name: name.into(),
             origin,
+            rotation: DQuat::IDENTITY,
+            scale: 1.0,
             local_bounds: mesh.bounds(),
             hash: mesh_hash(&mesh),
             edges: Arc::default(),
@@ -205,12 +280,16 @@ impl SceneObject {
         }
     }
 
-    /// Another placement of this object's mesh, named `name`, its frame's origin at
-    /// `origin`: the mesh (and what is known of it) shared, not copied.
-    pub fn placed(&self, name: impl Into<String>, origin: DVec3) -> SceneObject {
+    /// Another placement of this object's mesh, named `name`: its frame's origin at
+    /// `origin`, turned by `rotation` and scaled by `scale` (> 0) in the world (see
+    /// [Placements](SceneObject#placements)); the mesh (and what is known of it)
+    /// shared, not copied.
+    pub fn placed(&self, name: impl Into<String>, origin: DVec3, rotation: DQuat, scale: f64) -> SceneObject {
         SceneObject {
             name: name.into(),
             origin,
+            rotation: rotation.normalize(),
+            scale,
             ..self.clone()
         }
     }

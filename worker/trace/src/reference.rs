@@ -46,7 +46,7 @@ pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> 
                 let tri = hit.triangle as usize;
                 Some(SurfacePoint {
                     albedo: o.mesh.albedo(tri, hit.u, hit.v),
-                    normal: o.mesh.shading_normal(tri, hit.u, hit.v),
+                    normal: o.normal_to_world(o.mesh.shading_normal(tri, hit.u, hit.v)),
                     position: *ray * hit.t,
                     towards_eye: -ray.normalize(),
                     specular: o.specular,
@@ -81,41 +81,45 @@ pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> 
 /// pixel `(x, y)` at fine cell `(n·x + i, n·y + j)`, its centre at pixel position
 /// `(x + (i + ½)/n, y + (j + ½)/n)`. Each object wholly before the eye is traced as
 /// beams from it ([`PlaneRays`] on the plane one unit before the eye); one reaching
-/// behind the eye's plane, ray by ray. Each in its own frame: the eye moved into it.
+/// behind the eye's plane, ray by ray. Each in its own frame: the camera moved into
+/// it ([`SceneObject::local_camera`](relief_core::scene::SceneObject::local_camera)),
+/// its hits' depths back in the world's metres.
 struct SampleGrid<'a> {
     camera: &'a Camera,
     n: u32,
-    /// How each object is traced.
-    tracing: Vec<Tracing>,
+    /// How each object is traced, and its camera and world metres per metre of its
+    /// frame.
+    tracing: Vec<(Tracing, Camera, f32)>,
 }
 
 /// How a reference traces one object.
 enum Tracing {
     /// Block by block, as beams from the eye.
     Beams(PlaneRays),
-    /// One ray at a time from `eye`, in the object's frame.
-    RayByRay { eye: Vec3 },
+    /// One ray at a time from the eye, in the object's frame.
+    RayByRay,
     /// Not at all: it lies wholly behind the eye.
     Behind,
 }
 
-/// A sample's nearest hit: the object, the hit (`t` in view depth, so that the point
-/// is `eye + ray·t`) and the sample's ray scaled to a unit forward component.
+/// A sample's nearest hit: the object, the hit (`t` in the world's view depth, so
+/// that the point is `eye + ray·t`) and the sample's ray in the world, scaled to a
+/// unit forward component.
 type Sample = Option<(usize, Hit, Vec3)>;
 
 impl<'a> SampleGrid<'a> {
     fn new(tracer: &SceneTracer, camera: &'a Camera, n: u32) -> Self {
         let h = camera.height as f32;
         let tan_half = camera.tan_half_fov();
-        // `Camera::ray` at pixel position (0, 0), and per fine cell.
-        let corner_ray = camera.ray(0.0, 0.0) * PLANE_DEPTH;
-        let a = camera.ray_x_step() * (PLANE_DEPTH / n as f32);
-        let b = -camera.up * (2.0 * tan_half / h * PLANE_DEPTH / n as f32);
         let tracing = tracer
             .objects
             .iter()
             .map(|o| {
                 let (local, bounds) = (o.object.local_camera(camera), &o.object.local_bounds);
+                // `Camera::ray` at pixel position (0, 0), and per fine cell.
+                let corner_ray = local.ray(0.0, 0.0) * PLANE_DEPTH;
+                let a = local.ray_x_step() * (PLANE_DEPTH / n as f32);
+                let b = -local.up * (2.0 * tan_half / h * PLANE_DEPTH / n as f32);
                 let depths = bounds.corners().map(|p| local.to_view(p).z);
                 let near = depths.iter().copied().fold(f32::INFINITY, f32::min);
                 let far = depths.iter().copied().fold(f32::NEG_INFINITY, f32::max);
@@ -131,14 +135,15 @@ impl<'a> SampleGrid<'a> {
                     && within_beam_tangent(&local, bounds)
                     && fine_enough())
                 .then(|| {
-                    PlaneRays::from_centre(eye, eye + corner_ray, a, b, camera.forward, -PLANE_DEPTH, t_max)
+                    PlaneRays::from_centre(eye, eye + corner_ray, a, b, local.forward, -PLANE_DEPTH, t_max)
                 })
                 .flatten();
-                match beams {
+                let tracing = match beams {
                     Some(beams) => Tracing::Beams(beams),
                     None if far <= 0.0 => Tracing::Behind,
-                    None => Tracing::RayByRay { eye },
-                }
+                    None => Tracing::RayByRay,
+                };
+                (tracing, local, o.object.depth_scale())
             })
             .collect();
         SampleGrid { camera, n, tracing }
@@ -172,7 +177,7 @@ impl<'a> SampleGrid<'a> {
             }
         };
         let mut hits = Vec::new();
-        for ((k, o), tracing) in tracer.objects.iter().enumerate().zip(&self.tracing) {
+        for ((k, o), (tracing, local, scale)) in tracer.objects.iter().enumerate().zip(&self.tracing) {
             match tracing {
                 Tracing::Behind => {}
                 Tracing::Beams(beam) => {
@@ -182,9 +187,9 @@ impl<'a> SampleGrid<'a> {
                         o.bvh.intersect_block(beam, sub, &mut hits);
                         for ((fx, fy), hit) in sub.pixels().zip(&hits) {
                             if let Some(hit) = hit {
-                                // Depth past the plane to view depth.
+                                // Depth past the plane to view depth, in the world.
                                 let hit = Hit {
-                                    t: hit.t + PLANE_DEPTH,
+                                    t: (hit.t + PLANE_DEPTH) * scale,
                                     ..*hit
                                 };
                                 keep(index(fx, fy), k, hit, ray_of(fx, fy));
@@ -192,13 +197,16 @@ impl<'a> SampleGrid<'a> {
                         }
                     }
                 }
-                Tracing::RayByRay { eye } => {
+                Tracing::RayByRay => {
                     let cells: Vec<(u32, u32)> = fine.pixels().collect();
+                    let cell = 1.0 / n as f32;
                     let rays: Vec<Ray> = cells
                         .iter()
                         .map(|&(fx, fy)| Ray {
-                            origin: *eye,
-                            direction: ray_of(fx, fy).normalize(),
+                            origin: local.eye_f32(),
+                            direction: local
+                                .ray((fx as f32 + 0.5) * cell, (fy as f32 + 0.5) * cell)
+                                .normalize(),
                             t_min: 0.0,
                             t_max: f32::INFINITY,
                         })
@@ -209,9 +217,10 @@ impl<'a> SampleGrid<'a> {
                     for (&(fx, fy), hit) in cells.iter().zip(&hits) {
                         if let Some(hit) = hit {
                             let ray = ray_of(fx, fy);
-                            // Distance along the unit ray to view depth.
+                            // Distance along the unit ray to view depth, in the world
+                            // (a turn keeps the ray's length).
                             let hit = Hit {
-                                t: hit.t / ray.length(),
+                                t: hit.t / ray.length() * scale,
                                 ..*hit
                             };
                             keep(index(fx, fy), k, hit, ray);

@@ -51,6 +51,12 @@ pub enum DisplayError {
         "{method} shows orthographic relief textures only; this one is perspective (use a pre-warp method)"
     )]
     NeedsOrthographic { method: Method },
+    /// The object's frame is scaled in the world (a scene file's placement): only the
+    /// pre-warp methods store its depths in the world's metres.
+    #[error(
+        "{method} draws in the object's own metres; this object's frame is scaled by {scale} (use a pre-warp method)"
+    )]
+    ScaledFrame { method: Method, scale: f32 },
 }
 
 /// The widest turn round an object, from its texture's eye, at which the forward and
@@ -248,6 +254,17 @@ pub enum Prepared {
 }
 
 impl Prepared {
+    /// The display of an object whose frame is `scale` world metres per metre of its
+    /// own ([`SceneObject::depth_scale`](relief_core::scene::SceneObject::depth_scale)):
+    /// its depths stored in the world's metres, as the frame's other objects' are.
+    pub fn in_world(self, method: Method, scale: f32) -> Result<Prepared, DisplayError> {
+        match self {
+            Prepared::Prewarped(p) => Ok(Prepared::Prewarped(Box::new(p.in_world(scale)?))),
+            other if scale == 1.0 => Ok(other),
+            _ => Err(DisplayError::ScaledFrame { method, scale }),
+        }
+    }
+
     /// Texels of `impostor` (the one prepared) this display visits: those a pre-warp
     /// reached the screen from, or all.
     pub fn texels_warped(&self, impostor: &Impostor) -> usize {

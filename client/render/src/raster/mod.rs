@@ -54,12 +54,15 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
             continue;
         }
         // Each vertex projected once (a vertex is a corner of ~6 triangles); only the
-        // triangles crossing the near plane are projected again, corner by corner.
+        // triangles crossing the near plane are projected again, corner by corner. In
+        // the world's metres: a scaled frame's view coordinates times its scale (the
+        // same pixels, depths the frame's others compare with).
+        let scale = object.depth_scale();
         let vertices: Vec<clip::Corner> = object
             .mesh
             .positions
             .par_iter()
-            .map(|&p| clip::Corner::new(&projection, camera.to_view(p)))
+            .map(|&p| clip::Corner::new(&projection, camera.to_view(p) * scale))
             .collect();
         let set_up: Vec<ScreenTriangle> = object
             .mesh

@@ -54,6 +54,7 @@ use relief_core::relief::SourceCamera;
 
 use crate::gbuffer::GBuffer;
 use crate::impostor::Impostor;
+use texmap::Depths;
 
 /// `x ∈ [0, 2²³ − 0.5)` rounded to the nearest integer (ties to even); anything else
 /// (negative, NaN) gives an arbitrary value below 2²³, so callers bound the result.
@@ -106,6 +107,8 @@ pub struct Prewarped {
     params: params::WarpParams,
     /// The factor applied to the depths in the depth test (see [`Prewarped::behind`]).
     depth_scale: f32,
+    /// World metres per metre of the texture's frame (see [`Prewarped::in_world`]).
+    world_scale: f32,
 }
 
 impl Prewarped {
@@ -120,6 +123,7 @@ impl Prewarped {
             image,
             params,
             depth_scale: 1.0,
+            world_scale: 1.0,
         })
     }
 
@@ -144,6 +148,21 @@ impl Prewarped {
         })
     }
 
+    /// Stores (and tests) depths `scale` times those seen in the texture's frame: the
+    /// frame of an object scaled in the world
+    /// ([`SceneObject::depth_scale`](relief_core::scene::SceneObject::depth_scale)),
+    /// whose depths the frame's other objects compare with in the world's metres.
+    /// [`WarpError::NonFinite`] for a `scale` not finite and positive.
+    pub fn in_world(self, scale: f32) -> Result<Prewarped, WarpError> {
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(WarpError::NonFinite);
+        }
+        Ok(Prewarped {
+            world_scale: self.world_scale * scale,
+            ..self
+        })
+    }
+
     /// Texture-maps the pre-warped image of `impostor` (the one pre-warped) for
     /// `camera` (the one it was pre-warped for) into `gbuffer` as object `object`.
     pub fn draw(self, impostor: &Impostor, object: u32, camera: &Camera, gbuffer: &mut GBuffer) {
@@ -151,7 +170,10 @@ impl Prewarped {
             &self.image,
             &impostor.texture,
             &self.params,
-            self.depth_scale,
+            Depths {
+                tested: self.depth_scale,
+                world: self.world_scale,
+            },
             object,
             camera,
             gbuffer,

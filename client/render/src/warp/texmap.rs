@@ -58,14 +58,22 @@ pub fn volume_rect(camera: &Camera, c: &SourceCamera) -> (u32, u32, u32, u32) {
     screen_rect(camera, &corners)
 }
 
+/// How a texture mapping's depths go into the buffer: multiplied by `world` into the
+/// world's metres ([`Prewarped::in_world`](super::Prewarped::in_world)), then by
+/// `tested` for the depth test only ([`Prewarped::behind`](super::Prewarped::behind)).
+#[derive(Debug, Clone, Copy)]
+pub struct Depths {
+    pub tested: f32,
+    pub world: f32,
+}
+
 /// Maps `image` (pre-warped for `camera.eye`) onto the screen into `gbuffer`, its
-/// depths multiplied by `depth_scale` for the depth test (1: as they are; see
-/// [`Prewarped::behind`](super::Prewarped::behind)) and stored as they are.
+/// depths as `depths` says.
 pub fn map(
     image: &PrewarpImage,
     texture: &ReliefTexture,
     params: &WarpParams,
-    depth_scale: f32,
+    depths: Depths,
     object: u32,
     camera: &Camera,
     gbuffer: &mut GBuffer,
@@ -168,8 +176,8 @@ pub fn map(
                     };
                     let stored =
                         Stored::with_encoded_normal(object, attributes.albedo(), attributes.normal());
-                    let view_depth = (params.h + depth) / towards_plane[l];
-                    let tested = view_depth * depth_scale;
+                    let view_depth = (params.h + depth) / towards_plane[l] * depths.world;
+                    let tested = view_depth * depths.tested;
                     if coverage < 1.0 {
                         pixels.add_fragment(x + l, tested, view_depth, coverage, &stored);
                     } else {
