@@ -5,6 +5,7 @@
 //! `.obj` file (a one-object scene named after the file).
 
 pub mod file;
+mod forest;
 
 use std::path::Path;
 use std::sync::Arc;
@@ -32,14 +33,20 @@ const BUILTINS: &[(&str, &str)] = &[
     ),
 ];
 
+/// The built-in scene made by a rule rather than kept as a file: [`forest`].
+const FOREST: &str = "forest";
+
 /// Names accepted by [`Scene::load`] without a file.
 pub fn builtin_names() -> Vec<&'static str> {
-    BUILTINS.iter().map(|(name, _)| *name).collect()
+    BUILTINS.iter().map(|(name, _)| *name).chain([FOREST]).collect()
 }
 
 /// The TOML text of a built-in scene.
 pub fn builtin_text(name: &str) -> Option<&'static str> {
-    BUILTINS.iter().find(|(n, _)| *n == name).map(|(_, text)| *text)
+    match name {
+        FOREST => Some(forest::text()),
+        _ => BUILTINS.iter().find(|(n, _)| *n == name).map(|(_, text)| *text),
+    }
 }
 
 /// The longest object name accepted.
@@ -328,10 +335,8 @@ impl Scene {
         match extension.as_deref() {
             Some("obj") => Self::from_obj(path, reach, limits),
             Some("toml") => file::load_file(path, reach, limits),
-            _ => match BUILTINS.iter().find(|(name, _)| *name == spec) {
-                Some((name, text)) => {
-                    file::parse(text, &format!("built-in `{name}`"), Path::new("."), reach, limits)
-                }
+            _ => match builtin_text(spec) {
+                Some(text) => file::parse(text, &format!("built-in `{spec}`"), Path::new("."), reach, limits),
                 None => Err(Error::UnknownScene(spec.to_string())),
             },
         }
