@@ -548,3 +548,62 @@ fn a_saturated_server_lengthens_the_textures_lives() {
     }
     assert_eq!(manager.tolerance(), asked);
 }
+
+/// Two placements of one knot, the second turned so that the camera sees it from the
+/// same direction, in the knot's own frame, as the first: one texture serves both.
+/// Only one is asked for (the second placement's need is covered by the first's
+/// request), and when it arrives both show it. Turned far otherwise, each asks its
+/// own.
+#[test]
+fn placements_seen_alike_share_one_texture() {
+    // From the eye (0, 1.5, 8), the first knot lies along (−3, −0.5, −8) and the second
+    // along (3, −0.5, −8): turned −41.1° about the vertical, the second sees the eye
+    // where the first does.
+    let twin = |yaw: f32| {
+        let text = format!(
+            r#"
+            [[objects]]
+            name = "knot"
+            generator = {{ kind = "knot", p = 2, q = 3, segments = 720, sides = 32, tube_radius = 0.28 }}
+            instances = [{{ translate = [-3, 1, 0] }}, {{ translate = [3, 1, 0], rotate_deg = [0, {yaw}, 0] }}]
+            "#
+        );
+        let limits = relief_core::scene::SceneLimits::default();
+        let reach = relief_core::reach::Reach::Anywhere;
+        Arc::new(
+            relief_core::scene::file::parse(&text, "twin", std::path::Path::new("."), reach, &limits)
+                .unwrap(),
+        )
+    };
+    let yaw = -2.0 * (3.0f32 / 8.0).atan().to_degrees();
+    let camera = Camera::look_at(
+        Vec3::new(0.0, 1.5, 8.0),
+        Vec3::new(0.0, 1.0, 0.0),
+        Vec3::Y,
+        60.0,
+        320,
+        180,
+    )
+    .unwrap();
+    // Frames from a still eye until both knots show an impostor: the requests asked
+    // and the textures shared meanwhile.
+    let run = |scene: &Arc<Scene>| {
+        let mut manager = served_locally(scene, Config::default());
+        let start = std::time::Instant::now();
+        while !(manager.frame(scene, &camera, 0.0).iter()).all(|s| matches!(s, Show::Impostor { .. })) {
+            assert!(
+                start.elapsed() < Duration::from_secs(60),
+                "textures did not arrive"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let asked = manager.counters.requests_now + manager.counters.requests_predicted;
+        (asked, manager.counters.textures_shared)
+    };
+    let (asked, shared) = run(&twin(yaw));
+    assert_eq!((asked, shared), (1, 1), "one request, its texture shared");
+    // Turned the other way, the second sees the eye some 150° round from where the
+    // first does.
+    let (asked, shared) = run(&twin(90.0));
+    assert_eq!((asked, shared), (2, 0), "seen from far apart, each its own");
+}

@@ -1,6 +1,8 @@
 //! The textures held for each object: arrivals taken in (never waiting), each final
-//! one's valid angle probed, the nearest the eye kept.
+//! one's valid angle probed, the nearest the eye kept, and each shared with the other
+//! placements of its mesh that can show it.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -15,7 +17,7 @@ use relief_render::validity::edges::EdgeError;
 use relief_render::validity::rim::Rim;
 use relief_render::warp::params::WarpParams;
 
-use super::around::angle_between;
+use super::around::{angle_between, similar_distance};
 use super::choose::growth;
 use super::messages::{Arrival, Failure};
 use super::policy::{
@@ -66,10 +68,12 @@ impl std::fmt::Debug for ReadyTexture {
     }
 }
 
-/// A texture held for an object.
+/// A texture held for an object. (Placements of one mesh hold one texture alike,
+/// its pyramid and critical points shared: see [`Manager::share`].)
+#[derive(Clone)]
 pub(super) struct Held {
-    pub(super) pyramid: Pyramid,
-    pub(super) critical: CriticalPoints,
+    pub(super) pyramid: Arc<Pyramid>,
+    pub(super) critical: Arc<CriticalPoints>,
     /// The regions' gaps at the texture's own eye: what it shows at best.
     pub(super) baseline: Vec<f32>,
     /// Its rim's curvature: the band past the outline it cannot show from a turned eye.
@@ -82,6 +86,9 @@ pub(super) struct Held {
     /// texture or a partner): its lifetime.
     pub(super) arrived: Instant,
     pub(super) last_shown: Option<Instant>,
+    /// Asked for by another placement of the mesh, and shared with this one: counted
+    /// in that placement's lifetimes, not here.
+    pub(super) shared: bool,
 }
 
 #[derive(Default)]
@@ -151,37 +158,29 @@ impl Manager {
                     state.held.retain(|h| h.is_final || h.eye != p.eye);
                     let held = Held {
                         eye: p.eye,
-                        pyramid,
-                        critical,
+                        pyramid: Arc::new(pyramid),
+                        critical: Arc::new(critical),
                         baseline,
                         rim,
                         growth_weight,
                         is_final,
                         arrived,
                         last_shown: None,
+                        shared: false,
                     };
                     let object = &scene.objects[p.object];
-                    let (camera, centre) = (object.local_camera(camera), object.local_bounds.center());
+                    let (local, centre) = (object.local_camera(camera), object.local_bounds.center());
                     if is_final {
-                        let angle = probe_valid_angle(&held, centre, &camera, tolerance);
+                        let angle = probe_valid_angle(&held, centre, &local, tolerance);
                         state.valid_angle = Some(angle);
                         tracing::debug!(
                             object = p.object,
                             valid_deg = angle.to_degrees(),
                             "texture arrived; its valid angle probed"
                         );
+                        self.share(scene, camera, p.object, &held, angle);
                     }
-                    state.held.push(held);
-                    // Keep the textures nearest the eye.
-                    if state.held.len() > self.config.keep {
-                        let eye = camera.eye_f32();
-                        state.held.sort_by(|a, b| {
-                            angle_between(centre, a.eye, eye).total_cmp(&angle_between(centre, b.eye, eye))
-                        });
-                        for retired in state.held.split_off(self.config.keep) {
-                            self.counters.retired.retire(&retired);
-                        }
-                    }
+                    self.hold(p.object, held, centre, local.eye_f32());
                 }
                 Arrival::ServerLoad { wait } => self.feel_load(wait),
                 Arrival::Failed { id, failure } => {
@@ -221,6 +220,50 @@ impl Manager {
 }
 
 impl Manager {
+    /// Holds `held` for object `k`, keeping the textures nearest its eye (`eye`, about
+    /// `centre`, in its frame).
+    fn hold(&mut self, k: usize, held: Held, centre: Vec3, eye: Vec3) {
+        let state = &mut self.objects[k];
+        state.held.push(held);
+        if state.held.len() > self.config.keep {
+            state.held.sort_by(|a, b| {
+                angle_between(centre, a.eye, eye).total_cmp(&angle_between(centre, b.eye, eye))
+            });
+            for retired in state.held.split_off(self.config.keep) {
+                self.counters.retired.retire(&retired);
+            }
+        }
+    }
+
+    /// Shares object `from`'s new final texture `held`, valid over `angle` about its
+    /// eye, with the other placements of its mesh that can show it: those whose eye
+    /// (in the mesh's frame, where the texture is) lies within that angle of its own at
+    /// a similar distance, and that hold nothing nearer. Each then holds it as if it had
+    /// asked (its pyramid shared, not copied), and asks for none of its own.
+    fn share(&mut self, scene: &Scene, camera: &Camera, from: usize, held: &Held, angle: f32) {
+        let mesh = &scene.objects[from];
+        let centre = mesh.local_bounds.center();
+        for (j, other) in scene.objects.iter().enumerate() {
+            if j == from || !other.shares_mesh(mesh) {
+                continue;
+            }
+            let eye = other.local_camera(camera).eye_f32();
+            let turn = angle_between(centre, held.eye, eye);
+            let nearer_held =
+                (self.objects[j].held.iter()).any(|h| angle_between(centre, h.eye, eye) <= turn);
+            if turn > angle || !similar_distance(centre, held.eye, eye) || nearer_held {
+                continue;
+            }
+            let shared = Held {
+                shared: true,
+                ..held.clone()
+            };
+            self.hold(j, shared, centre, eye);
+            self.objects[j].valid_angle.get_or_insert(angle);
+            self.counters.textures_shared += 1;
+        }
+    }
+
     /// The lifetimes of the run's final textures so far: those no longer held, and
     /// those held now.
     pub fn texture_lifetimes(&self) -> TextureLifetimes {

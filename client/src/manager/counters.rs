@@ -22,6 +22,9 @@ pub struct Counters {
     pub requests_timed_out: u64,
     /// … or predictions the saturated server refused.
     pub requests_shed: u64,
+    /// Final textures one placement asked for and another placement of its mesh was
+    /// given too (a request it did not make).
+    pub textures_shared: u64,
     /// The factor the server's load put on the tolerance, summed over the frames drawn
     /// (over their count: its mean; see [`LOAD_HIGH_WAIT`](super::policy::LOAD_HIGH_WAIT)).
     pub load_scale_sum: f64,
@@ -59,7 +62,7 @@ impl TextureLifetimes {
     /// Counts the lifetime of `held`, a texture no longer held or counted as such
     /// (previews are not counted).
     pub(super) fn retire(&mut self, held: &super::cache::Held) {
-        if !held.is_final {
+        if !held.is_final || held.shared {
             return;
         }
         match held.last_shown {

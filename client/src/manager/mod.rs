@@ -241,7 +241,7 @@ impl Manager {
             let valid = within_any && !too_far;
             let want_finer =
                 !within(best) && grades.iter().any(|g| g.growth <= tolerance && g.finer_available);
-            let asked_for = self.pending_covers(k, centre, eye);
+            let asked_for = self.pending_covers(scene, k, centre, eye);
             if valid || asked_for {
                 self.counters.prediction_hits += 1;
             }

@@ -98,11 +98,13 @@ impl Manager {
         percentile(recent, LATENCY_PERCENTILE)
     }
 
-    /// Whether a request already out for `object` will serve `eye`.
-    pub(super) fn pending_covers(&self, object: usize, centre: Vec3, eye: Vec3) -> bool {
+    /// Whether a request already out for `object`, or for another placement of its
+    /// mesh (whose texture it will share: see [`Manager::share`]), will serve `eye`.
+    pub(super) fn pending_covers(&self, scene: &Scene, object: usize, centre: Vec3, eye: Vec3) -> bool {
         let reach = PENDING_REACH * self.valid_angle(object);
+        let mesh = &scene.objects[object];
         self.pending.values().any(|p| {
-            p.object == object
+            (p.object == object || scene.objects[p.object].shares_mesh(mesh))
                 && angle_between(centre, p.eye, eye) < reach
                 && ((p.eye - centre).length() / (eye - centre).length() - 1.0).abs() < PENDING_DISTANCE_SLACK
         })
@@ -234,7 +236,7 @@ impl Manager {
             .map(|p| p.eye)
             .collect();
         let covered = held_covers(centre, future, &held, &asked, self.tolerance())
-            || self.pending_covers(k, centre, future);
+            || self.pending_covers(scene, k, centre, future);
         let ahead = self.ahead(k, centre, eye, future);
         let deadline = Some((horizon * 1e3) as u64);
         // (Quiet a while after the saturated server refused one: see `SHED_QUIET`.)

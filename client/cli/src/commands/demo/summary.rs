@@ -60,6 +60,8 @@ pub(super) struct Summary {
     /// refused.
     pub(super) requests_open_at_exit: usize,
     pub(super) requests_shed: u64,
+    /// Final textures asked for by one placement of a mesh and given to others too.
+    pub(super) textures_shared: u64,
     /// The mean factor the server's load put on the tolerance over the frames (1: the
     /// tolerance asked for throughout).
     pub(super) load_scale_mean: f64,
