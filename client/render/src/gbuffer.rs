@@ -509,13 +509,15 @@ impl<'a> RowShader<'a> {
                 .iter()
                 .map(|o| (o.specular.strength, o.specular.shininess))
                 .collect(),
-            turns: if scene.objects.iter().all(|o| o.rotation == glam::DQuat::IDENTITY) {
-                Vec::new()
-            } else {
-                let turn = |o: &relief_core::scene::SceneObject| {
-                    (o.rotation != glam::DQuat::IDENTITY).then(|| glam::Mat3::from_quat(o.rotation.as_quat()))
-                };
-                scene.objects.iter().map(turn).collect()
+            turns: {
+                let turns: Vec<_> = (scene.objects.iter())
+                    .map(|o| o.turn().map(glam::Mat3::from_quat))
+                    .collect();
+                if turns.iter().all(Option::is_none) {
+                    Vec::new()
+                } else {
+                    turns
+                }
             },
             objects: u32x8::splat(u32::try_from(scene.objects.len()).unwrap_or(u32::MAX)),
             background: to_rgb8(scene.background),
@@ -620,19 +622,24 @@ impl<'a> RowShader<'a> {
 }
 
 impl RowShader<'_> {
+    /// Object `id`'s frame's turn in the world, where it has one.
+    #[inline(always)]
+    fn turn(&self, id: u32) -> Option<glam::Mat3> {
+        self.turns.get(id as usize).copied().flatten()
+    }
+
     /// Normals of the objects `ids` (one a lane), each in its object's frame, turned
     /// into the world.
     #[inline(always)]
     fn to_world(&self, normals: Vec3x8, ids: &[u32]) -> Vec3x8 {
-        let turn_of = |id: u32| self.turns.get(id as usize).copied().flatten();
-        if self.turns.is_empty() || ids.iter().all(|&id| turn_of(id).is_none()) {
+        if self.turns.is_empty() || ids.iter().all(|&id| self.turn(id).is_none()) {
             return normals;
         }
         // (Rare: a frame turned by a placement. Lane by lane.)
         let (x, y, z) = (normals.x.to_array(), normals.y.to_array(), normals.z.to_array());
         let turned: [Vec3; LANES] = std::array::from_fn(|l| {
             let n = Vec3::new(x[l], y[l], z[l]);
-            match ids.get(l).copied().and_then(turn_of) {
+            match ids.get(l).and_then(|&id| self.turn(id)) {
                 Some(turn) => turn * n,
                 None => n,
             }
@@ -668,7 +675,7 @@ impl RowShader<'_> {
                     albedo: Vec3::new(channel(0), channel(8), channel(16)),
                     normal: {
                         let n = Vec3::from(f.stored.normal.map(f32::from));
-                        match self.turns.get(f.stored.object as usize).copied().flatten() {
+                        match self.turn(f.stored.object) {
                             Some(turn) => turn * n,
                             None => n,
                         }

@@ -452,17 +452,17 @@ fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<Vec<SceneObj
     local.validate().map_err(invalid)?;
     check_extent(&local).map_err(|m| invalid(format!("scaled, its vertices lie {m}")))?;
     let own_origin = DVec3::from(own.translate);
-    let mut names = o.placement_names().into_iter();
-    let first = SceneObject::new(names.next().unwrap_or_default(), local, own_origin, specular);
+    let object = SceneObject::new(o.name.clone(), local, own_origin, specular);
     if o.instances.is_none() {
-        return Ok(vec![first]);
+        return Ok(vec![object]);
     }
     o.placements()
         .iter()
-        .zip(std::iter::once(first.name.clone()).chain(names))
+        .zip(o.placement_names())
         .map(|(placement, name)| {
             // The placement after the object's own transform, x ↦ t + s·R·(t_o + x):
-            // its frame's origin at t + s·R·t_o, turned by R, scaled by s.
+            // its frame's origin at t + s·R·t_o, turned by R, scaled by s. (In f64, as
+            // the origin is; the object's own rotation went into the f32 mesh.)
             let [rx, ry, rz] = placement.rotate_deg.map(|d| (d as f64).to_radians());
             let rotation = DQuat::from_euler(EulerRot::XYZ, rx, ry, rz);
             let scale = placement.scale as f64;
@@ -472,7 +472,7 @@ fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<Vec<SceneObj
                     "{name} lies at {origin}, beyond {MAX_COORDINATE:e} m from the origin"
                 )));
             }
-            Ok(first.placed(name, origin, rotation, scale))
+            Ok(object.placed(name, origin, rotation, scale))
         })
         .collect()
 }

@@ -231,6 +231,11 @@ impl SceneObject {
         self.rotation.as_quat() * normal
     }
 
+    /// The frame's turn in the world, where it has one (`None`: the world's axes).
+    pub fn turn(&self) -> Option<glam::Quat> {
+        (self.rotation != DQuat::IDENTITY).then(|| self.rotation.as_quat())
+    }
+
     /// `lighting` (the world's) in the object's frame: point lights moved, turned and
     /// scaled into it, directional ones turned. (Lights here do not fade with distance,
     /// so what they light is the same in either frame.)
