@@ -194,21 +194,18 @@ impl Manager {
         let mut stale = false;
         // (When this frame shows its impostors: their textures' last use.)
         let shown_at = Some(Instant::now());
-        let mut shows = Vec::with_capacity(scene.objects.len());
+        let mut shows = vec![Show::Geometry; scene.objects.len()];
         let world_camera = camera;
-        for (k, object) in scene.objects.iter().enumerate() {
+        for k in nearest_first(scene, world_camera) {
+            let object = &scene.objects[k];
             // Each object is decided about in its own frame (see `SceneObject`).
             let camera = &object.local_camera(world_camera);
             match geometry_reason(object, world_camera.eye) {
-                Some(GeometryReason::Cheap) => {
-                    shows.push(Show::Geometry);
-                    continue;
-                }
+                Some(GeometryReason::Cheap) => continue,
                 Some(GeometryReason::TooNear) => {
                     // Drawn as geometry while the eye is this near, but the eye will
                     // leave: have its textures ready by then.
                     self.predict_for(scene, k, camera);
-                    shows.push(Show::Geometry);
                     continue;
                 }
                 None => {}
@@ -218,7 +215,6 @@ impl Manager {
                 // (drawn as geometry, which the rasterizer leaves out at once); the
                 // textures for where the eye is going are still asked for.
                 self.predict_for(scene, k, camera);
-                shows.push(Show::Geometry);
                 continue;
             }
             let (centre, eye) = (object.local_bounds.center(), camera.eye_f32());
@@ -288,7 +284,7 @@ impl Manager {
                 self.request(scene, k, eye, camera, None);
             }
             self.predict_for(scene, k, camera);
-            shows.push(match best {
+            shows[k] = match best {
                 Some((i, g)) if g.growth <= SHOWN_STALE * tolerance => {
                     let held = &mut self.objects[k].held;
                     held[i].last_shown = shown_at;
@@ -305,7 +301,7 @@ impl Manager {
                     }
                 }
                 _ => Show::Geometry,
-            });
+            };
         }
         if stale {
             self.counters.stale_frames += 1;
@@ -313,4 +309,18 @@ impl Manager {
         self.counters.load_scale_sum += f64::from(self.load_scale);
         shows
     }
+}
+
+/// The scene's objects, nearest the eye of `camera` first (by their bounds' centres):
+/// the order a frame decides about them in, and so the order its requests go out in —
+/// a server serves requests alike in urgency first come, first served, and in a scene
+/// of hundreds of objects the near ones, large on screen, should not wait behind the
+/// far ones.
+fn nearest_first(scene: &Scene, camera: &Camera) -> Vec<usize> {
+    let distance = |o: &relief_core::scene::SceneObject| {
+        o.world_bounds().center().as_dvec3().distance_squared(camera.eye)
+    };
+    let mut order: Vec<(f64, usize)> = (scene.objects.iter()).map(distance).zip(0..).collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0));
+    order.into_iter().map(|(_, k)| k).collect()
 }
