@@ -568,12 +568,7 @@ fn placements_seen_alike_share_one_texture() {
             instances = [{{ translate = [-3, 1, 0] }}, {{ translate = [3, 1, 0], rotate_deg = [0, {yaw}, 0] }}]
             "#
         );
-        let limits = relief_core::scene::SceneLimits::default();
-        let reach = relief_core::reach::Reach::Anywhere;
-        Arc::new(
-            relief_core::scene::file::parse(&text, "twin", std::path::Path::new("."), reach, &limits)
-                .unwrap(),
-        )
+        Arc::new(Scene::parse(&text).unwrap())
     };
     let yaw = -2.0 * (3.0f32 / 8.0).atan().to_degrees();
     let camera = Camera::look_at(

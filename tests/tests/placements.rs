@@ -2,16 +2,14 @@
 //! mesh transformed by hand, and all the placements of an object share one mesh, one
 //! BVH and (in its frame) its textures.
 
-use std::path::Path;
 use std::sync::Arc;
 
 use glam::DVec3;
 
 use relief_core::camera::Camera;
 use relief_core::frame::NO_OBJECT;
-use relief_core::reach::Reach;
 use relief_core::relief::{DepthBits, SourceProjection};
-use relief_core::scene::{Scene, SceneLimits, SceneObject, file};
+use relief_core::scene::{Scene, SceneObject};
 use relief_render::gbuffer::GBuffer;
 use relief_render::impostor::{Faces, Impostor};
 use relief_render::raster::rasterize;
@@ -21,14 +19,7 @@ use relief_trace::reference::render_reference;
 use relief_trace::tracer::{ObjectTracer, SceneTracer};
 
 fn parse(text: &str) -> Scene {
-    file::parse(
-        text,
-        "test",
-        Path::new("."),
-        Reach::Anywhere,
-        &SceneLimits::default(),
-    )
-    .expect("scene")
+    Scene::parse(text).expect("scene")
 }
 
 const KNOT: &str =

@@ -345,14 +345,7 @@ fn an_object_a_million_metres_out_draws_as_at_the_origin() {
             offset.y + 1.3,
             offset.z,
         );
-        let scene = relief_core::scene::file::parse(
-            &text,
-            "test",
-            std::path::Path::new("."),
-            relief_core::reach::Reach::Anywhere,
-            &Default::default(),
-        )
-        .expect("scene");
+        let scene = relief_core::scene::Scene::parse(&text).expect("scene");
         let eye = offset + DVec3::new(2.1, 2.3, 3.7);
         let camera = Camera::look_at(eye, offset + DVec3::new(0.0, 1.1, 0.0), Vec3::Y, 50.0, 240, 160)
             .expect("camera");

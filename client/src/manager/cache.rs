@@ -247,7 +247,7 @@ impl Manager {
             if j == from || !other.shares_mesh(mesh) {
                 continue;
             }
-            let eye = other.local_camera(camera).eye_f32();
+            let eye = other.to_local(camera.eye);
             let turn = angle_between(centre, held.eye, eye);
             let nearer_held =
                 (self.objects[j].held.iter()).any(|h| angle_between(centre, h.eye, eye) <= turn);

@@ -131,6 +131,17 @@ struct ObjectFile {
 }
 
 impl ObjectFile {
+    /// The object's own transform, as a placement. (Its keys stand in the object's
+    /// table, not flattened from a `PlacementFile`: serde cannot flatten where unknown
+    /// keys are refused.)
+    fn own(&self) -> PlacementFile {
+        PlacementFile {
+            translate: self.translate,
+            rotate_deg: self.rotate_deg,
+            scale: self.scale,
+        }
+    }
+
     /// The object's placements: those listed, or one that leaves it as it is.
     fn placements(&self) -> &[PlacementFile] {
         self.instances.as_deref().unwrap_or(&[PlacementFile::AS_IT_IS])
@@ -426,11 +437,7 @@ fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<Vec<SceneObj
         }
         _ => return Err(invalid("give exactly one of `obj` or `generator`")),
     };
-    let own = PlacementFile {
-        translate: o.translate,
-        rotate_deg: o.rotate_deg,
-        scale: o.scale,
-    };
+    let own = o.own();
     own.check()?;
     if let Some(diffuse) = o.diffuse {
         let diffuse = crate::vector::ensure_finite("diffuse", Vec3::from(diffuse)).map_err(invalid)?;
@@ -482,13 +489,7 @@ mod tests {
     use super::*;
 
     fn parse_str(text: &str) -> Result<Scene> {
-        parse(
-            text,
-            "test",
-            Path::new("."),
-            Reach::Anywhere,
-            &SceneLimits::default(),
-        )
+        Scene::parse(text)
     }
 
     /// A scene's cost is counted from its file — generators from their parameters, OBJ

@@ -199,7 +199,7 @@ impl SceneObject {
         let turn = self.rotation.inverse();
         let axis = |v: Vec3| (turn * v.as_dvec3()).normalize().as_vec3();
         Camera {
-            eye: turn * (camera.eye - self.origin) / self.scale,
+            eye: self.in_frame(camera.eye),
             forward: axis(camera.forward),
             right: axis(camera.right),
             up: axis(camera.up),
@@ -212,7 +212,12 @@ impl SceneObject {
         if self.is_moved_only() {
             return (world - self.origin).as_vec3();
         }
-        (self.rotation.inverse() * (world - self.origin) / self.scale).as_vec3()
+        self.in_frame(world).as_vec3()
+    }
+
+    /// A world point in the object's (turned, scaled) frame, still in `f64`.
+    fn in_frame(&self, world: DVec3) -> DVec3 {
+        self.rotation.inverse() * (world - self.origin) / self.scale
     }
 
     /// A point of the object's frame in the world.
@@ -330,6 +335,18 @@ impl Scene {
     /// within the [default](SceneLimits::default) limits.
     pub fn load(spec: &str) -> Result<Scene> {
         Self::load_within(spec, Reach::Anywhere, &SceneLimits::default())
+    }
+
+    /// A scene from the text of a scene file, within the [default](SceneLimits::default)
+    /// limits; the paths it names are relative to the working directory.
+    pub fn parse(text: &str) -> Result<Scene> {
+        file::parse(
+            text,
+            "scene text",
+            Path::new("."),
+            Reach::Anywhere,
+            &SceneLimits::default(),
+        )
     }
 
     /// As [`Scene::load`], reading only files within `reach` (the built-in scenes
@@ -505,16 +522,7 @@ mod tests {
     #[test]
     fn meshes_far_from_their_own_origin_for_their_size_are_warned_about() {
         assert!(Scene::load("default").unwrap().precision_warnings().is_empty());
-        let parse = |text: &str| {
-            file::parse(
-                text,
-                "test",
-                Path::new("."),
-                Reach::Anywhere,
-                &SceneLimits::default(),
-            )
-            .unwrap()
-        };
+        let parse = |text: &str| Scene::parse(text).unwrap();
         let moved = parse(
             "[[objects]]\nname = \"ball\"\ngenerator = { kind = \"sphere\", subdivisions = 2 }\ntranslate = [1e6, 0, 0]\n",
         );

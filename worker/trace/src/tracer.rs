@@ -24,14 +24,9 @@ pub struct ObjectTracer {
 impl ObjectTracer {
     /// Builds the object's BVH (the tracer keeps a copy of the object).
     pub fn new(object: &SceneObject) -> Self {
-        Self::owning(object.clone())
-    }
-
-    /// As [`ObjectTracer::new`], taking the object.
-    pub fn owning(object: SceneObject) -> Self {
         ObjectTracer {
             bvh: Arc::new(Bvh::build(&object.mesh)),
-            object,
+            object: object.clone(),
         }
     }
 

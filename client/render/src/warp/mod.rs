@@ -105,10 +105,17 @@ pub fn display(
 pub struct Prewarped {
     image: prewarp::PrewarpImage,
     params: params::WarpParams,
-    /// The factor applied to the depths in the depth test (see [`Prewarped::behind`]).
-    depth_scale: f32,
-    /// World metres per metre of the texture's frame (see [`Prewarped::in_world`]).
-    world_scale: f32,
+    /// How its depths go into the frame ([`Prewarped::in_world`], [`Prewarped::behind`]).
+    depths: Depths,
+}
+
+/// `factor`, when finite and positive; else [`WarpError::NonFinite`].
+fn positive(factor: f32) -> Result<f32, WarpError> {
+    if factor.is_finite() && factor > 0.0 {
+        Ok(factor)
+    } else {
+        Err(WarpError::NonFinite)
+    }
 }
 
 impl Prewarped {
@@ -122,8 +129,10 @@ impl Prewarped {
         Ok(Prewarped {
             image,
             params,
-            depth_scale: 1.0,
-            world_scale: 1.0,
+            depths: Depths {
+                tested: 1.0,
+                world: 1.0,
+            },
         })
     }
 
@@ -138,14 +147,9 @@ impl Prewarped {
     /// is within that margin in front: a second texture filling in what the first
     /// cannot show, never fighting it where both show the same surface.
     /// [`WarpError::NonFinite`] for a `factor` not finite and positive.
-    pub fn behind(self, factor: f32) -> Result<Prewarped, WarpError> {
-        if !(factor.is_finite() && factor > 0.0) {
-            return Err(WarpError::NonFinite);
-        }
-        Ok(Prewarped {
-            depth_scale: self.depth_scale * factor,
-            ..self
-        })
+    pub fn behind(mut self, factor: f32) -> Result<Prewarped, WarpError> {
+        self.depths.tested *= positive(factor)?;
+        Ok(self)
     }
 
     /// Stores (and tests) depths `scale` times those seen in the texture's frame: the
@@ -153,14 +157,9 @@ impl Prewarped {
     /// ([`SceneObject::depth_scale`](relief_core::scene::SceneObject::depth_scale)),
     /// whose depths the frame's other objects compare with in the world's metres.
     /// [`WarpError::NonFinite`] for a `scale` not finite and positive.
-    pub fn in_world(self, scale: f32) -> Result<Prewarped, WarpError> {
-        if !(scale.is_finite() && scale > 0.0) {
-            return Err(WarpError::NonFinite);
-        }
-        Ok(Prewarped {
-            world_scale: self.world_scale * scale,
-            ..self
-        })
+    pub fn in_world(mut self, scale: f32) -> Result<Prewarped, WarpError> {
+        self.depths.world *= positive(scale)?;
+        Ok(self)
     }
 
     /// Texture-maps the pre-warped image of `impostor` (the one pre-warped) for
@@ -170,10 +169,7 @@ impl Prewarped {
             &self.image,
             &impostor.texture,
             &self.params,
-            Depths {
-                tested: self.depth_scale,
-                world: self.world_scale,
-            },
+            self.depths,
             object,
             camera,
             gbuffer,
