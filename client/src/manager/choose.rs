@@ -63,8 +63,8 @@ pub(super) struct Grade {
     /// Too coarse to be shown: its texels would cover more than [`COARSEST_SHOWN`]
     /// pixels (eq. 4-1).
     pub(super) too_coarse: bool,
-    /// … and a finer texture can be had (the top of the
-    /// [`TEXTURE_LADDER`](super::policy::TEXTURE_LADDER) is finer).
+    /// … and a finer texture can be had (the edge asked for now,
+    /// [`Manager::size_for`], is larger).
     pub(super) finer_available: bool,
 }
 

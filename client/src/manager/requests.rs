@@ -19,7 +19,7 @@ use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
     MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK, PENDING_REACH,
-    REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, asked_for,
+    REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -111,8 +111,8 @@ impl Manager {
     }
 
     /// The texture to ask for from `eye`: its edge — what the screen can show of the
-    /// object ([`asked_for`]), rounded up to the [`texture_ladder`] — and its
-    /// projection.
+    /// object ([`asked_for`]), rounded up to the [`texture_ladder`], at most the
+    /// projection's [`largest_edge`] — and its projection.
     pub(super) fn size_for(object: &SceneObject, eye: Vec3, camera: &Camera) -> (u32, SourceProjection) {
         let (projection, edge) = asked_for(
             object,
@@ -121,7 +121,8 @@ impl Manager {
                 ..*camera
             },
         );
-        (texture_ladder(edge.unwrap_or(u32::MAX)), projection)
+        let edge = texture_ladder(edge.unwrap_or(u32::MAX)).min(largest_edge(projection));
+        (edge, projection)
     }
 
     pub(super) fn request(
