@@ -34,18 +34,22 @@
 //!   closest-hit traversal of single rays, and of a block of an image plane's rays as
 //!   one beam ([`PlaneRays`](bvh::PlaneRays)) for bakes and references (both checked
 //!   against an independent ray caster in `tests/tests/bvh_oracle.rs`).
-//! - [`tracer`] — a scene ready for ray casting: one BVH per object.
+//! - [`tracer`] — a scene ready for ray casting: one BVH per mesh, shared by its
+//!   placements, and one over the placements.
+//! - [`placements`] — that top level, which a reference frame walks once per block of
+//!   pixels, nearest object first.
 //! - [`tiles`] — the one way images are split across threads.
 //! - [`bake`](mod@bake) — the relief texture of one object for an eye.
 //! - [`reference`](mod@reference) — a full perspective frame of the whole scene, Phong-lit.
 
 pub mod bake;
 pub mod bvh;
+pub mod placements;
 mod prefetch;
 pub mod reference;
 pub mod tiles;
 pub mod tracer;
 
 pub use bake::{BakeError, bake};
-pub use reference::{ANTIALIASED_SAMPLES, render_reference};
+pub use reference::{ANTIALIASED_SAMPLES, ObjectWalk, render_reference};
 pub use tracer::SceneTracer;

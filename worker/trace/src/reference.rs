@@ -15,6 +15,7 @@ use relief_core::frame::{Frame, NO_OBJECT};
 use relief_core::shading::{SurfacePoint, to_rgb8};
 
 use crate::bvh::{Hit, PlaneRays, Ray};
+use crate::placements::BlockRays;
 use crate::tiles::{Block, par_fill_blocks};
 use crate::tracer::SceneTracer;
 
@@ -28,6 +29,24 @@ pub const ANTIALIASED_SAMPLES: u32 = 3;
 /// coverage is that of a point-sampled frame at any count. Runs on the current rayon
 /// pool.
 pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> Frame {
+    render_reference_by(tracer, camera, samples, ObjectWalk::NearestFirst)
+}
+
+/// How a reference frame goes through a scene's objects for each block of pixels. The
+/// frame is the same either way, bit for bit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ObjectWalk {
+    /// The objects the top-level BVH finds in the block, nearest first, until the rest
+    /// lie behind what is hit ([`Placements::nearest_first`](crate::placements::Placements::nearest_first)):
+    /// [`render_reference`]'s.
+    NearestFirst,
+    /// Every object in turn: the baseline `relief bench reference` measures the other
+    /// against.
+    EveryObject,
+}
+
+/// [`render_reference`], going through the objects by `walk`.
+pub fn render_reference_by(tracer: &SceneTracer, camera: &Camera, samples: u32, walk: ObjectWalk) -> Frame {
     let n = samples.max(1) | 1;
     let middle = (n * n / 2) as usize;
     let grid = SampleGrid::new(tracer, camera, n);
@@ -36,7 +55,7 @@ pub fn render_reference(tracer: &SceneTracer, camera: &Camera, samples: u32) -> 
     let lighting = tracer.lighting.relative_to(camera.eye);
     let mut pixels = vec![(background, NO_OBJECT); camera.width as usize * camera.height as usize];
     par_fill_blocks(camera.width, camera.height, &mut pixels, |block, values| {
-        let nearest = grid.nearest(tracer, block);
+        let nearest = grid.nearest(tracer, block, walk);
         // Every hit lit at once (the model runs several points per instruction).
         let points: Vec<SurfacePoint> = nearest
             .iter()
@@ -150,86 +169,147 @@ impl<'a> SampleGrid<'a> {
     }
 
     /// The nearest hit of each sample of the pixels of `block`, pixel by pixel (in
-    /// [`Block::pixels`] order), each pixel's samples row by row.
-    fn nearest(&self, tracer: &SceneTracer, block: Block) -> Vec<Sample> {
-        let n = self.n;
+    /// [`Block::pixels`] order), each pixel's samples row by row, of the objects `walk`
+    /// goes through.
+    fn nearest(&self, tracer: &SceneTracer, block: Block, walk: ObjectWalk) -> Vec<Sample> {
+        let mut samples = BlockSamples::new(block, self.n);
+        match walk {
+            ObjectWalk::NearestFirst => {
+                tracer.placements.nearest_first(&self.rays(block), |k| {
+                    self.trace(tracer, k, &mut samples);
+                    samples.farthest()
+                });
+            }
+            ObjectWalk::EveryObject => {
+                for k in 0..tracer.objects.len() {
+                    self.trace(tracer, k, &mut samples);
+                }
+            }
+        }
+        samples.nearest
+    }
+
+    /// The rays through `block`'s pixels.
+    fn rays(&self, block: Block) -> BlockRays {
+        let corner = |x: u32, y: u32| (x as f32, y as f32);
+        BlockRays::new(
+            self.camera,
+            corner(block.x0, block.y0),
+            corner(block.x0 + block.width, block.y0 + block.height),
+        )
+    }
+
+    /// The ray in the world of fine cell `(fx, fy)`, scaled to a unit forward
+    /// component.
+    fn ray_of(&self, fx: u32, fy: u32) -> Vec3 {
+        let cell = 1.0 / self.n as f32;
+        self.camera
+            .ray((fx as f32 + 0.5) * cell, (fy as f32 + 0.5) * cell)
+    }
+
+    /// Traces object `k` through the block's samples, keeping its hits where nearer.
+    fn trace(&self, tracer: &SceneTracer, k: usize, samples: &mut BlockSamples) {
+        let (o, (tracing, local, scale)) = (&tracer.objects[k], &self.tracing[k]);
+        let fine = samples.fine;
+        let mut hits = Vec::new();
+        match tracing {
+            Tracing::Behind => {}
+            Tracing::Beams(beam) => {
+                for sub in fine.tiles() {
+                    hits.clear();
+                    hits.resize((sub.width * sub.height) as usize, None);
+                    o.bvh.intersect_block(beam, sub, &mut hits);
+                    for ((fx, fy), hit) in sub.pixels().zip(&hits) {
+                        if let Some(hit) = hit {
+                            // Depth past the plane to view depth, in the world.
+                            let hit = Hit {
+                                t: (hit.t + PLANE_DEPTH) * scale,
+                                ..*hit
+                            };
+                            samples.keep(fx, fy, k, hit, || self.ray_of(fx, fy));
+                        }
+                    }
+                }
+            }
+            Tracing::RayByRay => {
+                let cells: Vec<(u32, u32)> = fine.pixels().collect();
+                let cell = 1.0 / self.n as f32;
+                let rays: Vec<Ray> = cells
+                    .iter()
+                    .map(|&(fx, fy)| Ray {
+                        origin: local.eye_f32(),
+                        direction: local
+                            .ray((fx as f32 + 0.5) * cell, (fy as f32 + 0.5) * cell)
+                            .normalize(),
+                        t_min: 0.0,
+                        t_max: f32::INFINITY,
+                    })
+                    .collect();
+                hits.resize(rays.len(), None);
+                o.bvh.intersect_batch(&rays, &mut hits);
+                for (&(fx, fy), hit) in cells.iter().zip(&hits) {
+                    if let Some(hit) = hit {
+                        let ray = self.ray_of(fx, fy);
+                        // Distance along the unit ray to view depth, in the world
+                        // (a turn keeps the ray's length).
+                        let hit = Hit {
+                            t: hit.t / ray.length() * scale,
+                            ..*hit
+                        };
+                        samples.keep(fx, fy, k, hit, || ray);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The samples of one block of pixels, as a block of the fine grid, and the nearest
+/// hit of each so far.
+struct BlockSamples {
+    fine: Block,
+    n: u32,
+    /// Pixels in a row of the block.
+    width: u32,
+    nearest: Vec<Sample>,
+}
+
+impl BlockSamples {
+    fn new(block: Block, n: u32) -> Self {
         let fine = Block {
             x0: block.x0 * n,
             y0: block.y0 * n,
             width: block.width * n,
             height: block.height * n,
         };
-        // Fine cell (fx, fy) of the block's samples, at its place in the output.
-        let index = |fx: u32, fy: u32| {
-            let (dx, dy) = (fx - fine.x0, fy - fine.y0);
-            let pixel = (dy / n) * block.width + dx / n;
-            ((pixel * n + dy % n) * n + dx % n) as usize
-        };
-        let ray_of = |fx: u32, fy: u32| {
-            let cell = 1.0 / n as f32;
-            self.camera
-                .ray((fx as f32 + 0.5) * cell, (fy as f32 + 0.5) * cell)
-        };
-        let mut nearest: Vec<Sample> = vec![None; fine.pixels().count()];
-        let mut keep = |at: usize, k: usize, hit: Hit, ray: Vec3| {
-            if nearest[at].is_none_or(|(_, best, _)| hit.t < best.t) {
-                nearest[at] = Some((k, hit, ray));
-            }
-        };
-        let mut hits = Vec::new();
-        for ((k, o), (tracing, local, scale)) in tracer.objects.iter().enumerate().zip(&self.tracing) {
-            match tracing {
-                Tracing::Behind => {}
-                Tracing::Beams(beam) => {
-                    for sub in fine.tiles() {
-                        hits.clear();
-                        hits.resize((sub.width * sub.height) as usize, None);
-                        o.bvh.intersect_block(beam, sub, &mut hits);
-                        for ((fx, fy), hit) in sub.pixels().zip(&hits) {
-                            if let Some(hit) = hit {
-                                // Depth past the plane to view depth, in the world.
-                                let hit = Hit {
-                                    t: (hit.t + PLANE_DEPTH) * scale,
-                                    ..*hit
-                                };
-                                keep(index(fx, fy), k, hit, ray_of(fx, fy));
-                            }
-                        }
-                    }
-                }
-                Tracing::RayByRay => {
-                    let cells: Vec<(u32, u32)> = fine.pixels().collect();
-                    let cell = 1.0 / n as f32;
-                    let rays: Vec<Ray> = cells
-                        .iter()
-                        .map(|&(fx, fy)| Ray {
-                            origin: local.eye_f32(),
-                            direction: local
-                                .ray((fx as f32 + 0.5) * cell, (fy as f32 + 0.5) * cell)
-                                .normalize(),
-                            t_min: 0.0,
-                            t_max: f32::INFINITY,
-                        })
-                        .collect();
-                    hits.clear();
-                    hits.resize(rays.len(), None);
-                    o.bvh.intersect_batch(&rays, &mut hits);
-                    for (&(fx, fy), hit) in cells.iter().zip(&hits) {
-                        if let Some(hit) = hit {
-                            let ray = ray_of(fx, fy);
-                            // Distance along the unit ray to view depth, in the world
-                            // (a turn keeps the ray's length).
-                            let hit = Hit {
-                                t: hit.t / ray.length() * scale,
-                                ..*hit
-                            };
-                            keep(index(fx, fy), k, hit, ray);
-                        }
-                    }
-                }
-            }
+        BlockSamples {
+            fine,
+            n,
+            width: block.width,
+            nearest: vec![None; fine.pixels().count()],
         }
-        nearest
+    }
+
+    /// Keeps `hit` of object `k` at fine cell `(fx, fy)` if it is nearer than the
+    /// sample's hit so far, or as near and of an object listed earlier: the same hit
+    /// whatever order the objects come in.
+    fn keep(&mut self, fx: u32, fy: u32, k: usize, hit: Hit, ray: impl FnOnce() -> Vec3) {
+        let n = self.n;
+        let (dx, dy) = (fx - self.fine.x0, fy - self.fine.y0);
+        let pixel = (dy / n) * self.width + dx / n;
+        let at = ((pixel * n + dy % n) * n + dx % n) as usize;
+        let nearer = |&(best_k, best, _): &(usize, Hit, Vec3)| (hit.t, k) < (best.t, best_k);
+        if self.nearest[at].as_ref().is_none_or(nearer) {
+            self.nearest[at] = Some((k, hit, ray()));
+        }
+    }
+
+    /// The farthest of the samples' nearest hits, as a view depth in the world;
+    /// infinite while a sample has none.
+    fn farthest(&self) -> f32 {
+        (self.nearest.iter())
+            .map(|sample| sample.as_ref().map_or(f32::INFINITY, |(_, hit, _)| hit.t))
+            .fold(0.0, f32::max)
     }
 }
 
@@ -279,3 +359,114 @@ const PLANE_DEPTH: f32 = 1.0;
 /// Relative margin on an object's far depth, for its beams' `t_max`: no hit on its
 /// bounds' far side is lost to rounding.
 const BEAM_DEPTH_MARGIN: f32 = 1e-4;
+
+#[cfg(test)]
+mod tests {
+    use glam::{DVec3, Vec3};
+
+    use relief_core::camera::Camera;
+    use relief_core::scene::Scene;
+
+    use super::*;
+
+    /// A ground, a wall, and 60 small spheres and knots in rows behind it and before
+    /// it — turned, scaled, one across the eye's plane — and the eye far from the origin.
+    fn crowd(origin: DVec3) -> Scene {
+        let mut text = String::from(
+            r#"
+            [[objects]]
+            name = "ground"
+            generator = { kind = "plane", size = 80.0, divisions = 1 }
+            [[objects]]
+            name = "wall"
+            generator = { kind = "plane", size = 6.0, divisions = 2 }
+            translate = [0, 1, -2]
+            rotate_deg = [90, 0, 0]
+            [[objects]]
+            name = "sphere"
+            generator = { kind = "sphere", subdivisions = 2 }
+            instances = [
+            "#,
+        );
+        for k in 0..30 {
+            let (x, z) = ((k % 6) as f64 * 1.7 - 4.0, -(k / 6) as f64 * 2.5 + 3.0);
+            text.push_str(&format!(
+                "{{ translate = [{x}, 0.6, {z}], rotate_deg = [0, {}, 0], scale = {} }},\n",
+                k * 37,
+                0.3 + 0.02 * k as f64
+            ));
+        }
+        // One beside the eye, across its plane.
+        text.push_str("{ translate = [1.1, 2, 9], scale = 0.5 },\n]\n");
+        text.push_str(
+            r#"
+            [[objects]]
+            name = "knot"
+            generator = { kind = "knot", p = 2, q = 3, segments = 60, sides = 8, tube_radius = 0.28 }
+            instances = [
+            "#,
+        );
+        for k in 0..29 {
+            let (x, z) = ((k % 6) as f64 * 1.7 - 3.2, -(k / 6) as f64 * 2.5 + 1.8);
+            text.push_str(&format!(
+                "{{ translate = [{x}, 1.0, {z}], rotate_deg = [{}, 20, 0] }},\n",
+                k * 11
+            ));
+        }
+        text.push_str("]\n");
+        let mut scene = Scene::parse(&text).expect("scene");
+        for object in &mut scene.objects {
+            object.origin += origin;
+        }
+        scene
+    }
+
+    fn view(origin: DVec3) -> Camera {
+        let eye = origin + DVec3::new(0.3, 2.1, 9.0);
+        let mut camera =
+            Camera::look_at(Vec3::ZERO, Vec3::new(0.0, -0.1, -1.0), Vec3::Y, 70.0, 96, 64).expect("camera");
+        camera.eye = eye;
+        camera
+    }
+
+    /// Each block's samples from the top-level BVH, nearest first with culling, equal
+    /// those of every object traced in turn, bit for bit; and the culling skips most
+    /// objects. At the origin and 10⁶ m from it, one and three samples a pixel.
+    #[test]
+    fn the_top_level_finds_every_objects_nearest_hits() {
+        for origin in [DVec3::ZERO, DVec3::new(1e6, 0.0, -1e6)] {
+            let scene = crowd(origin);
+            let tracer = SceneTracer::new(&scene);
+            let camera = view(origin);
+            for samples in [1, 3] {
+                let grid = SampleGrid::new(&tracer, &camera, samples);
+                let (mut traced, mut blocks, mut hits) = (0, 0, 0);
+                let whole = Block {
+                    x0: 0,
+                    y0: 0,
+                    width: camera.width,
+                    height: camera.height,
+                };
+                for block in whole.tiles() {
+                    let culled = grid.nearest(&tracer, block, ObjectWalk::NearestFirst);
+                    let every = grid.nearest(&tracer, block, ObjectWalk::EveryObject);
+                    assert_eq!(culled, every, "{block:?}");
+                    hits += culled.iter().flatten().count();
+                    let mut samples_of = BlockSamples::new(block, grid.n);
+                    tracer.placements.nearest_first(&grid.rays(block), |k| {
+                        traced += 1;
+                        grid.trace(&tracer, k, &mut samples_of);
+                        samples_of.farthest()
+                    });
+                    blocks += 1;
+                }
+                let objects = scene.objects.len();
+                assert!(hits > 0, "nothing hit");
+                assert!(
+                    traced * 8 < blocks * objects,
+                    "{traced} objects traced over {blocks} blocks of {objects} objects"
+                );
+            }
+        }
+    }
+}

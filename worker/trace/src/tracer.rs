@@ -1,5 +1,6 @@
-//! Scenes made ready for ray casting: one BVH per mesh, shared by the objects that
-//! place it.
+//! Scenes made ready for ray casting: a two-level BVH. One BVH per mesh, shared by
+//! the objects that place it (the bottom level, [`ObjectTracer`]), and one over the
+//! objects' bounds in the world (the top level, [`Placements`]).
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -12,6 +13,7 @@ use relief_core::scene::{Scene, SceneObject};
 use relief_core::shading::Lighting;
 
 use crate::bvh::Bvh;
+use crate::placements::Placements;
 
 /// One object with its mesh's BVH.
 #[derive(Debug, Clone)]
@@ -52,19 +54,24 @@ impl ObjectTracer {
     }
 }
 
-/// Every object of a scene with its BVH, plus what shading needs.
+/// Every object of a scene with its BVH, the BVH over them, and what shading needs.
 #[derive(Debug, Clone)]
 pub struct SceneTracer {
     pub objects: Vec<ObjectTracer>,
+    /// Over `objects`' world bounds, as [`SceneTracer::new`] found them.
+    pub(crate) placements: Placements,
     pub lighting: Lighting,
     pub background: Vec3,
 }
 
 impl SceneTracer {
-    /// Builds every mesh's BVH, in parallel ([`ObjectTracer::all`]).
+    /// Builds every mesh's BVH, in parallel ([`ObjectTracer::all`]), and the BVH over
+    /// the objects.
     pub fn new(scene: &Scene) -> Self {
+        let bounds: Vec<_> = scene.objects.iter().map(SceneObject::world_bounds).collect();
         SceneTracer {
             objects: ObjectTracer::all(scene.objects.clone()),
+            placements: Placements::build(&bounds),
             lighting: scene.lighting.clone(),
             background: scene.background,
         }

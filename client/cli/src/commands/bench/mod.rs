@@ -2,10 +2,13 @@
 //! in the same run (machines here are noisy: compare ratios, and runs, not one figure).
 //!
 //! - [`raytrace`] — BVH build and primary-ray throughput of a bake.
+//! - [`reference`](mod@reference) — a reference frame through the top-level BVH against every object
+//!   in turn.
 //! - [`warp`] — every display method's time against memcpy and a naive pre-warp.
 //! - [`rpc`] — loopback RPC latency against a bare gRPC call; requests end to end.
 
 mod raytrace;
+mod reference;
 mod rpc;
 mod warp;
 
@@ -16,6 +19,9 @@ use clap::Subcommand;
 pub enum BenchCommand {
     /// BVH build time and primary-ray throughput of a bake, one thread and all threads.
     Raytrace(raytrace::RaytraceArgs),
+    /// A reference frame through the top-level BVH, nearest object first, against
+    /// tracing every object in turn.
+    Reference(reference::ReferenceBenchArgs),
     /// Display time of every warp method against memcpy and a naive pre-warp.
     Warp(warp::WarpArgs),
     /// Loopback RPC latency against a bare gRPC call, and impostor requests end to end.
@@ -25,6 +31,7 @@ pub enum BenchCommand {
 pub fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::Raytrace(args) => raytrace::run(args),
+        BenchCommand::Reference(args) => reference::run(args),
         BenchCommand::Warp(args) => warp::run(args),
         BenchCommand::Rpc(args) => rpc::run(args),
     }
