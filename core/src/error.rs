@@ -18,7 +18,7 @@ pub enum Error {
     Scene { origin: String, message: String },
     /// `--scene` named neither a built-in scene nor an existing file.
     #[error(
-        "unknown scene `{0}`: give a built-in scene name ({builtins}), a .toml scene file or an .obj file",
+        "unknown scene `{0}`: give a built-in scene name ({builtins}), a .toml scene file, or an .obj, .gltf or .glb file",
         builtins = crate::scene::builtin_names().join(", ")
     )]
     UnknownScene(String),

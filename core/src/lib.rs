@@ -14,7 +14,7 @@
 //! ```
 //! use relief_core::scene::Scene;
 //!
-//! let scene = Scene::load("orbit-knot")?; // a built-in name, a .toml or an .obj file
+//! let scene = Scene::load("orbit-knot")?; // a built-in name, a .toml, an .obj or a glTF file
 //! let knot = scene.object("knot")?;
 //! assert!(knot.mesh.triangle_count() > 1000);
 //! let camera = scene.path.pose(0).unwrap().camera(scene.fov_y_degrees, 640, 360)?;
@@ -25,10 +25,10 @@
 //!
 //! - [`bounds`] — axis-aligned boxes and the ray/box slab test.
 //! - [`camera`] — the perspective camera of a frame and the scene's camera path.
-//! - [`mesh`], [`obj`], [`generators`] — triangle meshes, their loading from Wavefront
-//!   OBJ, and the procedural meshes of the built-in scenes.
+//! - [`mesh`], [`obj`], [`gltf`], [`generators`] — triangle meshes, their loading from
+//!   Wavefront OBJ and glTF 2.0, and the procedural meshes of the built-in scenes.
 //! - [`scene`] — scenes (objects placed in the world, lights, camera path), loaded from a
-//!   built-in name, a TOML scene file or a bare `.obj`.
+//!   built-in name, a TOML scene file, or a bare `.obj` or glTF file ([`gltf`]).
 //! - [`relief`] — the relief texture: its source camera, depth quantisation and on-disk
 //!   format (`texture.json` + PNG planes).
 //! - [`frame`] — a rendered RGB8 frame with per-pixel object ids.
@@ -46,6 +46,7 @@ pub mod camera;
 pub mod error;
 pub mod frame;
 pub mod generators;
+pub mod gltf;
 pub mod hash;
 pub mod mesh;
 pub mod obj;

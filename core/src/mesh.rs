@@ -16,6 +16,18 @@ pub struct TextureImage {
 }
 
 impl TextureImage {
+    /// An 8-bit RGB image's texels, each channel over 255.
+    pub fn from_rgb8(image: &image::RgbImage) -> TextureImage {
+        TextureImage {
+            width: image.width(),
+            height: image.height(),
+            texels: image
+                .pixels()
+                .map(|p| Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32) / 255.0)
+                .collect(),
+        }
+    }
+
     /// Bilinear lookup with wrap-around addressing; `uv = (0, 0)` is the bottom-left
     /// corner, as in OBJ.
     pub fn sample(&self, uv: Vec2) -> Vec3 {

@@ -154,14 +154,7 @@ pub fn load_texture(path: &Path) -> Result<TextureImage> {
             message: format!("cannot read texture: {e}"),
         })?
         .to_rgb8();
-    Ok(TextureImage {
-        width: image.width(),
-        height: image.height(),
-        texels: image
-            .pixels()
-            .map(|p| Vec3::new(p[0] as f32, p[1] as f32, p[2] as f32) / 255.0)
-            .collect(),
-    })
+    Ok(TextureImage::from_rgb8(&image))
 }
 
 /// The triangles [`load_obj`] would make of `path` (each face of `n` corners gives

@@ -171,7 +171,8 @@ fn safe_relative(path: &str) -> Option<PathBuf> {
 }
 
 /// The bundle of a `--scene` argument: a built-in name, a TOML scene file with the
-/// OBJ files it names, or a bare OBJ — each OBJ with its MTL files and their textures.
+/// OBJ and glTF files it names, or a bare OBJ or glTF file — each OBJ with its MTL files
+/// and their textures, each glTF file with the buffers and images it names.
 pub fn bundle_for(spec: &str) -> Result<Bundle> {
     let path = Path::new(spec);
     let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
@@ -181,6 +182,11 @@ pub fn bundle_for(spec: &str) -> Result<Bundle> {
         Some("obj") => {
             let name = file_name(path)?;
             add_obj(path, &name, &mut files)?;
+            name
+        }
+        Some("gltf" | "glb") => {
+            let name = file_name(path)?;
+            add_gltf(path, &name, &mut files)?;
             name
         }
         Some("toml") => {
@@ -199,8 +205,14 @@ pub fn bundle_for(spec: &str) -> Result<Bundle> {
                 .and_then(|o| o.as_array())
                 .into_iter()
                 .flatten();
-            for obj in objs.filter_map(|o| o.get("obj").and_then(|v| v.as_str())) {
-                add_obj(&base.join(obj), obj, &mut files)?;
+            for object in objs {
+                let named = |key: &str| object.get(key).and_then(|v| v.as_str());
+                if let Some(obj) = named("obj") {
+                    add_obj(&base.join(obj), obj, &mut files)?;
+                }
+                if let Some(gltf) = named("gltf") {
+                    add_gltf(&base.join(gltf), gltf, &mut files)?;
+                }
             }
             files.push(SceneFile {
                 path: name.clone(),
@@ -259,6 +271,30 @@ fn add_obj(path: &Path, name: &str, files: &mut Vec<SceneFile>) -> Result<()> {
     Ok(())
 }
 
+/// Adds a glTF file (as `name`) and the buffers and images beside it that it names.
+fn add_gltf(path: &Path, name: &str, files: &mut Vec<SceneFile>) -> Result<()> {
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let name_dir = Path::new(name)
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_default();
+    for file in relief_core::gltf::referenced_files(path, Reach::Anywhere)? {
+        // A missing or escaping file is the loader's error to name, not the bundle's.
+        if let (Some(relative), Ok(bytes)) = (safe_relative(&file), std::fs::read(base.join(&file))) {
+            files.push(SceneFile {
+                path: name_dir.join(relative).to_string_lossy().into_owned(),
+                data: bytes,
+            });
+        }
+    }
+    files.push(SceneFile {
+        path: name.to_string(),
+        data,
+    });
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -280,6 +316,47 @@ mod tests {
         let dir = private_scene_dir("relief-bundle-test").unwrap();
         let scene = again.load(dir.path(), &SceneLimits::default()).unwrap();
         assert!(scene.object("knot").is_ok());
+    }
+
+    /// A glTF file's bundle carries the buffer file beside it that it names, and loads
+    /// from the bundle alone; a buffer named outside the bundle is refused unread.
+    #[test]
+    fn a_gltf_bundle_carries_its_buffers() {
+        let made = private_scene_dir("relief-bundle-gltf").unwrap();
+        let dir = made.path();
+        let mut bytes = Vec::new();
+        for p in [[0f32, 0., 0.], [1., 0., 0.], [0., 1., 0.]] {
+            bytes.extend(p.iter().flat_map(|c| c.to_le_bytes()));
+        }
+        let gltf = |uri: &str| {
+            format!(
+                r#"{{"asset": {{"version": "2.0"}}, "scenes": [{{"nodes": [0]}}],
+                "nodes": [{{"name": "tri", "mesh": 0}}],
+                "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}}}]}}],
+                "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]}}],
+                "bufferViews": [{{"buffer": 0, "byteLength": 36}}],
+                "buffers": [{{"uri": "{uri}", "byteLength": 36}}]}}"#
+            )
+        };
+        let source = dir.join("source");
+        std::fs::create_dir_all(&source).unwrap();
+        std::fs::write(source.join("tri data.bin"), &bytes).unwrap();
+        std::fs::write(source.join("tri.gltf"), gltf("tri%20data.bin")).unwrap();
+        let bundle = bundle_for(&source.join("tri.gltf").to_string_lossy()).unwrap();
+        let scene = Bundle::decode(bundle.encoded.clone())
+            .unwrap()
+            .load(&dir.join("bundles"), &SceneLimits::default())
+            .unwrap();
+        assert_eq!(scene.objects[0].name, "tri");
+        assert_eq!(scene.objects[0].mesh.triangle_count(), 1);
+        std::fs::write(source.join("out.gltf"), gltf("../source/tri%20data.bin")).unwrap();
+        let bundle = bundle_for(&source.join("out.gltf").to_string_lossy()).unwrap();
+        let err = Bundle::decode(bundle.encoded.clone())
+            .unwrap()
+            .load(&dir.join("bundles2"), &SceneLimits::default())
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("buffer 0"), "{err}");
     }
 
     #[test]

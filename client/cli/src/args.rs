@@ -133,7 +133,7 @@ pub fn depth_bits(text: &str) -> Result<u32, String> {
 /// The scene and camera of a rendered frame, shared by `reference` and `frame`.
 #[derive(Args)]
 pub struct View {
-    /// Built-in scene name, .toml scene file, or .obj file.
+    /// Built-in scene name, .toml scene file, or .obj, .gltf or .glb file.
     #[arg(long, default_value = "default")]
     pub scene: String,
     /// Camera position, X,Y,Z.

@@ -22,7 +22,8 @@
 //!
 //! [[objects]]
 //! name = "ball"
-//! generator = { kind = "sphere", subdivisions = 4 }  # or: obj = "meshes/ball.obj"
+//! generator = { kind = "sphere", subdivisions = 4 }  # or: obj = "meshes/ball.obj",
+//!                               # or gltf = "ball.glb" (its nodes' meshes merged)
 //! translate = [0, 1, 0]
 //! rotate_deg = [0, 45, 0]       # about x, then y, then z
 //! scale = 1.0
@@ -116,6 +117,9 @@ fn one() -> f32 {
 struct ObjectFile {
     name: String,
     obj: Option<PathBuf>,
+    /// A glTF file's default scene, its nodes' meshes merged into this object's mesh
+    /// (a glTF file given as the scene itself places each node instead).
+    gltf: Option<PathBuf>,
     generator: Option<Generator>,
     #[serde(default)]
     translate: [f64; 3],
@@ -296,9 +300,10 @@ pub fn parse(text: &str, origin: &str, base: &Path, reach: Reach, limits: &Scene
             Error::Invalid(m) => error(format!("object `{}`: {m}", o.name)),
             other => other,
         };
-        let mesh = match (&o.obj, &o.generator) {
-            (Some(path), None) => crate::obj::count_triangles(&base.join(path), reach)?,
-            (None, Some(generator)) => {
+        let mesh = match (&o.obj, &o.gltf, &o.generator) {
+            (Some(path), None, None) => crate::obj::count_triangles(&base.join(path), reach)?,
+            (None, Some(path), None) => crate::gltf::census(&base.join(path), reach)?.placed_triangles,
+            (None, None, Some(generator)) => {
                 generator.validate().map_err(|e| named(invalid(e)))?;
                 generator.triangles()
             }
@@ -429,13 +434,14 @@ fn invalid(what: impl std::fmt::Display) -> Error {
 /// scale and rotation made into the mesh's frame, each placement turning, scaling and
 /// moving that frame.
 fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<Vec<SceneObject>> {
-    let mut mesh: Mesh = match (&o.obj, &o.generator) {
-        (Some(path), None) => crate::obj::load_obj(&base.join(path), reach)?,
-        (None, Some(generator)) => {
+    let mut mesh: Mesh = match (&o.obj, &o.gltf, &o.generator) {
+        (Some(path), None, None) => crate::obj::load_obj(&base.join(path), reach)?,
+        (None, Some(path), None) => crate::gltf::load_gltf_merged(&base.join(path), reach)?,
+        (None, None, Some(generator)) => {
             generator.validate().map_err(invalid)?;
             generator.build()
         }
-        _ => return Err(invalid("give exactly one of `obj` or `generator`")),
+        _ => return Err(invalid("give exactly one of `obj`, `gltf` or `generator`")),
     };
     let own = o.own();
     own.check()?;

@@ -119,6 +119,22 @@ pub fn check_object_name(name: &str) -> Result<(), BadObjectName> {
 )]
 pub struct BadObjectName(pub String);
 
+/// `text` (a file's stem, a node's name) made a valid object name (see
+/// [`check_object_name`]): other characters, dots too (so it cannot start with one),
+/// become `_`, and it is cut to [`MAX_OBJECT_NAME`]; `fallback` when nothing is left.
+fn object_name(text: &str, fallback: &str) -> String {
+    let name: String = text
+        .chars()
+        .map(|c| if name_char(c) && c != '.' { c } else { '_' })
+        .take(MAX_OBJECT_NAME)
+        .collect();
+    if name.is_empty() {
+        fallback.to_string()
+    } else {
+        name
+    }
+}
+
 /// A character an object name may hold ([`check_object_name`]).
 fn name_char(c: char) -> bool {
     c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.')
@@ -331,7 +347,7 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Loads a built-in scene by name, a `.toml` scene file or a bare `.obj` file,
+    /// Loads a built-in scene by name, a `.toml` scene file, or a bare `.obj` or glTF (`.gltf`, `.glb`) file,
     /// within the [default](SceneLimits::default) limits.
     pub fn load(spec: &str) -> Result<Scene> {
         Self::load_within(spec, Reach::Anywhere, &SceneLimits::default())
@@ -356,6 +372,7 @@ impl Scene {
         let extension = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
         match extension.as_deref() {
             Some("obj") => Self::from_obj(path, reach, limits),
+            Some("gltf" | "glb") => Self::from_gltf(path, reach, limits),
             Some("toml") => file::load_file(path, reach, limits),
             _ => match builtin_text(spec) {
                 Some(text) => file::parse(text, &format!("built-in `{spec}`"), Path::new("."), reach, limits),
@@ -374,31 +391,96 @@ impl Scene {
             path: path.to_path_buf(),
             message: format!("its vertices lie {m}"),
         })?;
-        // The file's stem, made a valid object name (see [`check_object_name`]; dots
-        // go too, so that it cannot start with one).
-        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
-        let name: String = stem
-            .unwrap_or_default()
-            .chars()
-            .map(|c| if name_char(c) && c != '.' { c } else { '_' })
-            .take(MAX_OBJECT_NAME)
-            .collect();
-        let name = if name.is_empty() {
-            "object".to_string()
-        } else {
-            name
-        };
+        let name = object_name(&path.file_stem().unwrap_or_default().to_string_lossy(), "object");
         let object = SceneObject::new(name.clone(), mesh, DVec3::ZERO, Specular::default());
+        Ok(Scene::of_model(name, vec![object]))
+    }
+
+    /// A scene of a glTF file (`.gltf` or `.glb`, with the buffers and images it names,
+    /// within `reach`): an object for each node of its default scene that holds a mesh,
+    /// named after the node, placing that mesh (one mesh in memory however many nodes
+    /// use it; a node whose transform is not a similarity — an uneven scale, a shear —
+    /// gets the mesh transformed into one of its own); default lights and an orbit
+    /// path. Refused, before its buffers are read, past `limits`.
+    pub fn from_gltf(path: &Path, reach: Reach, limits: &SceneLimits) -> Result<Scene> {
+        let census = crate::gltf::census(path, reach)?;
+        limits.check(census.mesh_triangles, census.placements)?;
+        let model = crate::gltf::load_gltf(path, reach)?;
+        let at_fault = |name: &str, message: String| Error::Obj {
+            path: path.to_path_buf(),
+            message: format!("node `{name}`: {message}"),
+        };
+        let mut templates: Vec<Option<SceneObject>> = vec![None; model.meshes.len()];
+        let mut meshes = model.meshes;
+        let mut names = std::collections::HashSet::new();
+        let mut objects = Vec::with_capacity(model.placements.len());
+        for placement in &model.placements {
+            // Unique valid names: `wheel`, `wheel_2`, … for nodes alike or unnamed.
+            let stem = object_name(&placement.name, "node");
+            let name = (1..)
+                .map(|k| {
+                    if k == 1 {
+                        stem.clone()
+                    } else {
+                        format!("{stem}_{k}")
+                    }
+                })
+                .find(|n| !names.contains(n))
+                .unwrap_or_default();
+            names.insert(name.clone());
+            let object = match crate::gltf::similarity(&placement.transform) {
+                Some((origin, rotation, scale)) => {
+                    let template = match &mut templates[placement.mesh] {
+                        Some(template) => template,
+                        slot => {
+                            let mesh = (meshes[placement.mesh].take())
+                                .ok_or_else(|| at_fault(&name, "its mesh was not built".into()))?;
+                            file::check_extent(&mesh).map_err(|e| at_fault(&name, e.to_string()))?;
+                            slot.insert(SceneObject::new(
+                                name.clone(),
+                                mesh,
+                                DVec3::ZERO,
+                                Specular::default(),
+                            ))
+                        }
+                    };
+                    template.placed(name, origin, rotation, scale)
+                }
+                None => {
+                    let source = match (&templates[placement.mesh], &meshes[placement.mesh]) {
+                        (Some(template), _) => template.mesh.as_ref().clone(),
+                        (None, Some(mesh)) => mesh.clone(),
+                        (None, None) => return Err(at_fault(&name, "its mesh was not built".into())),
+                    };
+                    let mut mesh =
+                        source.transformed(glam::Affine3A::from_mat3(placement.transform.matrix3.as_mat3()));
+                    if placement.transform.matrix3.determinant() < 0.0 {
+                        // A mirror: the corners' turn is reversed to keep faces facing out.
+                        mesh.triangles.iter_mut().for_each(|t| t.swap(1, 2));
+                    }
+                    file::check_extent(&mesh).map_err(|e| at_fault(&name, e.to_string()))?;
+                    SceneObject::new(name, mesh, placement.transform.translation, Specular::default())
+                }
+            };
+            objects.push(object);
+        }
+        let name = object_name(&path.file_stem().unwrap_or_default().to_string_lossy(), "model");
+        Ok(Scene::of_model(name, objects))
+    }
+
+    /// A scene of a model file's `objects`, named `name`: default lights and background,
+    /// and the default orbit path.
+    fn of_model(name: String, objects: Vec<SceneObject>) -> Scene {
         let mut scene = Scene {
             name,
-            objects: vec![object],
+            objects,
             lighting: default_lighting(),
             background: file::DEFAULT_BACKGROUND.into(),
             fov_y_degrees: file::DEFAULT_FOV,
             path: CameraPath::default(),
         };
         scene.path = scene.default_path();
-        Ok(scene)
+        scene
     }
 
     /// World bounds of all objects, rounded out to `f32` ([`SceneObject::world_bounds`]).

@@ -14,7 +14,7 @@ use crate::args;
 
 #[derive(Args)]
 pub struct BakeArgs {
-    /// Built-in scene name, .toml scene file, or .obj file.
+    /// Built-in scene name, .toml scene file, or .obj, .gltf or .glb file.
     #[arg(long, default_value = "default")]
     scene: String,
     /// Object to bake; may be omitted when the scene has one object.

@@ -28,7 +28,7 @@ use crate::{args, progress};
 
 #[derive(Args)]
 pub struct LoadArgs {
-    /// Built-in scene name, .toml scene file, or .obj file.
+    /// Built-in scene name, .toml scene file, or .obj, .gltf or .glb file.
     #[arg(long, default_value = "default")]
     scene: String,
     /// Simulated clients, each on its own place along the camera path; a list

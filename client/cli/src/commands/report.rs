@@ -23,7 +23,7 @@ pub enum ReportCommand {
 
 #[derive(Args)]
 pub struct ErrorVsTimeArgs {
-    /// Built-in scene name, .toml scene file, or .obj file.
+    /// Built-in scene name, .toml scene file, or .obj, .gltf or .glb file.
     #[arg(long, default_value = "default")]
     scene: String,
     /// One object (default: every object with at least 1,000 triangles).

@@ -18,7 +18,7 @@ use relief_lab::timing::best_ms;
 
 #[derive(Args)]
 pub struct RaytraceArgs {
-    /// Built-in scene name, .toml scene file, or .obj file.
+    /// Built-in scene name, .toml scene file, or .obj, .gltf or .glb file.
     #[arg(long, default_value = "default")]
     scene: String,
     /// Object to trace (default: the one with the most triangles).

@@ -14,7 +14,7 @@ use relief_lab::timing::best_ms;
 
 #[derive(Args)]
 pub struct ReferenceBenchArgs {
-    /// Built-in scene name, .toml scene file, or .obj file.
+    /// Built-in scene name, .toml scene file, or .obj, .gltf or .glb file.
     #[arg(long, default_value = "forest")]
     scene: String,
     /// The frame of the scene's camera path whose view is traced.

@@ -22,7 +22,7 @@ use relief_lab::timing::{median_ms, median_ms_after};
 
 #[derive(Args)]
 pub struct WarpArgs {
-    /// Built-in scene name, .toml scene file, or .obj file.
+    /// Built-in scene name, .toml scene file, or .obj, .gltf or .glb file.
     #[arg(long, default_value = "default")]
     scene: String,
     /// Object whose relief texture is warped.

@@ -31,7 +31,7 @@ use crate::{args, progress};
 
 #[derive(Args)]
 pub struct DemoArgs {
-    /// Built-in scene name, .toml scene file, or .obj file.
+    /// Built-in scene name, .toml scene file, or .obj, .gltf or .glb file.
     #[arg(long, default_value = "default")]
     scene: String,
     /// Path frames to fly, at --fps (default: the scene's whole camera path). The eye

@@ -1,0 +1,666 @@
+//! glTF 2.0 loading (through `gltf`), `.gltf` and `.glb`: each mesh (its triangle
+//! primitives merged, positions, normals, first texture coordinates), the default
+//! scene's node hierarchy as placements of those meshes (a mesh many nodes use is one
+//! mesh), and each material's base colour — factor and texture — as albedo.
+//!
+//! Nothing is read outside the caller's [`Reach`]: the crate's own importer (which
+//! opens whatever a URI names) is not used; buffers and images come from the `.glb`'s
+//! binary chunk, `data:` URIs, or files beside the model within reach.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use base64::Engine;
+use glam::{DAffine3, DMat3, DMat4, DQuat, DVec3, Vec2, Vec3};
+
+use crate::error::{Error, Result};
+use crate::mesh::{Material, Mesh, TextureImage};
+use crate::reach::Reach;
+
+/// A glTF file's meshes, and where its default scene places them.
+#[derive(Debug)]
+pub struct GltfModel {
+    /// Mesh `k` of the file (only those some node uses are built; the rest are `None`).
+    pub meshes: Vec<Option<Mesh>>,
+    pub placements: Vec<GltfPlacement>,
+}
+
+/// A node of the default scene that holds a mesh.
+#[derive(Debug, Clone)]
+pub struct GltfPlacement {
+    /// The node's name, or `node<index>` when it has none.
+    pub name: String,
+    /// Index into [`GltfModel::meshes`].
+    pub mesh: usize,
+    /// The node's transform composed with its ancestors': model space to the file's
+    /// world.
+    pub transform: DAffine3,
+}
+
+/// What [`load_gltf`] would build from a file, read from its JSON before any buffer.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct GltfCensus {
+    /// Triangles of the meshes the default scene uses, each mesh once (its triangle
+    /// primitives' index counts, or vertex counts, over three).
+    pub mesh_triangles: u64,
+    /// … and over every placement: what [`load_gltf_merged`] builds.
+    pub placed_triangles: u64,
+    /// Nodes holding a mesh.
+    pub placements: usize,
+}
+
+/// [`GltfCensus`] of `path`, within `reach`.
+pub fn census(path: &Path, reach: Reach) -> Result<GltfCensus> {
+    let gltf = open(path, reach)?;
+    let mut triangles_of = vec![None; gltf.document.meshes().len()];
+    let mut census = GltfCensus {
+        mesh_triangles: 0,
+        placed_triangles: 0,
+        placements: 0,
+    };
+    for mesh in scene_nodes(&gltf.document)
+        .iter()
+        .filter_map(|(node, _)| node.mesh())
+    {
+        let triangles = *triangles_of[mesh.index()].get_or_insert_with(|| {
+            let counted = mesh
+                .primitives()
+                .filter(|p| p.mode() == gltf::mesh::Mode::Triangles)
+                .map(|p| {
+                    let corners = match p.indices() {
+                        Some(indices) => indices.count(),
+                        None => p.get(&gltf::Semantic::Positions).map_or(0, |a| a.count()),
+                    };
+                    corners as u64 / 3
+                });
+            let triangles = counted.fold(0u64, u64::saturating_add);
+            census.mesh_triangles = census.mesh_triangles.saturating_add(triangles);
+            triangles
+        });
+        census.placed_triangles = census.placed_triangles.saturating_add(triangles);
+        census.placements += 1;
+    }
+    Ok(census)
+}
+
+/// The files beside `path` that it names by URI (buffers and images, not `data:` URIs),
+/// as paths relative to its directory: what a scene bundle must carry with it.
+pub fn referenced_files(path: &Path, reach: Reach) -> Result<Vec<String>> {
+    let gltf = open(path, reach)?;
+    let buffers = gltf.document.buffers().filter_map(|b| match b.source() {
+        gltf::buffer::Source::Uri(uri) => Some(uri),
+        gltf::buffer::Source::Bin => None,
+    });
+    let images = gltf.document.images().filter_map(|i| match i.source() {
+        gltf::image::Source::Uri { uri, .. } => Some(uri),
+        gltf::image::Source::View { .. } => None,
+    });
+    Ok(buffers
+        .chain(images)
+        .filter(|uri| !uri.starts_with("data:") && !uri.contains("://"))
+        .map(percent_decoded)
+        .collect())
+}
+
+/// The default scene of `path` as one mesh: each placement's mesh transformed by its
+/// node's transform, all merged (what a scene file's object naming a glTF file is).
+pub fn load_gltf_merged(path: &Path, reach: Reach) -> Result<Mesh> {
+    let model = load_gltf(path, reach)?;
+    let mut merged: Option<Mesh> = None;
+    for placement in &model.placements {
+        let Some(mesh) = &model.meshes[placement.mesh] else {
+            continue;
+        };
+        let placed = mesh.transformed(glam::Affine3A::from_mat3_translation(
+            placement.transform.matrix3.as_mat3(),
+            placement.transform.translation.as_vec3(),
+        ));
+        match &mut merged {
+            Some(all) => all.append(placed),
+            None => merged = Some(placed),
+        }
+    }
+    merged.ok_or_else(|| Error::Obj {
+        path: path.to_path_buf(),
+        message: "its scene places no mesh".into(),
+    })
+}
+
+/// Loads `path` (a `.gltf` or `.glb` within `reach`): its meshes and its default
+/// scene's placements of them (the first scene when none is the default). Errors name
+/// the file and the node, mesh, primitive or accessor at fault.
+pub fn load_gltf(path: &Path, reach: Reach) -> Result<GltfModel> {
+    let error = |message: String| Error::Obj {
+        path: path.to_path_buf(),
+        message,
+    };
+    let gltf = open(path, reach)?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let buffers: Vec<Vec<u8>> = gltf
+        .document
+        .buffers()
+        .map(|buffer| {
+            let data = match buffer.source() {
+                gltf::buffer::Source::Bin => gltf.blob.clone().ok_or_else(|| {
+                    error(format!(
+                        "buffer {} is the binary chunk, which the file lacks",
+                        buffer.index()
+                    ))
+                })?,
+                gltf::buffer::Source::Uri(uri) => read_uri(uri, base, reach)
+                    .map_err(|e| error(format!("buffer {}: {e}", buffer.index())))?,
+            };
+            if data.len() < buffer.length() {
+                return Err(error(format!(
+                    "buffer {}: {} bytes, where its byteLength says {}",
+                    buffer.index(),
+                    data.len(),
+                    buffer.length()
+                )));
+            }
+            Ok(data)
+        })
+        .collect::<Result<_>>()?;
+    let materials: Vec<Material> = gltf
+        .document
+        .materials()
+        .map(|m| material(&m, &buffers, base, reach, path))
+        .collect();
+    let mut meshes: Vec<Option<Mesh>> = vec![None; gltf.document.meshes().len()];
+    let mut placements = Vec::new();
+    for (node, transform) in scene_nodes(&gltf.document) {
+        let Some(mesh) = node.mesh() else { continue };
+        let name = node
+            .name()
+            .map_or_else(|| format!("node{}", node.index()), str::to_string);
+        let at = |message: String| error(format!("node {} (`{name}`): {message}", node.index()));
+        if !transform.is_finite() {
+            return Err(at("its transform (with its ancestors') is not finite".into()));
+        }
+        if meshes[mesh.index()].is_none() {
+            meshes[mesh.index()] = Some(build_mesh(&mesh, &buffers, &materials).map_err(at)?);
+        }
+        placements.push(GltfPlacement {
+            name,
+            mesh: mesh.index(),
+            transform,
+        });
+    }
+    if placements.is_empty() {
+        return Err(error("its scene places no mesh".into()));
+    }
+    Ok(GltfModel { meshes, placements })
+}
+
+/// Reads and validates the file's JSON (and a `.glb`'s binary chunk).
+fn open(path: &Path, reach: Reach) -> Result<gltf::Gltf> {
+    let opened = reach.check(path)?;
+    let bytes = std::fs::read(opened).map_err(|e| Error::io(path, e))?;
+    gltf::Gltf::from_slice(&bytes).map_err(|e| Error::Obj {
+        path: path.to_path_buf(),
+        message: format!("malformed glTF: {e}"),
+    })
+}
+
+/// The default scene's nodes (the first scene's when none is the default), each with
+/// its transform composed with its ancestors'. Depth first, parents before children; a
+/// node reached twice (glTF forbids it, but a file may) is visited once.
+fn scene_nodes(document: &gltf::Document) -> Vec<(gltf::Node<'_>, DAffine3)> {
+    let Some(scene) = document.default_scene().or_else(|| document.scenes().next()) else {
+        return Vec::new();
+    };
+    let mut seen = vec![false; document.nodes().len()];
+    let mut out = Vec::new();
+    let mut stack: Vec<(gltf::Node<'_>, DAffine3)> = scene.nodes().map(|n| (n, DAffine3::IDENTITY)).collect();
+    stack.reverse();
+    while let Some((node, parent)) = stack.pop() {
+        if std::mem::replace(&mut seen[node.index()], true) {
+            continue;
+        }
+        let own = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        let transform = parent * DAffine3::from_mat4(own);
+        let children: Vec<_> = node.children().map(|c| (c, transform)).collect();
+        stack.extend(children.into_iter().rev());
+        out.push((node, transform));
+    }
+    out
+}
+
+/// A mesh's triangle primitives merged into one [`Mesh`]; the message names the
+/// primitive or accessor at fault.
+fn build_mesh(
+    mesh: &gltf::Mesh<'_>,
+    buffers: &[Vec<u8>],
+    materials: &[Material],
+) -> std::result::Result<Mesh, String> {
+    let label = format!(
+        "mesh {}{}",
+        mesh.index(),
+        mesh.name().map_or(String::new(), |n| format!(" (`{n}`)"))
+    );
+    let mut out = Mesh {
+        materials: materials.to_vec(),
+        ..Default::default()
+    };
+    // Primitives without a material get the default one, last.
+    let default_material = out.materials.len();
+    out.materials.push(Material::default());
+    let (mut normals, mut texcoords, mut ids) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut any_normals, mut any_texcoords) = (false, false);
+    for primitive in mesh.primitives() {
+        let at = format!("{label}, primitive {}", primitive.index());
+        if primitive.mode() != gltf::mesh::Mode::Triangles {
+            tracing::warn!(
+                "{at}: {:?} primitives are not drawn, only triangles",
+                primitive.mode()
+            );
+            continue;
+        }
+        for (_, accessor) in primitive
+            .attributes()
+            .chain(primitive.indices().map(|a| (gltf::Semantic::Positions, a)))
+        {
+            if accessor.count() == 0 || accessor.view().is_none() {
+                return Err(format!(
+                    "{at}: accessor {} is empty or has no buffer view",
+                    accessor.index()
+                ));
+            }
+        }
+        let reader = primitive.reader(|buffer| buffers.get(buffer.index()).map(Vec::as_slice));
+        let accessor_of = |semantic: gltf::Semantic| primitive.get(&semantic).map_or(0, |a| a.index());
+        let positions: Vec<Vec3> = reader
+            .read_positions()
+            .ok_or_else(|| {
+                format!(
+                    "{at}: no POSITION, or accessor {} lies past its buffer",
+                    accessor_of(gltf::Semantic::Positions)
+                )
+            })?
+            .map(Vec3::from)
+            .collect();
+        let first = out.positions.len() as u32;
+        let n = positions.len();
+        let prim_normals: Option<Vec<Vec3>> = match primitive.get(&gltf::Semantic::Normals) {
+            Some(a) => Some(
+                reader
+                    .read_normals()
+                    .ok_or_else(|| format!("{at}: accessor {} (NORMAL) lies past its buffer", a.index()))?
+                    .map(Vec3::from)
+                    .collect(),
+            ),
+            None => None,
+        };
+        let prim_uv: Option<Vec<Vec2>> = match primitive.get(&gltf::Semantic::TexCoords(0)) {
+            Some(a) => Some(
+                reader
+                    .read_tex_coords(0)
+                    .ok_or_else(|| format!("{at}: accessor {} (TEXCOORD_0) lies past its buffer", a.index()))?
+                    .into_f32()
+                    // glTF's v runs down the image; the meshes' up (as in OBJ).
+                    .map(|[u, v]| Vec2::new(u, 1.0 - v))
+                    .collect(),
+            ),
+            None => None,
+        };
+        for (what, len) in [
+            ("NORMAL", prim_normals.as_ref().map(Vec::len)),
+            ("TEXCOORD_0", prim_uv.as_ref().map(Vec::len)),
+        ] {
+            if let Some(len) = len
+                && len != n
+            {
+                return Err(format!("{at}: {len} {what} values for {n} positions"));
+            }
+        }
+        let corners: Vec<u32> = match primitive.indices() {
+            Some(a) => reader
+                .read_indices()
+                .ok_or_else(|| format!("{at}: accessor {} (indices) lies past its buffer", a.index()))?
+                .into_u32()
+                .collect(),
+            None => (0..n as u32).collect(),
+        };
+        if let Some(i) = corners.iter().position(|&i| i as usize >= n) {
+            return Err(format!(
+                "{at}: index {} (corner {i} of accessor {}) names a vertex past its {n}",
+                corners[i],
+                primitive.indices().map_or(0, |a| a.index())
+            ));
+        }
+        let material = primitive.material().index().unwrap_or(default_material) as u16;
+        any_normals |= prim_normals.is_some();
+        any_texcoords |= prim_uv.is_some();
+        normals.push((out.positions.len(), prim_normals));
+        texcoords.push((out.positions.len(), prim_uv));
+        out.positions.extend(positions);
+        for t in corners.chunks_exact(3) {
+            out.triangles.push([first + t[0], first + t[1], first + t[2]]);
+            ids.push(material);
+        }
+    }
+    let total = out.positions.len();
+    // Attributes some primitives lack: zero normals (taken as absent: faceted) and
+    // zero coordinates.
+    fn fill<T: Copy>(parts: Vec<(usize, Option<Vec<T>>)>, zero: T, total: usize) -> Vec<T> {
+        let mut all = vec![zero; total];
+        for (start, values) in parts.into_iter().filter_map(|(start, v)| Some((start, v?))) {
+            all[start..start + values.len()].copy_from_slice(&values);
+        }
+        all
+    }
+    out.normals = any_normals.then(|| fill(normals, Vec3::ZERO, total));
+    out.texcoords = any_texcoords.then(|| fill(texcoords, Vec2::ZERO, total));
+    out.triangle_materials = Some(ids);
+    out.validate().map_err(|e| format!("{label}: {e}"))?;
+    Ok(out)
+}
+
+/// A glTF material's base colour as albedo: the factor (linear RGB), times the base
+/// colour texture where it has one that can be read (else a warning, and the factor).
+fn material(m: &gltf::Material<'_>, buffers: &[Vec<u8>], base: &Path, reach: Reach, path: &Path) -> Material {
+    let pbr = m.pbr_metallic_roughness();
+    let [r, g, b, _] = pbr.base_color_factor();
+    let name = m
+        .name()
+        .map_or_else(|| format!("material{}", m.index().unwrap_or(0)), str::to_string);
+    let diffuse_texture = pbr.base_color_texture().and_then(|info| {
+        let image = info.texture().source();
+        let bytes = match image.source() {
+            gltf::image::Source::View { view, .. } => buffers
+                .get(view.buffer().index())
+                .and_then(|b| b.get(view.offset()..view.offset() + view.length()))
+                .map(<[u8]>::to_vec)
+                .ok_or_else(|| format!("image {}'s buffer view lies past its buffer", image.index())),
+            gltf::image::Source::Uri { uri, .. } => read_uri(uri, base, reach),
+        };
+        let decoded = bytes.and_then(|bytes| image::load_from_memory(&bytes).map_err(|e| e.to_string()));
+        match decoded {
+            Ok(decoded) => Some(Arc::new(TextureImage::from_rgb8(&decoded.to_rgb8()))),
+            Err(e) => {
+                tracing::warn!(
+                    "{}: material `{name}`'s base colour texture not read ({e}); its factor alone is used",
+                    path.display()
+                );
+                None
+            }
+        }
+    });
+    Material {
+        name,
+        diffuse: Vec3::new(r, g, b).clamp(Vec3::ZERO, Vec3::ONE),
+        diffuse_texture,
+    }
+}
+
+/// The bytes a URI names: a `data:` URI's base64 payload, or a file relative to
+/// `base` within `reach`.
+fn read_uri(uri: &str, base: &Path, reach: Reach) -> std::result::Result<Vec<u8>, String> {
+    if let Some(data) = uri.strip_prefix("data:") {
+        let (_, payload) = data
+            .split_once(";base64,")
+            .ok_or("a data: URI that is not base64")?;
+        return base64::engine::general_purpose::STANDARD
+            .decode(payload)
+            .map_err(|e| format!("a data: URI's base64: {e}"));
+    }
+    if uri.contains("://") {
+        return Err(format!(
+            "`{uri}`: only data: URIs and files beside the model are read"
+        ));
+    }
+    let file: PathBuf = base.join(percent_decoded(uri));
+    let opened = reach.check(&file).map_err(|e| e.to_string())?;
+    std::fs::read(opened).map_err(|e| format!("{}: {e}", file.display()))
+}
+
+/// A URI path with its `%XX` escapes decoded (glTF URIs are escaped: a space is `%20`).
+fn percent_decoded(uri: &str) -> String {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let hex = |b: u8| (b as char).to_digit(16);
+        if bytes[i] == b'%'
+            && let (Some(hi), Some(lo)) = (
+                bytes.get(i + 1).and_then(|&b| hex(b)),
+                bytes.get(i + 2).and_then(|&b| hex(b)),
+            )
+        {
+            out.push((hi * 16 + lo) as u8);
+            i += 3;
+        } else {
+            out.push(bytes[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// A placement's transform as a similarity — origin, rotation, uniform scale — when it
+/// is one (within a part in 10⁶); `None` for a shear or an uneven scale, whose mesh is
+/// then transformed into a mesh of its own.
+pub fn similarity(transform: &DAffine3) -> Option<(DVec3, DQuat, f64)> {
+    let m: DMat3 = transform.matrix3;
+    let scales = DVec3::new(m.x_axis.length(), m.y_axis.length(), m.z_axis.length());
+    let scale = scales.x;
+    let even = (scales - DVec3::splat(scale)).abs().max_element() <= 1e-6 * scale;
+    if !scale.is_finite() || scale <= 0.0 || !even || m.determinant() <= 0.0 {
+        return None;
+    }
+    let turn = m * (1.0 / scale);
+    let orthogonal = (turn.transpose() * turn - DMat3::IDENTITY)
+        .to_cols_array()
+        .iter()
+        .all(|e| e.abs() <= 1e-6);
+    orthogonal.then(|| (transform.translation, DQuat::from_mat3(&turn), scale))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A unit quad (4 positions, 6 u16 indices) as one buffer's bytes.
+    fn quad_bytes() -> Vec<u8> {
+        let mut bytes = Vec::new();
+        for p in [[0f32, 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]] {
+            bytes.extend(p.iter().flat_map(|c| c.to_le_bytes()));
+        }
+        for i in [0u16, 1, 2, 0, 2, 3] {
+            bytes.extend(i.to_le_bytes());
+        }
+        bytes
+    }
+
+    /// A glTF document of the quad mesh placed by three children of a moved and scaled
+    /// parent: moved, turned 90° about y, and stretched along y (`children` and
+    /// `indices` may be changed by a test). `uri` is the buffer's (none: a .glb's).
+    fn document(uri: Option<&str>, indices_accessor: u32, stretch: &str) -> String {
+        let uri = uri.map_or(String::new(), |u| format!(r#""uri": "{u}", "#));
+        format!(
+            r#"{{
+  "asset": {{ "version": "2.0" }},
+  "scene": 0,
+  "scenes": [{{ "nodes": [0] }}],
+  "nodes": [
+    {{ "name": "parent", "translation": [10, 0, 0], "scale": [2, 2, 2], "children": [1, 2, 3] }},
+    {{ "name": "moved", "mesh": 0, "translation": [1, 0, 0] }},
+    {{ "name": "turned", "mesh": 0, "rotation": [0, 0.70710678, 0, 0.70710678] }},
+    {{ "name": "stretched", "mesh": 0, "scale": {stretch} }}
+  ],
+  "meshes": [{{ "name": "quad", "primitives": [{{ "attributes": {{ "POSITION": 0 }}, "indices": {indices_accessor}, "material": 0 }}] }}],
+  "materials": [{{ "name": "red", "pbrMetallicRoughness": {{ "baseColorFactor": [0.8, 0.1, 0.1, 1] }} }}],
+  "accessors": [
+    {{ "bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0] }},
+    {{ "bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR" }},
+    {{ "bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR", "byteOffset": 0 }}
+  ],
+  "bufferViews": [
+    {{ "buffer": 0, "byteOffset": 0, "byteLength": 48 }},
+    {{ "buffer": 0, "byteOffset": 48, "byteLength": 12 }}
+  ],
+  "buffers": [{{ {uri}"byteLength": 60 }}]
+}}"#
+        )
+    }
+
+    fn data_uri() -> String {
+        format!(
+            "data:application/octet-stream;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(quad_bytes())
+        )
+    }
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(crate::scratch::unique_name("relief-gltf"));
+        std::fs::create_dir_all(&dir).expect("scratch dir");
+        dir.join(name)
+    }
+
+    /// A .glb: the JSON chunk (padded with spaces) and the binary chunk.
+    fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
+        let mut json = json.as_bytes().to_vec();
+        json.resize(json.len().div_ceil(4) * 4, b' ');
+        let mut bin = bin.to_vec();
+        bin.resize(bin.len().div_ceil(4) * 4, 0);
+        let total = 12 + 8 + json.len() + 8 + bin.len();
+        let mut out = Vec::new();
+        out.extend(b"glTF");
+        out.extend(2u32.to_le_bytes());
+        out.extend((total as u32).to_le_bytes());
+        out.extend((json.len() as u32).to_le_bytes());
+        out.extend(b"JSON");
+        out.extend(json);
+        out.extend((bin.len() as u32).to_le_bytes());
+        out.extend(b"BIN\0");
+        out.extend(bin);
+        out
+    }
+
+    /// The quad's corner (1, 1, 0) in the world, through each placement, as composed by
+    /// hand; the three placements of one mesh; the base colour as albedo. The same from
+    /// a .gltf with a data: URI, one with the buffer in a file beside it, and a .glb.
+    #[test]
+    fn nodes_place_one_mesh_as_composed_by_hand() {
+        let gltf = scratch("quad.gltf");
+        std::fs::write(&gltf, document(Some(&data_uri()), 1, "[1, 2, 1]")).expect("write");
+        let beside = scratch("quad beside.gltf");
+        std::fs::write(beside.with_file_name("quad data.bin"), quad_bytes()).expect("write");
+        std::fs::write(&beside, document(Some("quad%20data.bin"), 1, "[1, 2, 1]")).expect("write");
+        let binary = scratch("quad.glb");
+        std::fs::write(&binary, glb(&document(None, 1, "[1, 2, 1]"), &quad_bytes())).expect("write");
+        for path in [gltf, beside, binary] {
+            let counted = census(&path, Reach::Anywhere).expect("census");
+            assert_eq!(
+                (
+                    counted.mesh_triangles,
+                    counted.placed_triangles,
+                    counted.placements
+                ),
+                (2, 6, 3),
+                "{}",
+                path.display()
+            );
+            let merged = load_gltf_merged(&path, Reach::Anywhere).expect("merged");
+            assert_eq!(merged.triangle_count(), 6);
+            let model = load_gltf(&path, Reach::Anywhere).expect("load");
+            let names: Vec<&str> = model.placements.iter().map(|p| p.name.as_str()).collect();
+            assert_eq!(names, ["moved", "turned", "stretched"]);
+            assert!(model.placements.iter().all(|p| p.mesh == 0));
+            let mesh = model.meshes[0].as_ref().expect("mesh built");
+            assert_eq!(mesh.triangle_count(), 2);
+            assert_eq!(mesh.materials[0].diffuse, Vec3::new(0.8, 0.1, 0.1));
+            let corner = DVec3::new(1.0, 1.0, 0.0);
+            let world: Vec<DVec3> = model
+                .placements
+                .iter()
+                .map(|p| p.transform.transform_point3(corner))
+                .collect();
+            // parent: x ↦ (10, 0, 0) + 2x.
+            let expected = [
+                DVec3::new(10.0 + 2.0 * 2.0, 2.0, 0.0),
+                DVec3::new(10.0, 2.0, -2.0),
+                DVec3::new(12.0, 4.0, 0.0),
+            ];
+            for (w, e) in world.iter().zip(expected) {
+                assert!(w.distance(e) < 1e-6, "{w} against {e}");
+            }
+            let kinds: Vec<bool> = model
+                .placements
+                .iter()
+                .map(|p| similarity(&p.transform).is_some())
+                .collect();
+            assert_eq!(kinds, [true, true, false], "the stretch is no similarity");
+            let (origin, _, scale) = similarity(&model.placements[1].transform).expect("turned");
+            assert!(
+                (scale - 2.0).abs() < 1e-6 && origin.distance(DVec3::new(10.0, 0.0, 0.0)) < 1e-9,
+                "{scale} {origin}"
+            );
+            // As a scene: the similarities place one mesh, the stretch has its own.
+            let scene = crate::scene::Scene::load(&path.to_string_lossy()).expect("scene");
+            let objects = &scene.objects;
+            assert_eq!(objects.iter().map(|o| o.name.as_str()).collect::<Vec<_>>(), names);
+            assert!(objects[0].shares_mesh(&objects[1]) && !objects[0].shares_mesh(&objects[2]));
+            for (object, e) in objects.iter().zip(expected) {
+                let local = object.mesh.positions[2];
+                assert!(
+                    object.to_world(local).distance(e) < 1e-5,
+                    "{}: {}",
+                    object.name,
+                    object.to_world(local)
+                );
+            }
+        }
+    }
+
+    /// Faults name what is at fault: an accessor index past the list (the JSON path),
+    /// indices naming a vertex past the positions (the accessor), a transform that
+    /// overflows (the node), a buffer shorter than it says, a URI that is not a file.
+    #[test]
+    fn bad_files_name_the_fault() {
+        let cases: [(String, &str); 5] = [
+            (document(Some(&data_uri()), 9, "[1, 2, 1]"), "indices"),
+            (
+                document(Some(&data_uri()), 1, "[1, 1e39, 1]"),
+                "node 3 (`stretched`)",
+            ),
+            (
+                document(Some("data:application/octet-stream;base64,AAAA"), 1, "[1, 2, 1]"),
+                "buffer 0: 3 bytes",
+            ),
+            (
+                document(Some("https://example.com/quad.bin"), 1, "[1, 2, 1]"),
+                "only data: URIs",
+            ),
+            (document(Some("missing.bin"), 1, "[1, 2, 1]"), "buffer 0"),
+        ];
+        for (k, (text, named)) in cases.iter().enumerate() {
+            let path = scratch(&format!("bad{k}.gltf"));
+            std::fs::write(&path, text).expect("write");
+            let message = load_gltf(&path, Reach::Anywhere)
+                .expect_err("refused")
+                .to_string();
+            assert!(
+                message.contains(named) && message.contains("bad"),
+                "case {k}: {message}"
+            );
+        }
+        // Indices past the quad's four vertices.
+        let mut bytes = quad_bytes();
+        bytes[48..50].copy_from_slice(&7u16.to_le_bytes());
+        let uri = format!(
+            "data:application/octet-stream;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(&bytes)
+        );
+        let path = scratch("past.gltf");
+        std::fs::write(&path, document(Some(&uri), 1, "[1, 2, 1]")).expect("write");
+        let message = load_gltf(&path, Reach::Anywhere)
+            .expect_err("refused")
+            .to_string();
+        assert!(
+            message.contains("index 7") && message.contains("accessor 1"),
+            "{message}"
+        );
+        assert!(load_gltf(&scratch("none.glb"), Reach::Anywhere).is_err());
+    }
+}
