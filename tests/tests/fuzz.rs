@@ -1,13 +1,13 @@
 //! Bounded fuzzing of everything that arrives from someone else: wire messages (a
 //! scene bundle, an impostor request, a relief texture, a worker's registration) and
-//! the files a bundle carries (scene TOML, OBJ). Random bytes, and valid inputs with
+//! the files a bundle carries (scene TOML, OBJ, glTF). Random bytes, and valid inputs with
 //! random edits, must give an answer — a value or an error naming the problem — never
 //! a panic or a hang.
 //!
 //! The valid inputs edited are the built-in scenes, wire messages made here, and the
-//! files of `tests/fuzz-corpus/` (every scene-file key and OBJ statement the loaders
-//! read). Each property runs [`CASES`] cases (`RELIEF_FUZZ_CASES=N` for a longer run);
-//! failing seeds are kept in `tests/tests/proptest-regressions/` and replayed first.
+//! files of `tests/fuzz-corpus/` (every scene-file key, OBJ statement and glTF feature
+//! the loaders read). Each property runs [`CASES`] cases (`RELIEF_FUZZ_CASES=N` for a longer run);
+//! failing seeds are kept in `tests/tests/fuzz.proptest-regressions` and replayed first.
 
 use relief_core::relief::SourceProjection;
 use std::path::Path;
@@ -80,6 +80,13 @@ static SCENES: LazyLock<Vec<Vec<u8>>> = LazyLock::new(|| {
 
 /// The OBJ files edited: the corpus's.
 static OBJS: LazyLock<Vec<Vec<u8>>> = LazyLock::new(|| corpus("obj"));
+
+/// The glTF files edited, JSON and binary: the corpus's.
+static GLTFS: LazyLock<Vec<(&str, Vec<u8>)>> = LazyLock::new(|| {
+    let json = corpus("gltf").into_iter().map(|bytes| ("gltf", bytes));
+    json.chain(corpus("glb").into_iter().map(|bytes| ("glb", bytes)))
+        .collect()
+});
 
 /// The contents of the corpus files whose names end in `extension`.
 fn corpus(extension: &str) -> Vec<Vec<u8>> {
@@ -170,6 +177,24 @@ proptest! {
             std::fs::write(&path, content).expect("writing the OBJ");
             let _ = count_triangles(&path, Reach::Within(&dir));
             let _ = load_obj(&path, Reach::Within(&dir));
+        }
+    }
+}
+
+proptest! {
+    // A quarter of the cases: a glTF case costs about four of the others (its JSON is
+    // parsed and validated whole), and the whole run is kept to minutes.
+    #![proptest_config(ProptestConfig { cases: config().cases / 4, ..config() })]
+
+    #[test]
+    fn gltf_files_load_or_refuse(seed in any::<usize>(), edits in edits(), bytes in prop::collection::vec(any::<u8>(), 0..512)) {
+        let (extension, valid) = &GLTFS[seed % GLTFS.len()];
+        let dir = relief_tests::scratch("fuzz-gltf");
+        for (k, content) in [edited(valid, &edits), bytes].into_iter().enumerate() {
+            let path = dir.join(format!("m{k}.{extension}"));
+            std::fs::write(&path, content).expect("writing the glTF file");
+            let _ = relief_core::gltf::census(&path, Reach::Within(&dir));
+            let _ = relief_core::scene::Scene::load_within(&path.to_string_lossy(), Reach::Within(&dir), &LIMITS);
         }
     }
 }

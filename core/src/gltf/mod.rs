@@ -5,13 +5,18 @@
 //!
 //! Nothing is read outside the caller's [`Reach`]: the crate's own importer (which
 //! opens whatever a URI names) is not used; buffers and images come from the `.glb`'s
-//! binary chunk, `data:` URIs, or files beside the model within reach.
+//! binary chunk, `data:` URIs, or files beside the model within reach; accessors are
+//! read by `accessor.rs`, which checks every offset.
+
+mod accessor;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use base64::Engine;
 use glam::{DAffine3, DMat3, DMat4, DQuat, DVec3, Vec2, Vec3};
+
+use gltf::json::accessor::ComponentType;
 
 use crate::error::{Error, Result};
 use crate::mesh::{Material, Mesh, TextureImage};
@@ -91,10 +96,13 @@ pub fn referenced_files(path: &Path, reach: Reach) -> Result<Vec<String>> {
         gltf::buffer::Source::Uri(uri) => Some(uri),
         gltf::buffer::Source::Bin => None,
     });
-    let images = gltf.document.images().filter_map(|i| match i.source() {
-        gltf::image::Source::Uri { uri, .. } => Some(uri),
-        gltf::image::Source::View { .. } => None,
-    });
+    // (From the JSON: `gltf`'s `Image::source` panics on an image with neither.)
+    let images = gltf
+        .document
+        .as_json()
+        .images
+        .iter()
+        .filter_map(|i| i.uri.as_deref());
     Ok(buffers
         .chain(images)
         .filter(|uri| !uri.starts_with("data:") && !uri.contains("://"))
@@ -164,7 +172,7 @@ pub fn load_gltf(path: &Path, reach: Reach) -> Result<GltfModel> {
     let materials: Vec<Material> = gltf
         .document
         .materials()
-        .map(|m| material(&m, &buffers, base, reach, path))
+        .map(|m| material(&m, gltf.document.as_json(), &buffers, base, reach, path))
         .collect();
     let mut meshes: Vec<Option<Mesh>> = vec![None; gltf.document.meshes().len()];
     let mut placements = Vec::new();
@@ -178,7 +186,8 @@ pub fn load_gltf(path: &Path, reach: Reach) -> Result<GltfModel> {
             return Err(at("its transform (with its ancestors') is not finite".into()));
         }
         if meshes[mesh.index()].is_none() {
-            meshes[mesh.index()] = Some(build_mesh(&mesh, &buffers, &materials).map_err(at)?);
+            meshes[mesh.index()] =
+                Some(build_mesh(path, &mesh, gltf.document.as_json(), &buffers, &materials).map_err(at)?);
         }
         placements.push(GltfPlacement {
             name,
@@ -194,12 +203,36 @@ pub fn load_gltf(path: &Path, reach: Reach) -> Result<GltfModel> {
 
 /// Reads and validates the file's JSON (and a `.glb`'s binary chunk).
 fn open(path: &Path, reach: Reach) -> Result<gltf::Gltf> {
+    let error = |message: String| Error::Obj {
+        path: path.to_path_buf(),
+        message,
+    };
     let opened = reach.check(path)?;
     let bytes = std::fs::read(opened).map_err(|e| Error::io(path, e))?;
-    gltf::Gltf::from_slice(&bytes).map_err(|e| Error::Obj {
-        path: path.to_path_buf(),
-        message: format!("malformed glTF: {e}"),
-    })
+    let malformed = |e: gltf::Error| error(format!("malformed glTF: {e}"));
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(&bytes).map_err(malformed)?;
+    let root = document.into_json();
+    // gltf-json 1.4's validation looks up a primitive's POSITION accessor before it
+    // checks that the index is in range (a panic on a bad one, found by fuzzing):
+    // every attribute's accessor is checked here first.
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            if let Some(index) = primitive
+                .attributes
+                .values()
+                .find(|a| a.value() >= root.accessors.len())
+            {
+                return Err(error(format!(
+                    "meshes[{m}].primitives[{p}].attributes: accessor {} is past the file's {}",
+                    index.value(),
+                    root.accessors.len()
+                )));
+            }
+        }
+    }
+    let document = gltf::Document::from_json(root).map_err(malformed)?;
+    Ok(gltf::Gltf { document, blob })
 }
 
 /// The default scene's nodes (the first scene's when none is the default), each with
@@ -229,7 +262,9 @@ fn scene_nodes(document: &gltf::Document) -> Vec<(gltf::Node<'_>, DAffine3)> {
 /// A mesh's triangle primitives merged into one [`Mesh`]; the message names the
 /// primitive or accessor at fault.
 fn build_mesh(
+    path: &Path,
     mesh: &gltf::Mesh<'_>,
+    root: &gltf::json::Root,
     buffers: &[Vec<u8>],
     materials: &[Material],
 ) -> std::result::Result<Mesh, String> {
@@ -251,58 +286,38 @@ fn build_mesh(
         let at = format!("{label}, primitive {}", primitive.index());
         if primitive.mode() != gltf::mesh::Mode::Triangles {
             tracing::warn!(
-                "{at}: {:?} primitives are not drawn, only triangles",
+                "{}: {at}: {:?} primitives are not drawn, only triangles",
+                path.display(),
                 primitive.mode()
             );
             continue;
         }
-        for (_, accessor) in primitive
-            .attributes()
-            .chain(primitive.indices().map(|a| (gltf::Semantic::Positions, a)))
-        {
-            if accessor.count() == 0 || accessor.view().is_none() {
-                return Err(format!(
-                    "{at}: accessor {} is empty or has no buffer view",
-                    accessor.index()
-                ));
-            }
+        let floats = [ComponentType::F32];
+        let accessor = |semantic: gltf::Semantic| primitive.get(&semantic).map(|a| a.index());
+        let read =
+            |index: usize, allowed: &[ComponentType]| accessor::floats::<3>(root, buffers, index, allowed);
+        let positions: Vec<Vec3> = match accessor(gltf::Semantic::Positions) {
+            Some(index) => read(index, &floats).map_err(|e| format!("{at}: {e}"))?,
+            None => return Err(format!("{at}: no POSITION")),
         }
-        let reader = primitive.reader(|buffer| buffers.get(buffer.index()).map(Vec::as_slice));
-        let accessor_of = |semantic: gltf::Semantic| primitive.get(&semantic).map_or(0, |a| a.index());
-        let positions: Vec<Vec3> = reader
-            .read_positions()
-            .ok_or_else(|| {
-                format!(
-                    "{at}: no POSITION, or accessor {} lies past its buffer",
-                    accessor_of(gltf::Semantic::Positions)
-                )
-            })?
-            .map(Vec3::from)
-            .collect();
+        .into_iter()
+        .map(Vec3::from)
+        .collect();
         let first = out.positions.len() as u32;
         let n = positions.len();
-        let prim_normals: Option<Vec<Vec3>> = match primitive.get(&gltf::Semantic::Normals) {
-            Some(a) => Some(
-                reader
-                    .read_normals()
-                    .ok_or_else(|| format!("{at}: accessor {} (NORMAL) lies past its buffer", a.index()))?
-                    .map(Vec3::from)
-                    .collect(),
-            ),
-            None => None,
-        };
-        let prim_uv: Option<Vec<Vec2>> = match primitive.get(&gltf::Semantic::TexCoords(0)) {
-            Some(a) => Some(
-                reader
-                    .read_tex_coords(0)
-                    .ok_or_else(|| format!("{at}: accessor {} (TEXCOORD_0) lies past its buffer", a.index()))?
-                    .into_f32()
-                    // glTF's v runs down the image; the meshes' up (as in OBJ).
-                    .map(|[u, v]| Vec2::new(u, 1.0 - v))
-                    .collect(),
-            ),
-            None => None,
-        };
+        let prim_normals: Option<Vec<Vec3>> = (accessor(gltf::Semantic::Normals))
+            .map(|index| read(index, &floats).map(|ns| ns.into_iter().map(Vec3::from).collect()))
+            .transpose()
+            .map_err(|e| format!("{at}: {e}"))?;
+        let uv_types = [ComponentType::F32, ComponentType::U8, ComponentType::U16];
+        let prim_uv: Option<Vec<Vec2>> = (accessor(gltf::Semantic::TexCoords(0)))
+            .map(|index| {
+                let uv = accessor::floats::<2>(root, buffers, index, &uv_types)?;
+                // glTF's v runs down the image; the meshes' up (as in OBJ).
+                Ok::<_, String>(uv.into_iter().map(|[u, v]| Vec2::new(u, 1.0 - v)).collect())
+            })
+            .transpose()
+            .map_err(|e| format!("{at}: {e}"))?;
         for (what, len) in [
             ("NORMAL", prim_normals.as_ref().map(Vec::len)),
             ("TEXCOORD_0", prim_uv.as_ref().map(Vec::len)),
@@ -314,11 +329,7 @@ fn build_mesh(
             }
         }
         let corners: Vec<u32> = match primitive.indices() {
-            Some(a) => reader
-                .read_indices()
-                .ok_or_else(|| format!("{at}: accessor {} (indices) lies past its buffer", a.index()))?
-                .into_u32()
-                .collect(),
+            Some(a) => accessor::indices(root, buffers, a.index()).map_err(|e| format!("{at}: {e}"))?,
             None => (0..n as u32).collect(),
         };
         if let Some(i) = corners.iter().position(|&i| i as usize >= n) {
@@ -358,22 +369,21 @@ fn build_mesh(
 
 /// A glTF material's base colour as albedo: the factor (linear RGB), times the base
 /// colour texture where it has one that can be read (else a warning, and the factor).
-fn material(m: &gltf::Material<'_>, buffers: &[Vec<u8>], base: &Path, reach: Reach, path: &Path) -> Material {
+fn material(
+    m: &gltf::Material<'_>,
+    root: &gltf::json::Root,
+    buffers: &[Vec<u8>],
+    base: &Path,
+    reach: Reach,
+    path: &Path,
+) -> Material {
     let pbr = m.pbr_metallic_roughness();
     let [r, g, b, _] = pbr.base_color_factor();
     let name = m
         .name()
         .map_or_else(|| format!("material{}", m.index().unwrap_or(0)), str::to_string);
     let diffuse_texture = pbr.base_color_texture().and_then(|info| {
-        let image = info.texture().source();
-        let bytes = match image.source() {
-            gltf::image::Source::View { view, .. } => buffers
-                .get(view.buffer().index())
-                .and_then(|b| b.get(view.offset()..view.offset() + view.length()))
-                .map(<[u8]>::to_vec)
-                .ok_or_else(|| format!("image {}'s buffer view lies past its buffer", image.index())),
-            gltf::image::Source::Uri { uri, .. } => read_uri(uri, base, reach),
-        };
+        let bytes = image_bytes(root, info.texture().source().index(), buffers, base, reach);
         let decoded = bytes.and_then(|bytes| image::load_from_memory(&bytes).map_err(|e| e.to_string()));
         match decoded {
             Ok(decoded) => Some(Arc::new(TextureImage::from_rgb8(&decoded.to_rgb8()))),
@@ -390,6 +400,35 @@ fn material(m: &gltf::Material<'_>, buffers: &[Vec<u8>], base: &Path, reach: Rea
         name,
         diffuse: Vec3::new(r, g, b).clamp(Vec3::ZERO, Vec3::ONE),
         diffuse_texture,
+    }
+}
+
+/// The bytes of image `index`: its buffer view's, or its URI's. (Read from the JSON:
+/// `gltf`'s `Image::source` panics on an image with a view but no MIME type, or with
+/// neither a view nor a URI, which its validation lets through.)
+fn image_bytes(
+    root: &gltf::json::Root,
+    index: usize,
+    buffers: &[Vec<u8>],
+    base: &Path,
+    reach: Reach,
+) -> std::result::Result<Vec<u8>, String> {
+    let image = root.images.get(index).ok_or(format!("no image {index}"))?;
+    match (&image.buffer_view, &image.uri) {
+        (Some(view), _) => {
+            let view =
+                (root.buffer_views.get(view.value())).ok_or(format!("image {index}: no buffer view"))?;
+            let start = view.byte_offset.map_or(0, |o| o.0);
+            let range = usize::try_from(start)
+                .ok()
+                .zip(usize::try_from(start.saturating_add(view.byte_length.0)).ok());
+            range
+                .and_then(|(start, end)| buffers.get(view.buffer.value())?.get(start..end))
+                .map(<[u8]>::to_vec)
+                .ok_or_else(|| format!("image {index}'s buffer view lies past its buffer"))
+        }
+        (None, Some(uri)) => read_uri(uri, base, reach),
+        (None, None) => Err(format!("image {index} has neither a buffer view nor a uri")),
     }
 }
 
@@ -614,12 +653,17 @@ mod tests {
     }
 
     /// Faults name what is at fault: an accessor index past the list (the JSON path),
-    /// indices naming a vertex past the positions (the accessor), a transform that
+    /// vectors of floats given as indices, indices naming a vertex past the positions
+    /// (the accessor), a transform that
     /// overflows (the node), a buffer shorter than it says, a URI that is not a file.
     #[test]
     fn bad_files_name_the_fault() {
-        let cases: [(String, &str); 5] = [
+        let cases: [(String, &str); 6] = [
             (document(Some(&data_uri()), 9, "[1, 2, 1]"), "indices"),
+            (
+                document(Some(&data_uri()), 0, "[1, 2, 1]"),
+                "accessor 0: 1 components",
+            ),
             (
                 document(Some(&data_uri()), 1, "[1, 1e39, 1]"),
                 "node 3 (`stretched`)",
