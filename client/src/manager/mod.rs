@@ -61,7 +61,7 @@ use around::angle_between;
 use cache::ObjectState;
 use choose::{Grade, may_show, shown_texture};
 use draw::Kept;
-use policy::{SHOWN_STALE, WARM_UP_POLL, texel_pixels};
+use policy::{SHOWN_STALE, WARM_UP_POLL, cheaper_as_geometry, texel_pixels};
 use requests::Pending;
 
 /// The manager of one client: what it holds and has asked for per object, where the eye
@@ -218,6 +218,12 @@ impl Manager {
                 continue;
             }
             let (centre, eye) = (object.local_bounds.center(), camera.eye_f32());
+            if cheaper_as_geometry(object, Self::size_for(object, eye, camera).0) {
+                // Drawn as geometry while its texture would cost more than it; where
+                // the eye is going, it may not.
+                self.predict_for(scene, k, camera);
+                continue;
+            }
             let grades: Vec<Grade> = self.grades(scene, k, eye, camera).collect();
             self.counters.needs += 1;
             let held = &self.objects[k].held;

@@ -238,6 +238,32 @@ pub const SHEET_TEXEL_PIXELS: f32 = 0.6;
 /// The largest texture edge asked for leaves or sheets ([`SHEET_TEXEL_PIXELS`]).
 pub const SHEET_MAX_EDGE: u32 = 720;
 
+// ---- Geometry where it costs no more -----------------------------------------------
+
+/// Nanoseconds this client's rasterizer takes a triangle of leaves, shading included:
+/// drawn as geometry in the demo, the default scene's tree (9,228 triangles) added
+/// 1.5–1.6 ms to the frame's geometry stage (3 runs). (Smaller triangles cost less:
+/// the rock's million take 28–32 ms.)
+pub const GEOMETRY_NS_PER_TRIANGLE: f32 = 160.0;
+
+/// Nanoseconds a texel of a texture costs a frame, pre-warp and texture mapping: the
+/// same runs' pre-warp and mapping stages fell by 1.9–2.0 ms with the tree's 157 k
+/// texels a frame gone (a texture of leaves, mostly empty texels; a solid's cost more:
+/// `relief bench warp`'s 256² pre-warp alone is 17 ns a texel).
+pub const WARP_NS_PER_TEXEL: f32 = 12.0;
+
+/// Whether `object` costs no more drawn as geometry than as an impostor whose texture
+/// has `edge` texels a side (then it is drawn as geometry, which is exact). With the
+/// costs above, the default scene's tree is drawn as geometry once its texture would
+/// pass 351 texels a side; the sphere (20 k triangles) would past 522, beyond a
+/// solid's largest texture, so it, the knot and the rock never are. In the demo (3 runs against 2) the tree then matched geometry where its
+/// impostor was 2.9–3.3 dB below, the frame took 6.9–7.2 ms where it took 6.6–6.7, and
+/// 74–88 textures were asked for where 125–143 were.
+pub fn cheaper_as_geometry(object: &SceneObject, edge: u32) -> bool {
+    let geometry = object.mesh.triangle_count() as f32 * GEOMETRY_NS_PER_TRIANGLE;
+    geometry <= (edge as f32).powi(2) * WARP_NS_PER_TEXEL
+}
+
 /// The texel, in pixels' angles, a texture of `object` is asked for and shown at from
 /// `camera`: [`SHEET_TEXEL_PIXELS`] for leaves and sheets; for solids
 /// [`FINE_TEXEL_PIXELS`] while that keeps within [`FINE_TEXEL_MAX_EDGE`], else
@@ -462,6 +488,20 @@ mod tests {
         let (tree, knot, sphere) = (weight("tree"), weight("knot"), weight("sphere"));
         assert!(tree > 1.5, "tree {tree}");
         assert_eq!((knot, sphere), (1.0, 1.0));
+    }
+
+    /// Leaves are drawn as geometry where their texture would be large; the default
+    /// scene's solids never are.
+    #[test]
+    fn geometry_where_it_costs_no_more() {
+        let scene = Scene::load("default").expect("default scene");
+        let object = |name| scene.object(name).expect("object");
+        let (tree, knot, sphere, rock) = (object("tree"), object("knot"), object("sphere"), object("rock"));
+        assert!(cheaper_as_geometry(tree, SHEET_MAX_EDGE) && cheaper_as_geometry(tree, 360));
+        assert!(!cheaper_as_geometry(tree, 256));
+        for solid in [sphere, knot, rock] {
+            assert!(!cheaper_as_geometry(solid, SOLID_MAX_EDGE), "{}", solid.name);
+        }
     }
 
     /// Small textures of solids get the fine texel, those the frame is full of the

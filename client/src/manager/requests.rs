@@ -19,7 +19,7 @@ use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
     MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK, PENDING_REACH,
-    REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
+    REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, asked_for, cheaper_as_geometry, largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -229,6 +229,9 @@ impl Manager {
             return;
         }
         let (future, eye) = (object.to_local(future), camera.eye_f32());
+        if cheaper_as_geometry(object, Self::size_for(object, future, camera).0) {
+            return;
+        }
         let held: Vec<(Vec3, Grade)> = (self.objects[k].held.iter().map(|h| h.eye))
             .zip(self.grades(scene, k, future, camera))
             .collect();
