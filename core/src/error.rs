@@ -10,7 +10,7 @@ pub enum Error {
     /// with `{:#}` would say it twice.)
     #[error("{}: {error}", path.display())]
     Io { path: PathBuf, error: std::io::Error },
-    /// A Wavefront OBJ file is malformed or holds no usable triangles.
+    /// A model file (Wavefront OBJ, glTF) is malformed or holds no usable triangles.
     #[error("{}: {message}", path.display())]
     Obj { path: PathBuf, message: String },
     /// A scene file is malformed or inconsistent.

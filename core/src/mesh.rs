@@ -15,7 +15,28 @@ pub struct TextureImage {
     pub texels: Vec<Vec3>,
 }
 
+/// The largest material texture edge read, texels: a texture is held as three 4-byte
+/// floats a texel, so 4096² is 200 MB; a larger (or a forged) image is refused before
+/// it is decoded.
+pub const MAX_TEXTURE_EDGE: u32 = 4096;
+
 impl TextureImage {
+    /// The PNG or JPEG image in `bytes`, refused (with the decoder's reason) past
+    /// [`MAX_TEXTURE_EDGE`] a side or when it cannot be read.
+    pub fn decode(bytes: &[u8]) -> std::result::Result<TextureImage, String> {
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(MAX_TEXTURE_EDGE);
+        limits.max_image_height = Some(MAX_TEXTURE_EDGE);
+        // (The decoder's own buffers: at most the RGBA bytes of the largest image.)
+        limits.max_alloc = Some(4 * u64::from(MAX_TEXTURE_EDGE).pow(2));
+        let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
+            .with_guessed_format()
+            .map_err(|e| e.to_string())?;
+        reader.limits(limits);
+        let image = reader.decode().map_err(|e| e.to_string())?;
+        Ok(TextureImage::from_rgb8(&image.to_rgb8()))
+    }
+
     /// An 8-bit RGB image's texels, each channel over 255.
     pub fn from_rgb8(image: &image::RgbImage) -> TextureImage {
         TextureImage {
@@ -307,10 +328,17 @@ impl Mesh {
     }
 
     /// A copy placed in the world by `transform`; normals go through the inverse
-    /// transpose and are renormalised.
+    /// transpose and are renormalised, and a mirror (a negative determinant) reverses
+    /// each triangle's corners, so that faces keep facing out.
     pub fn transformed(&self, transform: Affine3A) -> Mesh {
         let normal_matrix: Mat3 = Mat3::from(transform.matrix3).inverse().transpose();
+        let triangles = if transform.matrix3.determinant() < 0.0 {
+            self.triangles.iter().map(|&[a, b, c]| [a, c, b]).collect()
+        } else {
+            self.triangles.clone()
+        };
         Mesh {
+            triangles,
             positions: self
                 .positions
                 .iter()
@@ -321,7 +349,9 @@ impl Mesh {
                     .map(|&n| (normal_matrix * n).normalize_or_zero())
                     .collect()
             }),
-            ..self.clone()
+            texcoords: self.texcoords.clone(),
+            triangle_materials: self.triangle_materials.clone(),
+            materials: self.materials.clone(),
         }
     }
 

@@ -146,15 +146,13 @@ fn convert_material(m: &tobj::Material, base_dir: &Path, reach: Reach) -> Materi
     }
 }
 
-/// Loads an image file as a linear RGB texture.
+/// Loads an image file as a linear RGB texture ([`TextureImage::decode`]).
 pub fn load_texture(path: &Path) -> Result<TextureImage> {
-    let image = image::open(path)
-        .map_err(|e| Error::Obj {
-            path: path.to_path_buf(),
-            message: format!("cannot read texture: {e}"),
-        })?
-        .to_rgb8();
-    Ok(TextureImage::from_rgb8(&image))
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    TextureImage::decode(&bytes).map_err(|e| Error::Obj {
+        path: path.to_path_buf(),
+        message: format!("cannot read texture: {e}"),
+    })
 }
 
 /// The triangles [`load_obj`] would make of `path` (each face of `n` corners gives

@@ -232,7 +232,9 @@ pub const FINE_TEXEL_MAX_EDGE: u32 = 360;
 /// against 4.1–4.3 at [`FINE_TEXEL_PIXELS`] (up to 360², then a pixel); 0.5 (up to
 /// 720² or 1024²) gained no more over the first 150 frames (2.1–2.5 dB, against
 /// 2.2–2.3 at 0.6) and warped 1.3–1.5× the texels. The frame was 3.7–4.1× faster than
-/// geometry, against 4.3–4.7×.
+/// geometry, against 4.3–4.7×. (Since [`cheaper_as_geometry`], the tree itself is drawn
+/// as geometry wherever its texture would pass 351 a side: the larger edges serve
+/// leaves of more triangles, and trees afar.)
 pub const SHEET_TEXEL_PIXELS: f32 = 0.6;
 
 /// The largest texture edge asked for leaves or sheets ([`SHEET_TEXEL_PIXELS`]).
@@ -256,9 +258,10 @@ pub const WARP_NS_PER_TEXEL: f32 = 12.0;
 /// has `edge` texels a side (then it is drawn as geometry, which is exact). With the
 /// costs above, the default scene's tree is drawn as geometry once its texture would
 /// pass 351 texels a side; the sphere (20 k triangles) would past 522, beyond a
-/// solid's largest texture, so it, the knot and the rock never are. In the demo (3 runs against 2) the tree then matched geometry where its
-/// impostor was 2.9–3.3 dB below, the frame took 6.9–7.2 ms where it took 6.6–6.7, and
-/// 74–88 textures were asked for where 125–143 were.
+/// solid's largest texture, so it, the knot and the rock never are. In the demo (whole
+/// path, rtt 0 and 100, against the same before) the tree then matched geometry where
+/// its impostor was 2.9–3.3 dB below, the frame took 6.45–6.64 ms where it took
+/// 6.63–6.73, and 84–119 textures were asked for where 125–143 were.
 pub fn cheaper_as_geometry(object: &SceneObject, edge: u32) -> bool {
     let geometry = object.mesh.triangle_count() as f32 * GEOMETRY_NS_PER_TRIANGLE;
     geometry <= (edge as f32).powi(2) * WARP_NS_PER_TEXEL

@@ -3,6 +3,8 @@
 //! check — an index accessor of floats, a view past its buffer — and panic on it; a
 //! file here may come from anyone.)
 
+use std::sync::Arc;
+
 use gltf::json::Root;
 use gltf::json::accessor::{ComponentType, GenericComponentType, Type};
 use gltf::json::validation::Checked;
@@ -12,7 +14,7 @@ use gltf::json::validation::Checked;
 /// largest value. `allowed` are the component types accepted.
 pub(super) fn floats<const N: usize>(
     root: &Root,
-    buffers: &[Vec<u8>],
+    buffers: &[Arc<[u8]>],
     index: usize,
     allowed: &[ComponentType],
 ) -> Result<Vec<[f32; N]>, String> {
@@ -23,7 +25,7 @@ pub(super) fn floats<const N: usize>(
 }
 
 /// Accessor `index`'s elements as vertex indices: unsigned byte, short or int scalars.
-pub(super) fn indices(root: &Root, buffers: &[Vec<u8>], index: usize) -> Result<Vec<u32>, String> {
+pub(super) fn indices(root: &Root, buffers: &[Arc<[u8]>], index: usize) -> Result<Vec<u32>, String> {
     let allowed = [ComponentType::U8, ComponentType::U16, ComponentType::U32];
     let elements = Elements::of(root, buffers, index, 1, &allowed)?;
     Ok((0..elements.count).map(|e| elements.unsigned(e, 0)).collect())
@@ -40,7 +42,7 @@ struct Elements<'a> {
 impl<'a> Elements<'a> {
     fn of(
         root: &Root,
-        buffers: &'a [Vec<u8>],
+        buffers: &'a [Arc<[u8]>],
         index: usize,
         components: usize,
         allowed: &[ComponentType],

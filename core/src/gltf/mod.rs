@@ -43,11 +43,14 @@ pub struct GltfPlacement {
 }
 
 /// What [`load_gltf`] would build from a file, read from its JSON before any buffer.
+/// A primitive counts the triangles it holds, or a third of its vertices where those
+/// are more (many primitives may share one large vertex accessor, each copying it).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct GltfCensus {
-    /// Triangles of the meshes the default scene uses, each mesh once (its triangle
-    /// primitives' index counts, or vertex counts, over three).
-    pub mesh_triangles: u64,
+    /// Triangles built for a scene of the file: the meshes its default scene uses,
+    /// each once, and again for each placement that is no similarity (which gets a
+    /// transformed copy).
+    pub built_triangles: u64,
     /// … and over every placement: what [`load_gltf_merged`] builds.
     pub placed_triangles: u64,
     /// Nodes holding a mesh.
@@ -57,31 +60,31 @@ pub struct GltfCensus {
 /// [`GltfCensus`] of `path`, within `reach`.
 pub fn census(path: &Path, reach: Reach) -> Result<GltfCensus> {
     let gltf = open(path, reach)?;
-    let mut triangles_of = vec![None; gltf.document.meshes().len()];
+    let mut triangles_of: Vec<Option<u64>> = vec![None; gltf.document.meshes().len()];
     let mut census = GltfCensus {
-        mesh_triangles: 0,
+        built_triangles: 0,
         placed_triangles: 0,
         placements: 0,
     };
-    for mesh in scene_nodes(&gltf.document)
-        .iter()
-        .filter_map(|(node, _)| node.mesh())
-    {
-        let triangles = *triangles_of[mesh.index()].get_or_insert_with(|| {
-            let counted = mesh
+    for (node, transform) in scene_nodes(&gltf.document) {
+        let Some(mesh) = node.mesh() else { continue };
+        let known = triangles_of[mesh.index()];
+        let triangles = known.unwrap_or_else(|| {
+            let primitives = mesh
                 .primitives()
-                .filter(|p| p.mode() == gltf::mesh::Mode::Triangles)
-                .map(|p| {
-                    let corners = match p.indices() {
-                        Some(indices) => indices.count(),
-                        None => p.get(&gltf::Semantic::Positions).map_or(0, |a| a.count()),
-                    };
-                    corners as u64 / 3
-                });
-            let triangles = counted.fold(0u64, u64::saturating_add);
-            census.mesh_triangles = census.mesh_triangles.saturating_add(triangles);
-            triangles
+                .filter(|p| p.mode() == gltf::mesh::Mode::Triangles);
+            let corners = primitives.map(|p| {
+                let indices = p.indices().map_or(0, |a| a.count());
+                let vertices = p.get(&gltf::Semantic::Positions).map_or(0, |a| a.count());
+                indices.max(vertices) as u64 / 3
+            });
+            corners.fold(0u64, u64::saturating_add)
         });
+        triangles_of[mesh.index()] = Some(triangles);
+        let copies = u64::from(known.is_none()) + u64::from(similarity(&transform).is_none());
+        census.built_triangles = census
+            .built_triangles
+            .saturating_add(copies.saturating_mul(triangles));
         census.placed_triangles = census.placed_triangles.saturating_add(triangles);
         census.placements += 1;
     }
@@ -124,6 +127,12 @@ pub fn load_gltf_merged(path: &Path, reach: Reach) -> Result<Mesh> {
             placement.transform.translation.as_vec3(),
         ));
         match &mut merged {
+            Some(all) if all.materials.len() + placed.materials.len() > usize::from(u16::MAX) => {
+                return Err(Error::Obj {
+                    path: path.to_path_buf(),
+                    message: format!("merged, its placements hold more than {} materials", u16::MAX),
+                });
+            }
             Some(all) => all.append(placed),
             None => merged = Some(placed),
         }
@@ -144,36 +153,8 @@ pub fn load_gltf(path: &Path, reach: Reach) -> Result<GltfModel> {
     };
     let gltf = open(path, reach)?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let buffers: Vec<Vec<u8>> = gltf
-        .document
-        .buffers()
-        .map(|buffer| {
-            let data = match buffer.source() {
-                gltf::buffer::Source::Bin => gltf.blob.clone().ok_or_else(|| {
-                    error(format!(
-                        "buffer {} is the binary chunk, which the file lacks",
-                        buffer.index()
-                    ))
-                })?,
-                gltf::buffer::Source::Uri(uri) => read_uri(uri, base, reach)
-                    .map_err(|e| error(format!("buffer {}: {e}", buffer.index())))?,
-            };
-            if data.len() < buffer.length() {
-                return Err(error(format!(
-                    "buffer {}: {} bytes, where its byteLength says {}",
-                    buffer.index(),
-                    data.len(),
-                    buffer.length()
-                )));
-            }
-            Ok(data)
-        })
-        .collect::<Result<_>>()?;
-    let materials: Vec<Material> = gltf
-        .document
-        .materials()
-        .map(|m| material(&m, gltf.document.as_json(), &buffers, base, reach, path))
-        .collect();
+    let buffers = read_buffers(&gltf, base, reach).map_err(error)?;
+    let mut materials = Materials::new(gltf.document.as_json(), &buffers, base, reach, path);
     let mut meshes: Vec<Option<Mesh>> = vec![None; gltf.document.meshes().len()];
     let mut placements = Vec::new();
     for (node, transform) in scene_nodes(&gltf.document) {
@@ -187,7 +168,7 @@ pub fn load_gltf(path: &Path, reach: Reach) -> Result<GltfModel> {
         }
         if meshes[mesh.index()].is_none() {
             meshes[mesh.index()] =
-                Some(build_mesh(path, &mesh, gltf.document.as_json(), &buffers, &materials).map_err(at)?);
+                Some(build_mesh(path, &mesh, gltf.document.as_json(), &buffers, &mut materials).map_err(at)?);
         }
         placements.push(GltfPlacement {
             name,
@@ -199,6 +180,42 @@ pub fn load_gltf(path: &Path, reach: Reach) -> Result<GltfModel> {
         return Err(error("its scene places no mesh".into()));
     }
     Ok(GltfModel { meshes, placements })
+}
+
+/// The file's buffers: the binary chunk (buffer 0 only, as glTF puts it), `data:` URIs,
+/// or files beside it — each file read once, however many buffers name it.
+fn read_buffers(gltf: &gltf::Gltf, base: &Path, reach: Reach) -> std::result::Result<Vec<Arc<[u8]>>, String> {
+    let blob: Option<Arc<[u8]>> = gltf.blob.as_deref().map(Arc::from);
+    let mut files: std::collections::HashMap<&str, Arc<[u8]>> = std::collections::HashMap::new();
+    let mut buffers = Vec::new();
+    for buffer in gltf.document.buffers() {
+        let k = buffer.index();
+        let data = match buffer.source() {
+            gltf::buffer::Source::Bin if k == 0 => blob
+                .clone()
+                .ok_or("buffer 0 is the binary chunk, which the file lacks")?,
+            gltf::buffer::Source::Bin => return Err(format!("buffer {k} has no uri")),
+            gltf::buffer::Source::Uri(uri) => match files.get(uri) {
+                Some(data) => data.clone(),
+                None => {
+                    let data: Arc<[u8]> = read_uri(uri, base, reach)
+                        .map_err(|e| format!("buffer {k}: {e}"))?
+                        .into();
+                    files.insert(uri, data.clone());
+                    data
+                }
+            },
+        };
+        if data.len() < buffer.length() {
+            return Err(format!(
+                "buffer {k}: {} bytes, where its byteLength says {}",
+                data.len(),
+                buffer.length()
+            ));
+        }
+        buffers.push(data);
+    }
+    Ok(buffers)
 }
 
 /// Reads and validates the file's JSON (and a `.glb`'s binary chunk).
@@ -265,21 +282,18 @@ fn build_mesh(
     path: &Path,
     mesh: &gltf::Mesh<'_>,
     root: &gltf::json::Root,
-    buffers: &[Vec<u8>],
-    materials: &[Material],
+    buffers: &[Arc<[u8]>],
+    materials: &mut Materials<'_>,
 ) -> std::result::Result<Mesh, String> {
     let label = format!(
         "mesh {}{}",
         mesh.index(),
         mesh.name().map_or(String::new(), |n| format!(" (`{n}`)"))
     );
-    let mut out = Mesh {
-        materials: materials.to_vec(),
-        ..Default::default()
-    };
-    // Primitives without a material get the default one, last.
-    let default_material = out.materials.len();
-    out.materials.push(Material::default());
+    let mut out = Mesh::default();
+    // The materials this mesh's primitives use, numbered in the mesh (by the file's
+    // index; `None`, the default material).
+    let mut numbered: std::collections::HashMap<Option<usize>, u16> = std::collections::HashMap::new();
     let (mut normals, mut texcoords, mut ids) = (Vec::new(), Vec::new(), Vec::new());
     let (mut any_normals, mut any_texcoords) = (false, false);
     for primitive in mesh.primitives() {
@@ -303,7 +317,12 @@ fn build_mesh(
         .into_iter()
         .map(Vec3::from)
         .collect();
-        let first = out.positions.len() as u32;
+        let first = u32::try_from(out.positions.len())
+            .ok()
+            .filter(|first| {
+                first.checked_add(positions.len() as u32).is_some() && positions.len() < u32::MAX as usize
+            })
+            .ok_or_else(|| format!("{at}: more than {} vertices in the mesh", u32::MAX))?;
         let n = positions.len();
         let prim_normals: Option<Vec<Vec3>> = (accessor(gltf::Semantic::Normals))
             .map(|index| read(index, &floats).map(|ns| ns.into_iter().map(Vec3::from).collect()))
@@ -339,7 +358,17 @@ fn build_mesh(
                 primitive.indices().map_or(0, |a| a.index())
             ));
         }
-        let material = primitive.material().index().unwrap_or(default_material) as u16;
+        let index = primitive.material().index();
+        let material = match numbered.get(&index) {
+            Some(&number) => number,
+            None => {
+                let number = u16::try_from(out.materials.len())
+                    .map_err(|_| format!("{at}: more than {} materials in the mesh", u16::MAX))?;
+                out.materials.push(materials.get(index));
+                numbered.insert(index, number);
+                number
+            }
+        };
         any_normals |= prim_normals.is_some();
         any_texcoords |= prim_uv.is_some();
         normals.push((out.positions.len(), prim_normals));
@@ -367,39 +396,82 @@ fn build_mesh(
     Ok(out)
 }
 
-/// A glTF material's base colour as albedo: the factor (linear RGB), times the base
-/// colour texture where it has one that can be read (else a warning, and the factor).
-fn material(
-    m: &gltf::Material<'_>,
-    root: &gltf::json::Root,
-    buffers: &[Vec<u8>],
-    base: &Path,
-    reach: Reach,
-    path: &Path,
-) -> Material {
-    let pbr = m.pbr_metallic_roughness();
-    let [r, g, b, _] = pbr.base_color_factor();
-    let name = m
-        .name()
-        .map_or_else(|| format!("material{}", m.index().unwrap_or(0)), str::to_string);
-    let diffuse_texture = pbr.base_color_texture().and_then(|info| {
-        let bytes = image_bytes(root, info.texture().source().index(), buffers, base, reach);
-        let decoded = bytes.and_then(|bytes| image::load_from_memory(&bytes).map_err(|e| e.to_string()));
-        match decoded {
-            Ok(decoded) => Some(Arc::new(TextureImage::from_rgb8(&decoded.to_rgb8()))),
+/// The file's materials, each made the first time a mesh uses one: the base colour as
+/// albedo, the factor (linear RGB) times the base colour texture where it has one that
+/// can be read (else a warning, and the factor). Each image is decoded once, however
+/// many materials use it, within [`TextureImage::decode`]'s limits.
+struct Materials<'a> {
+    root: &'a gltf::json::Root,
+    buffers: &'a [Arc<[u8]>],
+    base: &'a Path,
+    reach: Reach<'a>,
+    path: &'a Path,
+    made: Vec<Option<Material>>,
+    images: std::collections::HashMap<usize, Option<Arc<TextureImage>>>,
+}
+
+impl<'a> Materials<'a> {
+    fn new(
+        root: &'a gltf::json::Root,
+        buffers: &'a [Arc<[u8]>],
+        base: &'a Path,
+        reach: Reach<'a>,
+        path: &'a Path,
+    ) -> Self {
+        Materials {
+            root,
+            buffers,
+            base,
+            reach,
+            path,
+            made: vec![None; root.materials.len()],
+            images: std::collections::HashMap::new(),
+        }
+    }
+
+    /// Material `index` of the file (the default material for `None`).
+    fn get(&mut self, index: Option<usize>) -> Material {
+        let Some(index) = index.filter(|&k| k < self.made.len()) else {
+            return Material::default();
+        };
+        if let Some(made) = &self.made[index] {
+            return made.clone();
+        }
+        let json = &self.root.materials[index];
+        let pbr = &json.pbr_metallic_roughness;
+        let [r, g, b, _] = pbr.base_color_factor.0;
+        let name = json.name.clone().unwrap_or_else(|| format!("material{index}"));
+        let diffuse_texture = (pbr.base_color_texture.as_ref())
+            .and_then(|info| self.root.textures.get(info.index.value()))
+            .and_then(|texture| self.image(texture.source.value(), &name));
+        let material = Material {
+            name,
+            diffuse: Vec3::new(r, g, b).clamp(Vec3::ZERO, Vec3::ONE),
+            diffuse_texture,
+        };
+        self.made[index] = Some(material.clone());
+        material
+    }
+
+    /// Image `index`, decoded once; `None` (and a warning naming `material`) when it
+    /// cannot be read.
+    fn image(&mut self, index: usize, material: &str) -> Option<Arc<TextureImage>> {
+        if let Some(image) = self.images.get(&index) {
+            return image.clone();
+        }
+        let bytes = image_bytes(self.root, index, self.buffers, self.base, self.reach);
+        let image = match bytes.and_then(|bytes| TextureImage::decode(&bytes)) {
+            Ok(image) => Some(Arc::new(image)),
             Err(e) => {
                 tracing::warn!(
-                    "{}: material `{name}`'s base colour texture not read ({e}); its factor alone is used",
-                    path.display()
+                    "{}: material `{material}`'s base colour texture not read ({e}); its factor alone is used",
+                    self.path.display()
                 );
                 None
             }
-        }
-    });
-    Material {
-        name,
-        diffuse: Vec3::new(r, g, b).clamp(Vec3::ZERO, Vec3::ONE),
-        diffuse_texture,
+        };
+        self.images.insert(index, image.clone());
+        image
     }
 }
 
@@ -409,7 +481,7 @@ fn material(
 fn image_bytes(
     root: &gltf::json::Root,
     index: usize,
-    buffers: &[Vec<u8>],
+    buffers: &[Arc<[u8]>],
     base: &Path,
     reach: Reach,
 ) -> std::result::Result<Vec<u8>, String> {
@@ -592,11 +664,11 @@ mod tests {
             let counted = census(&path, Reach::Anywhere).expect("census");
             assert_eq!(
                 (
-                    counted.mesh_triangles,
+                    counted.built_triangles,
                     counted.placed_triangles,
                     counted.placements
                 ),
-                (2, 6, 3),
+                (4, 6, 3), // (the stretched placement builds a copy)
                 "{}",
                 path.display()
             );
@@ -706,5 +778,59 @@ mod tests {
             "{message}"
         );
         assert!(load_gltf(&scratch("none.glb"), Reach::Anywhere).is_err());
+        // A second buffer claiming the binary chunk (a copy of it each, once).
+        let two = document(None, 1, "[1, 2, 1]").replace(
+            r#""buffers": [{ "byteLength": 60 }]"#,
+            r#""buffers": [{ "byteLength": 60 }, { "byteLength": 60 }]"#,
+        );
+        let path = scratch("two.glb");
+        std::fs::write(&path, glb(&two, &quad_bytes())).expect("write");
+        let message = load_gltf(&path, Reach::Anywhere)
+            .expect_err("refused")
+            .to_string();
+        assert!(message.contains("buffer 1 has no uri"), "{message}");
+    }
+
+    /// What a small file can make a loader build is counted before it is read: every
+    /// primitive of a mesh, the mesh once however many similar placements, and a
+    /// placement that is no similarity its own copy.
+    #[test]
+    fn the_census_counts_what_would_be_built() {
+        let one_triangle_each = document(Some(&data_uri()), 1, "[1, 2, 1]").replace(
+            r#""primitives": [{ "attributes": { "POSITION": 0 }, "indices": 1, "material": 0 }]"#,
+            &format!(
+                r#""primitives": [{}]"#,
+                vec![r#"{ "attributes": { "POSITION": 0 }, "indices": 1 }"#; 50].join(", ")
+            ),
+        );
+        let path = scratch("many.gltf");
+        std::fs::write(&path, &one_triangle_each).expect("write");
+        let counted = census(&path, Reach::Anywhere).expect("census");
+        // 50 primitives of 2 triangles (6 indices, 4 vertices): 100 a mesh, built once
+        // for the two similar placements and once more for the stretched one.
+        assert_eq!((counted.built_triangles, counted.placed_triangles), (200, 300));
+    }
+
+    /// Repeated and empty node names become unique object names; a mirroring node's
+    /// mesh keeps its faces facing out (its corners reversed).
+    #[test]
+    fn nodes_alike_get_names_of_their_own_and_mirrors_face_out() {
+        let text = document(Some(&data_uri()), 1, "[1, 1, -1]")
+            .replace(r#""name": "turned", "#, r#""name": "moved", "#)
+            .replace(r#""name": "stretched", "#, "");
+        let path = scratch("alike.gltf");
+        std::fs::write(&path, text).expect("write");
+        let scene = crate::scene::Scene::load(&path.to_string_lossy()).expect("scene");
+        let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();
+        assert_eq!(names, ["moved", "moved_2", "node3"]);
+        let mirrored = &scene.objects[2];
+        let [a, b, c] = mirrored.mesh.triangles[0];
+        let p = |i: u32| mirrored.mesh.positions[i as usize];
+        // The quad faces +z; mirrored in z it faces −z, and so must its winding.
+        assert!(
+            (p(b) - p(a)).cross(p(c) - p(a)).z < 0.0,
+            "{:?}",
+            mirrored.mesh.triangles[0]
+        );
     }
 }

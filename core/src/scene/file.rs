@@ -389,6 +389,17 @@ fn convert_light(light: LightFile) -> Result<Light> {
 /// more than a tenth of a millimetre.
 const MAX_COORDINATE: f64 = 1e12;
 
+/// Whether an object's frame's origin lies within [`MAX_COORDINATE`] of the world's;
+/// the message says where it lies.
+pub(super) fn check_origin(origin: DVec3) -> std::result::Result<(), String> {
+    if origin.is_finite() && origin.abs().max_element() <= MAX_COORDINATE {
+        return Ok(());
+    }
+    Err(format!(
+        "lies at {origin}, beyond {MAX_COORDINATE:e} m from the origin"
+    ))
+}
+
 /// Whether a mesh lies within [`MAX_COORDINATE`] of its origin.
 pub(super) fn check_extent(mesh: &Mesh) -> Result<()> {
     let bounds = mesh.bounds();
@@ -480,11 +491,7 @@ fn build_object(o: ObjectFile, base: &Path, reach: Reach) -> Result<Vec<SceneObj
             let rotation = DQuat::from_euler(EulerRot::XYZ, rx, ry, rz);
             let scale = placement.scale as f64;
             let origin = DVec3::from(placement.translate) + rotation * own_origin * scale;
-            if origin.abs().max_element() > MAX_COORDINATE {
-                return Err(invalid(format!(
-                    "{name} lies at {origin}, beyond {MAX_COORDINATE:e} m from the origin"
-                )));
-            }
+            check_origin(origin).map_err(|e| invalid(format!("{name} {e}")))?;
             Ok(object.placed(name, origin, rotation, scale))
         })
         .collect()

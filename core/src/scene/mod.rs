@@ -7,6 +7,7 @@
 pub mod file;
 mod forest;
 
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -56,8 +57,9 @@ pub const MAX_OBJECT_NAME: usize = 64;
 /// bytes of scene file can name a generator of billions of triangles.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SceneLimits {
-    /// Triangles over every object (generators' counts from their parameters, OBJ
-    /// files' from their face lines).
+    /// Triangles over every mesh built (generators' counts from their parameters, OBJ
+    /// files' from their face lines, glTF files' from their JSON:
+    /// [`GltfCensus`](crate::gltf::GltfCensus)).
     pub max_triangles: u64,
     pub max_objects: usize,
 }
@@ -118,6 +120,37 @@ pub fn check_object_name(name: &str) -> Result<(), BadObjectName> {
     "object name `{0}` must be 1 to {MAX_OBJECT_NAME} ASCII letters, digits, `-`, `_` or `.`, not starting with `.`"
 )]
 pub struct BadObjectName(pub String);
+
+/// Object names made unique and valid from names that may repeat or be empty (a glTF
+/// file's nodes): `wheel`, `wheel_2`, `wheel_3`, … each in constant time.
+#[derive(Default)]
+struct UniqueNames {
+    taken: HashSet<String>,
+    /// Per stem, the suffix to try next.
+    next: HashMap<String, u64>,
+}
+
+impl UniqueNames {
+    fn make(&mut self, text: &str) -> String {
+        let stem = object_name(text, "node");
+        let mut k = self.next.get(&stem).copied().unwrap_or(1);
+        loop {
+            let name = if k == 1 {
+                stem.clone()
+            } else {
+                // (The stem cut to leave room for the suffix within the longest name.)
+                let suffix = format!("_{k}");
+                let kept: String = stem.chars().take(MAX_OBJECT_NAME - suffix.len()).collect();
+                kept + &suffix
+            };
+            k += 1;
+            if self.taken.insert(name.clone()) {
+                self.next.insert(stem, k);
+                return name;
+            }
+        }
+    }
+}
 
 /// `text` (a file's stem, a node's name) made a valid object name (see
 /// [`check_object_name`]): other characters, dots too (so it cannot start with one),
@@ -404,7 +437,7 @@ impl Scene {
     /// path. Refused, before its buffers are read, past `limits`.
     pub fn from_gltf(path: &Path, reach: Reach, limits: &SceneLimits) -> Result<Scene> {
         let census = crate::gltf::census(path, reach)?;
-        limits.check(census.mesh_triangles, census.placements)?;
+        limits.check(census.built_triangles, census.placements)?;
         let model = crate::gltf::load_gltf(path, reach)?;
         let at_fault = |name: &str, message: String| Error::Obj {
             path: path.to_path_buf(),
@@ -412,22 +445,11 @@ impl Scene {
         };
         let mut templates: Vec<Option<SceneObject>> = vec![None; model.meshes.len()];
         let mut meshes = model.meshes;
-        let mut names = std::collections::HashSet::new();
+        let mut names = UniqueNames::default();
         let mut objects = Vec::with_capacity(model.placements.len());
         for placement in &model.placements {
-            // Unique valid names: `wheel`, `wheel_2`, … for nodes alike or unnamed.
-            let stem = object_name(&placement.name, "node");
-            let name = (1..)
-                .map(|k| {
-                    if k == 1 {
-                        stem.clone()
-                    } else {
-                        format!("{stem}_{k}")
-                    }
-                })
-                .find(|n| !names.contains(n))
-                .unwrap_or_default();
-            names.insert(name.clone());
+            let name = names.make(&placement.name);
+            file::check_origin(placement.transform.translation).map_err(|e| at_fault(&name, e))?;
             let object = match crate::gltf::similarity(&placement.transform) {
                 Some((origin, rotation, scale)) => {
                     let template = match &mut templates[placement.mesh] {
@@ -448,16 +470,12 @@ impl Scene {
                 }
                 None => {
                     let source = match (&templates[placement.mesh], &meshes[placement.mesh]) {
-                        (Some(template), _) => template.mesh.as_ref().clone(),
-                        (None, Some(mesh)) => mesh.clone(),
+                        (Some(template), _) => template.mesh.as_ref(),
+                        (None, Some(mesh)) => mesh,
                         (None, None) => return Err(at_fault(&name, "its mesh was not built".into())),
                     };
-                    let mut mesh =
+                    let mesh =
                         source.transformed(glam::Affine3A::from_mat3(placement.transform.matrix3.as_mat3()));
-                    if placement.transform.matrix3.determinant() < 0.0 {
-                        // A mirror: the corners' turn is reversed to keep faces facing out.
-                        mesh.triangles.iter_mut().for_each(|t| t.swap(1, 2));
-                    }
                     file::check_extent(&mesh).map_err(|e| at_fault(&name, e.to_string()))?;
                     SceneObject::new(name, mesh, placement.transform.translation, Specular::default())
                 }

@@ -53,7 +53,7 @@ impl Placements {
                 .fold(Aabb::default(), |b, &k| b.union(bounds[k as usize]))
         };
         let mut nodes = vec![Node {
-            bounds: union(&order),
+            bounds: Aabb::default(),
             first: 0,
             count: 0,
         }];
@@ -105,7 +105,6 @@ impl Placements {
             return;
         }
         let mut beyond = f32::INFINITY;
-        // (A box that cannot be placed, NaN, is visited: never culled on a doubt.)
         let past = |near: f32, beyond: f32| near > beyond * (1.0 + DEPTH_MARGIN);
         let mut queue = BinaryHeap::new();
         if let Some(near) = rays.near_depth(&self.nodes[0].bounds) {
@@ -217,7 +216,9 @@ impl BlockRays {
             return None;
         }
         let f = self.forward;
-        Some(f.dot(Vec3::select(f.cmpgt(Vec3::ZERO), lo, hi)))
+        let near = f.dot(Vec3::select(f.cmpgt(Vec3::ZERO), lo, hi));
+        // (A box that cannot be placed, NaN, comes first: never culled on a doubt.)
+        Some(if near.is_nan() { f32::NEG_INFINITY } else { near })
     }
 }
 

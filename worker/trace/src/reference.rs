@@ -211,7 +211,8 @@ impl<'a> SampleGrid<'a> {
     fn trace(&self, tracer: &SceneTracer, k: usize, samples: &mut BlockSamples) {
         let (o, (tracing, local, scale)) = (&tracer.objects[k], &self.tracing[k]);
         let fine = samples.fine;
-        let mut hits = Vec::new();
+        // (The block's scratch buffer, taken while `samples` keeps hits.)
+        let mut hits = std::mem::take(&mut samples.hits);
         match tracing {
             Tracing::Behind => {}
             Tracing::Beams(beam) => {
@@ -245,6 +246,7 @@ impl<'a> SampleGrid<'a> {
                         t_max: f32::INFINITY,
                     })
                     .collect();
+                hits.clear();
                 hits.resize(rays.len(), None);
                 o.bvh.intersect_batch(&rays, &mut hits);
                 for (&(fx, fy), hit) in cells.iter().zip(&hits) {
@@ -261,6 +263,7 @@ impl<'a> SampleGrid<'a> {
                 }
             }
         }
+        samples.hits = hits;
     }
 }
 
@@ -272,6 +275,8 @@ struct BlockSamples {
     /// Pixels in a row of the block.
     width: u32,
     nearest: Vec<Sample>,
+    /// Scratch for one object's hits over a tile.
+    hits: Vec<Option<Hit>>,
 }
 
 impl BlockSamples {
@@ -287,6 +292,7 @@ impl BlockSamples {
             n,
             width: block.width,
             nearest: vec![None; fine.pixels().count()],
+            hits: Vec::new(),
         }
     }
 
