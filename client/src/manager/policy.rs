@@ -244,7 +244,7 @@ pub const SHEET_MAX_EDGE: u32 = 720;
 
 /// Nanoseconds this client's rasterizer takes a triangle of leaves, shading included:
 /// drawn as geometry in the demo, the default scene's tree (9,228 triangles) added
-/// 1.5–1.6 ms to the frame's geometry stage (3 runs). (Smaller triangles cost less:
+/// 1.2–1.6 ms to the frame's geometry stage (5 runs). (Smaller triangles cost less:
 /// the rock's million take 28–32 ms.)
 pub const GEOMETRY_NS_PER_TRIANGLE: f32 = 160.0;
 
