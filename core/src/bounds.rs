@@ -61,6 +61,18 @@ impl Aabb {
         (self.max - self.min).max(Vec3::ZERO)
     }
 
+    /// The axis (0, 1 or 2) along which the box is longest; the first of equals.
+    pub fn widest_axis(&self) -> usize {
+        let e = self.extent();
+        if e.x >= e.y && e.x >= e.z {
+            0
+        } else if e.y >= e.z {
+            1
+        } else {
+            2
+        }
+    }
+
     /// Half the surface area: the SAH cost weight.
     #[inline]
     pub fn half_area(&self) -> f32 {

@@ -239,30 +239,53 @@ fn file_name(path: &Path) -> Result<String> {
         .ok_or_else(|| Error::Invalid(format!("{} has no file name", path.display())))
 }
 
+/// Where the files a model names lie: beside the model on disk, and beside its name in
+/// the bundle.
+struct Beside {
+    base: PathBuf,
+    name_dir: PathBuf,
+}
+
+impl Beside {
+    fn of(path: &Path, name: &str) -> Beside {
+        Beside {
+            base: path.parent().unwrap_or(Path::new(".")).to_path_buf(),
+            name_dir: Path::new(name)
+                .parent()
+                .map(Path::to_path_buf)
+                .unwrap_or_default(),
+        }
+    }
+
+    /// The bytes of the file `relative` names beside the model, if it can be read (a
+    /// missing one is the loader's to name, not the bundle's).
+    fn read(&self, relative: impl AsRef<Path>) -> Option<Vec<u8>> {
+        std::fs::read(self.base.join(relative)).ok()
+    }
+
+    /// Adds `data` as the file `relative` names beside the model.
+    fn add(&self, relative: impl AsRef<Path>, data: Vec<u8>, files: &mut Vec<SceneFile>) {
+        files.push(SceneFile {
+            path: self.name_dir.join(relative).to_string_lossy().into_owned(),
+            data,
+        });
+    }
+}
+
 /// Adds an OBJ (as `name`), its MTL files and their texture maps.
 fn add_obj(path: &Path, name: &str, files: &mut Vec<SceneFile>) -> Result<()> {
     let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let base = path.parent().unwrap_or(Path::new("."));
-    let name_dir = Path::new(name)
-        .parent()
-        .map(Path::to_path_buf)
-        .unwrap_or_default();
+    let beside = Beside::of(path, name);
     for mtl in referenced(&data, "mtllib") {
-        let Ok(mtl_data) = std::fs::read(base.join(&mtl)) else {
+        let Some(mtl_data) = beside.read(&mtl) else {
             continue; // A missing MTL is a warning when loading, not an error.
         };
         for texture in referenced(&mtl_data, "map_Kd") {
-            if let Ok(bytes) = std::fs::read(base.join(&texture)) {
-                files.push(SceneFile {
-                    path: name_dir.join(&texture).to_string_lossy().into_owned(),
-                    data: bytes,
-                });
+            if let Some(bytes) = beside.read(&texture) {
+                beside.add(&texture, bytes, files);
             }
         }
-        files.push(SceneFile {
-            path: name_dir.join(&mtl).to_string_lossy().into_owned(),
-            data: mtl_data,
-        });
+        beside.add(&mtl, mtl_data, files);
     }
     files.push(SceneFile {
         path: name.to_string(),
@@ -274,18 +297,13 @@ fn add_obj(path: &Path, name: &str, files: &mut Vec<SceneFile>) -> Result<()> {
 /// Adds a glTF file (as `name`) and the buffers and images beside it that it names.
 fn add_gltf(path: &Path, name: &str, files: &mut Vec<SceneFile>) -> Result<()> {
     let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let base = path.parent().unwrap_or(Path::new("."));
-    let name_dir = Path::new(name)
-        .parent()
-        .map(Path::to_path_buf)
-        .unwrap_or_default();
-    for file in relief_core::gltf::referenced_files(path, Reach::Anywhere)? {
-        // A missing or escaping file is the loader's error to name, not the bundle's.
-        if let (Some(relative), Ok(bytes)) = (safe_relative(&file), std::fs::read(base.join(&file))) {
-            files.push(SceneFile {
-                path: name_dir.join(relative).to_string_lossy().into_owned(),
-                data: bytes,
-            });
+    let beside = Beside::of(path, name);
+    for file in relief_core::gltf::referenced_files(path, &data)? {
+        // (One that would leave the model's directory is left out: refused on loading.)
+        if let Some(relative) = safe_relative(&file)
+            && let Some(bytes) = beside.read(&relative)
+        {
+            beside.add(&relative, bytes, files);
         }
     }
     files.push(SceneFile {

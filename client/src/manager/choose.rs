@@ -190,15 +190,16 @@ impl Manager {
     /// How each held texture of `object` would do warped to `eye`: the growth of its
     /// widest predicted gap over the gaps it has at its own eye, in screen pixels
     /// (`INFINITY` when it cannot be warped there), whether it is too coarse to be
-    /// shown, and whether a finer one can be had (eq. 4-1).
+    /// shown, and whether a finer one can be had (eq. 4-1): one of `wanted` texels a
+    /// side, the edge asked for at `eye` ([`Manager::size_for`]).
     pub(super) fn grades<'a>(
         &'a self,
         scene: &Scene,
         object: usize,
         eye: Vec3,
+        wanted: u32,
         camera: &'a Camera,
     ) -> impl Iterator<Item = Grade> + 'a {
-        let (wanted, _) = Self::size_for(&scene.objects[object], eye, camera);
         let centre = scene.objects[object].local_bounds.center();
         let at_eye = Camera {
             eye: eye.as_dvec3(),

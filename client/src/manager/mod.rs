@@ -218,13 +218,14 @@ impl Manager {
                 continue;
             }
             let (centre, eye) = (object.local_bounds.center(), camera.eye_f32());
-            if cheaper_as_geometry(object, Self::size_for(object, eye, camera).0) {
+            let (wanted, _) = Self::size_for(object, eye, camera);
+            if cheaper_as_geometry(object, wanted) {
                 // Drawn as geometry while its texture would cost more than it; where
                 // the eye is going, it may not.
                 self.predict_for(scene, k, camera);
                 continue;
             }
-            let grades: Vec<Grade> = self.grades(scene, k, eye, camera).collect();
+            let grades: Vec<Grade> = self.grades(scene, k, eye, wanted, camera).collect();
             self.counters.needs += 1;
             let held = &self.objects[k].held;
             let best = shown_texture(&grades, tolerance, |i| angle_between(centre, held[i].eye, eye));

@@ -229,11 +229,12 @@ impl Manager {
             return;
         }
         let (future, eye) = (object.to_local(future), camera.eye_f32());
-        if cheaper_as_geometry(object, Self::size_for(object, future, camera).0) {
+        let (wanted, _) = Self::size_for(object, future, camera);
+        if cheaper_as_geometry(object, wanted) {
             return;
         }
         let held: Vec<(Vec3, Grade)> = (self.objects[k].held.iter().map(|h| h.eye))
-            .zip(self.grades(scene, k, future, camera))
+            .zip(self.grades(scene, k, future, wanted, camera))
             .collect();
         let asked: Vec<Vec3> = (self.pending.values())
             .filter(|p| p.object == k)

@@ -91,10 +91,11 @@ pub fn census(path: &Path, reach: Reach) -> Result<GltfCensus> {
     Ok(census)
 }
 
-/// The files beside `path` that it names by URI (buffers and images, not `data:` URIs),
-/// as paths relative to its directory: what a scene bundle must carry with it.
-pub fn referenced_files(path: &Path, reach: Reach) -> Result<Vec<String>> {
-    let gltf = open(path, reach)?;
+/// The files beside a glTF file that it names by URI (buffers and images, not `data:`
+/// URIs), as paths relative to its directory: what a scene bundle must carry with it.
+/// `bytes` are the file's, read from `path` (named in errors).
+pub fn referenced_files(path: &Path, bytes: &[u8]) -> Result<Vec<String>> {
+    let gltf = parse(path, bytes)?;
     let buffers = gltf.document.buffers().filter_map(|b| match b.source() {
         gltf::buffer::Source::Uri(uri) => Some(uri),
         gltf::buffer::Source::Bin => None,
@@ -220,15 +221,20 @@ fn read_buffers(gltf: &gltf::Gltf, base: &Path, reach: Reach) -> std::result::Re
 
 /// Reads and validates the file's JSON (and a `.glb`'s binary chunk).
 fn open(path: &Path, reach: Reach) -> Result<gltf::Gltf> {
+    let opened = reach.check(path)?;
+    let bytes = std::fs::read(opened).map_err(|e| Error::io(path, e))?;
+    parse(path, &bytes)
+}
+
+/// Validates a glTF file's `bytes` (read from `path`, named in errors).
+fn parse(path: &Path, bytes: &[u8]) -> Result<gltf::Gltf> {
     let error = |message: String| Error::Obj {
         path: path.to_path_buf(),
         message,
     };
-    let opened = reach.check(path)?;
-    let bytes = std::fs::read(opened).map_err(|e| Error::io(path, e))?;
     let malformed = |e: gltf::Error| error(format!("malformed glTF: {e}"));
     let gltf::Gltf { document, blob } =
-        gltf::Gltf::from_slice_without_validation(&bytes).map_err(malformed)?;
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(malformed)?;
     let root = document.into_json();
     // gltf-json 1.4's validation looks up a primitive's POSITION accessor before it
     // checks that the index is in range (a panic on a bad one, found by fuzzing):

@@ -185,11 +185,7 @@ impl PlacementFile {
     fn check(&self) -> Result<()> {
         let moved =
             crate::vector::ensure_finite_f64("translate", DVec3::from(self.translate)).map_err(invalid)?;
-        if moved.abs().max_element() > MAX_COORDINATE {
-            return Err(invalid(format!(
-                "translate {moved} lies beyond {MAX_COORDINATE:e} m from the origin"
-            )));
-        }
+        check_origin(moved).map_err(|e| invalid(format!("translate {e}")))?;
         crate::vector::ensure_finite("rotate_deg", Vec3::from(self.rotate_deg)).map_err(invalid)?;
         if !(self.scale.is_finite() && self.scale > 0.0) {
             return Err(invalid(format!(

@@ -67,14 +67,7 @@ impl Placements {
                 continue;
             }
             let centres = Aabb::from_points(objects.iter().map(|&k| bounds[k as usize].center()));
-            let extent = centres.extent();
-            let axis = if extent.x >= extent.y && extent.x >= extent.z {
-                0
-            } else if extent.y >= extent.z {
-                1
-            } else {
-                2
-            };
+            let axis = centres.widest_axis();
             let middle = objects.len() / 2;
             objects.select_nth_unstable_by(middle, |&a, &b| {
                 let (a, b) = (bounds[a as usize].center(), bounds[b as usize].center());

@@ -280,14 +280,7 @@ fn partition(refs: &[PrimRef], prims: &mut [u32], centroids: Aabb, axis: usize, 
 /// Splits at the median centroid along the widest axis (order by index when all
 /// centroids coincide).
 fn median_split(refs: &[PrimRef], prims: &mut [u32], centroids: Aabb) -> (usize, (Aabb, Aabb), (Aabb, Aabb)) {
-    let extent = centroids.extent();
-    let axis = if extent.x >= extent.y && extent.x >= extent.z {
-        0
-    } else if extent.y >= extent.z {
-        1
-    } else {
-        2
-    };
+    let axis = centroids.widest_axis();
     let mid = prims.len() / 2;
     prims.select_nth_unstable_by(mid, |&a, &b| {
         refs[a as usize].centroid[axis].total_cmp(&refs[b as usize].centroid[axis])
