@@ -789,7 +789,8 @@ pub fn prewarp(impostor: &Impostor, params: &WarpParams, variant: Variant) -> Pr
     prewarp_with(impostor, params, variant, None, false)
 }
 
-/// As [`prewarp`], with the halves above and below the epipole on two threads: they
+/// As [`prewarp`], with the halves above and below the epipole on two threads (for a
+/// texture of more than twice `MIN_TASK_PIXELS` texels): they
 /// write disjoint rows (texels move towards the epipole or away from it, never past
 /// it), so each
 /// writes straight into the final image. With `seen` (see [`PlaneWindow::seen_by`]),
@@ -801,7 +802,8 @@ pub fn prewarp_split(
     variant: Variant,
     seen: Option<&PlaneWindow>,
 ) -> PrewarpImage {
-    prewarp_with(impostor, params, variant, seen, true)
+    let parallel = impostor.packed.len() >= 2 * super::MIN_TASK_PIXELS;
+    prewarp_with(impostor, params, variant, seen, parallel)
 }
 
 /// A rectangle of the source plane, in texel coordinates: `u ∈ [u0, u1], v ∈ [v0, v1]`.
