@@ -42,6 +42,7 @@ mod requests;
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
+use rayon::prelude::*;
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender};
 
 use relief_core::camera::Camera;
@@ -61,7 +62,7 @@ use around::angle_between;
 use cache::ObjectState;
 use choose::{Grade, may_show, shown_texture};
 use draw::Kept;
-use policy::{SHOWN_STALE, WARM_UP_POLL, cheaper_as_geometry, texel_pixels};
+use policy::{PARALLEL_ASSESSMENTS, SHOWN_STALE, WARM_UP_POLL, cheaper_as_geometry, texel_pixels};
 use requests::Pending;
 
 /// The manager of one client: what it holds and has asked for per object, where the eye
@@ -196,36 +197,48 @@ impl Manager {
         let shown_at = Some(Instant::now());
         let mut shows = vec![Show::Geometry; scene.objects.len()];
         let world_camera = camera;
+        // Every object assessed, and its prediction worked out, at once on the pool's
+        // threads: they only read, and grading each held texture (its critical points'
+        // growth) at the eye and where it is going is most of a frame's plan — at 300
+        // impostors, milliseconds.
+        let assess = |k: usize| {
+            let assessment = self.assess(scene, k, world_camera);
+            let prediction = (assessment.reason != Some(GeometryReason::Cheap))
+                .then(|| self.prediction(scene, k, &assessment.camera))
+                .flatten();
+            (assessment, prediction)
+        };
+        let objects = 0..scene.objects.len();
+        let mut assessed: Vec<Option<_>> = match objects.len() < PARALLEL_ASSESSMENTS {
+            true => objects.map(|k| Some(assess(k))).collect(),
+            false => objects.into_par_iter().map(|k| Some(assess(k))).collect(),
+        };
         for k in nearest_first(scene, world_camera) {
             let object = &scene.objects[k];
+            let Some((assessment, prediction)) = assessed[k].take() else {
+                continue;
+            };
             // Each object is decided about in its own frame (see `SceneObject`).
-            let camera = &object.local_camera(world_camera);
-            match geometry_reason(object, world_camera.eye) {
+            let camera = &assessment.camera;
+            match assessment.reason {
                 Some(GeometryReason::Cheap) => continue,
                 Some(GeometryReason::TooNear) => {
                     // Drawn as geometry while the eye is this near, but the eye will
                     // leave: have its textures ready by then.
-                    self.predict_for(scene, k, camera);
+                    self.predict_for(scene, k, camera, prediction);
                     continue;
                 }
                 None => {}
             }
-            if !camera.may_see(&object.local_bounds) {
-                // Off screen: nothing shown, so nothing stale and nothing needed now
-                // (drawn as geometry, which the rasterizer leaves out at once); the
-                // textures for where the eye is going are still asked for.
-                self.predict_for(scene, k, camera);
+            let Some(grades) = assessment.grades else {
+                // Off screen (nothing shown, so nothing stale and nothing needed now:
+                // drawn as geometry, which the rasterizer leaves out at once), or drawn
+                // as geometry while its texture would cost more than it: the textures
+                // for where the eye is going are still asked for.
+                self.predict_for(scene, k, camera, prediction);
                 continue;
-            }
+            };
             let (centre, eye) = (object.local_bounds.center(), camera.eye_f32());
-            let (wanted, _) = Self::size_for(object, eye, camera);
-            if cheaper_as_geometry(object, wanted) {
-                // Drawn as geometry while its texture would cost more than it; where
-                // the eye is going, it may not.
-                self.predict_for(scene, k, camera);
-                continue;
-            }
-            let grades: Vec<Grade> = self.grades(scene, k, eye, wanted, camera).collect();
             self.counters.needs += 1;
             let held = &self.objects[k].held;
             let best = shown_texture(&grades, tolerance, |i| angle_between(centre, held[i].eye, eye));
@@ -290,7 +303,7 @@ impl Manager {
             if (!valid || want_finer) && !asked_for && !asking_now {
                 self.request(scene, k, eye, camera, None);
             }
-            self.predict_for(scene, k, camera);
+            self.predict_for(scene, k, camera, prediction);
             shows[k] = match best {
                 Some((i, g)) if g.growth <= SHOWN_STALE * tolerance => {
                     let held = &mut self.objects[k].held;
@@ -315,6 +328,40 @@ impl Manager {
         }
         self.counters.load_scale_sum += f64::from(self.load_scale);
         shows
+    }
+}
+
+/// What a frame knows of an object before deciding about it ([`Manager::assess`]).
+struct Assessment {
+    /// The frame's camera in the object's frame (see `SceneObject`).
+    camera: Camera,
+    /// Why it is drawn as geometry, whatever the textures.
+    reason: Option<GeometryReason>,
+    /// Each held texture's grade at the eye, where it may be shown: on screen, and its
+    /// texture no dearer to warp than its triangles to draw
+    /// ([`cheaper_as_geometry`]); `None` elsewhere.
+    grades: Option<Vec<Grade>>,
+}
+
+impl Manager {
+    /// Object `k` seen from `world_camera`: its camera, and how its textures grade.
+    fn assess(&self, scene: &Scene, k: usize, world_camera: &Camera) -> Assessment {
+        let object = &scene.objects[k];
+        let camera = object.local_camera(world_camera);
+        let reason = geometry_reason(object, world_camera.eye);
+        let grades = (reason.is_none() && camera.may_see(&object.local_bounds))
+            .then(|| {
+                let eye = camera.eye_f32();
+                let (wanted, _) = Self::size_for(object, eye, &camera);
+                (!cheaper_as_geometry(object, wanted))
+                    .then(|| self.grades(scene, k, eye, wanted, &camera).collect())
+            })
+            .flatten();
+        Assessment {
+            camera,
+            reason,
+            grades,
+        }
     }
 }
 

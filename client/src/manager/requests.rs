@@ -52,6 +52,16 @@ pub fn texture_ladder(need: u32) -> u32 {
         .unwrap_or(largest)
 }
 
+/// What [`Manager::predict_for`] decides from ([`Manager::prediction`]).
+pub(super) struct Prediction {
+    /// Seconds ahead.
+    horizon: f64,
+    /// The eye then, in the object's frame.
+    future: Vec3,
+    /// Each held texture's eye and its grade from `future`.
+    held: Vec<(Vec3, Grade)>,
+}
+
 impl Manager {
     /// Records the round trip of `pending`, whose final texture reached the client at
     /// `arrived` and is taken in now: in the counters (latency to its arrival, and the
@@ -210,32 +220,59 @@ impl Manager {
         turned(centre, to, axis, lead)
     }
 
-    /// Asks ahead (when predicting) for the texture the eye will need once a request
-    /// for object `k` made now comes back, and withdraws predictions the motion has
-    /// left behind. `camera` in the object's frame.
-    pub(super) fn predict_for(&mut self, scene: &Scene, k: usize, camera: &Camera) {
+    /// Where the eye will be once a request for object `k` made now comes back (in the
+    /// object's frame, as `camera` is), and how each held texture grades there: what
+    /// [`Manager::predict_for`] decides from. `None` where nothing is to be asked
+    /// ahead: not predicting, no motion yet, or drawn as geometry from there. It only
+    /// reads, so a frame works it out for every object at once.
+    pub(super) fn prediction(&self, scene: &Scene, k: usize, camera: &Camera) -> Option<Prediction> {
         if !self.config.predict {
-            return;
+            return None;
         }
         // The round trip to plan for, with time to spare, and the eye then.
         let horizon = (HORIZON_SPARE * self.latency(k) + HORIZON_MARGIN_S).min(MAX_HORIZON_S);
-        let Some(future) = self.predictor.predict(horizon) else {
-            return;
-        };
+        let future = self.predictor.predict(horizon)?;
         let object = &scene.objects[k];
-        let centre = object.local_bounds.center();
         // Drawn as geometry from there: nothing to ask for.
         if geometry_reason(object, future) == Some(GeometryReason::TooNear) {
-            return;
+            return None;
         }
-        let (future, eye) = (object.to_local(future), camera.eye_f32());
+        let future = object.to_local(future);
         let (wanted, _) = Self::size_for(object, future, camera);
         if cheaper_as_geometry(object, wanted) {
-            return;
+            return None;
         }
-        let held: Vec<(Vec3, Grade)> = (self.objects[k].held.iter().map(|h| h.eye))
+        let held = (self.objects[k].held.iter().map(|h| h.eye))
             .zip(self.grades(scene, k, future, wanted, camera))
             .collect();
+        Some(Prediction {
+            horizon,
+            future,
+            held,
+        })
+    }
+
+    /// Asks ahead for the texture the eye will need once a request for object `k`
+    /// made now comes back, as `prediction` ([`Manager::prediction`]) foresees, and
+    /// withdraws predictions the motion has left behind. `camera` in the object's
+    /// frame.
+    pub(super) fn predict_for(
+        &mut self,
+        scene: &Scene,
+        k: usize,
+        camera: &Camera,
+        prediction: Option<Prediction>,
+    ) {
+        let Some(Prediction {
+            horizon,
+            future,
+            held,
+        }) = prediction
+        else {
+            return;
+        };
+        let centre = scene.objects[k].local_bounds.center();
+        let eye = camera.eye_f32();
         let asked: Vec<Vec3> = (self.pending.values())
             .filter(|p| p.object == k)
             .map(|p| p.eye)
