@@ -137,37 +137,59 @@ fn edge(p: Vec2, q: Vec2, r: Vec2) -> f32 {
     OrderedEdge::new(p, q, 1.0).value_at(r)
 }
 
-/// The pixels `x` of row centre `py` in `bounds` whose centres the triangle `corners`
-/// (oriented by `sign`) can cover: each edge bounds the row on one side where it
-/// crosses it. Widened against rounding (2 pixels, more for coordinates far off screen)
-/// — the per-pixel tests inside stay exact, so the shared-edge rule holds — it spares
-/// the tests of the bounding box's pixels outside the triangle (half of them for a
-/// large one). `None` when empty.
-#[inline]
-fn row_span(corners: [Vec2; 3], sign: f32, py: f32, bounds: (usize, usize)) -> Option<(usize, usize)> {
-    let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
-    let mut largest = 0f32;
-    for k in 0..3 {
-        let (p, q) = (corners[(k + 1) % 3], corners[(k + 2) % 3]);
-        largest = largest.max(p.x.abs()).max(p.y.abs());
-        let dy = q.y - p.y;
-        if dy == 0.0 {
-            // Parallel to the row: all of it or none, which the exact tests decide.
-            continue;
-        }
-        let crossing = p.x + (py - p.y) * ((q.x - p.x) / dy);
-        // The inside of the edge p → q is where sign·E ≥ 0, E growing with x as −dy.
-        if sign * dy < 0.0 {
-            lo = lo.max(crossing);
-        } else {
-            hi = hi.min(crossing);
+/// Where a triangle's edges cross each row, set up once per triangle (each edge's
+/// slope: a division, where a row then costs a multiply-add an edge — a leaf, thin
+/// and tall, meets many rows for few pixels, and the divisions per row were the
+/// tree's largest cost drawn as geometry).
+#[derive(Clone, Copy)]
+struct RowSpans {
+    /// Per edge `p → q`: `p`, `(q.x − p.x)/(q.y − p.y)`, and whether the inside lies
+    /// right of the crossing (it bounds the row from below); `None` for an edge
+    /// parallel to the rows — all of the row or none, which the exact tests decide.
+    edges: [Option<(Vec2, f32, bool)>; 3],
+    /// How far a span is widened against rounding (2 pixels, more for coordinates far
+    /// off screen).
+    slack: f32,
+}
+
+impl RowSpans {
+    /// The edges of the triangle `corners`, oriented by `sign`.
+    fn new(corners: [Vec2; 3], sign: f32) -> RowSpans {
+        let mut largest = 0f32;
+        let edges = [0, 1, 2].map(|k| {
+            let (p, q) = (corners[(k + 1) % 3], corners[(k + 2) % 3]);
+            largest = largest.max(p.x.abs()).max(p.y.abs());
+            let dy = q.y - p.y;
+            // The inside of the edge p → q is where sign·E ≥ 0, E growing with x as −dy.
+            (dy != 0.0).then(|| (p, (q.x - p.x) / dy, sign * dy < 0.0))
+        });
+        RowSpans {
+            edges,
+            slack: 2.0 + 1e-6 * largest,
         }
     }
-    let slack = 2.0 + 1e-6 * largest;
-    // (NaN bounds leave `max`/`min` unchanged: the whole box is tested.)
-    let first = ((lo - slack - 0.5).ceil().max(bounds.0 as f32) as usize).max(bounds.0);
-    let last = ((hi + slack - 0.5).floor().min(bounds.1 as f32) as usize).min(bounds.1);
-    (first <= last).then_some((first, last))
+
+    /// The pixels `x` of row centre `py` in `bounds` whose centres the triangle can
+    /// cover: each edge bounds the row on one side where it crosses it. Widened against
+    /// rounding — the per-pixel tests inside stay exact, so the shared-edge rule holds
+    /// — it spares the tests of the bounding box's pixels outside the triangle (half of
+    /// them for a large one). `None` when empty.
+    #[inline]
+    fn row(&self, py: f32, bounds: (usize, usize)) -> Option<(usize, usize)> {
+        let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
+        for &(p, slope, below) in self.edges.iter().flatten() {
+            let crossing = p.x + (py - p.y) * slope;
+            if below {
+                lo = lo.max(crossing);
+            } else {
+                hi = hi.min(crossing);
+            }
+        }
+        // (NaN bounds leave `max`/`min` unchanged: the whole box is tested.)
+        let first = ((lo - self.slack - 0.5).ceil().max(bounds.0 as f32) as usize).max(bounds.0);
+        let last = ((hi + self.slack - 0.5).floor().min(bounds.1 as f32) as usize).min(bounds.1);
+        (first <= last).then_some((first, last))
+    }
 }
 
 /// The pixels of the `w × h` screen whose centres (`k + 0.5`) the bounding box of the
@@ -226,9 +248,10 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
     let edges = [(b, c), (c, a), (a, b)].map(|(p, q)| OrderedEdge::new(p, q, sign));
     let inv_area = f32x8::splat(inv_area);
     let inv_depth = inv_depth.map(f32x8::splat);
+    let spans = RowSpans::new([a, b, c], sign);
     for y in y_start..=y_end {
         let py = y as f32 + 0.5;
-        let Some((x_first, x_last)) = row_span([a, b, c], sign, py, (x_start, x_end)) else {
+        let Some((x_first, x_last)) = spans.row(py, (x_start, x_end)) else {
             continue;
         };
         let row = edges.map(|e| e.row(py));
@@ -265,20 +288,15 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
                 if !nearer {
                     continue;
                 }
-                let bary = || (s.bary[0] * pa[l] + s.bary[1] * pb[l] + s.bary[2] * pc[l]) / sum[l];
+                // (Here one of the two is not uniform: the barycentrics are needed.)
+                let bary = (s.bary[0] * pa[l] + s.bary[1] * pb[l] + s.bary[2] * pc[l]) / sum[l];
                 rows.set(
                     i,
                     GPixel {
                         depth: depth[l],
                         object: index,
-                        albedo: uniform_albedo.unwrap_or_else(|| {
-                            let bary = bary();
-                            to_rgb8(mesh.albedo(tri, bary.x, bary.y))
-                        }),
-                        normal: uniform_normal.unwrap_or_else(|| {
-                            let bary = bary();
-                            mesh.shading_normal(tri, bary.x, bary.y)
-                        }),
+                        albedo: uniform_albedo.unwrap_or_else(|| to_rgb8(mesh.albedo(tri, bary.x, bary.y))),
+                        normal: uniform_normal.unwrap_or_else(|| mesh.shading_normal(tri, bary.x, bary.y)),
                     },
                 );
             }
@@ -363,9 +381,10 @@ mod tests {
                 continue;
             }
             let sign = area.signum();
+            let spans = RowSpans::new([a, b, c], sign);
             for y in 0..h {
                 let py = y as f32 + 0.5;
-                let span = row_span([a, b, c], sign, py, (0, w - 1));
+                let span = spans.row(py, (0, w - 1));
                 for x in 0..w {
                     let p = Vec2::new(x as f32 + 0.5, py);
                     let inside = sign * edge(b, c, p) >= 0.0
