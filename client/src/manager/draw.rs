@@ -56,17 +56,19 @@ impl Manager {
     /// within the pool: from a thread outside it, each would wake a pool thread and
     /// sleep until it is done — at 300 impostors, about 900 such hand-overs a frame.
     pub fn render(&mut self, scene: &Scene, shows: &[Show], camera: &Camera, gbuffer: &mut GBuffer) -> Frame {
-        rayon::scope(|_| self.render_in_pool(scene, shows, camera, gbuffer))
+        // (Timed from here: the hand-over into the pool is the frame's.)
+        let start = Instant::now();
+        rayon::scope(|_| self.render_in_pool(start, scene, shows, camera, gbuffer))
     }
 
     fn render_in_pool(
         &mut self,
+        start: Instant,
         scene: &Scene,
         shows: &[Show],
         camera: &Camera,
         gbuffer: &mut GBuffer,
     ) -> Frame {
-        let start = Instant::now();
         gbuffer.clear();
         self.sprites.resize_with(scene.objects.len(), || None);
         // Each object is tested and drawn in its own frame (see `SceneObject`).

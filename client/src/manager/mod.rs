@@ -62,7 +62,7 @@ use around::angle_between;
 use cache::ObjectState;
 use choose::{Grade, may_show, shown_texture};
 use draw::Kept;
-use policy::{PARALLEL_ASSESSMENTS, SHOWN_STALE, WARM_UP_POLL, cheaper_as_geometry, texel_pixels};
+use policy::{ASSESSMENTS_PER_TASK, SHOWN_STALE, WARM_UP_POLL, texel_pixels};
 use requests::Pending;
 
 /// The manager of one client: what it holds and has asked for per object, where the eye
@@ -197,24 +197,25 @@ impl Manager {
         let shown_at = Some(Instant::now());
         let mut shows = vec![Show::Geometry; scene.objects.len()];
         let world_camera = camera;
-        // Every object assessed, and its prediction worked out, at once on the pool's
-        // threads: they only read, and grading each held texture (its critical points'
-        // growth) at the eye and where it is going is most of a frame's plan — at 300
-        // impostors, milliseconds.
-        let assess = |k: usize| {
+        // Every object assessed, and its prediction worked out, before any is decided
+        // about: they only read, and grading each held texture (its critical points'
+        // growth) at the eye and where it is going is most of a frame's plan — on all
+        // cores once there are enough objects to share ([`ASSESSMENTS_PER_TASK`]).
+        let assess_and_predict = |k: usize| {
             let assessment = self.assess(scene, k, world_camera);
             let prediction = (assessment.reason != Some(GeometryReason::Cheap))
                 .then(|| self.prediction(scene, k, &assessment.camera))
                 .flatten();
-            (assessment, prediction)
+            Some((assessment, prediction))
         };
-        let objects = 0..scene.objects.len();
-        let mut assessed: Vec<Option<_>> = match objects.len() < PARALLEL_ASSESSMENTS {
-            true => objects.map(|k| Some(assess(k))).collect(),
-            false => objects.into_par_iter().map(|k| Some(assess(k))).collect(),
-        };
+        let mut assessed: Vec<Option<_>> = (0..scene.objects.len())
+            .into_par_iter()
+            .with_min_len(ASSESSMENTS_PER_TASK)
+            .map(assess_and_predict)
+            .collect();
         for k in nearest_first(scene, world_camera) {
             let object = &scene.objects[k];
+            // (Each object comes once.)
             let Some((assessment, prediction)) = assessed[k].take() else {
                 continue;
             };
@@ -337,9 +338,10 @@ struct Assessment {
     camera: Camera,
     /// Why it is drawn as geometry, whatever the textures.
     reason: Option<GeometryReason>,
-    /// Each held texture's grade at the eye, where it may be shown: on screen, and its
-    /// texture no dearer to warp than its triangles to draw
-    /// ([`cheaper_as_geometry`]); `None` elsewhere.
+    /// Each held texture's grade at the eye (in the order held: the frame adds and
+    /// drops none before it decides), where it may be shown: on screen, and its
+    /// texture no dearer to warp than its triangles to draw ([`Manager::graded_at`]);
+    /// `None` elsewhere.
     grades: Option<Vec<Grade>>,
 }
 
@@ -350,12 +352,7 @@ impl Manager {
         let camera = object.local_camera(world_camera);
         let reason = geometry_reason(object, world_camera.eye);
         let grades = (reason.is_none() && camera.may_see(&object.local_bounds))
-            .then(|| {
-                let eye = camera.eye_f32();
-                let (wanted, _) = Self::size_for(object, eye, &camera);
-                (!cheaper_as_geometry(object, wanted))
-                    .then(|| self.grades(scene, k, eye, wanted, &camera).collect())
-            })
+            .then(|| self.graded_at(scene, k, camera.eye_f32(), &camera))
             .flatten();
         Assessment {
             camera,

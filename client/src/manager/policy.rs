@@ -254,11 +254,11 @@ pub const GEOMETRY_NS_PER_TRIANGLE: f32 = 160.0;
 /// `relief bench warp`'s 256² pre-warp alone is 17 ns a texel).
 pub const WARP_NS_PER_TEXEL: f32 = 12.0;
 
-/// The fewest objects a frame assesses on all cores at once (grading each held
-/// texture at the eye and where it is going): fewer are graded in turn, where waking
-/// the pool's threads (about 0.1 ms) costs more than it saves. At 300 impostors the
-/// plan took 8.7–9.5 ms so, 10.5–10.7 in turn (a grid of knots, `docs/targets.md`).
-pub const PARALLEL_ASSESSMENTS: usize = 32;
+/// The fewest objects one task of a frame's assessment takes (grading each held
+/// texture at the eye and where it is going): fewer than twice as many are assessed
+/// on the calling thread, where waking the pool's threads (about 0.1 ms) costs more
+/// than it saves (measured in `docs/targets.md`, "Many impostors").
+pub const ASSESSMENTS_PER_TASK: usize = 16;
 
 /// Whether `object` costs no more drawn as geometry than as an impostor whose texture
 /// has `edge` texels a side (then it is drawn as geometry, which is exact). With the

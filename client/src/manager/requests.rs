@@ -223,8 +223,8 @@ impl Manager {
     /// Where the eye will be once a request for object `k` made now comes back (in the
     /// object's frame, as `camera` is), and how each held texture grades there: what
     /// [`Manager::predict_for`] decides from. `None` where nothing is to be asked
-    /// ahead: not predicting, no motion yet, or drawn as geometry from there. It only
-    /// reads, so a frame works it out for every object at once.
+    /// ahead: not predicting, no eye observed yet, or drawn as geometry from there. It
+    /// only reads, so a frame works it out for every object at once.
     pub(super) fn prediction(&self, scene: &Scene, k: usize, camera: &Camera) -> Option<Prediction> {
         if !self.config.predict {
             return None;
@@ -238,18 +238,30 @@ impl Manager {
             return None;
         }
         let future = object.to_local(future);
-        let (wanted, _) = Self::size_for(object, future, camera);
-        if cheaper_as_geometry(object, wanted) {
-            return None;
-        }
-        let held = (self.objects[k].held.iter().map(|h| h.eye))
-            .zip(self.grades(scene, k, future, wanted, camera))
-            .collect();
+        let grades = self.graded_at(scene, k, future, camera)?;
+        let held = (self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect();
         Some(Prediction {
             horizon,
             future,
             held,
         })
+    }
+
+    /// Each held texture of object `k` graded at `eye` (in its frame, as `camera` is)
+    /// for the texture an eye there would ask for; `None` where the object costs no
+    /// more drawn as geometry ([`cheaper_as_geometry`]).
+    pub(super) fn graded_at(
+        &self,
+        scene: &Scene,
+        k: usize,
+        eye: Vec3,
+        camera: &Camera,
+    ) -> Option<Vec<Grade>> {
+        let (wanted, _) = Self::size_for(&scene.objects[k], eye, camera);
+        if cheaper_as_geometry(&scene.objects[k], wanted) {
+            return None;
+        }
+        Some(self.grades(scene, k, eye, wanted, camera).collect())
     }
 
     /// Asks ahead for the texture the eye will need once a request for object `k`

@@ -143,13 +143,22 @@ fn edge(p: Vec2, q: Vec2, r: Vec2) -> f32 {
 /// tree's largest cost drawn as geometry).
 #[derive(Clone, Copy)]
 struct RowSpans {
-    /// Per edge `p → q`: `p`, `(q.x − p.x)/(q.y − p.y)`, and whether the inside lies
-    /// right of the crossing (it bounds the row from below); `None` for an edge
-    /// parallel to the rows — all of the row or none, which the exact tests decide.
-    edges: [Option<(Vec2, f32, bool)>; 3],
+    /// Per edge, where it crosses the rows; `None` for an edge parallel to them — all
+    /// of a row or none, which the exact tests decide.
+    edges: [Option<Crossing>; 3],
     /// How far a span is widened against rounding (2 pixels, more for coordinates far
     /// off screen).
     slack: f32,
+}
+
+/// Where an edge `p → q` crosses the rows: at `x = p.x + (y − p.y)·slope`.
+#[derive(Clone, Copy)]
+struct Crossing {
+    p: Vec2,
+    /// `(q.x − p.x) / (q.y − p.y)`.
+    slope: f32,
+    /// The inside lies right of the crossing (it is the span's left end).
+    left_end: bool,
 }
 
 impl RowSpans {
@@ -161,7 +170,11 @@ impl RowSpans {
             largest = largest.max(p.x.abs()).max(p.y.abs());
             let dy = q.y - p.y;
             // The inside of the edge p → q is where sign·E ≥ 0, E growing with x as −dy.
-            (dy != 0.0).then(|| (p, (q.x - p.x) / dy, sign * dy < 0.0))
+            (dy != 0.0).then(|| Crossing {
+                p,
+                slope: (q.x - p.x) / dy,
+                left_end: sign * dy < 0.0,
+            })
         });
         RowSpans {
             edges,
@@ -177,9 +190,9 @@ impl RowSpans {
     #[inline]
     fn row(&self, py: f32, bounds: (usize, usize)) -> Option<(usize, usize)> {
         let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
-        for &(p, slope, below) in self.edges.iter().flatten() {
+        for &Crossing { p, slope, left_end } in self.edges.iter().flatten() {
             let crossing = p.x + (py - p.y) * slope;
-            if below {
+            if left_end {
                 lo = lo.max(crossing);
             } else {
                 hi = hi.min(crossing);

@@ -58,9 +58,8 @@ use texmap::Depths;
 
 /// The fewest pixels or texels one task of a warp takes (a pre-warp's half, a texture
 /// mapping's rows, its footprint pass): smaller work is not split across cores, where
-/// handing it to another thread costs more than it saves. A far impostor is a few
-/// hundred pixels: a 32² texture's texture mapping into a 64² frame took 62 µs split
-/// row by row and 23 µs whole (`relief bench warp --size 32 --frame-size 64`).
+/// handing it to another thread costs more than it saves — a far impostor is a few
+/// hundred pixels (measured in `docs/targets.md`, "Many impostors").
 pub(crate) const MIN_TASK_PIXELS: usize = 4096;
 
 /// `x ∈ [0, 2²³ − 0.5)` rounded to the nearest integer (ties to even); anything else
@@ -127,7 +126,8 @@ fn positive(factor: f32) -> Result<f32, WarpError> {
 
 impl Prewarped {
     /// The pre-warp of `impostor` for `camera`'s eye in `variant`, split at its epipole
-    /// over two threads, of only what the screen can show (a texture partly off screen,
+    /// over two threads when large ([`prewarp::prewarp_split`]), of only what the
+    /// screen can show (a texture partly off screen,
     /// or far larger than it, pre-warps only the texels that can land on it).
     pub fn new(variant: Variant, impostor: &Impostor, camera: &Camera) -> Result<Prewarped, WarpError> {
         let params = params::WarpParams::new(&impostor.texture, camera.eye_f32())?;

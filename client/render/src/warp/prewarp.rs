@@ -789,8 +789,8 @@ pub fn prewarp(impostor: &Impostor, params: &WarpParams, variant: Variant) -> Pr
     prewarp_with(impostor, params, variant, None, false)
 }
 
-/// As [`prewarp`], with the halves above and below the epipole on two threads (for a
-/// texture of more than twice `MIN_TASK_PIXELS` texels): they
+/// As [`prewarp`], with the halves above and below the epipole on two threads when
+/// it visits at least twice `MIN_TASK_PIXELS` texels (each half about that): they
 /// write disjoint rows (texels move towards the epipole or away from it, never past
 /// it), so each
 /// writes straight into the final image. With `seen` (see [`PlaneWindow::seen_by`]),
@@ -802,8 +802,7 @@ pub fn prewarp_split(
     variant: Variant,
     seen: Option<&PlaneWindow>,
 ) -> PrewarpImage {
-    let parallel = impostor.packed.len() >= 2 * super::MIN_TASK_PIXELS;
-    prewarp_with(impostor, params, variant, seen, parallel)
+    prewarp_with(impostor, params, variant, seen, true)
 }
 
 /// A rectangle of the source plane, in texel coordinates: `u ∈ [u0, u1], v ∈ [v0, v1]`.
@@ -995,7 +994,7 @@ fn prewarp_with(
         false => job.half::<false>(below.clone(), out),
         true => job.half::<true>(below.clone(), out),
     };
-    if parallel {
+    if parallel && visited >= 2 * super::MIN_TASK_PIXELS {
         rayon::join(|| upper_half(&mut upper), || lower_half(&mut lower));
     } else {
         upper_half(&mut upper);

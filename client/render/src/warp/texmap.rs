@@ -111,8 +111,7 @@ pub fn map(
     );
     let (u1, v1) = (f32x8::splat(u1), f32x8::splat(v1));
     // Rows are independent (each pixel samples the image and depth-tests its own slot):
-    // split across cores, unless too few pixels to pay for it (`MIN_TASK_PIXELS`).
-    // Silhouette pixels come back as fragments.
+    // split across cores. Silhouette pixels come back as fragments.
     let map_row = |mut pixels: Rows| {
         let y = pixels.y0();
         let row = dots(camera.ray(x0 as f32 + 0.5, y as f32 + 0.5));
@@ -184,49 +183,35 @@ pub fn map(
         }
         pixels.into_fragments()
     };
-    let pixels = (x1 - x0) as usize * (y1 - y0) as usize;
-    let rows = gbuffer.bands(y0, y1, 1);
-    let fragments: Vec<Vec<Fragment>> = if pixels < MIN_TASK_PIXELS {
-        rows.into_iter().map(map_row).collect()
-    } else {
-        let rows_per_task = (MIN_TASK_PIXELS / (x1 - x0) as usize).max(1);
-        (rows.into_par_iter().with_min_len(rows_per_task))
-            .map(map_row)
-            .collect()
-    };
+    // (Not split below `MIN_TASK_PIXELS` a task: rayon then runs it on this thread.)
+    let rows_per_task = (MIN_TASK_PIXELS / (x1 - x0) as usize).max(1);
+    let fragments: Vec<Vec<Fragment>> = (gbuffer.bands(y0, y1, 1).into_par_iter())
+        .with_min_len(rows_per_task)
+        .map(map_row)
+        .collect();
     gbuffer.add_fragments(fragments.into_iter().flatten());
 }
 
 /// Per texel `k` of `image` (but the last row and column): whether any of the four
 /// texels of the bilinear footprint whose top-left is `k` holds a surface — the one
 /// look-up that turns away most of a texture mapping's pixels. Both passes in
-/// parallel: they read the whole pre-warped image (4 MB at 512²) before the mapping
-/// can start.
+/// parallel for a large image: they read the whole pre-warped image (4 MB at 512²)
+/// before the mapping can start.
 fn footprints(image: &PrewarpImage) -> Vec<u8> {
     // (`max`: chunks must not be empty; an image of no texels yields no rows.)
     let w = (image.width as usize).max(1);
-    let small = image.texels.len() < MIN_TASK_PIXELS;
-    let is_filled = |t: &PTexel| !t.is_empty() as u8;
-    let filled: Vec<u8> = match small {
-        true => image.texels.iter().map(is_filled).collect(),
-        false => image.texels.par_iter().map(is_filled).collect(),
-    };
+    let filled: Vec<u8> = (image.texels.par_iter().with_min_len(MIN_TASK_PIXELS))
+        .map(|t| !t.is_empty() as u8)
+        .collect();
     let mut out = vec![0; filled.len()];
-    let footprint = |((out, top), bottom): ((&mut [u8], &[u8]), &[u8])| {
-        for x in 0..w.saturating_sub(1) {
-            out[x] = top[x] | top[x + 1] | bottom[x] | bottom[x + 1];
-        }
-    };
-    if small {
-        (out.chunks_exact_mut(w).zip(filled.chunks_exact(w)))
-            .zip(filled.chunks_exact(w).skip(1))
-            .for_each(footprint);
-    } else {
-        (out.par_chunks_exact_mut(w).zip(filled.par_chunks_exact(w)))
-            .zip(filled.par_chunks_exact(w).skip(1))
-            .with_min_len((MIN_TASK_PIXELS / w).max(1))
-            .for_each(footprint);
-    }
+    (out.par_chunks_exact_mut(w).zip(filled.par_chunks_exact(w)))
+        .zip(filled.par_chunks_exact(w).skip(1))
+        .with_min_len((MIN_TASK_PIXELS / w).max(1))
+        .for_each(|((out, top), bottom)| {
+            for x in 0..w.saturating_sub(1) {
+                out[x] = top[x] | top[x + 1] | bottom[x] | bottom[x + 1];
+            }
+        });
     out
 }
 
