@@ -391,9 +391,10 @@ fn frame_writes_the_picture_and_the_promised_json() {
         v["psnr_whole_db"].as_f64().unwrap(),
     );
     assert!(whole <= both + 1e-9, "{stdout}");
-    // Measured when written: 28.3 dB, SSIM 0.975, 18× faster than all geometry.
+    // Measured when written: 28.3 dB, SSIM 0.975. (Its speed, 13–26× all geometry's
+    // here, is the benchmarks' to claim: timed once beside the other tests, one run
+    // of a clean clone's CI drew it at 0.3×.)
     assert!(both > 24.0 && v["ssim"].as_f64().unwrap() > 0.9, "{stdout}");
-    assert!(v["speedup"].as_f64().unwrap() > 1.0, "{stdout}");
     let picture = image::open(out).expect("the frame is a PNG");
     assert_eq!((picture.width(), picture.height()), (64, 36));
 }
