@@ -38,7 +38,7 @@ impl TextureImage {
     }
 
     /// An 8-bit RGB image's texels, each channel over 255.
-    pub fn from_rgb8(image: &image::RgbImage) -> TextureImage {
+    fn from_rgb8(image: &image::RgbImage) -> TextureImage {
         TextureImage {
             width: image.width(),
             height: image.height(),
@@ -408,7 +408,7 @@ impl Mesh {
 }
 
 /// Concatenates an optional per-vertex attribute, filling the side that lacks it.
-fn merge_attribute<T: Copy>(
+pub(crate) fn merge_attribute<T: Copy>(
     own: &mut Option<Vec<T>>,
     other: Option<Vec<T>>,
     own_len: usize,

@@ -16,6 +16,7 @@ use super::cache::Held;
 use super::policy::{
     COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LONE_BAND, LONE_MAX_TURN, MAX_TEXEL_PIXELS,
     MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
+    cheaper_as_geometry,
 };
 
 /// How an object is drawn this frame.
@@ -187,25 +188,30 @@ pub(super) fn can_partner(centre: Vec3, shown: Vec3, eye: Vec3, other: Vec3) -> 
 }
 
 impl Manager {
-    /// How each held texture of `object` would do warped to `eye`: the growth of its
-    /// widest predicted gap over the gaps it has at its own eye, in screen pixels
-    /// (`INFINITY` when it cannot be warped there), whether it is too coarse to be
-    /// shown, and whether a finer one can be had (eq. 4-1): one of `wanted` texels a
-    /// side, the edge asked for at `eye` ([`Manager::size_for`]).
-    pub(super) fn grades<'a>(
-        &'a self,
+    /// How each held texture of `object` would do warped to `eye` (in its frame, as
+    /// `camera` is): the growth of its widest predicted gap over the gaps it has at its
+    /// own eye, in screen pixels (`INFINITY` when it cannot be warped there), whether it
+    /// is too coarse to be shown, and whether a finer one can be had (eq. 4-1) — of the
+    /// edge an eye there asks for ([`Manager::size_for`]). `None` where the object costs
+    /// no more drawn as geometry than that texture warped ([`cheaper_as_geometry`]).
+    pub(super) fn grades(
+        &self,
         scene: &Scene,
         object: usize,
         eye: Vec3,
-        wanted: u32,
-        camera: &'a Camera,
-    ) -> impl Iterator<Item = Grade> + 'a {
-        let centre = scene.objects[object].local_bounds.center();
+        camera: &Camera,
+    ) -> Option<Vec<Grade>> {
+        let o = &scene.objects[object];
+        let (wanted, _) = Self::size_for(o, eye, camera);
+        if cheaper_as_geometry(o, wanted) {
+            return None;
+        }
+        let centre = o.local_bounds.center();
         let at_eye = Camera {
             eye: eye.as_dvec3(),
             ..*camera
         };
-        self.objects[object].held.iter().map(move |h| {
+        let grade = |h: &Held| {
             let texture = &h.pyramid.levels[0].texture.camera;
             let too_coarse = needs_finer_texture(texture, &at_eye, COARSEST_SHOWN);
             Grade {
@@ -214,7 +220,8 @@ impl Manager {
                 too_coarse,
                 finer_available: too_coarse && texture.width < wanted,
             }
-        })
+        };
+        Some(self.objects[object].held.iter().map(grade).collect())
     }
 
     /// How `show` draws object `k` from `camera` (in the world): `None` for geometry (or

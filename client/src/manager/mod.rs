@@ -201,24 +201,19 @@ impl Manager {
         // about: they only read, and grading each held texture (its critical points'
         // growth) at the eye and where it is going is most of a frame's plan — on all
         // cores once there are enough objects to share ([`ASSESSMENTS_PER_TASK`]).
-        let assess_and_predict = |k: usize| {
+        let assess_and_predict = |&k: &usize| {
             let assessment = self.assess(scene, k, world_camera);
             let prediction = (assessment.reason != Some(GeometryReason::Cheap))
                 .then(|| self.prediction(scene, k, &assessment.camera))
                 .flatten();
-            Some((assessment, prediction))
+            (k, assessment, prediction)
         };
-        let mut assessed: Vec<Option<_>> = (0..scene.objects.len())
-            .into_par_iter()
-            .with_min_len(ASSESSMENTS_PER_TASK)
+        let order = nearest_first(scene, world_camera);
+        let assessed: Vec<_> = (order.par_iter().with_min_len(ASSESSMENTS_PER_TASK))
             .map(assess_and_predict)
             .collect();
-        for k in nearest_first(scene, world_camera) {
+        for (k, assessment, prediction) in assessed {
             let object = &scene.objects[k];
-            // (Each object comes once.)
-            let Some((assessment, prediction)) = assessed[k].take() else {
-                continue;
-            };
             // Each object is decided about in its own frame (see `SceneObject`).
             let camera = &assessment.camera;
             match assessment.reason {
@@ -340,7 +335,7 @@ struct Assessment {
     reason: Option<GeometryReason>,
     /// Each held texture's grade at the eye (in the order held: the frame adds and
     /// drops none before it decides), where it may be shown: on screen, and its
-    /// texture no dearer to warp than its triangles to draw ([`Manager::graded_at`]);
+    /// texture no dearer to warp than its triangles to draw ([`Manager::grades`]);
     /// `None` elsewhere.
     grades: Option<Vec<Grade>>,
 }
@@ -352,7 +347,7 @@ impl Manager {
         let camera = object.local_camera(world_camera);
         let reason = geometry_reason(object, world_camera.eye);
         let grades = (reason.is_none() && camera.may_see(&object.local_bounds))
-            .then(|| self.graded_at(scene, k, camera.eye_f32(), &camera))
+            .then(|| self.grades(scene, k, camera.eye_f32(), &camera))
             .flatten();
         Assessment {
             camera,

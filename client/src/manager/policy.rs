@@ -254,12 +254,6 @@ pub const GEOMETRY_NS_PER_TRIANGLE: f32 = 160.0;
 /// `relief bench warp`'s 256² pre-warp alone is 17 ns a texel).
 pub const WARP_NS_PER_TEXEL: f32 = 12.0;
 
-/// The fewest objects one task of a frame's assessment takes (grading each held
-/// texture at the eye and where it is going): fewer than twice as many are assessed
-/// on the calling thread, where waking the pool's threads (about 0.1 ms) costs more
-/// than it saves (measured in `docs/targets.md`, "Many impostors").
-pub const ASSESSMENTS_PER_TASK: usize = 16;
-
 /// Whether `object` costs no more drawn as geometry than as an impostor whose texture
 /// has `edge` texels a side (then it is drawn as geometry, which is exact). With the
 /// costs above, the default scene's tree is drawn as geometry once its texture would
@@ -370,6 +364,14 @@ pub const PROBE_LIMIT: f32 = 0.5 * PI;
 /// … then refined this many halvings between the last turn within the tolerance and
 /// the first beyond: to 1/16 of the step, finer than the eye moves in a frame.
 pub const PROBE_REFINEMENTS: u32 = 4;
+
+// ---- The frame's own work ------------------------------------------------------------
+
+/// The fewest objects one task of a frame's assessment takes (grading each held
+/// texture at the eye and where it is going): fewer than twice as many are assessed
+/// on the calling thread, where waking the pool's threads (about 0.1 ms) costs more
+/// than it saves (measured in `docs/targets.md`, "Many impostors").
+pub const ASSESSMENTS_PER_TASK: usize = 16;
 
 // ---- The server's load ------------------------------------------------------------------
 

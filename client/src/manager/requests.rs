@@ -19,7 +19,7 @@ use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
     MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK, PENDING_REACH,
-    REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, asked_for, cheaper_as_geometry, largest_edge,
+    REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -238,30 +238,13 @@ impl Manager {
             return None;
         }
         let future = object.to_local(future);
-        let grades = self.graded_at(scene, k, future, camera)?;
+        let grades = self.grades(scene, k, future, camera)?;
         let held = (self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect();
         Some(Prediction {
             horizon,
             future,
             held,
         })
-    }
-
-    /// Each held texture of object `k` graded at `eye` (in its frame, as `camera` is)
-    /// for the texture an eye there would ask for; `None` where the object costs no
-    /// more drawn as geometry ([`cheaper_as_geometry`]).
-    pub(super) fn graded_at(
-        &self,
-        scene: &Scene,
-        k: usize,
-        eye: Vec3,
-        camera: &Camera,
-    ) -> Option<Vec<Grade>> {
-        let (wanted, _) = Self::size_for(&scene.objects[k], eye, camera);
-        if cheaper_as_geometry(&scene.objects[k], wanted) {
-            return None;
-        }
-        Some(self.grades(scene, k, eye, wanted, camera).collect())
     }
 
     /// Asks ahead for the texture the eye will need once a request for object `k`

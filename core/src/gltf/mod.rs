@@ -19,7 +19,7 @@ use glam::{DAffine3, DMat3, DMat4, DQuat, DVec3, Vec2, Vec3};
 use gltf::json::accessor::ComponentType;
 
 use crate::error::{Error, Result};
-use crate::mesh::{Material, Mesh, TextureImage};
+use crate::mesh::{Material, Mesh, TextureImage, merge_attribute};
 use crate::reach::Reach;
 
 /// A glTF file's meshes, and where its default scene places them.
@@ -300,8 +300,7 @@ fn build_mesh(
     // The materials this mesh's primitives use, numbered in the mesh (by the file's
     // index; `None`, the default material).
     let mut numbered: std::collections::HashMap<Option<usize>, u16> = std::collections::HashMap::new();
-    let (mut normals, mut texcoords, mut ids) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut any_normals, mut any_texcoords) = (false, false);
+    let mut ids = Vec::new();
     for primitive in mesh.primitives() {
         let at = format!("{label}, primitive {}", primitive.index());
         if primitive.mode() != gltf::mesh::Mode::Triangles {
@@ -375,28 +374,17 @@ fn build_mesh(
                 number
             }
         };
-        any_normals |= prim_normals.is_some();
-        any_texcoords |= prim_uv.is_some();
-        normals.push((out.positions.len(), prim_normals));
-        texcoords.push((out.positions.len(), prim_uv));
+        // Attributes some primitives lack: zero normals (taken as absent: faceted) and
+        // zero coordinates.
+        let had = out.positions.len();
+        merge_attribute(&mut out.normals, prim_normals, had, n, Vec3::ZERO);
+        merge_attribute(&mut out.texcoords, prim_uv, had, n, Vec2::ZERO);
         out.positions.extend(positions);
         for t in corners.chunks_exact(3) {
             out.triangles.push([first + t[0], first + t[1], first + t[2]]);
             ids.push(material);
         }
     }
-    let total = out.positions.len();
-    // Attributes some primitives lack: zero normals (taken as absent: faceted) and
-    // zero coordinates.
-    fn fill<T: Copy>(parts: Vec<(usize, Option<Vec<T>>)>, zero: T, total: usize) -> Vec<T> {
-        let mut all = vec![zero; total];
-        for (start, values) in parts.into_iter().filter_map(|(start, v)| Some((start, v?))) {
-            all[start..start + values.len()].copy_from_slice(&values);
-        }
-        all
-    }
-    out.normals = any_normals.then(|| fill(normals, Vec3::ZERO, total));
-    out.texcoords = any_texcoords.then(|| fill(texcoords, Vec2::ZERO, total));
     out.triangle_materials = Some(ids);
     out.validate().map_err(|e| format!("{label}: {e}"))?;
     Ok(out)

@@ -137,7 +137,7 @@ fn edge(p: Vec2, q: Vec2, r: Vec2) -> f32 {
     OrderedEdge::new(p, q, 1.0).value_at(r)
 }
 
-/// Where a triangle's edges cross each row, set up once per triangle (each edge's
+/// Where a triangle's edges cross each row, set up once per triangle and band (each edge's
 /// slope: a division, where a row then costs a multiply-add an edge — a leaf, thin
 /// and tall, meets many rows for few pixels, and the divisions per row were the
 /// tree's largest cost drawn as geometry).

@@ -62,6 +62,11 @@ use texmap::Depths;
 /// hundred pixels (measured in `docs/targets.md`, "Many impostors").
 pub(crate) const MIN_TASK_PIXELS: usize = 4096;
 
+/// Rows `width` pixels wide one task takes: [`MIN_TASK_PIXELS`] worth, at least one.
+pub(crate) fn rows_per_task(width: usize) -> usize {
+    (MIN_TASK_PIXELS / width.max(1)).max(1)
+}
+
 /// `x ∈ [0, 2²³ − 0.5)` rounded to the nearest integer (ties to even); anything else
 /// (negative, NaN) gives an arbitrary value below 2²³, so callers bound the result.
 /// Adding 2²³ leaves the rounded value in the float's mantissa bits: one add, where a

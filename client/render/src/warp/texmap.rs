@@ -15,8 +15,8 @@ use relief_core::relief::{ReliefTexture, SourceCamera};
 
 use super::params::WarpParams;
 use super::prewarp::{Attributes, PTexel, PrewarpImage};
-use super::{MIN_TASK_PIXELS, round_small};
-use crate::gbuffer::{Fragment, GBuffer, Rows, Stored};
+use super::{MIN_TASK_PIXELS, round_small, rows_per_task};
+use crate::gbuffer::{Fragment, GBuffer, Stored};
 use relief_core::shading::{LANE_INDEX, LANES};
 
 /// The screen rectangle `[x0, x1) × [y0, y1)` that the plane region `corners` can
@@ -111,83 +111,84 @@ pub fn map(
     );
     let (u1, v1) = (f32x8::splat(u1), f32x8::splat(v1));
     // Rows are independent (each pixel samples the image and depth-tests its own slot):
-    // split across cores. Silhouette pixels come back as fragments.
-    let map_row = |mut pixels: Rows| {
-        let y = pixels.y0();
-        let row = dots(camera.ray(x0 as f32 + 0.5, y as f32 + 0.5));
-        // Eight pixels at once up to the texel look-ups: most of the rectangle is
-        // empty, and a group none of whose footprints holds a texel costs a few vector
-        // operations.
-        for x in (x0 as usize..x1 as usize).step_by(LANES) {
-            let steps = f32x8::splat((x - x0 as usize) as f32) + LANE_INDEX;
-            let along = |start: f32, step: f32| f32x8::splat(start) + f32x8::splat(step) * steps;
-            let towards_plane = along(row.x, x_step.x);
-            let s = f32x8::splat(params.h) / towards_plane;
-            let u = f32x8::splat(params.foot.x) + s * along(row.y, x_step.y);
-            let v = f32x8::splat(params.foot.y) + s * along(row.z, x_step.z);
-            let (fu, fv) = (u - corner_u, v - corner_v);
-            // (Every comparison is false for NaN.)
-            let facing = towards_plane.simd_gt(f32x8::ZERO);
-            let inside = facing
-                & fu.simd_ge(f32x8::ZERO)
-                & fv.simd_ge(f32x8::ZERO)
-                & fu.simd_lt(last_x)
-                & fv.simd_lt(last_y);
-            // Within the image but not its footprint: the outermost half texel.
-            let rim = facing
-                & !inside
-                & u.simd_ge(f32x8::splat(u0))
-                & v.simd_ge(f32x8::splat(v0))
-                & u.simd_lt(u1)
-                & v.simd_lt(v1);
-            let n = LANES.min(x1 as usize - x);
-            let lanes_in = (1u32 << n) - 1;
-            let (inside, rim) = (inside.to_bitmask() & lanes_in, rim.to_bitmask() & lanes_in);
-            if inside | rim == 0 {
-                continue;
-            }
-            // Exact: the inside lanes are non-negative and below the image's size.
-            let (xs, ys) = (fu.trunc_int(), fv.trunc_int());
-            let ks = (ys * i32x8::splat(image.width as i32) + xs).to_array();
-            let (xs, ys) = (xs.to_array(), ys.to_array());
-            let (fu, fv, u, v) = (fu.to_array(), fv.to_array(), u.to_array(), v.to_array());
-            let towards_plane = towards_plane.to_array();
-            for l in 0..n {
-                let found = if inside & (1 << l) != 0 {
-                    let k = ks[l] as usize;
-                    if footprints[k] == 0 {
-                        continue;
-                    }
-                    let (tx, ty) = (fu[l] - xs[l] as f32, fv[l] - ys[l] as f32);
-                    sample_inside(image, k, tx, ty)
-                } else if rim & (1 << l) != 0 {
-                    image
-                        .at(u[l], v[l])
-                        .filter(|t| !t.is_empty())
-                        .map(|t| (t.depth, t.attributes, 1.0))
-                } else {
-                    None
-                };
-                let Some((depth, attributes, coverage)) = found else {
+    // split across cores, no task below `MIN_TASK_PIXELS` (rayon runs work it does not
+    // split on this thread). Silhouette pixels come back as fragments.
+    let fragments: Vec<Vec<Fragment>> = gbuffer
+        .bands(y0, y1, 1)
+        .into_par_iter()
+        .with_min_len(rows_per_task((x1 - x0) as usize))
+        .map(|mut pixels| {
+            let y = pixels.y0();
+            let row = dots(camera.ray(x0 as f32 + 0.5, y as f32 + 0.5));
+            // Eight pixels at once up to the texel look-ups: most of the rectangle is
+            // empty, and a group none of whose footprints holds a texel costs a few vector
+            // operations.
+            for x in (x0 as usize..x1 as usize).step_by(LANES) {
+                let steps = f32x8::splat((x - x0 as usize) as f32) + LANE_INDEX;
+                let along = |start: f32, step: f32| f32x8::splat(start) + f32x8::splat(step) * steps;
+                let towards_plane = along(row.x, x_step.x);
+                let s = f32x8::splat(params.h) / towards_plane;
+                let u = f32x8::splat(params.foot.x) + s * along(row.y, x_step.y);
+                let v = f32x8::splat(params.foot.y) + s * along(row.z, x_step.z);
+                let (fu, fv) = (u - corner_u, v - corner_v);
+                // (Every comparison is false for NaN.)
+                let facing = towards_plane.simd_gt(f32x8::ZERO);
+                let inside = facing
+                    & fu.simd_ge(f32x8::ZERO)
+                    & fv.simd_ge(f32x8::ZERO)
+                    & fu.simd_lt(last_x)
+                    & fv.simd_lt(last_y);
+                // Within the image but not its footprint: the outermost half texel.
+                let rim = facing
+                    & !inside
+                    & u.simd_ge(f32x8::splat(u0))
+                    & v.simd_ge(f32x8::splat(v0))
+                    & u.simd_lt(u1)
+                    & v.simd_lt(v1);
+                let n = LANES.min(x1 as usize - x);
+                let lanes_in = (1u32 << n) - 1;
+                let (inside, rim) = (inside.to_bitmask() & lanes_in, rim.to_bitmask() & lanes_in);
+                if inside | rim == 0 {
                     continue;
-                };
-                let stored = Stored::with_encoded_normal(object, attributes.albedo(), attributes.normal());
-                let view_depth = (params.h + depth) / towards_plane[l] * depths.world;
-                let tested = view_depth * depths.tested;
-                if coverage < 1.0 {
-                    pixels.add_fragment(x + l, tested, view_depth, coverage, &stored);
-                } else {
-                    pixels.keep_nearer_stored_as(x + l, tested, view_depth, &stored);
+                }
+                // Exact: the inside lanes are non-negative and below the image's size.
+                let (xs, ys) = (fu.trunc_int(), fv.trunc_int());
+                let ks = (ys * i32x8::splat(image.width as i32) + xs).to_array();
+                let (xs, ys) = (xs.to_array(), ys.to_array());
+                let (fu, fv, u, v) = (fu.to_array(), fv.to_array(), u.to_array(), v.to_array());
+                let towards_plane = towards_plane.to_array();
+                for l in 0..n {
+                    let found = if inside & (1 << l) != 0 {
+                        let k = ks[l] as usize;
+                        if footprints[k] == 0 {
+                            continue;
+                        }
+                        let (tx, ty) = (fu[l] - xs[l] as f32, fv[l] - ys[l] as f32);
+                        sample_inside(image, k, tx, ty)
+                    } else if rim & (1 << l) != 0 {
+                        image
+                            .at(u[l], v[l])
+                            .filter(|t| !t.is_empty())
+                            .map(|t| (t.depth, t.attributes, 1.0))
+                    } else {
+                        None
+                    };
+                    let Some((depth, attributes, coverage)) = found else {
+                        continue;
+                    };
+                    let stored =
+                        Stored::with_encoded_normal(object, attributes.albedo(), attributes.normal());
+                    let view_depth = (params.h + depth) / towards_plane[l] * depths.world;
+                    let tested = view_depth * depths.tested;
+                    if coverage < 1.0 {
+                        pixels.add_fragment(x + l, tested, view_depth, coverage, &stored);
+                    } else {
+                        pixels.keep_nearer_stored_as(x + l, tested, view_depth, &stored);
+                    }
                 }
             }
-        }
-        pixels.into_fragments()
-    };
-    // (Not split below `MIN_TASK_PIXELS` a task: rayon then runs it on this thread.)
-    let rows_per_task = (MIN_TASK_PIXELS / (x1 - x0) as usize).max(1);
-    let fragments: Vec<Vec<Fragment>> = (gbuffer.bands(y0, y1, 1).into_par_iter())
-        .with_min_len(rows_per_task)
-        .map(map_row)
+            pixels.into_fragments()
+        })
         .collect();
     gbuffer.add_fragments(fragments.into_iter().flatten());
 }
@@ -204,9 +205,10 @@ fn footprints(image: &PrewarpImage) -> Vec<u8> {
         .map(|t| !t.is_empty() as u8)
         .collect();
     let mut out = vec![0; filled.len()];
-    (out.par_chunks_exact_mut(w).zip(filled.par_chunks_exact(w)))
+    out.par_chunks_exact_mut(w)
+        .zip(filled.par_chunks_exact(w))
         .zip(filled.par_chunks_exact(w).skip(1))
-        .with_min_len((MIN_TASK_PIXELS / w).max(1))
+        .with_min_len(rows_per_task(w))
         .for_each(|((out, top), bottom)| {
             for x in 0..w.saturating_sub(1) {
                 out[x] = top[x] | top[x + 1] | bottom[x] | bottom[x + 1];
