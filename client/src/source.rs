@@ -36,6 +36,7 @@ fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::I
         request_id: request.id,
         progressive: request.needed_in_ms.is_none(),
         projection: projection_to_pb(request.projection).into(),
+        serve_within: request.serve_within,
     }
 }
 

@@ -213,6 +213,7 @@ fn the_local_generator_serves_requests_for_now_in_the_order_asked() {
             depth_bits: DepthBits::Eight,
             projection: SourceProjection::Perspective,
             needed_in_ms: None,
+            serve_within: 0.0,
         };
         commands_tx.send(Command::Request(request)).unwrap();
     }

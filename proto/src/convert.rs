@@ -208,6 +208,9 @@ pub struct Request {
     pub request_id: u64,
     pub progressive: bool,
     pub projection: SourceProjection,
+    /// How near another eye must be for its texture to serve this request, as a
+    /// fraction of `eye`'s distance from the object's centre (0: this eye only).
+    pub serve_within: f32,
 }
 
 /// The projection a request or job asks for.
@@ -278,7 +281,22 @@ pub fn request_from_pb(r: &pb::ImpostorRequest) -> Result<Request, Status> {
         request_id: r.request_id,
         progressive: r.progressive,
         projection: projection_from_pb("projection", r.projection)?,
+        serve_within: serve_within_from_pb(r.serve_within)?,
     })
+}
+
+/// A request's `serve_within`: finite, from 0 to
+/// [`MAX_SERVE_WITHIN`](crate::limits::MAX_SERVE_WITHIN).
+fn serve_within_from_pb(value: f32) -> Result<f32, Status> {
+    let max = crate::limits::MAX_SERVE_WITHIN;
+    if (0.0..=max).contains(&value) {
+        Ok(value)
+    } else {
+        Err(invalid(
+            "serve_within",
+            format_args!("{value} is not within 0..={max}"),
+        ))
+    }
 }
 
 /// The content hash of an encoded scene bundle.
@@ -350,6 +368,7 @@ mod tests {
             request_id: 7,
             progressive: false,
             projection: pb::SourceProjection::Perspective.into(),
+            serve_within: 0.05,
         };
         assert_eq!(
             request_from_pb(&good).unwrap().projection,
@@ -416,5 +435,14 @@ mod tests {
             })
             .contains("`object`")
         );
+        for serve_within in [f32::NAN, -0.01, 0.6, f32::INFINITY] {
+            assert!(
+                field_of(pb::ImpostorRequest {
+                    serve_within,
+                    ..good.clone()
+                })
+                .contains("`serve_within`")
+            );
+        }
     }
 }

@@ -21,3 +21,8 @@ pub const MAX_CLIENT_ID_BYTES: usize = 256;
 
 /// The largest scene message a worker takes when it fetches a scene.
 pub const MAX_SCENE_FETCH_MESSAGE_BYTES: usize = 1 << 30;
+
+/// The most a request's `serve_within` may be (about 29° of turn about the object): a
+/// texture from farther round shows its object worse than any tolerance a client uses
+/// would accept, so a larger reach is a client's mistake, refused by name.
+pub const MAX_SERVE_WITHIN: f32 = 0.5;

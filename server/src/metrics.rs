@@ -137,6 +137,11 @@ impl Collector for ServerCollector {
                 "Requests that joined a job made for an earlier one",
                 stats.merged,
             ),
+            (
+                "served_nearby",
+                "Requests served (cached or merged) by a texture made for another eye within their reach",
+                stats.served_nearby,
+            ),
             ("withdrawn", "Requests their clients withdrew", stats.withdrawn),
             (
                 "requeued",

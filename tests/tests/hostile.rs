@@ -54,6 +54,7 @@ fn ask(scene: &str, id: u64, size: u32, client_id: &str) -> pb::ImpostorRequest 
         request_id: id,
         progressive: false,
         projection: pb::SourceProjection::Orthographic.into(),
+        serve_within: 0.0,
     }
 }
 

@@ -40,6 +40,7 @@ fn request(
         progressive: false,
         // (What the client asks for.)
         projection: pb::SourceProjection::Perspective.into(),
+        serve_within: 0.0,
     }
 }
 
@@ -106,11 +107,30 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
         Some(eye),
         "a perspective texture is seen from its eye"
     );
+    // A nearby eye, with a reach that takes it in: the cached texture of `eye`; with
+    // none, a texture of its own.
+    let nearby = eye + Vec3::new(0.05, 0.0, 0.0);
+    let mut near = request(&hash.to_string(), "knot", nearby, 128, 5, pb::Urgency::Now);
+    near.serve_within = 0.02;
+    let shared = collect(remote.request(near.clone()).await.unwrap())
+        .await
+        .unwrap();
+    let shared = texture_from_pb("texture", shared[0].texture.as_ref().unwrap()).unwrap();
+    assert_eq!(shared, local, "a texture made for an eye within reach serves");
+    near.request_id = 6;
+    near.serve_within = 0.0;
+    let own = collect(remote.request(near).await.unwrap()).await.unwrap();
+    let own = texture_from_pb("texture", own[0].texture.as_ref().unwrap()).unwrap();
+    assert_eq!(own.eye, nearby, "without a reach, the eye asked for");
     let stats = remote.stats().await.unwrap();
-    assert_eq!((stats.requests, stats.cache_hits), (4, 2), "{stats:?}");
+    assert_eq!(
+        (stats.requests, stats.cache_hits, stats.served_nearby),
+        (6, 3, 1),
+        "{stats:?}"
+    );
     // Every request's latency is in the histogram, one count per bucket and one over.
     assert_eq!(stats.latency_counts.len(), stats.latency_bucket_ms.len() + 1);
-    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 4, "{stats:?}");
+    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 6, "{stats:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

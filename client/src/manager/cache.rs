@@ -154,10 +154,17 @@ impl Manager {
                     let tolerance = self.tolerance();
                     let state = &mut self.objects[p.object];
                     state.received += is_final as u64;
+                    // Its own eye: one the server made for a nearby eye serves too (see
+                    // `SERVE_REACH`).
+                    let eye = pyramid.levels[0].texture.eye;
+                    // Held already: the texture that served another request.
+                    if state.held.iter().any(|h| h.is_final && h.eye == eye) {
+                        continue;
+                    }
                     // A final texture replaces its own preview.
-                    state.held.retain(|h| h.is_final || h.eye != p.eye);
+                    state.held.retain(|h| h.is_final || h.eye != eye);
                     let held = Held {
-                        eye: p.eye,
+                        eye,
                         pyramid: Arc::new(pyramid),
                         critical: Arc::new(critical),
                         baseline,

@@ -20,6 +20,9 @@ pub struct TextureRequest {
     pub projection: SourceProjection,
     /// `None`: needed now; `Some(ms)`: expected to be needed in `ms`.
     pub needed_in_ms: Option<u64>,
+    /// A texture made for an eye within this fraction of `eye`'s distance from the
+    /// object's centre serves too (about radians of turn; 0: this eye only).
+    pub serve_within: f32,
 }
 
 /// What the manager sends to whoever makes textures.

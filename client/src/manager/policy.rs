@@ -346,6 +346,15 @@ pub const PENDING_REACH: f32 = 0.8;
 /// … and within this fraction of its distance from the object.
 pub const PENDING_DISTANCE_SLACK: f32 = 0.2;
 
+/// A texture made for another eye within this fraction of the object's valid angle of
+/// the one asked for serves a request: one the server holds or is making for another
+/// client, or another placement. Such a texture still covers (1 + [`LEAD`] −
+/// `SERVE_REACH`) valid angles of the motion, and clients flying through one scene
+/// share their textures rather than each waiting for its own: 64 clients of `relief
+/// load` had half their requests served so at 0.25, four in five at 0.5, and stalled
+/// half as often (see docs/load-test.md).
+pub const SERVE_REACH: f32 = 0.5;
+
 /// Predictions farther than this many valid angles from both the eye and its future are
 /// withdrawn: the motion has left them behind.
 pub const WITHDRAW_REACH: f32 = 2.0;

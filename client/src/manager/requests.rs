@@ -10,6 +10,7 @@ use relief_core::camera::Camera;
 use relief_core::relief::SourceProjection;
 use relief_core::scene::{Scene, SceneObject};
 use relief_core::stats::percentile;
+use relief_proto::limits::MAX_SERVE_WITHIN;
 use relief_render::geometry::{GeometryReason, geometry_reason};
 
 use super::Manager;
@@ -19,7 +20,7 @@ use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
     MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK, PENDING_REACH,
-    REQUESTED_DEPTH_BITS, TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
+    REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -155,6 +156,7 @@ impl Manager {
             depth_bits: REQUESTED_DEPTH_BITS,
             projection,
             needed_in_ms,
+            serve_within: (SERVE_REACH * self.valid_angle(object)).min(MAX_SERVE_WITHIN),
         };
         if self.commands.send(Command::Request(request)).is_err() {
             return;

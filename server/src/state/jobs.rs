@@ -16,48 +16,74 @@ use relief_proto::pb;
 use super::queue::Priority;
 use super::{ResultSender, State};
 
-/// Where a texture is made from: the scene, the object's mesh and the eye (in the
-/// object's frame). Textures of one view differ only in their texel count and depth
-/// bits; placements of one mesh share them.
+/// What a texture shows, whatever its eye: the scene, the object's mesh and the
+/// projection. Placements of one mesh share their textures (eyes are in the mesh's
+/// frame), and so do clients flying through one scene.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub(super) struct View {
+pub(super) struct Subject {
     pub(super) scene: ContentHash,
     pub(super) mesh: ContentHash,
-    pub(super) eye: [u32; 3],
     pub(super) projection: SourceProjection,
 }
 
-/// What a job makes, or a request asks for: a view, at a size and depth.
+/// What a job makes, or a request asks for: a subject from an eye (in the object's
+/// frame), at a size and depth.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub struct JobKey {
-    pub(super) view: View,
+    pub(super) subject: Subject,
+    /// The eye's bits: one key per eye, exactly.
+    eye: [u32; 3],
     pub(super) size: u32,
     pub(super) depth_bits: u32,
+}
+
+/// A request's key, and how near another eye may be to serve it.
+#[derive(Debug, Clone)]
+pub(super) struct Wanted {
+    pub(super) key: JobKey,
+    /// The farthest (object-frame distance) the eye of a texture serving it may be from
+    /// its own: the request's `serve_within` times its eye's distance from the
+    /// object's centre.
+    pub(super) reach: f32,
 }
 
 impl JobKey {
     /// The key of request `r` for an object whose mesh has content hash `mesh`.
     pub(super) fn of(r: &Request, mesh: ContentHash) -> JobKey {
         JobKey {
-            view: View {
+            subject: Subject {
                 scene: r.scene,
                 mesh,
-                eye: r.eye.to_array().map(f32::to_bits),
                 projection: r.projection,
             },
+            eye: r.eye.to_array().map(f32::to_bits),
             size: r.size,
             depth_bits: r.depth_bits.bits(),
         }
     }
 
-    /// Whether the texture made for `self` serves a request for `wanted`: the same
-    /// view, with at least its depth bits and its edge, up to [`MAX_SERVED_RATIO`]
-    /// times it (a client draws the pyramid level its screen needs, so more texels cost
-    /// it bytes on the wire, not warp time).
-    pub(super) fn satisfies(&self, wanted: &JobKey) -> bool {
-        self.view == wanted.view
-            && self.depth_bits >= wanted.depth_bits
-            && (wanted.size..=wanted.size.saturating_mul(MAX_SERVED_RATIO)).contains(&self.size)
+    /// The eye, in the object's frame.
+    pub(super) fn eye(&self) -> Vec3 {
+        Vec3::from_array(self.eye.map(f32::from_bits))
+    }
+
+    /// How far the eye of the texture made for `self` is from `wanted`'s, if that
+    /// texture serves it: the same subject, an eye within its reach, at least its
+    /// depth bits and its edge, up to [`MAX_SERVED_RATIO`] times it (a client draws
+    /// the pyramid level its screen needs, so more texels cost it bytes on the wire,
+    /// not warp time).
+    pub(super) fn serves(&self, wanted: &Wanted) -> Option<f32> {
+        let w = &wanted.key;
+        let apart = if self.eye == w.eye {
+            0.0
+        } else {
+            self.eye().distance(w.eye())
+        };
+        (self.subject == w.subject
+            && apart <= wanted.reach
+            && self.depth_bits >= w.depth_bits
+            && (w.size..=w.size.saturating_mul(MAX_SERVED_RATIO)).contains(&self.size))
+        .then_some(apart)
     }
 }
 
@@ -80,6 +106,12 @@ pub const EXPRESS_MAX_TEXELS: u32 = 64 * 64;
 /// A far bigger one would cost a small request's client far more bytes — and, still
 /// being made, far more waiting than a bake of its own.
 const MAX_SERVED_RATIO: u32 = 2;
+
+/// The most jobs, and the most cached textures, of one [`Subject`] a request looks
+/// through for one that serves it: each is an eye to compare, so this bounds a
+/// request's lookup (tens of microseconds) however many a flood of requests left.
+/// The cache keeps no more of one subject.
+pub(super) const SUBJECT_SCAN: usize = 1024;
 
 /// `texture` with its planes in buffers of their own, exactly their size: decoded
 /// from the wire they are slices of the whole received message's buffer (larger, and
@@ -262,17 +294,16 @@ impl State {
                 bits.bits()
             ));
         }
-        let asked: [u32; 3] = job.key.view.eye;
-        if eye.to_array().map(f32::to_bits) != asked {
+        if eye.to_array().map(f32::to_bits) != job.key.eye {
             return Err(format!(
                 "the result of job {job_id} was made for another eye ({eye})"
             ));
         }
-        let Some(bounds) = self.object_bounds(&job.key.view.scene, &spec.object) else {
+        let Some(bounds) = self.object_bounds(&job.key.subject.scene, &spec.object) else {
             return Ok(());
         };
-        let expected =
-            SourceCamera::facing(eye, &bounds, w, h, job.key.view.projection).map_err(|e| e.to_string())?;
+        let expected = SourceCamera::facing(eye, &bounds, w, h, job.key.subject.projection)
+            .map_err(|e| e.to_string())?;
         let extent = bounds.extent().length();
         let near = |a: Vec3, b: Vec3, scale: f32| a.distance(b) <= CAMERA_SLACK * scale;
         let fits = near(camera.origin, expected.origin, extent)
@@ -505,10 +536,10 @@ impl State {
         let Some(job) = self.jobs.remove(&job_id) else {
             return;
         };
-        if let Some(ids) = self.by_view.get_mut(&job.key.view) {
+        if let Some(ids) = self.by_subject.get_mut(&job.key.subject) {
             ids.retain(|&id| id != job_id);
             if ids.is_empty() {
-                self.by_view.remove(&job.key.view);
+                self.by_subject.remove(&job.key.subject);
             }
         }
         match job.state {
@@ -568,14 +599,23 @@ impl State {
     }
 
     /// The job whose texture will serve `wanted`: a running one before a queued one
-    /// (it finishes sooner), then the smallest.
-    pub(super) fn job_for(&self, wanted: &JobKey) -> Option<u64> {
-        self.by_view
-            .get(&wanted.view)?
+    /// (it finishes sooner), then the one nearest its eye, then the smallest. Only the
+    /// subject's [`SUBJECT_SCAN`] newest jobs are looked through.
+    pub(super) fn job_for(&self, wanted: &Wanted) -> Option<u64> {
+        let rank = |job: &Job| {
+            Some((
+                matches!(job.state, JobState::Queued(_)),
+                job.key.serves(wanted)?,
+                job.key.size,
+            ))
+        };
+        self.by_subject
+            .get(&wanted.key.subject)?
             .iter()
-            .filter_map(|id| Some((*id, self.jobs.get(id)?)))
-            .filter(|(_, job)| job.key.satisfies(wanted))
-            .min_by_key(|(_, job)| (matches!(job.state, JobState::Queued(_)), job.key.size))
+            .rev()
+            .take(SUBJECT_SCAN)
+            .filter_map(|id| Some((*id, rank(self.jobs.get(id)?)?)))
+            .min_by(|(_, a), (_, b)| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)))
             .map(|(id, _)| id)
     }
 }

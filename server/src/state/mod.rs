@@ -39,7 +39,7 @@ pub use jobs::{JobKey, WaiterId};
 pub use stats::{Counters, LATENCY_BUCKETS_MS};
 
 use cache::Cached;
-use jobs::{Job, JobState, View, Waiter};
+use jobs::{Job, JobState, Subject, Waiter, Wanted};
 use queue::{FairQueue, Priority};
 use scenes::Scenes;
 pub use scenes::{SceneRefusal, StoredObject, StoredScene};
@@ -79,14 +79,14 @@ pub struct State {
     scenes: Scenes,
     jobs: HashMap<u64, Job>,
     queue: FairQueue,
-    /// The jobs of each view (a few: one per size and depth asked for).
-    by_view: HashMap<View, Vec<u64>>,
+    /// The jobs of each subject, oldest first.
+    by_subject: HashMap<Subject, Vec<u64>>,
     waiters: HashMap<WaiterId, Waiter>,
     /// Requests waiting, per client credential (see [`Limits::max_waiting_per_client`]).
     waiting_by_owner: HashMap<Arc<str>, usize>,
     workers: HashMap<u64, Worker>,
-    /// The cached textures of each view.
-    cache: HashMap<View, Vec<Cached>>,
+    /// The cached textures of each subject.
+    cache: HashMap<Subject, Vec<Cached>>,
     /// The cached textures by their last use (the clock), least recent first: what
     /// eviction takes, without a scan of the cache.
     recency: BTreeMap<u64, JobKey>,
@@ -125,7 +125,7 @@ impl State {
             scenes: Scenes::default(),
             jobs: HashMap::new(),
             queue: FairQueue::default(),
-            by_view: HashMap::new(),
+            by_subject: HashMap::new(),
             waiters: HashMap::new(),
             waiting_by_owner: HashMap::new(),
             workers: HashMap::new(),
@@ -194,12 +194,17 @@ impl State {
         }
         self.counters.requests += 1;
         let key = JobKey::of(request, object.mesh);
+        let wanted = Wanted {
+            reach: request.serve_within * request.eye.distance(object.bounds.center()),
+            key: key.clone(),
+        };
         self.clock += 1;
         let clock = self.clock;
-        if let Some(hit) = self.cached_for(&key) {
+        if let Some(hit) = self.cached_for(&wanted) {
             let last = std::mem::replace(&mut hit.used, clock);
             let (texture, hit_key) = (hit.texture.clone(), hit.key.clone());
             self.recency.remove(&last);
+            self.counters.served_nearby += u64::from(hit_key.eye() != key.eye());
             self.recency.insert(clock, hit_key);
             self.counters.cache_hits += 1;
             self.latencies_push(0.0);
@@ -232,10 +237,13 @@ impl State {
                 Urgency::Predicted { in_ms } => in_ms.saturating_mul(1000),
             };
         let predicted = matches!(request.urgency, Urgency::Predicted { .. });
-        let job_id = match self.job_for(&key) {
+        let job_id = match self.job_for(&wanted) {
             Some(id) => {
                 self.counters.merged += 1;
                 // A more urgent request moves a queued job forward.
+                if let Some(job) = self.jobs.get(&id) {
+                    self.counters.served_nearby += u64::from(job.key.eye() != key.eye());
+                }
                 if let Some(job) = self.jobs.get_mut(&id)
                     && let JobState::Queued(p) = job.state
                 {
@@ -300,7 +308,7 @@ impl State {
                     },
                 );
                 self.queue.insert(&owner, priority);
-                self.by_view.entry(key.view).or_default().push(id);
+                self.by_subject.entry(key.subject).or_default().push(id);
                 id
             }
         };

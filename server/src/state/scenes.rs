@@ -89,7 +89,7 @@ impl State {
         if bytes > limit {
             return Err(SceneRefusal::TooLarge { bytes, limit });
         }
-        let needed: HashSet<ContentHash> = self.jobs.values().map(|job| job.key.view.scene).collect();
+        let needed: HashSet<ContentHash> = self.jobs.values().map(|job| job.key.subject.scene).collect();
         let mut idle: Vec<(u64, ContentHash, usize)> = (self.scenes.stored.iter())
             .filter(|(h, _)| !needed.contains(*h))
             .map(|(h, e)| (e.used, *h, e.scene.encoded.len()))
@@ -155,7 +155,7 @@ impl State {
             .filter(|w| &*w.credential == credential)
             .flat_map(|w| &w.running)
             .filter_map(|id| self.jobs.get(id))
-            .any(|job| job.key.view.scene == *hash);
+            .any(|job| job.key.subject.scene == *hash);
         if !holds_job_on_it {
             return None;
         }

@@ -13,6 +13,8 @@ pub struct Counters {
     pub requests: u64,
     pub cache_hits: u64,
     pub merged: u64,
+    /// Cache hits and merges served by a texture made for another eye.
+    pub served_nearby: u64,
     pub withdrawn: u64,
     pub requeued: u64,
     /// Cancelled jobs their workers stopped before finishing.
@@ -97,6 +99,7 @@ impl State {
             requests: self.counters.requests,
             cache_hits: self.counters.cache_hits,
             merged: self.counters.merged,
+            served_nearby: self.counters.served_nearby,
             withdrawn: self.counters.withdrawn,
             requeued: self.counters.requeued,
             cache_bytes: self.cache_bytes as u64,

@@ -83,6 +83,7 @@ fn request(scene: ContentHash, id: u64, eye: Vec3, urgency: Urgency) -> Request 
         request_id: id,
         progressive: false,
         projection: SourceProjection::Orthographic,
+        serve_within: 0.0,
     }
 }
 
@@ -191,6 +192,96 @@ fn a_bigger_texture_serves_smaller_requests() {
         .unwrap();
     assert_eq!(s.counters.cache_hits, 1);
     assert_eq!((s.counters.merged, s.stats().queue_now), (2, 3));
+}
+
+/// A request with a reach (`serve_within`) is served by the texture made for the
+/// nearest eye within it — a job queued for another request, or a cached texture —
+/// and gets a job of its own when none is that near; a request without one only by
+/// its own eye.
+#[test]
+fn the_nearest_eye_within_reach_serves_a_request() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, mut rx) = unbounded_channel();
+    // From (x, 0, 5), about 5 from the ball's centre: a reach of 0.05 is 0.25 or so.
+    let ask = |id: u64, x: f32, serve_within: f32| Request {
+        serve_within,
+        ..request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Now)
+    };
+    s.admit(&ask(1, 0.0, 0.0), OWNER, tx.clone()).unwrap();
+    s.admit(&ask(2, 0.2, 0.05), OWNER, tx.clone()).unwrap();
+    assert_eq!((s.counters.merged, s.counters.served_nearby), (1, 1));
+    s.admit(&ask(3, 0.6, 0.05), OWNER, tx.clone()).unwrap();
+    s.admit(&ask(4, 0.2, 0.0), OWNER, tx.clone()).unwrap();
+    assert_eq!(s.counters.merged, 1, "0.6 is out of reach; 0.2 asked exactly");
+    // Both 0.6 and 0.2 are jobs now, and 0.6 is nearer.
+    s.admit(&ask(5, 0.5, 0.05), OWNER, tx.clone()).unwrap();
+    assert_eq!((s.counters.merged, s.counters.served_nearby), (2, 2));
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 3, 1, wtx);
+    s.dispatch();
+    // Each job's texture says which eye it was made for in its width (tenths of x).
+    for job in std::iter::from_fn(|| next_job(&mut wrx)) {
+        let texture = pb::ReliefTexture {
+            width: (job.eye.unwrap().x * 10.0).round() as u32,
+            albedo: vec![0; 100].into(),
+            ..Default::default()
+        };
+        s.result(job.job_id, texture, true, 1);
+    }
+    let mut served: Vec<(u64, u32)> = std::iter::from_fn(|| rx.try_recv().ok())
+        .map(|r| r.unwrap())
+        .map(|r| (r.request_id, r.texture.unwrap().width))
+        .collect();
+    served.sort();
+    assert_eq!(served, vec![(1, 0), (2, 0), (3, 6), (4, 2), (5, 6)]);
+    // Cached: 0.12 is nearest 0.2; 0.38 is out of reach of all three at 0.03, and
+    // nearest 0.2 at 0.05.
+    let cached_width = |s: &mut State, id: u64, x: f32, serve_within: f32| match s.admit(
+        &ask(id, x, serve_within),
+        OWNER,
+        tx.clone(),
+    ) {
+        Ok(Admission::Cached(t)) => Some(t.width),
+        _ => None,
+    };
+    assert_eq!(cached_width(&mut s, 6, 0.12, 0.05), Some(2));
+    assert_eq!(cached_width(&mut s, 7, 0.38, 0.03), None);
+    assert_eq!(cached_width(&mut s, 8, 0.38, 0.05), Some(2));
+    assert_eq!(cached_width(&mut s, 9, 0.6, 0.0), Some(6), "its own eye");
+    assert_eq!(cached_width(&mut s, 10, 0.61, 0.0), None);
+    assert_eq!((s.counters.cache_hits, s.counters.served_nearby), (3, 4));
+}
+
+/// The cache keeps at most `SUBJECT_SCAN` textures of one subject (each request
+/// looks through them), dropping the subject's least recently used.
+#[test]
+fn the_cache_keeps_a_bounded_number_of_one_subjects_textures() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    let ask = |id: u64| request(hash, id, Vec3::new(id as f32 * 1e-3, 0.0, 5.0), Urgency::Now);
+    let extra = 5;
+    for id in 1..=(jobs::SUBJECT_SCAN + extra) as u64 {
+        s.admit(&ask(id), OWNER, tx.clone()).unwrap();
+        s.dispatch();
+        let job = next_job(&mut wrx).unwrap();
+        let texture = pb::ReliefTexture {
+            albedo: vec![0; 10].into(),
+            ..Default::default()
+        };
+        s.result(job.job_id, texture, true, 1);
+    }
+    assert_eq!(s.stats().cache_bytes, 10 * jobs::SUBJECT_SCAN as u64);
+    let hit = |s: &mut State, id: u64| {
+        let again = Request {
+            request_id: 10_000 + id,
+            ..ask(id)
+        };
+        matches!(s.admit(&again, OWNER, tx.clone()), Ok(Admission::Cached(_)))
+    };
+    assert!(!hit(&mut s, 1), "the oldest went");
+    assert!(hit(&mut s, extra as u64 + 1), "the oldest kept is there");
 }
 
 /// The cache keeps within its bytes by dropping the least recently used texture:

@@ -98,17 +98,20 @@ struct Row {
     psnr_db_min: f64,
     /// Predictions the saturated server refused.
     requests_shed: u64,
+    /// Of the requests the server took in, the fraction a texture made for another eye
+    /// (asked by another client, or another placement) served: work sharing saved.
+    served_nearby_frac: f64,
     /// The mean factor the server's load put on the tolerance, over the frames: how
     /// much longer the textures were let live than asked.
     load_scale_mean: f64,
 }
 
-const HEADER: &str = "tolerance_px,clients,repeats,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,latency_ms_p99_lo,latency_ms_p99_hi,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min,requests_shed,load_scale_mean";
+const HEADER: &str = "tolerance_px,clients,repeats,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,latency_ms_p99_lo,latency_ms_p99_hi,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min,requests_shed,served_nearby_frac,load_scale_mean";
 
 impl Row {
     fn csv(&self) -> String {
         format!(
-            "{},{},{},{},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.3},{:.3},{:.3},{:.2},{:.2},{},{:.2}",
+            "{},{},{},{},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.3},{:.3},{:.3},{:.2},{:.2},{},{:.3},{:.2}",
             self.tolerance_px,
             self.clients,
             self.repeats,
@@ -127,6 +130,7 @@ impl Row {
             self.psnr_db_mean,
             self.psnr_db_min,
             self.requests_shed,
+            self.served_nearby_frac,
             self.load_scale_mean
         )
     }
@@ -275,6 +279,7 @@ impl Setup<'_> {
             Some(args.workers),
         ))?;
         let started = Instant::now();
+        let mut stats_remote = remote.clone();
         let handles: Vec<_> = (0..clients)
             .map(|c| {
                 let mut remote = remote.clone();
@@ -318,8 +323,17 @@ impl Setup<'_> {
             })
             .collect::<Result<_>>()?;
         let seconds = started.elapsed().as_secs_f64();
+        let stats = self
+            .runtime
+            .block_on(stats_remote.stats())
+            .context("asking the server for its counters")?;
         drop(service);
-        Ok(Run { results, seconds })
+        Ok(Run {
+            results,
+            seconds,
+            served_nearby: stats.served_nearby,
+            server_requests: stats.requests,
+        })
     }
 }
 
@@ -327,6 +341,10 @@ impl Setup<'_> {
 struct Run {
     results: Vec<ClientResult>,
     seconds: f64,
+    /// The server's count of requests, and of those a texture made for another eye
+    /// served.
+    server_requests: u64,
+    served_nearby: u64,
 }
 
 /// The row of `clients` clients at `tolerance` from `runs`, pooled: counts summed, rates
@@ -378,6 +396,8 @@ fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
         psnr_db_mean: finite_mean(&psnr).unwrap_or(f64::NAN),
         psnr_db_min: finite_min(&psnr).unwrap_or(f64::NAN),
         requests_shed: sum(&|r| r.counters.requests_shed),
+        served_nearby_frac: runs.iter().map(|r| r.served_nearby).sum::<u64>() as f64
+            / runs.iter().map(|r| r.server_requests).sum::<u64>().max(1) as f64,
         load_scale_mean: results().map(|r| r.counters.load_scale_sum).sum::<f64>() / frames.max(1) as f64,
     }
 }

@@ -120,6 +120,7 @@ pub fn run(args: RpcArgs) -> Result<()> {
                 progressive: false,
                 // (What the client asks for.)
                 projection: pb::SourceProjection::Perspective.into(),
+                serve_within: 0.0,
             };
             let start = Instant::now();
             let mut stream = remote.request(request).await?;
