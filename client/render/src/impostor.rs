@@ -77,26 +77,38 @@ impl Impostor {
         // (`SourceCamera::texel_size_at` over its value at the plane, worked out once).
         let inverse_h = c.centre_distance().map_or(0.0, |h| 1.0 / h);
         let spread = |t: f32| 1.0 + t * inverse_h;
-        let normals: Vec<Vec3> = texture.normal.iter().map(|&n| decode_normal_rgb8(n)).collect();
-        let joined = |k: usize, l: usize, axis: Vec3, step: f32| {
+        // Each texel's depth and slopes worked out once (each is compared with up to
+        // four neighbours): this runs for every texture level a client receives.
+        // (Empty texels join nothing: nothing is worked out for them.)
+        let mut depths = vec![0.0; w * h];
+        let mut slopes_a = vec![0.0; w * h];
+        let mut slopes_b = vec![0.0; w * h];
+        for (k, (&level, &normal)) in texture.depth.iter().zip(&texture.normal).enumerate() {
+            if level != empty {
+                let n = decode_normal_rgb8(normal);
+                depths[k] = depth(k);
+                slopes_a[k] = slope(n, a_dir);
+                slopes_b[k] = slope(n, b_dir);
+            }
+        }
+        let joined = |k: usize, l: usize, slopes: &[f32], step: f32| {
             if texture.depth[k] == empty || texture.depth[l] == empty {
                 return false;
             }
+            let (dk, dl) = (depths[k], depths[l]);
             // (A perspective texture's neighbouring rays part with depth: the texel's
             // side where the surface lies.)
-            let step = step * spread(depth(k).max(depth(l)));
-            let allowed = SLOPE_SLACK * step * slope(normals[k], axis).max(slope(normals[l], axis))
-                + step
-                + 2.0 * quantum;
-            (depth(k) - depth(l)).abs() <= allowed
+            let step = step * spread(dk.max(dl));
+            let allowed = SLOPE_SLACK * step * slopes[k].max(slopes[l]) + step + 2.0 * quantum;
+            (dk - dl).abs() <= allowed
         };
         let mut right = vec![false; w * h];
         let mut down = vec![false; w * h];
         for j in 0..h {
             for i in 0..w {
                 let k = j * w + i;
-                right[k] = i + 1 < w && joined(k, k + 1, a_dir, a_len);
-                down[k] = j + 1 < h && joined(k, k + w, b_dir, b_len);
+                right[k] = i + 1 < w && joined(k, k + 1, &slopes_a, a_len);
+                down[k] = j + 1 < h && joined(k, k + w, &slopes_b, b_len);
             }
         }
         let packed = (texture.albedo.iter().zip(&texture.normal).zip(&texture.depth))

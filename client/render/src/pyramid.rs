@@ -95,16 +95,22 @@ pub fn downsample(texture: &ReliefTexture, coverage: &[f32]) -> (ReliefTexture, 
     let same_surface = 2.0 * camera.a.length().max(camera.b.length());
     let mut out = ReliefTexture::empty(camera, bits, texture.eye);
     let mut out_coverage = vec![0.0; (w * h) as usize];
+    // (Blocks are gathered into fixed arrays: this runs for every texture a client
+    // receives, and a vector per block was half its cost.)
     for j in 0..h {
         for i in 0..w {
             // (A block cut by the texture's edge: its missing texels lie outside the
             // fine quad, where there is nothing.)
-            let block: Vec<usize> = [(0, 0), (1, 0), (0, 1), (1, 1)]
-                .into_iter()
-                .map(|(di, dj)| (2 * i + di, 2 * j + dj))
-                .filter(|&(x, y)| x < c.width && y < c.height)
-                .map(|(x, y)| texture.index(x, y))
-                .collect();
+            let mut block = [0usize; 4];
+            let mut in_texture = 0;
+            for (di, dj) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let (x, y) = (2 * i + di, 2 * j + dj);
+                if x < c.width && y < c.height {
+                    block[in_texture] = texture.index(x, y);
+                    in_texture += 1;
+                }
+            }
+            let block = &block[..in_texture];
             let target = out.index(i, j);
             let covered = block
                 .iter()
@@ -115,25 +121,35 @@ pub fn downsample(texture: &ReliefTexture, coverage: &[f32]) -> (ReliefTexture, 
             if covered <= HALF_COVERED {
                 continue;
             }
-            let block: Vec<usize> = block.into_iter().filter(|&k| texture.depth[k] != empty).collect();
-            let Some(front) = block
-                .iter()
-                .map(|&k| c.depth_of_level(texture.depth[k], bits))
-                .reduce(f32::min)
-            else {
+            // The block's surface texels and their depths, then those on the front
+            // surface.
+            let mut surface = [(0usize, 0.0f32); 4];
+            let mut n_surface = 0;
+            for &k in block {
+                if texture.depth[k] != empty {
+                    surface[n_surface] = (k, c.depth_of_level(texture.depth[k], bits));
+                    n_surface += 1;
+                }
+            }
+            let surface = &surface[..n_surface];
+            let Some(front) = surface.iter().map(|&(_, d)| d).reduce(f32::min) else {
                 continue;
             };
-            let kept: Vec<usize> = block
-                .into_iter()
-                .filter(|&k| c.depth_of_level(texture.depth[k], bits) <= front + same_surface)
-                .collect();
-            let n = kept.len() as f32;
-            let mean = |f: &dyn Fn(usize) -> f32| kept.iter().map(|&k| f(k)).sum::<f32>() / n;
-            out.depth[target] =
-                camera.level_of_depth(mean(&|k| c.depth_of_level(texture.depth[k], bits)), bits);
+            let mut kept = [(0usize, 0.0f32); 4];
+            let mut n_kept = 0;
+            for &(k, d) in surface {
+                if d <= front + same_surface {
+                    kept[n_kept] = (k, d);
+                    n_kept += 1;
+                }
+            }
+            let kept = &kept[..n_kept];
+            let n = n_kept as f32;
+            let mean = |f: &dyn Fn(usize, f32) -> f32| kept.iter().map(|&(k, d)| f(k, d)).sum::<f32>() / n;
+            out.depth[target] = camera.level_of_depth(mean(&|_, d| d), bits);
             for ch in 0..3 {
-                out.albedo[target][ch] = (mean(&|k| texture.albedo[k][ch] as f32) + 0.5) as u8;
-                out.normal[target][ch] = (mean(&|k| texture.normal[k][ch] as f32) + 0.5) as u8;
+                out.albedo[target][ch] = (mean(&|k, _| texture.albedo[k][ch] as f32) + 0.5) as u8;
+                out.normal[target][ch] = (mean(&|k, _| texture.normal[k][ch] as f32) + 0.5) as u8;
             }
         }
     }

@@ -327,6 +327,7 @@ impl Setup<'_> {
             .runtime
             .block_on(stats_remote.stats())
             .context("asking the server for its counters")?;
+        tracing::debug!(clients, tolerance, ?stats, "the server's counters after the run");
         drop(service);
         Ok(Run {
             results,

@@ -7,10 +7,11 @@ use serde::Serialize;
 
 use relief_core::relief::DepthBits;
 
+use relief_client::manager::ReadyTexture;
 use relief_lab::methods::{Method, display, draw, prepare};
 use relief_lab::solo::Solo;
 use relief_render::gbuffer::GBuffer;
-use relief_render::impostor::Impostor;
+use relief_render::impostor::{Faces, Impostor};
 use relief_render::pyramid::{MAX_TEXEL_PIXELS, MIN_LEVEL_EDGE, Pyramid};
 use relief_render::warp::Variant;
 use relief_render::warp::params::WarpParams;
@@ -92,6 +93,22 @@ struct WarpReport {
     /// The same impostor seen from four times as far: the full texture against the
     /// pyramid level the resolution test picks (no texels the screen cannot show).
     multires: MultiRes,
+    /// What a client spends on each texture it receives, before any frame shows it.
+    taking_in: TakingIn,
+}
+
+/// A received texture's way into the client, ms (one core).
+#[derive(Serialize)]
+struct TakingIn {
+    /// The wire message checked and decoded into a texture.
+    decode_ms: f64,
+    /// Made ready for the frame loop (`ReadyTexture::new`): its pyramid with each
+    /// level's texel connectivity, critical points, rim and edge error.
+    ready_ms: f64,
+    /// Of which: the full level's connectivity and packed texels (`Impostor::new`).
+    impostor_ms: f64,
+    /// Of which: the whole pyramid, levels and connectivity (`Pyramid::new`).
+    pyramid_ms: f64,
 }
 
 /// Two pre-warps on the machine's threads, ms for both.
@@ -292,6 +309,27 @@ pub fn run(args: WarpArgs) -> Result<()> {
             saving: full_ms / level_ms,
         }
     };
+    bar.set_message("taking a texture in");
+    let taking_in = {
+        let wire = relief_proto::convert::texture_to_pb(texture);
+        let decode =
+            || relief_proto::convert::texture_from_pb("texture", &wire).map_err(|e| anyhow::anyhow!("{e}"));
+        let decoded = decode()?;
+        TakingIn {
+            decode_ms: median_ms(runs, || {
+                let _ = std::hint::black_box(decode());
+            }),
+            ready_ms: median_ms(runs, || {
+                std::hint::black_box(ReadyTexture::new(decoded.clone(), Faces::Both));
+            }),
+            impostor_ms: median_ms(runs, || {
+                std::hint::black_box(Impostor::new(decoded.clone()));
+            }),
+            pyramid_ms: median_ms(runs, || {
+                std::hint::black_box(Pyramid::new(decoded.clone(), MIN_LEVEL_EDGE));
+            }),
+        }
+    };
     bar.finish_and_clear();
     let interleaved = methods
         .get("interleaved")
@@ -316,6 +354,7 @@ pub fn run(args: WarpArgs) -> Result<()> {
         two_prewarps,
         pullpush_1280x720_ms,
         multires,
+        taking_in,
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -340,6 +379,11 @@ pub fn run(args: WarpArgs) -> Result<()> {
         report.multires.level_size,
         report.multires.level_ms,
         report.multires.saving
+    );
+    let t = &report.taking_in;
+    println!(
+        "taking the texture in: decode {:.3} ms, made ready {:.3} ms (of which the pyramid {:.3} ms, its full level's connectivity {:.3} ms)",
+        t.decode_ms, t.ready_ms, t.pyramid_ms, t.impostor_ms
     );
     let table: Vec<String> = report
         .table_8_1
