@@ -603,3 +603,72 @@ fn placements_seen_alike_share_one_texture() {
     let (asked, shared) = run(&twin(90.0));
     assert_eq!((asked, shared), (2, 0), "seen from far apart, each its own");
 }
+
+/// A texture the server made for a nearby eye (within the request's `serve_within`) is
+/// held, and graded, under the eye it was made for.
+#[test]
+fn a_texture_for_a_nearby_eye_is_held_under_its_own_eye() {
+    use relief_client::manager::policy::SERVE_REACH;
+    use relief_client::manager::{Arrival, ReadyTexture};
+    use relief_core::relief::DepthBits;
+    use relief_trace::bake;
+    use relief_trace::tracer::ObjectTracer;
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let (commands_tx, mut commands) = unbounded_channel();
+    let (arrivals, arrivals_rx) = unbounded_channel();
+    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let sphere = index(&scene, "sphere");
+    let object = &scene.objects[sphere];
+    let centre = object.world_bounds().center();
+    let local_centre = object.local_bounds.center();
+    let camera_at = |degrees: f32| {
+        let eye = centre
+            + Vec3::new(
+                4.5 * degrees.to_radians().sin(),
+                1.0,
+                4.5 * degrees.to_radians().cos(),
+            );
+        Camera::look_at(eye, centre, Vec3::Y, 60.0, 160, 90).unwrap()
+    };
+    let camera = camera_at(0.0);
+    manager.frame(&scene, &camera, 0.0);
+    let first = std::iter::from_fn(|| commands.try_recv().ok())
+        .find_map(|c| match c {
+            Command::Request(r) if r.needed_in_ms.is_none() => Some(r),
+            _ => None,
+        })
+        .expect("a request for now");
+    // Nothing held: the reach is the valid angle's share.
+    let distance = first.eye.distance(local_centre);
+    assert!(
+        first.serve_within > 0.0 && first.serve_within <= SERVE_REACH,
+        "{first:?}"
+    );
+    // Answered with the texture of an eye 1° round, within that reach.
+    let made_for = local_centre + glam::Quat::from_rotation_y(1f32.to_radians()) * (first.eye - local_centre);
+    assert!(made_for.distance(first.eye) <= first.serve_within * distance);
+    let texture = bake(
+        &ObjectTracer::new(object),
+        made_for,
+        64,
+        DepthBits::Eight,
+        relief_core::relief::SourceProjection::Perspective,
+    )
+    .unwrap();
+    arrivals
+        .send(Arrival::Texture {
+            id: first.id,
+            texture: Box::new(ReadyTexture::new(texture, relief_render::impostor::Faces::Front)),
+            is_final: true,
+        })
+        .unwrap();
+    let shows = manager.frame(&scene, &camera, 0.1);
+    let shown = manager
+        .describe(&scene, sphere, &shows[sphere], &camera)
+        .expect("the sphere as an impostor");
+    assert!(
+        (shown.turn_deg - 1.0).abs() < 0.05,
+        "held under the eye it was made for: {shown:?}"
+    );
+}

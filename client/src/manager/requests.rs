@@ -53,6 +53,29 @@ pub fn texture_ladder(need: u32) -> u32 {
         .unwrap_or(largest)
 }
 
+/// How near another eye must be for its texture to serve a request at `eye` for an
+/// object centred on `centre` with `valid_angle`, holding textures made for
+/// `held_eyes`: as a fraction of `eye`'s distance from the centre, [`SERVE_REACH`] of
+/// the valid angle, and less than half the way to any held texture's eye — so what
+/// comes back is never a texture held already, which could not cover what the request
+/// is for (and, cached, would answer every request again).
+pub(super) fn serve_within(
+    centre: Vec3,
+    eye: Vec3,
+    valid_angle: f32,
+    held_eyes: impl Iterator<Item = Vec3>,
+) -> f32 {
+    let nearest_held = held_eyes.map(|h| h.distance(eye)).fold(f32::INFINITY, f32::min);
+    let within = (SERVE_REACH * valid_angle)
+        .min(0.5 * nearest_held / eye.distance(centre))
+        .min(MAX_SERVE_WITHIN);
+    if within.is_finite() && within > 0.0 {
+        within
+    } else {
+        0.0
+    }
+}
+
 /// What [`Manager::predict_for`] decides from ([`Manager::prediction`]).
 pub(super) struct Prediction {
     /// Seconds ahead.
@@ -156,7 +179,12 @@ impl Manager {
             depth_bits: REQUESTED_DEPTH_BITS,
             projection,
             needed_in_ms,
-            serve_within: (SERVE_REACH * self.valid_angle(object)).min(MAX_SERVE_WITHIN),
+            serve_within: serve_within(
+                o.local_bounds.center(),
+                eye,
+                self.valid_angle(object),
+                self.objects[object].held.iter().map(|h| h.eye),
+            ),
         };
         if self.commands.send(Command::Request(request)).is_err() {
             return;
@@ -307,5 +335,33 @@ impl Manager {
             self.counters.withdrawn += stale.len() as u64;
             let _ = self.commands.send(Command::Withdraw(stale));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The reach is the valid angle's share, stops short of half the way to the
+    /// nearest held texture's eye, is none at a held eye, and is at most the
+    /// protocol's bound.
+    #[test]
+    fn the_reach_never_takes_in_a_held_texture() {
+        let (centre, eye) = (Vec3::ZERO, Vec3::new(0.0, 0.0, 10.0));
+        let valid = 0.2;
+        let alone = serve_within(centre, eye, valid, std::iter::empty());
+        assert_eq!(alone, SERVE_REACH * valid);
+        let far = Vec3::new(5.0, 0.0, 10.0);
+        assert_eq!(serve_within(centre, eye, valid, [far].into_iter()), alone);
+        // A held eye 0.4 away: a reach of at most 0.2 (0.02 of the distance 10).
+        let near = Vec3::new(0.4, 0.0, 10.0);
+        let capped = serve_within(centre, eye, valid, [far, near].into_iter());
+        assert!((capped - 0.02).abs() < 1e-6, "{capped}");
+        assert!(capped * 10.0 < near.distance(eye));
+        assert_eq!(serve_within(centre, eye, valid, [eye].into_iter()), 0.0);
+        assert_eq!(
+            serve_within(centre, eye, 10.0, std::iter::empty()),
+            MAX_SERVE_WITHIN
+        );
     }
 }
