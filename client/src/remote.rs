@@ -75,9 +75,9 @@ impl Remote {
             scenes: pb::scenes_client::ScenesClient::with_interceptor(channel.clone(), auth.clone())
                 .send_compressed(CompressionEncoding::Zstd)
                 .accept_compressed(CompressionEncoding::Zstd),
-            // Requests to Impostors are a few bytes: sent plain; textures come back compressed.
+            // Requests to Impostors are a few bytes, and textures come with their planes
+            // compressed (see `relief_proto::planes`): both plain on the wire.
             impostors: pb::impostors_client::ImpostorsClient::with_interceptor(channel, auth)
-                .accept_compressed(CompressionEncoding::Zstd)
                 .max_decoding_message_size(MAX_TEXTURE_MESSAGE_BYTES),
             client_id: client_id.to_string(),
         })

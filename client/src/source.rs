@@ -37,6 +37,7 @@ fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::I
         progressive: request.needed_in_ms.is_none(),
         projection: projection_to_pb(request.projection).into(),
         serve_within: request.serve_within,
+        zstd_planes: true,
     }
 }
 

@@ -8,6 +8,7 @@ use relief_core::hash::ContentHash;
 use relief_core::relief::{DepthBits, MAX_TEXTURE_SIZE, ReliefTexture, SourceCamera, SourceProjection};
 
 use crate::pb;
+use crate::planes::planes;
 
 fn invalid(field: &str, problem: impl std::fmt::Display) -> Status {
     Status::invalid_argument(format!("field `{field}`: {problem}"))
@@ -103,17 +104,19 @@ pub fn texture_to_pb(t: &ReliefTexture) -> pb::ReliefTexture {
         albedo: t.albedo.iter().flatten().copied().collect(),
         normal: t.normal.iter().flatten().copied().collect(),
         depth,
+        encoding: pb::PlaneEncoding::Raw.into(),
     }
 }
 
-/// A relief texture from the wire, every field checked. `field` prefixes the names in
-/// errors (e.g. `texture`).
+/// A relief texture from the wire, every field checked (its planes raw or compressed:
+/// see [`planes`](crate::planes)). `field` prefixes the names in errors (e.g.
+/// `texture`).
 pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTexture, Status> {
-    let (camera, depth_bits, eye) = check_texture_pb(field, t)?;
+    let (camera, depth_bits, eye) = check_header(field, t)?;
+    let [albedo, normal, depth] = planes(field, t, plane_sizes(&camera, depth_bits))?;
     let depth: Vec<u16> = match depth_bits {
-        DepthBits::Eight => t.depth.iter().map(|&q| q as u16).collect(),
-        DepthBits::Sixteen => t
-            .depth
+        DepthBits::Eight => depth.iter().map(|&q| q as u16).collect(),
+        DepthBits::Sixteen => depth
             .chunks_exact(2)
             .map(|b| u16::from_le_bytes([b[0], b[1]]))
             .collect(),
@@ -123,8 +126,8 @@ pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTextu
         camera,
         depth_bits,
         eye,
-        albedo: triples(&t.albedo),
-        normal: triples(&t.normal),
+        albedo: triples(&albedo),
+        normal: triples(&normal),
         depth,
     })
 }
@@ -132,6 +135,27 @@ pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTextu
 /// Every check of [`texture_from_pb`] without building the texture (for whoever only
 /// passes it on): its camera, depth bits and eye, or the first bad field.
 pub fn check_texture_pb(
+    field: &str,
+    t: &pb::ReliefTexture,
+) -> Result<(SourceCamera, DepthBits, Vec3), Status> {
+    let (camera, depth_bits, eye) = check_header(field, t)?;
+    planes(field, t, plane_sizes(&camera, depth_bits))?;
+    Ok((camera, depth_bits, eye))
+}
+
+/// The bytes of a texture's albedo, normal and depth planes (raw), for its camera and
+/// depth bits.
+pub fn plane_sizes(camera: &SourceCamera, depth_bits: DepthBits) -> [usize; 3] {
+    let texels = camera.width as usize * camera.height as usize;
+    let depth_bytes = match depth_bits {
+        DepthBits::Eight => 1,
+        DepthBits::Sixteen => 2,
+    };
+    [3 * texels, 3 * texels, depth_bytes * texels]
+}
+
+/// A texture's fields but its planes, checked: its camera, depth bits and eye.
+pub(crate) fn check_header(
     field: &str,
     t: &pb::ReliefTexture,
 ) -> Result<(SourceCamera, DepthBits, Vec3), Status> {
@@ -163,24 +187,6 @@ pub fn check_texture_pb(
     if !camera.centre_in_front() {
         return Err(invalid(&name("centre"), "not in front of the image plane"));
     }
-    let texels = width as usize * height as usize;
-    let plane = |f: &str, bytes: &[u8], per_texel: usize| {
-        if bytes.len() != texels * per_texel {
-            Err(invalid(
-                &name(f),
-                format_args!("{} bytes, expected {}", bytes.len(), texels * per_texel),
-            ))
-        } else {
-            Ok(())
-        }
-    };
-    plane("albedo", &t.albedo, 3)?;
-    plane("normal", &t.normal, 3)?;
-    let depth_bytes = match depth_bits {
-        DepthBits::Eight => 1,
-        DepthBits::Sixteen => 2,
-    };
-    plane("depth", &t.depth, depth_bytes)?;
     let eye = vec3_from_pb(&name("eye"), t.eye.as_ref())?;
     Ok((camera, depth_bits, eye))
 }
@@ -211,6 +217,8 @@ pub struct Request {
     /// How near another eye must be for its texture to serve this request, as a
     /// fraction of `eye`'s distance from the object's centre (0: this eye only).
     pub serve_within: f32,
+    /// The client reads compressed planes (see [`planes`](crate::planes)).
+    pub zstd_planes: bool,
 }
 
 /// The projection a request or job asks for.
@@ -282,6 +290,7 @@ pub fn request_from_pb(r: &pb::ImpostorRequest) -> Result<Request, Status> {
         progressive: r.progressive,
         projection: projection_from_pb("projection", r.projection)?,
         serve_within: serve_within_from_pb(r.serve_within)?,
+        zstd_planes: r.zstd_planes,
     })
 }
 
@@ -369,6 +378,7 @@ mod tests {
             progressive: false,
             projection: pb::SourceProjection::Perspective.into(),
             serve_within: 0.05,
+            zstd_planes: true,
         };
         assert_eq!(
             request_from_pb(&good).unwrap().projection,

@@ -3,8 +3,9 @@
 //! (in [`convert`]) — every message is validated here, where it enters a process — and
 //! scene bundles ([`bundle`]), how scenes travel by content hash; and what the server
 //! and the workers share besides: the bearer token ([`auth`]), endpoints
-//! ([`connect`]), the sizes of what crosses the wire ([`limits`]), the metrics
-//! endpoint ([`metrics`]) and the shutdown signal ([`shutdown`]).
+//! ([`connect`]), the sizes of what crosses the wire ([`limits`]), textures' planes
+//! compressed once ([`planes`]), the metrics endpoint ([`metrics`]) and the shutdown
+//! signal ([`shutdown`]).
 //!
 //! # Brief overview
 //!
@@ -32,6 +33,7 @@ pub mod connect;
 pub mod convert;
 pub mod limits;
 pub mod metrics;
+pub mod planes;
 pub mod shutdown;
 
 /// The message of the `CANCELLED` status that ends a withdrawn request's result

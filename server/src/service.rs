@@ -18,7 +18,7 @@ use relief_proto::limits::SCENE_CHUNK_BYTES;
 use relief_proto::pb;
 
 use crate::identity::{Caller, Role};
-use crate::state::{Admission, State, StoredObject, StoredScene};
+use crate::state::{Admission, State, StoredObject, StoredScene, texture_for};
 
 /// The server: its state under one lock, and where received scenes are unpacked.
 pub struct Shared {
@@ -309,12 +309,13 @@ impl pb::impostors_server::Impostors for Service {
         }
         match admission? {
             Admission::Cached(texture) => {
-                let _ = tx.send(Ok(pb::ImpostorResult {
+                let result = texture_for(&texture, r.zstd_planes).map(|texture| pb::ImpostorResult {
                     request_id: r.request_id,
-                    texture: Some((*texture).clone()),
+                    texture: Some(texture),
                     r#final: true,
                     bake_ms: 0,
-                }));
+                });
+                let _ = tx.send(result);
             }
             Admission::Queued => state.dispatch(),
         }

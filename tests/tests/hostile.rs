@@ -55,6 +55,7 @@ fn ask(scene: &str, id: u64, size: u32, client_id: &str) -> pb::ImpostorRequest 
         progressive: false,
         projection: pb::SourceProjection::Orthographic.into(),
         serve_within: 0.0,
+        zstd_planes: false,
     }
 }
 
@@ -173,6 +174,7 @@ fn tiny_texture() -> pb::ReliefTexture {
         normal: vec![128, 128, 255].into(),
         depth: vec![0].into(),
         centre: None,
+        encoding: pb::PlaneEncoding::Raw.into(),
     }
 }
 

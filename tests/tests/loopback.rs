@@ -41,6 +41,7 @@ fn request(
         // (What the client asks for.)
         projection: pb::SourceProjection::Perspective.into(),
         serve_within: 0.0,
+        zstd_planes: false,
     }
 }
 
@@ -70,7 +71,10 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
     let results = collect(remote.request(req.clone()).await.unwrap()).await.unwrap();
     assert_eq!(results.len(), 2, "a preview, then the final texture");
     assert!(!results[0].r#final && results[1].r#final);
-    let got = texture_from_pb("texture", results[1].texture.as_ref().unwrap()).unwrap();
+    // (Raw planes for a client that does not read compressed ones.)
+    let wire = results[1].texture.as_ref().unwrap();
+    assert_eq!(wire.encoding, pb::PlaneEncoding::Raw as i32);
+    let got = texture_from_pb("texture", wire).unwrap();
     let scene = Scene::load("default").unwrap();
     let local = bake(
         &ObjectTracer::new(scene.object("knot").unwrap()),
@@ -81,11 +85,18 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
     )
     .unwrap();
     assert_eq!(got, local, "the worker's texture differs from a local bake");
-    // Asked again: served from the cache.
+    // Asked again: served from the cache — with the planes compressed as the worker
+    // sent them, for a client that reads them so.
     req.request_id = 2;
     req.progressive = false;
+    req.zstd_planes = true;
     let again = collect(remote.request(req.clone()).await.unwrap()).await.unwrap();
     assert_eq!(again.len(), 1);
+    let wire = again[0].texture.as_ref().unwrap();
+    assert_eq!(wire.encoding, pb::PlaneEncoding::Zstd as i32);
+    assert!(wire.albedo.len() < results[1].texture.as_ref().unwrap().albedo.len());
+    assert_eq!(texture_from_pb("texture", wire).unwrap(), local);
+    req.zstd_planes = false;
     // A smaller request at the same eye: the bigger cached texture serves it.
     req.request_id = 3;
     req.size = 64;
@@ -309,7 +320,15 @@ async fn a_killed_workers_job_is_answered_by_another() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_worker_told_to_stop_finishes_its_job_first() {
     let (_server, url) = start_server(&["--job-timeout-ms", "600000"]);
-    let mut worker = start_worker(&url, &["--slots", "2"]);
+    // (On one thread, the held bake lasts seconds: the checks below come well within
+    // it.)
+    let mut worker = Running(
+        worker_command(&url)
+            .args(["--slots", "2"])
+            .env("RAYON_NUM_THREADS", "1")
+            .spawn()
+            .expect("starting relief-worker"),
+    );
     let (mut remote, hash) = upload_default(&url, None, "test").await;
     wait_for(&mut remote, "a worker", |s| s.workers == 1).await;
     let stream = start_long_bake(&mut remote, &hash).await;

@@ -25,6 +25,7 @@ use relief_proto::convert::{
 };
 use relief_proto::limits::{MAX_SCENE_FETCH_MESSAGE_BYTES, MAX_TEXTURE_MESSAGE_BYTES};
 use relief_proto::pb;
+use relief_proto::planes::compressed;
 use relief_trace::bake::bake_unless_cancelled;
 use relief_trace::tracer::ObjectTracer;
 
@@ -208,8 +209,8 @@ async fn session(
         Ok(c) => c,
         Err(e) => return End::Lost(anyhow!("connecting: {}", relief_proto::connect::explain(&e))),
     };
+    // (Results carry their planes compressed already: sent plain.)
     let mut workers = pb::workers_client::WorkersClient::with_interceptor(channel.clone(), auth.clone())
-        .send_compressed(CompressionEncoding::Zstd)
         .accept_compressed(CompressionEncoding::Zstd)
         .max_encoding_message_size(MAX_TEXTURE_MESSAGE_BYTES);
     let scenes = pb::scenes_client::ScenesClient::with_interceptor(channel, auth.clone())
@@ -379,8 +380,10 @@ async fn bake_job(job: pb::Job, context: &JobContext, cancelled: &Arc<AtomicBool
         }
         let (tracer, flag) = (tracer.clone(), cancelled.clone());
         let start = Instant::now();
+        // (Compressed here, once: see `relief_proto::planes`.)
         let texture = tokio::task::spawn_blocking(move || {
             bake_unless_cancelled(&tracer, eye, edge, bits, projection, &flag)
+                .map(|baked| baked.map(|texture| compressed(texture_to_pb(&texture))))
         })
         .await
         .map_err(|e| e.to_string())?
@@ -397,7 +400,7 @@ async fn bake_job(job: pb::Job, context: &JobContext, cancelled: &Arc<AtomicBool
         metrics.rays.inc_by(u64::from(edge) * u64::from(edge));
         let result = pb::JobResult {
             job_id: job.job_id,
-            texture: Some(texture_to_pb(&texture)),
+            texture: Some(texture),
             r#final: k + 1 == sizes.len(),
             bake_ms: start.elapsed().as_millis() as u32,
         };

@@ -77,39 +77,62 @@ impl Impostor {
         // (`SourceCamera::texel_size_at` over its value at the plane, worked out once).
         let inverse_h = c.centre_distance().map_or(0.0, |h| 1.0 / h);
         let spread = |t: f32| 1.0 + t * inverse_h;
-        // Each texel's depth and slopes worked out once (each is compared with up to
-        // four neighbours): this runs for every texture level a client receives.
-        // (Empty texels join nothing: nothing is worked out for them.)
-        let mut depths = vec![0.0; w * h];
-        let mut slopes_a = vec![0.0; w * h];
-        let mut slopes_b = vec![0.0; w * h];
-        for (k, (&level, &normal)) in texture.depth.iter().zip(&texture.normal).enumerate() {
-            if level != empty {
-                let n = decode_normal_rgb8(normal);
-                depths[k] = depth(k);
-                slopes_a[k] = slope(n, a_dir);
-                slopes_b[k] = slope(n, b_dir);
-            }
+        // Each texel's depth and slopes, worked out once (each is compared with up to
+        // four neighbours), a row at a time: this runs for every texture level a client
+        // receives, and whole planes of them cost more in fresh pages than in
+        // arithmetic. (Empty texels join nothing: nothing is worked out for them.)
+        #[derive(Clone, Copy, Default)]
+        struct Texel {
+            depth: f32,
+            slope_a: f32,
+            slope_b: f32,
         }
-        let joined = |k: usize, l: usize, slopes: &[f32], step: f32| {
-            if texture.depth[k] == empty || texture.depth[l] == empty {
-                return false;
-            }
-            let (dk, dl) = (depths[k], depths[l]);
+        let row_of = |j: usize, row: &mut Vec<Texel>| {
+            row.clear();
+            row.extend((j * w..(j + 1) * w).map(|k| {
+                if texture.depth[k] == empty {
+                    return Texel::default();
+                }
+                let n = decode_normal_rgb8(texture.normal[k]);
+                Texel {
+                    depth: depth(k),
+                    slope_a: slope(n, a_dir),
+                    slope_b: slope(n, b_dir),
+                }
+            }));
+        };
+        // Whether two surface texels `p` and `q`, a texel `step` apart, are joined, with
+        // their slopes along that step.
+        let joined = |p: Texel, q: Texel, (sp, sq): (f32, f32), step: f32| {
             // (A perspective texture's neighbouring rays part with depth: the texel's
             // side where the surface lies.)
-            let step = step * spread(dk.max(dl));
-            let allowed = SLOPE_SLACK * step * slopes[k].max(slopes[l]) + step + 2.0 * quantum;
-            (dk - dl).abs() <= allowed
+            let step = step * spread(p.depth.max(q.depth));
+            let allowed = SLOPE_SLACK * step * sp.max(sq) + step + 2.0 * quantum;
+            (p.depth - q.depth).abs() <= allowed
         };
+        let covered = |k: usize| texture.depth[k] != empty;
         let mut right = vec![false; w * h];
         let mut down = vec![false; w * h];
+        let (mut row, mut below) = (Vec::with_capacity(w), Vec::with_capacity(w));
+        if h > 0 {
+            row_of(0, &mut row);
+        }
         for j in 0..h {
+            if j + 1 < h {
+                row_of(j + 1, &mut below);
+            }
             for i in 0..w {
                 let k = j * w + i;
-                right[k] = i + 1 < w && joined(k, k + 1, &slopes_a, a_len);
-                down[k] = j + 1 < h && joined(k, k + w, &slopes_b, b_len);
+                right[k] = i + 1 < w
+                    && covered(k)
+                    && covered(k + 1)
+                    && joined(row[i], row[i + 1], (row[i].slope_a, row[i + 1].slope_a), a_len);
+                down[k] = j + 1 < h
+                    && covered(k)
+                    && covered(k + w)
+                    && joined(row[i], below[i], (row[i].slope_b, below[i].slope_b), b_len);
             }
+            std::mem::swap(&mut row, &mut below);
         }
         let packed = (texture.albedo.iter().zip(&texture.normal).zip(&texture.depth))
             .map(|((&albedo, &normal), &level)| crate::warp::prewarp::pack_texel(albedo, normal, level))

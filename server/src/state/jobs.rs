@@ -113,11 +113,11 @@ const MAX_SERVED_RATIO: u32 = 2;
 /// The cache keeps no more of one subject.
 pub(super) const SUBJECT_SCAN: usize = 1024;
 
-/// `texture` with its planes in buffers of their own, exactly their size: decoded
-/// from the wire they are slices of the whole received message's buffer (larger, and
-/// kept alive as long as any slice is — measured: the cache held about 1.8 times the
-/// bytes it counted). Copied once here, they are then shared by every waiter and cache
-/// hit.
+/// `texture` with its planes (as the worker sent them: ours compressed) in buffers of
+/// their own, exactly their size: decoded from the wire they are slices of the whole
+/// received message's buffer (larger, and kept alive as long as any slice is —
+/// measured: the cache held about 1.8 times the bytes it counted). Copied once here,
+/// they are then shared by every waiter and cache hit.
 fn compact(texture: pb::ReliefTexture) -> pb::ReliefTexture {
     use tonic::codegen::Bytes;
     pb::ReliefTexture {
@@ -169,6 +169,19 @@ pub(super) struct Waiter {
     pub(super) job: u64,
     pub(super) tx: ResultSender,
     pub(super) arrived: Instant,
+    /// It reads compressed planes (see `relief_proto::planes`).
+    pub(super) zstd_planes: bool,
+}
+
+/// `texture` (kept with compressed planes) as a client that reads compressed planes
+/// or not takes it.
+pub fn texture_for(texture: &pb::ReliefTexture, zstd_planes: bool) -> Result<pb::ReliefTexture, Status> {
+    if zstd_planes || texture.encoding == pb::PlaneEncoding::Raw as i32 {
+        Ok(texture.clone())
+    } else {
+        // (Checked as it arrived: this fails only on the server's own mistake.)
+        relief_proto::planes::raw("texture", texture).map_err(|e| Status::internal(e.message().to_string()))
+    }
 }
 
 impl State {
@@ -240,13 +253,13 @@ impl State {
         let texture = Arc::new(compact(texture));
         for waiter_id in &job.waiters {
             if let Some(w) = self.waiters.get(waiter_id) {
-                let result = pb::ImpostorResult {
+                let result = texture_for(&texture, w.zstd_planes).map(|texture| pb::ImpostorResult {
                     request_id: waiter_id.1,
-                    texture: Some((*texture).clone()),
+                    texture: Some(texture),
                     r#final: is_final,
                     bake_ms,
-                };
-                let _ = w.tx.send(Ok(result));
+                });
+                let _ = w.tx.send(result);
             }
         }
         if is_final {

@@ -35,7 +35,7 @@ use relief_core::relief::{FacingError, SourceCamera};
 use relief_proto::convert::{Request, Urgency, projection_to_pb, vec3_to_pb};
 use relief_proto::pb;
 
-pub use jobs::{JobKey, WaiterId};
+pub use jobs::{JobKey, WaiterId, texture_for};
 pub use stats::{Counters, LATENCY_BUCKETS_MS};
 
 use cache::Cached;
@@ -326,6 +326,7 @@ impl State {
                 job: job_id,
                 tx,
                 arrived: now,
+                zstd_planes: request.zstd_planes,
             },
         );
         Ok(Admission::Queued)

@@ -121,6 +121,7 @@ pub fn run(args: RpcArgs) -> Result<()> {
                 // (What the client asks for.)
                 projection: pb::SourceProjection::Perspective.into(),
                 serve_within: 0.0,
+                zstd_planes: true,
             };
             let start = Instant::now();
             let mut stream = remote.request(request).await?;
