@@ -1,6 +1,14 @@
 //! A TCP relay in user space between a test's processes on 127.0.0.1: what a network
-//! does to a link, without `netem` (this kernel has none) — a delay each way, and a
-//! partition that can be cut and healed.
+//! does to a link, without `netem` (this kernel has none) — a delay each way, packet
+//! loss, and a partition that can be cut and healed.
+//!
+//! Loss is modelled as TCP lives it, since the relay sees streams, not packets: each
+//! [`SEGMENT_BYTES`] of a stream is lost with the link's probability, and a loss holds
+//! back what it was read with and all that follows on its connection — by a round trip
+//! when enough follows it for the receiver's duplicate acknowledgements to ask for it
+//! again (fast retransmit), else by a retransmission timeout ([`MIN_RTO`] at least).
+//! A connection's opening handshake is lost the same way, and costs the kernel's first
+//! SYN retry ([`SYN_RETRY`]).
 //!
 //! A cut stops the bytes in both directions without closing anything, as a partition
 //! does: what was sent waits in the relay (and, behind it, in the senders' buffers),
@@ -24,8 +32,40 @@ use std::time::Duration;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 
+use relief_core::generators::SplitMix64;
+
 /// How often a relay in a cut looks whether the link is back.
 const CUT_POLL: Duration = Duration::from_millis(10);
+
+/// The bytes of one TCP segment on an Ethernet path (1500-byte MTU less the headers).
+pub const SEGMENT_BYTES: usize = 1448;
+
+/// Linux's least retransmission timeout: what a lost segment at the end of a burst
+/// (no duplicate acknowledgements to trigger fast retransmit) waits at least.
+pub const MIN_RTO: Duration = Duration::from_millis(200);
+
+/// Segments that must follow a lost one for three duplicate acknowledgements to ask
+/// for it again after one round trip.
+const FAST_RETRANSMIT_AFTER: usize = 3;
+
+/// Linux's first SYN retransmission: what a lost handshake costs a new connection.
+pub const SYN_RETRY: Duration = Duration::from_secs(1);
+
+/// What a relayed link does: a delay each way, and the probability each segment (or
+/// handshake) is lost.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Link {
+    pub delay: Duration,
+    pub loss: f64,
+}
+
+/// A seed for each connection's losses: runs differ only by what the processes do.
+static CONNECTIONS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+/// Whether this segment (or handshake) is lost: `rng`'s next draw under `loss`.
+fn lost(rng: &mut SplitMix64, loss: f64) -> bool {
+    loss > 0.0 && (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64 <= loss
+}
 
 /// A relay listening on an ephemeral 127.0.0.1 port, passing each connection on to
 /// its target; it stops when dropped (its connections end with the test's runtime).
@@ -43,6 +83,12 @@ impl Relay {
 
     /// [`Relay::start`] listening on `listen` (`host:port`; port 0 picks one).
     pub async fn start_on(listen: &str, target: &str, delay: Duration) -> Relay {
+        Relay::start_link(listen, target, Link { delay, loss: 0.0 }).await
+    }
+
+    /// A relay listening on `listen` (`host:port`; port 0 picks one) to `target` over
+    /// `link`.
+    pub async fn start_link(listen: &str, target: &str, link: Link) -> Relay {
         let listener = TcpListener::bind(listen).await.expect("binding the relay");
         let address = listener.local_addr().expect("the relay's address");
         let cut = Arc::new(AtomicBool::new(false));
@@ -53,6 +99,14 @@ impl Relay {
                 while let Ok((inbound, _)) = listener.accept().await {
                     let (cut, target) = (cut.clone(), target.clone());
                     tokio::spawn(async move {
+                        let seed = CONNECTIONS.fetch_add(1, Ordering::Relaxed);
+                        let mut rng = SplitMix64::new(seed);
+                        // (The handshake: a SYN each way.)
+                        let mut opening = link.delay * 2;
+                        if lost(&mut rng, link.loss) || lost(&mut rng, link.loss) {
+                            opening += SYN_RETRY;
+                        }
+                        tokio::time::sleep(opening).await;
                         wait_healed(&cut).await;
                         let Ok(outbound) = TcpStream::connect(&target).await else {
                             return;
@@ -60,8 +114,9 @@ impl Relay {
                         let _ = (inbound.set_nodelay(true), outbound.set_nodelay(true));
                         let (in_read, in_write) = inbound.into_split();
                         let (out_read, out_write) = outbound.into_split();
-                        tokio::spawn(pass(in_read, out_write, cut.clone(), delay));
-                        tokio::spawn(pass(out_read, in_write, cut, delay));
+                        let back = SplitMix64::new(rng.next_u64());
+                        tokio::spawn(pass(in_read, out_write, cut.clone(), link, rng));
+                        tokio::spawn(pass(out_read, in_write, cut, link, back));
                     });
                 }
             }
@@ -101,14 +156,16 @@ async fn wait_healed(cut: &AtomicBool) {
     }
 }
 
-/// Copies `from` to `to`, each chunk `delay` after it was read (chunks in flight
-/// together, as on a line with that latency) and none while the link is cut; closes
-/// `to` when `from` ends.
+/// Copies `from` to `to`, each chunk `link.delay` after it was read (chunks in flight
+/// together, as on a line with that latency), later when it or one before it lost a
+/// segment (see the module's notes), and none while the link is cut; closes `to` when
+/// `from` ends.
 async fn pass(
     mut from: tokio::net::tcp::OwnedReadHalf,
     mut to: tokio::net::tcp::OwnedWriteHalf,
     cut: Arc<AtomicBool>,
-    delay: Duration,
+    link: Link,
+    mut rng: SplitMix64,
 ) {
     let (line, mut arriving) = tokio::sync::mpsc::unbounded_channel::<(tokio::time::Instant, Vec<u8>)>();
     let writer = tokio::spawn(async move {
@@ -121,17 +178,82 @@ async fn pass(
         }
         let _ = to.shutdown().await;
     });
+    let round_trip = link.delay * 2;
     let mut buffer = vec![0u8; 64 << 10];
+    // Nothing on this connection arrives before what a loss held back.
+    let mut held_until = tokio::time::Instant::now();
     loop {
         let n = match from.read(&mut buffer).await {
             Ok(0) | Err(_) => break,
             Ok(n) => n,
         };
-        let due = tokio::time::Instant::now() + delay;
+        let arrival = tokio::time::Instant::now() + link.delay;
+        let mut due = arrival.max(held_until);
+        let segments = n.div_ceil(SEGMENT_BYTES);
+        if let Some(k) = (0..segments).find(|_| lost(&mut rng, link.loss)) {
+            let recovery = if segments - k > FAST_RETRANSMIT_AFTER {
+                round_trip
+            } else {
+                MIN_RTO.max(round_trip * 2)
+            };
+            // (Losses within one recovery are resent together, as with selective
+            // acknowledgements: they do not add up.)
+            due = due.max(arrival + recovery);
+        }
+        held_until = due;
         if line.send((due, buffer[..n].to_vec())).is_err() {
             break;
         }
     }
     drop(line);
     let _ = writer.await;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Sends `bytes` through a relay over `link` to an echo of the first byte, and
+    /// times the connection and the answer.
+    async fn timed(link: Link, bytes: usize) -> (Duration, Duration) {
+        let echo = TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let target = echo.local_addr().unwrap().to_string();
+        tokio::spawn(async move {
+            let (mut s, _) = echo.accept().await.unwrap();
+            let mut got = vec![0u8; bytes];
+            s.read_exact(&mut got).await.unwrap();
+            s.write_all(&got[..1]).await.unwrap();
+        });
+        let relay = Relay::start_link("127.0.0.1:0", &target, link).await;
+        let start = tokio::time::Instant::now();
+        let mut s = TcpStream::connect(relay.address).await.unwrap();
+        s.write_all(&vec![7u8; bytes]).await.unwrap();
+        let mut answer = [0u8; 1];
+        s.read_exact(&mut answer).await.unwrap();
+        let total = start.elapsed();
+        (total, total.saturating_sub(link.delay * 4))
+    }
+
+    /// A loss costs what TCP pays for it: a handshake the SYN retry, a segment at a
+    /// burst's end the retransmission timeout, one with enough behind it a round trip.
+    #[tokio::test]
+    async fn losses_cost_what_tcp_pays_for_them() {
+        let delay = Duration::from_millis(20);
+        let clean = Link { delay, loss: 0.0 };
+        let lossy = Link { delay, loss: 1.0 };
+        // The handshake's round trip, then there and back: two round trips.
+        let (small, _) = timed(clean, 100).await;
+        assert!(
+            small >= delay * 4 && small < delay * 4 + Duration::from_millis(150),
+            "{small:?}"
+        );
+        // Everything lost: the SYN retry, then each way a short message's tail loss.
+        let (_, over) = timed(lossy, 100).await;
+        let tail = MIN_RTO.max(delay * 4);
+        let least = SYN_RETRY + tail * 2;
+        assert!(
+            over >= least && over < least + Duration::from_millis(300),
+            "{over:?}"
+        );
+    }
 }

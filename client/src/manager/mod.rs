@@ -62,7 +62,7 @@ use around::angle_between;
 use cache::ObjectState;
 use choose::{Grade, may_show, shown_texture};
 use draw::Kept;
-use policy::{ASSESSMENTS_PER_TASK, SHOWN_STALE, WARM_UP_POLL, texel_pixels};
+use policy::{ASSESSMENTS_PER_TASK, GEOMETRY_WHILE_WAITING, SHOWN_STALE, WARM_UP_POLL, texel_pixels};
 use requests::Pending;
 
 /// The manager of one client: what it holds and has asked for per object, where the eye
@@ -346,8 +346,13 @@ impl Manager {
         let object = &scene.objects[k];
         let camera = object.local_camera(world_camera);
         let reason = geometry_reason(object, world_camera.eye);
+        let factor = if self.objects[k].held.is_empty() {
+            GEOMETRY_WHILE_WAITING
+        } else {
+            1.0
+        };
         let grades = (reason.is_none() && camera.may_see(&object.local_bounds))
-            .then(|| self.grades(scene, k, camera.eye_f32(), &camera))
+            .then(|| self.grades(scene, k, camera.eye_f32(), &camera, factor))
             .flatten();
         Assessment {
             camera,

@@ -262,10 +262,21 @@ pub const WARP_NS_PER_TEXEL: f32 = 12.0;
 /// path, rtt 0 and 100, against the same before) the tree then matched geometry where
 /// its impostor was 2.9–3.3 dB below, the frame took 6.45–6.64 ms where it took
 /// 6.63–6.73, and 84–119 textures were asked for where 125–143 were.
-pub fn cheaper_as_geometry(object: &SceneObject, edge: u32) -> bool {
+///
+/// With `factor` over 1, whether geometry costs no more than `factor` times the
+/// impostor (see [`GEOMETRY_WHILE_WAITING`]).
+pub fn cheaper_as_geometry(object: &SceneObject, edge: u32, factor: f32) -> bool {
     let geometry = object.mesh.triangle_count() as f32 * GEOMETRY_NS_PER_TRIANGLE;
-    geometry <= (edge as f32).powi(2) * WARP_NS_PER_TEXEL
+    geometry <= factor * (edge as f32).powi(2) * WARP_NS_PER_TEXEL
 }
+
+/// An object holding no texture is drawn as geometry — exact, and so not stale — while
+/// that costs no more than this many times its impostor would; its first texture is
+/// asked for as soon as it would pay ([`cheaper_as_geometry`] at 1). Without it, the
+/// tree stepping back from the 360-texel edge that is drawn as geometry to the 256 one
+/// that is not went stale until its texture came: 13–16 of the 300 frames of a flight
+/// over a 100 ms link with 2 % loss, each drawing it exactly at about the same cost.
+pub const GEOMETRY_WHILE_WAITING: f32 = 2.0;
 
 /// The texel, in pixels' angles, a texture of `object` is asked for and shown at from
 /// `camera`: [`SHEET_TEXEL_PIXELS`] for leaves and sheets; for solids
@@ -517,10 +528,13 @@ mod tests {
         let scene = Scene::load("default").expect("default scene");
         let object = |name| scene.object(name).expect("object");
         let (tree, knot, sphere, rock) = (object("tree"), object("knot"), object("sphere"), object("rock"));
-        assert!(cheaper_as_geometry(tree, SHEET_MAX_EDGE) && cheaper_as_geometry(tree, 360));
-        assert!(!cheaper_as_geometry(tree, 256));
+        assert!(cheaper_as_geometry(tree, SHEET_MAX_EDGE, 1.0) && cheaper_as_geometry(tree, 360, 1.0));
+        assert!(!cheaper_as_geometry(tree, 256, 1.0));
+        // With nothing to show, the tree waits as geometry at 256 texels, not at 184.
+        assert!(cheaper_as_geometry(tree, 256, GEOMETRY_WHILE_WAITING));
+        assert!(!cheaper_as_geometry(tree, 184, GEOMETRY_WHILE_WAITING));
         for solid in [sphere, knot, rock] {
-            assert!(!cheaper_as_geometry(solid, SOLID_MAX_EDGE), "{}", solid.name);
+            assert!(!cheaper_as_geometry(solid, SOLID_MAX_EDGE, 1.0), "{}", solid.name);
         }
     }
 

@@ -268,7 +268,8 @@ impl Manager {
             return None;
         }
         let future = object.to_local(future);
-        let grades = self.grades(scene, k, future, camera)?;
+        // (Asked for as soon as a texture would pay: see `GEOMETRY_WHILE_WAITING`.)
+        let grades = self.grades(scene, k, future, camera, 1.0)?;
         let held = (self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect();
         Some(Prediction {
             horizon,

@@ -10,6 +10,10 @@ mod rock;
 mod sphere;
 mod tree;
 
+/// The generators' deterministic random numbers, for whoever else needs the same (a
+/// test relay's lost packets).
+pub use noise::SplitMix64;
+
 use serde::Deserialize;
 
 use crate::mesh::Mesh;
