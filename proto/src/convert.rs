@@ -10,7 +10,7 @@ use relief_core::relief::{DepthBits, MAX_TEXTURE_SIZE, ReliefTexture, SourceCame
 use crate::pb;
 use crate::planes::planes;
 
-fn invalid(field: &str, problem: impl std::fmt::Display) -> Status {
+pub(crate) fn invalid(field: &str, problem: impl std::fmt::Display) -> Status {
     Status::invalid_argument(format!("field `{field}`: {problem}"))
 }
 
@@ -133,7 +133,8 @@ pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTextu
 }
 
 /// Every check of [`texture_from_pb`] without building the texture (for whoever only
-/// passes it on): its camera, depth bits and eye, or the first bad field.
+/// passes it on): its camera, depth bits and eye, or the first bad field. Compressed
+/// planes are decompressed to be checked (and dropped).
 pub fn check_texture_pb(
     field: &str,
     t: &pb::ReliefTexture,

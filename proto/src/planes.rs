@@ -4,8 +4,8 @@
 //! A worker sends [`compressed`] planes; the server checks them (they must decompress
 //! to their sizes, no more) and hands the same bytes to every client that asks for
 //! them so (`ImpostorRequest.zstd_planes`), [`raw`] ones to any other. Compressing
-//! once per texture, rather than once per client it goes to, took a third of a busy
-//! server's time off it.
+//! once per texture, rather than once per client it goes to, took 45 % of a busy
+//! server's time off it (64 clients of `relief load`).
 
 use std::borrow::Cow;
 

@@ -18,7 +18,7 @@ use relief_proto::limits::SCENE_CHUNK_BYTES;
 use relief_proto::pb;
 
 use crate::identity::{Caller, Role};
-use crate::state::{Admission, State, StoredObject, StoredScene, texture_for};
+use crate::state::{Admission, State, StoredObject, StoredScene};
 
 /// The server: its state under one lock, and where received scenes are unpacked.
 pub struct Shared {
@@ -70,6 +70,10 @@ pub struct ResultStream {
     shared: Arc<Shared>,
     client_id: String,
     request_id: u64,
+    /// The client reads compressed planes (see `relief_proto::planes`); for one that
+    /// does not, each texture's planes are decompressed here, on its own stream, not
+    /// where the state is held.
+    zstd_planes: bool,
 }
 
 impl Stream for ResultStream {
@@ -79,7 +83,24 @@ impl Stream for ResultStream {
         mut self: Pin<&mut Self>,
         cx: &mut std::task::Context<'_>,
     ) -> std::task::Poll<Option<Self::Item>> {
-        Pin::new(&mut self.results).poll_next(cx)
+        let zstd_planes = self.zstd_planes;
+        Pin::new(&mut self.results).poll_next(cx).map(|item| {
+            item.map(|result| {
+                result.and_then(|r| match r.texture {
+                    Some(texture) if !zstd_planes && texture.encoding != pb::PlaneEncoding::Raw as i32 => {
+                        // (Checked as it arrived: this fails only on the server's own
+                        // mistake.)
+                        let raw = relief_proto::planes::raw("texture", &texture)
+                            .map_err(|e| Status::internal(e.message().to_string()))?;
+                        Ok(pb::ImpostorResult {
+                            texture: Some(raw),
+                            ..r
+                        })
+                    }
+                    _ => Ok(r),
+                })
+            })
+        })
     }
 }
 
@@ -309,13 +330,12 @@ impl pb::impostors_server::Impostors for Service {
         }
         match admission? {
             Admission::Cached(texture) => {
-                let result = texture_for(&texture, r.zstd_planes).map(|texture| pb::ImpostorResult {
+                let _ = tx.send(Ok(pb::ImpostorResult {
                     request_id: r.request_id,
-                    texture: Some(texture),
+                    texture: Some((*texture).clone()),
                     r#final: true,
                     bake_ms: 0,
-                });
-                let _ = tx.send(result);
+                }));
             }
             Admission::Queued => state.dispatch(),
         }
@@ -330,6 +350,7 @@ impl pb::impostors_server::Impostors for Service {
             shared: self.0.clone(),
             client_id: r.client_id.clone(),
             request_id: r.request_id,
+            zstd_planes: r.zstd_planes,
         }))
     }
 

@@ -5,10 +5,14 @@
 //! Loss is modelled as TCP lives it, since the relay sees streams, not packets: each
 //! [`SEGMENT_BYTES`] of a stream is lost with the link's probability, and a loss holds
 //! back what it was read with and all that follows on its connection — by a round trip
-//! when enough follows it for the receiver's duplicate acknowledgements to ask for it
-//! again (fast retransmit), else by a retransmission timeout ([`MIN_RTO`] at least).
-//! A connection's opening handshake is lost the same way, and costs the kernel's first
-//! SYN retry ([`SYN_RETRY`]).
+//! when enough follows it in the same read for the receiver's duplicate
+//! acknowledgements to ask for it again (fast retransmit), else by a retransmission
+//! timeout (twice the round trip, [`MIN_RTO`] at least). So a loss near the end of a
+//! read pays the timeout even when the next read follows at once: harsher than TCP
+//! there.
+//!
+//! A connection opens a round trip after it is asked for (the handshake), and a lost
+//! handshake costs the kernel's first SYN retry ([`SYN_RETRY`]) more.
 //!
 //! A cut stops the bytes in both directions without closing anything, as a partition
 //! does: what was sent waits in the relay (and, behind it, in the senders' buffers),
@@ -64,7 +68,7 @@ static CONNECTIONS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64:
 
 /// Whether this segment (or handshake) is lost: `rng`'s next draw under `loss`.
 fn lost(rng: &mut SplitMix64, loss: f64) -> bool {
-    loss > 0.0 && (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64 <= loss
+    loss > 0.0 && f64::from(rng.range(0.0, 1.0)) < loss
 }
 
 /// A relay listening on an ephemeral 127.0.0.1 port, passing each connection on to
@@ -191,6 +195,8 @@ async fn pass(
         let mut due = arrival.max(held_until);
         let segments = n.div_ceil(SEGMENT_BYTES);
         if let Some(k) = (0..segments).find(|_| lost(&mut rng, link.loss)) {
+            // (The timeout is the smoothed round trip and four times its variation:
+            // about two round trips on a steady link.)
             let recovery = if segments - k > FAST_RETRANSMIT_AFTER {
                 round_trip
             } else {

@@ -118,8 +118,8 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
         Some(eye),
         "a perspective texture is seen from its eye"
     );
-    // A nearby eye, with a reach that takes it in: the cached texture of `eye`; with
-    // none, a texture of its own.
+    // A nearby eye, with a serve_within that takes `eye` in: the cached texture of
+    // `eye`; with none, a texture of its own.
     let nearby = eye + Vec3::new(0.05, 0.0, 0.0);
     let mut near = request(&hash.to_string(), "knot", nearby, 128, 5, pb::Urgency::Now);
     near.serve_within = 0.02;
@@ -127,12 +127,15 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
         .await
         .unwrap();
     let shared = texture_from_pb("texture", shared[0].texture.as_ref().unwrap()).unwrap();
-    assert_eq!(shared, local, "a texture made for an eye within reach serves");
+    assert_eq!(
+        shared, local,
+        "a texture made for an eye within serve_within serves"
+    );
     near.request_id = 6;
     near.serve_within = 0.0;
     let own = collect(remote.request(near).await.unwrap()).await.unwrap();
     let own = texture_from_pb("texture", own[0].texture.as_ref().unwrap()).unwrap();
-    assert_eq!(own.eye, nearby, "without a reach, the eye asked for");
+    assert_eq!(own.eye, nearby, "with no serve_within, the eye asked for");
     let stats = remote.stats().await.unwrap();
     assert_eq!(
         (stats.requests, stats.cache_hits, stats.served_nearby),

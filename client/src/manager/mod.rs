@@ -230,7 +230,11 @@ impl Manager {
                 // Off screen (nothing shown, so nothing stale and nothing needed now:
                 // drawn as geometry, which the rasterizer leaves out at once), or drawn
                 // as geometry while its texture would cost more than it: the textures
-                // for where the eye is going are still asked for.
+                // for where the eye is going are still asked for. One drawn as geometry
+                // only while it waits for its first texture asks for that now.
+                if self.waits_as_geometry(scene, k, camera) {
+                    self.request(scene, k, camera.eye_f32(), camera, None);
+                }
                 self.predict_for(scene, k, camera, prediction);
                 continue;
             };
@@ -335,12 +339,23 @@ struct Assessment {
     reason: Option<GeometryReason>,
     /// Each held texture's grade at the eye (in the order held: the frame adds and
     /// drops none before it decides), where it may be shown: on screen, and its
-    /// texture no dearer to warp than its triangles to draw ([`Manager::grades`]);
-    /// `None` elsewhere.
+    /// texture no dearer to warp than its triangles to draw — by
+    /// [`GEOMETRY_WHILE_WAITING`] when it holds none ([`Manager::grades`]); `None`
+    /// elsewhere.
     grades: Option<Vec<Grade>>,
 }
 
 impl Manager {
+    /// Whether object `k`, drawn as geometry from `camera` (in its frame), is so only
+    /// while it waits for its first texture ([`GEOMETRY_WHILE_WAITING`]): on screen,
+    /// holding and asking for nothing, though a texture would pay.
+    fn waits_as_geometry(&self, scene: &Scene, k: usize, camera: &Camera) -> bool {
+        self.objects[k].held.is_empty()
+            && !self.pending.values().any(|p| p.object == k)
+            && camera.may_see(&scene.objects[k].local_bounds)
+            && self.grades(scene, k, camera.eye_f32(), camera, 1.0).is_some()
+    }
+
     /// Object `k` seen from `world_camera`: its camera, and how its textures grade.
     fn assess(&self, scene: &Scene, k: usize, world_camera: &Camera) -> Assessment {
         let object = &scene.objects[k];

@@ -274,8 +274,8 @@ pub fn cheaper_as_geometry(object: &SceneObject, edge: u32, factor: f32) -> bool
 /// that costs no more than this many times its impostor would; its first texture is
 /// asked for as soon as it would pay ([`cheaper_as_geometry`] at 1). Without it, the
 /// tree stepping back from the 360-texel edge that is drawn as geometry to the 256 one
-/// that is not went stale until its texture came: 13–16 of the 300 frames of a flight
-/// over a 100 ms link with 2 % loss, each drawing it exactly at about the same cost.
+/// that is not went stale until its texture came: 7–19 of the 300 frames of a flight
+/// over 100 ms links with 2 % loss, each drawing it exactly at about the same cost.
 pub const GEOMETRY_WHILE_WAITING: f32 = 2.0;
 
 /// The texel, in pixels' angles, a texture of `object` is asked for and shown at from
@@ -361,10 +361,12 @@ pub const PENDING_DISTANCE_SLACK: f32 = 0.2;
 /// the one asked for serves a request: one the server holds or is making for another
 /// client, or another placement. Such a texture still covers (1 + [`LEAD`] −
 /// `SERVE_REACH`) valid angles of the motion, and clients flying through one scene
-/// share their textures rather than each waiting for its own: 64 clients of `relief
-/// load` had half their requests served so at 0.25, four in five at 0.5, and stalled
-/// half as often (see docs/load-test.md).
-pub const SERVE_REACH: f32 = 0.5;
+/// share their textures rather than each waiting for its own (see
+/// docs/load-test.md). At 0.5, 64 clients of `relief load` stalled 17–20 % of their
+/// frames where at 0.25 they stall 23–26 %, but a lone client over a 250 ms round
+/// trip went stale in 2.5–3.2 % of its frames where at 0.25 it does 1.1–1.4 % (and
+/// 0.9–1.4 % sharing nothing).
+pub const SERVE_REACH: f32 = 0.25;
 
 /// Predictions farther than this many valid angles from both the eye and its future are
 /// withdrawn: the motion has left them behind.

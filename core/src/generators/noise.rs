@@ -16,7 +16,7 @@ impl SplitMix64 {
     }
 
     /// Uniform in `[lo, hi)`.
-    pub(super) fn range(&mut self, lo: f32, hi: f32) -> f32 {
+    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
         let unit = (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
         lo + (hi - lo) * unit
     }

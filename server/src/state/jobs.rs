@@ -44,7 +44,7 @@ pub(super) struct Wanted {
     /// The farthest (object-frame distance) the eye of a texture serving it may be from
     /// its own: the request's `serve_within` times its eye's distance from the
     /// object's centre.
-    pub(super) reach: f32,
+    pub(super) radius: f32,
 }
 
 impl JobKey {
@@ -68,7 +68,7 @@ impl JobKey {
     }
 
     /// How far the eye of the texture made for `self` is from `wanted`'s, if that
-    /// texture serves it: the same subject, an eye within its reach, at least its
+    /// texture serves it: the same subject, an eye within its radius, at least its
     /// depth bits and its edge, up to [`MAX_SERVED_RATIO`] times it (a client draws
     /// the pyramid level its screen needs, so more texels cost it bytes on the wire,
     /// not warp time).
@@ -80,7 +80,7 @@ impl JobKey {
             self.eye().distance(w.eye())
         };
         (self.subject == w.subject
-            && apart <= wanted.reach
+            && apart <= wanted.radius
             && self.depth_bits >= w.depth_bits
             && (w.size..=w.size.saturating_mul(MAX_SERVED_RATIO)).contains(&self.size))
         .then_some(apart)
@@ -169,19 +169,6 @@ pub(super) struct Waiter {
     pub(super) job: u64,
     pub(super) tx: ResultSender,
     pub(super) arrived: Instant,
-    /// It reads compressed planes (see `relief_proto::planes`).
-    pub(super) zstd_planes: bool,
-}
-
-/// `texture` (kept with compressed planes) as a client that reads compressed planes
-/// or not takes it.
-pub fn texture_for(texture: &pb::ReliefTexture, zstd_planes: bool) -> Result<pb::ReliefTexture, Status> {
-    if zstd_planes || texture.encoding == pb::PlaneEncoding::Raw as i32 {
-        Ok(texture.clone())
-    } else {
-        // (Checked as it arrived: this fails only on the server's own mistake.)
-        relief_proto::planes::raw("texture", texture).map_err(|e| Status::internal(e.message().to_string()))
-    }
 }
 
 impl State {
@@ -253,13 +240,13 @@ impl State {
         let texture = Arc::new(compact(texture));
         for waiter_id in &job.waiters {
             if let Some(w) = self.waiters.get(waiter_id) {
-                let result = texture_for(&texture, w.zstd_planes).map(|texture| pb::ImpostorResult {
+                let result = pb::ImpostorResult {
                     request_id: waiter_id.1,
-                    texture: Some(texture),
+                    texture: Some((*texture).clone()),
                     r#final: is_final,
                     bake_ms,
-                });
-                let _ = w.tx.send(result);
+                };
+                let _ = w.tx.send(Ok(result));
             }
         }
         if is_final {

@@ -35,7 +35,7 @@ use relief_core::relief::{FacingError, SourceCamera};
 use relief_proto::convert::{Request, Urgency, projection_to_pb, vec3_to_pb};
 use relief_proto::pb;
 
-pub use jobs::{JobKey, WaiterId, texture_for};
+pub use jobs::{JobKey, WaiterId};
 pub use stats::{Counters, LATENCY_BUCKETS_MS};
 
 use cache::Cached;
@@ -195,7 +195,7 @@ impl State {
         self.counters.requests += 1;
         let key = JobKey::of(request, object.mesh);
         let wanted = Wanted {
-            reach: request.serve_within * request.eye.distance(object.bounds.center()),
+            radius: request.serve_within * request.eye.distance(object.bounds.center()),
             key: key.clone(),
         };
         self.clock += 1;
@@ -326,7 +326,6 @@ impl State {
                 job: job_id,
                 tx,
                 arrived: now,
-                zstd_planes: request.zstd_planes,
             },
         );
         Ok(Admission::Queued)

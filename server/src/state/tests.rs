@@ -195,15 +195,16 @@ fn a_bigger_texture_serves_smaller_requests() {
     assert_eq!((s.counters.merged, s.stats().queue_now), (2, 3));
 }
 
-/// A request with a reach (`serve_within`) is served by the texture made for the
+/// A request with a `serve_within` is served by the texture made for the
 /// nearest eye within it — a job queued for another request, or a cached texture —
 /// and gets a job of its own when none is that near; a request without one only by
 /// its own eye.
 #[test]
-fn the_nearest_eye_within_reach_serves_a_request() {
+fn the_nearest_eye_within_serve_within_serves_a_request() {
     let (mut s, hash) = state_with_scene();
     let (tx, mut rx) = unbounded_channel();
-    // From (x, 0, 5), about 5 from the ball's centre: a reach of 0.05 is 0.25 or so.
+    // From (x, 0, 5), about 5 from the ball's centre: a serve_within of 0.05 takes in
+    // eyes 0.25 or so away.
     let ask = |id: u64, x: f32, serve_within: f32| Request {
         serve_within,
         ..request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Now)
@@ -213,7 +214,7 @@ fn the_nearest_eye_within_reach_serves_a_request() {
     assert_eq!((s.counters.merged, s.counters.served_nearby), (1, 1));
     s.admit(&ask(3, 0.6, 0.05), OWNER, tx.clone()).unwrap();
     s.admit(&ask(4, 0.2, 0.0), OWNER, tx.clone()).unwrap();
-    assert_eq!(s.counters.merged, 1, "0.6 is out of reach; 0.2 asked exactly");
+    assert_eq!(s.counters.merged, 1, "0.6 is too far; 0.2 asked exactly");
     // Both 0.6 and 0.2 are jobs now, and 0.6 is nearer.
     s.admit(&ask(5, 0.5, 0.05), OWNER, tx.clone()).unwrap();
     assert_eq!((s.counters.merged, s.counters.served_nearby), (2, 2));
@@ -235,7 +236,7 @@ fn the_nearest_eye_within_reach_serves_a_request() {
         .collect();
     served.sort();
     assert_eq!(served, vec![(1, 0), (2, 0), (3, 6), (4, 2), (5, 6)]);
-    // Cached: 0.12 is nearest 0.2; 0.38 is out of reach of all three at 0.03, and
+    // Cached: 0.12 is nearest 0.2; 0.38 is too far from all three at 0.03, and
     // nearest 0.2 at 0.05.
     let cached_width = |s: &mut State, id: u64, x: f32, serve_within: f32| match s.admit(
         &ask(id, x, serve_within),

@@ -100,7 +100,7 @@ struct WarpReport {
 /// A received texture's way into the client, ms (one core).
 #[derive(Serialize)]
 struct TakingIn {
-    /// The wire message checked and decoded into a texture.
+    /// The wire message (its planes compressed) checked and decoded into a texture.
     decode_ms: f64,
     /// Made ready for the frame loop (`ReadyTexture::new`): its pyramid with each
     /// level's texel connectivity, critical points, rim and edge error.
@@ -311,7 +311,8 @@ pub fn run(args: WarpArgs) -> Result<()> {
     };
     bar.set_message("taking a texture in");
     let taking_in = {
-        let wire = relief_proto::convert::texture_to_pb(texture);
+        // (As a client receives it: its planes compressed.)
+        let wire = relief_proto::planes::compressed(relief_proto::convert::texture_to_pb(texture));
         let decode =
             || relief_proto::convert::texture_from_pb("texture", &wire).map_err(|e| anyhow::anyhow!("{e}"));
         let decoded = decode()?;
