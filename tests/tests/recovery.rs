@@ -14,12 +14,7 @@ use relief_tests::{command, scratch, start_server, start_server_at, start_worker
 /// One flight at a time: each times recoveries and counts stale frames, which two
 /// flights sharing the machine's cores would not give (a flight over a lossy link went
 /// from none to 14 % of its frames stale beside the others).
-static ONE_FLIGHT: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-/// Holds [`ONE_FLIGHT`] (whatever an earlier test's panic left it).
-fn one_flight() -> std::sync::MutexGuard<'static, ()> {
-    ONE_FLIGHT.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
-}
+static ONE_FLIGHT: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
 /// Requests the server has answered (each counted once in its latency histogram).
 fn answered(stats: &StatsReply) -> u64 {
@@ -126,7 +121,7 @@ const RECOVERED_WITHIN: Duration = Duration::from_secs(8);
 /// and its summary counts the time it could not be served.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_flight_recovers_from_a_server_restart() {
-    let _flight = one_flight();
+    let _flight = ONE_FLIGHT.lock().await;
     let (server, url) = start_server(&[]);
     let _worker = start_worker(&url, &[]);
     let mut watch = Remote::connect(&url, None, "watch").await.unwrap();
@@ -224,7 +219,7 @@ async fn partition(relay: &Relay, watch: &mut Remote, demo: Flying, within: Dura
 /// again within [`FLOWING_WITHIN`] of the link's return.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_partition_is_noticed_and_healed() {
-    let _flight = one_flight();
+    let _flight = ONE_FLIGHT.lock().await;
     let (_server, url) = start_server(&[]);
     let _worker = start_worker(&url, &[]);
     let mut watch = Remote::connect(&url, None, "watch").await.unwrap();
@@ -254,7 +249,7 @@ async fn a_partition_is_noticed_and_healed() {
 /// naming it.
 #[test]
 fn a_server_without_workers_is_said_counted_and_can_fail_the_run() {
-    let _flight = one_flight();
+    let _flight = ONE_FLIGHT.blocking_lock();
     let (_server, url) = start_server(&[]);
     let out = scratch("no-workers");
     let (status, summary, lines) = finish(fly(&url, 60, &out, &[]), Duration::from_secs(120));
@@ -284,7 +279,7 @@ const HOST_DELAY: Duration = Duration::from_millis(50);
 /// and its frames stay mostly fresh.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_flight_across_hosts_rides_out_a_partition() {
-    let _flight = one_flight();
+    let _flight = ONE_FLIGHT.lock().await;
     let Some(hosts) = relief_tests::netns::Hosts::create("rlft", 77, 3) else {
         eprintln!("skipped: network namespaces need root (`ip netns add` failed)");
         return;
@@ -353,7 +348,7 @@ const LOSSY_STALE_AT_MOST: f64 = 0.04;
 /// ahead: its textures come in time for nearly every frame.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_flight_over_a_lossy_link_stays_fresh() {
-    let _flight = one_flight();
+    let _flight = ONE_FLIGHT.lock().await;
     let (_server, url) = start_server(&[]);
     let target = url.strip_prefix("http://").unwrap();
     let to_workers = Relay::start_link("127.0.0.1:0", target, LOSSY).await;
