@@ -323,17 +323,23 @@ impl Setup<'_> {
             })
             .collect::<Result<_>>()?;
         let seconds = started.elapsed().as_secs_f64();
-        let stats = self
-            .runtime
-            .block_on(stats_remote.stats())
-            .context("asking the server for its counters")?;
-        tracing::debug!(clients, tolerance, ?stats, "the server's counters after the run");
+        // (The clients' figures stand without the server's counters: a failed look
+        // costs only `served_nearby_frac`.)
+        let served = match self.runtime.block_on(stats_remote.stats()) {
+            Ok(stats) => {
+                tracing::debug!(clients, tolerance, ?stats, "the server's counters after the run");
+                Some((stats.served_nearby, stats.requests))
+            }
+            Err(e) => {
+                tracing::warn!("the server's counters after the run: {}", e.message());
+                None
+            }
+        };
         drop(service);
         Ok(Run {
             results,
             seconds,
-            served_nearby: stats.served_nearby,
-            server_requests: stats.requests,
+            served,
         })
     }
 }
@@ -342,10 +348,9 @@ impl Setup<'_> {
 struct Run {
     results: Vec<ClientResult>,
     seconds: f64,
-    /// The server's count of requests, and of those a texture made for another eye
-    /// served.
-    server_requests: u64,
-    served_nearby: u64,
+    /// Of the requests the server took in, those a texture made for another eye
+    /// served, and all of them (`None` when the server did not say).
+    served: Option<(u64, u64)>,
 }
 
 /// The row of `clients` clients at `tolerance` from `runs`, pooled: counts summed, rates
@@ -397,8 +402,16 @@ fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
         psnr_db_mean: finite_mean(&psnr).unwrap_or(f64::NAN),
         psnr_db_min: finite_min(&psnr).unwrap_or(f64::NAN),
         requests_shed: sum(&|r| r.counters.requests_shed),
-        served_nearby_frac: runs.iter().map(|r| r.served_nearby).sum::<u64>() as f64
-            / runs.iter().map(|r| r.server_requests).sum::<u64>().max(1) as f64,
+        // NaN (null in JSON) when no server said.
+        served_nearby_frac: {
+            let said: Vec<(u64, u64)> = runs.iter().filter_map(|r| r.served).collect();
+            let (nearby, all) = said.iter().fold((0, 0), |(n, a), &(x, y)| (n + x, a + y));
+            if said.is_empty() {
+                f64::NAN
+            } else {
+                nearby as f64 / all.max(1) as f64
+            }
+        },
         load_scale_mean: results().map(|r| r.counters.load_scale_sum).sum::<f64>() / frames.max(1) as f64,
     }
 }
