@@ -147,6 +147,18 @@ impl Mesh {
         self.triangles.len()
     }
 
+    /// Normals as a file gave them, made unit — a non-finite or zero one means "none
+    /// here" (zero): shading falls back to the face normal. Every loader calls this.
+    pub(crate) fn settle_normals(&mut self) {
+        for n in self.normals.iter_mut().flatten() {
+            *n = if n.is_finite() {
+                n.normalize_or_zero()
+            } else {
+                Vec3::ZERO
+            };
+        }
+    }
+
     /// Checks index ranges, attribute lengths and finiteness; the error says what is wrong.
     pub fn validate(&self) -> Result<(), MeshError> {
         if self.triangles.is_empty() {

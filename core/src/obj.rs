@@ -106,18 +106,10 @@ pub fn load_obj(path: &Path, reach: Reach) -> Result<Mesh> {
             ids.push(material);
         }
     }
-    // Non-finite or zero normals from the file mean "none here": shading falls back to
-    // the face normal.
-    for n in &mut normals {
-        *n = if n.is_finite() {
-            n.normalize_or_zero()
-        } else {
-            Vec3::ZERO
-        };
-    }
     mesh.normals = any_normals.then_some(normals);
     mesh.texcoords = any_texcoords.then_some(texcoords);
     mesh.triangle_materials = Some(ids);
+    mesh.settle_normals();
     mesh.validate().map_err(|e| obj_error(e.to_string()))?;
     Ok(mesh)
 }

@@ -386,6 +386,7 @@ fn build_mesh(
         }
     }
     out.triangle_materials = Some(ids);
+    out.settle_normals();
     out.validate().map_err(|e| format!("{label}: {e}"))?;
     Ok(out)
 }
@@ -640,6 +641,48 @@ mod tests {
         out.extend(b"BIN\0");
         out.extend(bin);
         out
+    }
+
+    /// Normals as the file gives them are made unit, and a non-finite or zero one is
+    /// taken as none (zero: shading falls back to the face's), as from an OBJ file.
+    #[test]
+    fn normals_are_settled_as_from_an_obj_file() {
+        let mut bytes = Vec::new();
+        for p in [[0f32, 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.]] {
+            bytes.extend(p.iter().flat_map(|c| c.to_le_bytes()));
+        }
+        for n in [[0f32, 0., 2.], [f32::NAN, 0., 1.], [0., 0., 0.], [0., 0., 1.]] {
+            bytes.extend(n.iter().flat_map(|c| c.to_le_bytes()));
+        }
+        for i in [0u16, 1, 2, 0, 2, 3] {
+            bytes.extend(i.to_le_bytes());
+        }
+        let json = r#"{
+  "asset": { "version": "2.0" },
+  "scene": 0,
+  "scenes": [{ "nodes": [0] }],
+  "nodes": [{ "name": "quad", "mesh": 0 }],
+  "meshes": [{ "primitives": [{ "attributes": { "POSITION": 0, "NORMAL": 1 }, "indices": 2 }] }],
+  "accessors": [
+    { "bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0] },
+    { "bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3" },
+    { "bufferView": 2, "componentType": 5123, "count": 6, "type": "SCALAR" }
+  ],
+  "bufferViews": [
+    { "buffer": 0, "byteOffset": 0, "byteLength": 48 },
+    { "buffer": 0, "byteOffset": 48, "byteLength": 48 },
+    { "buffer": 0, "byteOffset": 96, "byteLength": 12 }
+  ],
+  "buffers": [{ "byteLength": 108 }]
+}"#;
+        let path = scratch("normals.glb");
+        std::fs::write(&path, glb(json, &bytes)).expect("write");
+        let model = load_gltf(&path, Reach::Anywhere).expect("load");
+        let mesh = model.meshes[0].as_ref().expect("mesh built");
+        let normals = mesh.normals.as_ref().expect("normals");
+        assert_eq!(normals, &[Vec3::Z, Vec3::ZERO, Vec3::ZERO, Vec3::Z]);
+        let merged = load_gltf_merged(&path, Reach::Anywhere).expect("merged");
+        assert_eq!(merged.normals.as_ref(), Some(normals));
     }
 
     /// The quad's corner (1, 1, 0) in the world, through each placement, as composed by
