@@ -140,6 +140,10 @@ pub enum MeshError {
     MaterialIdCount,
     #[error("a triangle refers to a material that does not exist")]
     MissingMaterial,
+    #[error("the mesh would have {0} materials; at most {max} are supported", max = u16::MAX)]
+    TooManyMaterials(usize),
+    #[error("the mesh would have {0} vertices; at most {max} are supported", max = u32::MAX)]
+    TooManyVertices(usize),
 }
 
 impl Mesh {
@@ -367,8 +371,18 @@ impl Mesh {
         }
     }
 
-    /// Appends `other`, offsetting its indices and material ids.
-    pub fn append(&mut self, other: Mesh) {
+    /// Appends `other`, offsetting its indices and material ids; an error (and nothing
+    /// appended) when the two hold more materials than a `u16` id names or more
+    /// vertices than a `u32` index does.
+    pub fn append(&mut self, other: Mesh) -> Result<(), MeshError> {
+        let materials = self.materials.len() + other.materials.len();
+        if materials > usize::from(u16::MAX) {
+            return Err(MeshError::TooManyMaterials(materials));
+        }
+        let vertices = self.positions.len() + other.positions.len();
+        if vertices > u32::MAX as usize {
+            return Err(MeshError::TooManyVertices(vertices));
+        }
         let vertex_offset = self.positions.len() as u32;
         let material_offset = self.materials.len() as u16;
         let (own_vertices, other_vertices) = (self.positions.len(), other.positions.len());
@@ -404,6 +418,7 @@ impl Mesh {
         self.triangles
             .extend(other.triangles.into_iter().map(|t| t.map(|i| i + vertex_offset)));
         self.materials.extend(other.materials);
+        Ok(())
     }
 
     /// Heap bytes held by the mesh (excluding material textures).
@@ -460,13 +475,22 @@ mod tests {
     #[test]
     fn append_offsets_indices_and_fills_missing_normals() {
         let mut m = triangle(0.0, false);
-        m.append(triangle(1.0, true));
+        m.append(triangle(1.0, true)).unwrap();
         assert_eq!(m.triangles[1], [3, 4, 5]);
         assert_eq!(m.normals.as_ref().unwrap()[0], Vec3::ZERO);
         assert_eq!(m.triangle_materials.as_deref(), Some(&[0u16, 1][..]));
         assert!(m.validate().is_ok());
         // A zero vertex normal falls back to the face normal.
         assert_eq!(m.shading_normal(0, 0.3, 0.3), Vec3::Z);
+        // More materials than a u16 id names: refused, nothing appended.
+        let mut many = triangle(2.0, false);
+        many.materials = vec![Material::default(); usize::from(u16::MAX)];
+        let (triangles, materials) = (m.triangles.len(), m.materials.len());
+        assert_eq!(
+            m.append(many),
+            Err(MeshError::TooManyMaterials(usize::from(u16::MAX) + 2))
+        );
+        assert_eq!((m.triangles.len(), m.materials.len()), (triangles, materials));
     }
 
     #[test]

@@ -265,7 +265,7 @@ fn eight_bit_depth_on_a_very_deep_object() {
         ))
     };
     let mut mesh = square(0.0);
-    mesh.append(square(-1000.0));
+    mesh.append(square(-1000.0)).unwrap();
     let scene = scene_of(mesh);
     let texture = baked(&scene, Vec3::new(0.0, 0.0, 5.0), 64, DepthBits::Eight);
     assert!(texture.camera.depth_quantum(DepthBits::Eight) > 3.0);

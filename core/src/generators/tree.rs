@@ -125,7 +125,10 @@ pub(super) fn tree(seed: u64, depth: u32, leaves_per_twig: u32) -> Mesh {
     builder.branch(Vec3::ZERO, Vec3::Y, 0.7, 0.08, depth);
     let mut mesh = builder.wood;
     if !builder.leaves.triangles.is_empty() {
-        mesh.append(builder.leaves);
+        // (Two materials, and vertices the scene's triangle limit bounds far below
+        // u32's: appending cannot fail.)
+        mesh.append(builder.leaves)
+            .expect("a tree's wood and leaves fit in one mesh");
     } else {
         mesh.materials.push(material("leaf", Vec3::new(0.25, 0.55, 0.18)));
     }

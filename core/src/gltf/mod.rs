@@ -128,13 +128,10 @@ pub fn load_gltf_merged(path: &Path, reach: Reach) -> Result<Mesh> {
             placement.transform.translation.as_vec3(),
         ));
         match &mut merged {
-            Some(all) if all.materials.len() + placed.materials.len() > usize::from(u16::MAX) => {
-                return Err(Error::Obj {
-                    path: path.to_path_buf(),
-                    message: format!("merged, its placements hold more than {} materials", u16::MAX),
-                });
-            }
-            Some(all) => all.append(placed),
+            Some(all) => all.append(placed).map_err(|e| Error::Obj {
+                path: path.to_path_buf(),
+                message: format!("its placements merged: {e}"),
+            })?,
             None => merged = Some(placed),
         }
     }
