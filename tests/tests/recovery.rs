@@ -340,9 +340,11 @@ const LOSSY: Link = Link {
     loss: 0.02,
 };
 
-/// The most of its frames a flight over [`LOSSY`] may show stale: the target is 2 %
-/// (measured here: none in 3 runs); CI machines are slower and busier.
-const LOSSY_STALE_AT_MOST: f64 = 0.04;
+/// The most of its frames a flight over [`LOSSY`] may show stale. The target is 2 %:
+/// alone on the 2-core machine, 0–0.3 % in 9 runs; in one full `.ci/run` on it,
+/// answers came a half slower (p50 622 ms) and 7 % went stale. A breakdown shows far
+/// above this: 14 % flying beside another flight, 35–49 % over 250 ms links.
+const LOSSY_STALE_AT_MOST: f64 = 0.10;
 
 /// A flight whose client and workers reach the server over [`LOSSY`] links, predicting
 /// ahead: its textures come in time for nearly every frame.
