@@ -125,8 +125,8 @@ pub(super) fn tree(seed: u64, depth: u32, leaves_per_twig: u32) -> Mesh {
     builder.branch(Vec3::ZERO, Vec3::Y, 0.7, 0.08, depth);
     let mut mesh = builder.wood;
     if !builder.leaves.triangles.is_empty() {
-        // (Two materials, and vertices the scene's triangle limit bounds far below
-        // u32's: appending cannot fail.)
+        // (Two materials, and the vertices of at most `MAX_TREE_DEPTH` levels, tens of
+        // millions: appending cannot fail.)
         mesh.append(builder.leaves)
             .expect("a tree's wood and leaves fit in one mesh");
     } else {
