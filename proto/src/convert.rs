@@ -1,6 +1,8 @@
 //! Checked conversions between wire messages and core types. Every error is a
 //! `tonic::Status` with code INVALID_ARGUMENT that names the offending field.
 
+use std::borrow::Cow;
+
 use glam::Vec3;
 use tonic::Status;
 
@@ -112,8 +114,12 @@ pub fn texture_to_pb(t: &ReliefTexture) -> pb::ReliefTexture {
 /// see [`planes`](crate::planes)). `field` prefixes the names in errors (e.g.
 /// `texture`).
 pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTexture, Status> {
-    let (camera, depth_bits, eye) = check_header(field, t)?;
-    let [albedo, normal, depth] = planes(field, t, plane_sizes(&camera, depth_bits))?;
+    let Checked {
+        camera,
+        depth_bits,
+        eye,
+        planes: [albedo, normal, depth],
+    } = checked(field, t)?;
     let depth: Vec<u16> = match depth_bits {
         DepthBits::Eight => depth.iter().map(|&q| q as u16).collect(),
         DepthBits::Sixteen => depth
@@ -139,14 +145,40 @@ pub fn check_texture_pb(
     field: &str,
     t: &pb::ReliefTexture,
 ) -> Result<(SourceCamera, DepthBits, Vec3), Status> {
-    let (camera, depth_bits, eye) = check_header(field, t)?;
-    planes(field, t, plane_sizes(&camera, depth_bits))?;
+    let Checked {
+        camera,
+        depth_bits,
+        eye,
+        ..
+    } = checked(field, t)?;
     Ok((camera, depth_bits, eye))
+}
+
+/// A texture from the wire, every field checked ([`checked`]).
+pub(crate) struct Checked<'a> {
+    pub(crate) camera: SourceCamera,
+    pub(crate) depth_bits: DepthBits,
+    pub(crate) eye: Vec3,
+    /// Albedo, normal and depth, raw: borrowed where they came raw, decompressed where
+    /// they came compressed.
+    pub(crate) planes: [Cow<'a, [u8]>; 3],
+}
+
+/// Every field of `t` checked.
+pub(crate) fn checked<'a>(field: &str, t: &'a pb::ReliefTexture) -> Result<Checked<'a>, Status> {
+    let (camera, depth_bits, eye) = check_header(field, t)?;
+    let planes = planes(field, t, plane_sizes(&camera, depth_bits))?;
+    Ok(Checked {
+        camera,
+        depth_bits,
+        eye,
+        planes,
+    })
 }
 
 /// The bytes of a texture's albedo, normal and depth planes (raw), for its camera and
 /// depth bits.
-pub fn plane_sizes(camera: &SourceCamera, depth_bits: DepthBits) -> [usize; 3] {
+fn plane_sizes(camera: &SourceCamera, depth_bits: DepthBits) -> [usize; 3] {
     let texels = camera.width as usize * camera.height as usize;
     let depth_bytes = match depth_bits {
         DepthBits::Eight => 1,
@@ -156,10 +188,7 @@ pub fn plane_sizes(camera: &SourceCamera, depth_bits: DepthBits) -> [usize; 3] {
 }
 
 /// A texture's fields but its planes, checked: its camera, depth bits and eye.
-pub(crate) fn check_header(
-    field: &str,
-    t: &pb::ReliefTexture,
-) -> Result<(SourceCamera, DepthBits, Vec3), Status> {
+fn check_header(field: &str, t: &pb::ReliefTexture) -> Result<(SourceCamera, DepthBits, Vec3), Status> {
     let name = |f: &str| format!("{field}.{f}");
     let width = size_from_pb(&name("width"), t.width)?;
     let height = size_from_pb(&name("height"), t.height)?;

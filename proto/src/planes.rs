@@ -44,9 +44,7 @@ pub fn compressed(texture: pb::ReliefTexture) -> pb::ReliefTexture {
 /// `texture` with raw planes (decompressed, when they came compressed), every field
 /// checked. `field` prefixes the names in errors.
 pub fn raw(field: &str, texture: &pb::ReliefTexture) -> Result<pb::ReliefTexture, Status> {
-    let (camera, depth_bits, _) = crate::convert::check_header(field, texture)?;
-    let sizes = crate::convert::plane_sizes(&camera, depth_bits);
-    let [albedo, normal, depth] = planes(field, texture, sizes)?;
+    let [albedo, normal, depth] = crate::convert::checked(field, texture)?.planes;
     if texture.encoding == pb::PlaneEncoding::Raw as i32 {
         return Ok(texture.clone());
     }
@@ -68,9 +66,7 @@ pub(crate) fn planes<'a>(
     texture: &'a pb::ReliefTexture,
     sizes: [usize; 3],
 ) -> Result<[Cow<'a, [u8]>; 3], Status> {
-    let name = |f: &str| format!("{field}.{f}");
-    let invalid =
-        |f: &str, problem: String| Status::invalid_argument(format!("field `{}`: {problem}", name(f)));
+    let invalid = |f: &str, problem: String| crate::convert::invalid(&format!("{field}.{f}"), problem);
     let compressed = match pb::PlaneEncoding::try_from(texture.encoding) {
         Ok(pb::PlaneEncoding::Raw) => false,
         Ok(pb::PlaneEncoding::Zstd) => true,

@@ -240,22 +240,20 @@ impl State {
         let job_id = match self.job_for(&wanted) {
             Some(id) => {
                 self.counters.merged += 1;
-                // A more urgent request moves a queued job forward.
-                if let Some(job) = self.jobs.get(&id) {
+                if let Some(job) = self.jobs.get_mut(&id) {
                     self.counters.served_nearby += u64::from(job.key.eye() != key.eye());
-                }
-                if let Some(job) = self.jobs.get_mut(&id)
-                    && let JobState::Queued(p) = job.state
-                {
-                    let better = Priority {
-                        predicted: p.predicted && predicted,
-                        deadline_us: p.deadline_us.min(deadline_us),
-                        id,
-                    };
-                    if better != p {
-                        self.queue.remove(&job.owner, &p);
-                        self.queue.insert(&job.owner, better);
-                        job.state = JobState::Queued(better);
+                    // A more urgent request moves a queued job forward.
+                    if let JobState::Queued(p) = job.state {
+                        let better = Priority {
+                            predicted: p.predicted && predicted,
+                            deadline_us: p.deadline_us.min(deadline_us),
+                            id,
+                        };
+                        if better != p {
+                            self.queue.remove(&job.owner, &p);
+                            self.queue.insert(&job.owner, better);
+                            job.state = JobState::Queued(better);
+                        }
                     }
                 }
                 id
