@@ -51,10 +51,19 @@ impl Predictor {
 
     /// The eye expected `dt` seconds after the last sample.
     pub fn predict(&self, dt: f64) -> Option<DVec3> {
+        Some(self.motion()?.at(dt))
+    }
+
+    /// The motion fitted to the recent eyes, to be asked where the eye will be at any
+    /// number of times (the fit is made once).
+    pub fn motion(&self) -> Option<Motion> {
         let &(t_last, last) = self.samples.back()?;
         let n = self.samples.len();
         if n < 2 {
-            return Some(last);
+            return Some(Motion {
+                last,
+                coefficients: [[0.0; 3]; 3],
+            });
         }
         // Fit x(τ) = c0 + c1·τ + c2·τ² (τ relative to the last sample, x to its
         // position: an eye far from the origin is fitted as precisely) by least
@@ -74,16 +83,34 @@ impl Predictor {
                 }
             }
         }
-        let mut out = [0f64; 3];
+        let mut coefficients = [[0f64; 3]; 3];
         for axis in 0..3 {
-            let coefficients = solve(&ata, &atb[axis], degree + 1)?;
-            let value = coefficients[0] + coefficients[1] * dt + coefficients[2] * dt * dt;
-            if !value.is_finite() {
-                return Some(last);
-            }
-            out[axis] = value;
+            coefficients[axis] = solve(&ata, &atb[axis], degree + 1)?;
         }
-        Some(last + DVec3::from_array(out))
+        Some(Motion { last, coefficients })
+    }
+}
+
+/// The eye's motion as [`Predictor::motion`] fitted it: per axis, the offset from the
+/// last eye as a quadratic in the time since.
+#[derive(Debug, Clone, Copy)]
+pub struct Motion {
+    last: DVec3,
+    coefficients: [[f64; 3]; 3],
+}
+
+impl Motion {
+    /// The eye expected `dt` seconds after the last sample (that sample's eye where
+    /// the fit gives no finite position).
+    pub fn at(&self, dt: f64) -> DVec3 {
+        let mut out = [0f64; 3];
+        for (value, c) in out.iter_mut().zip(&self.coefficients) {
+            *value = c[0] + c[1] * dt + c[2] * dt * dt;
+            if !value.is_finite() {
+                return self.last;
+            }
+        }
+        self.last + DVec3::from_array(out)
     }
 }
 

@@ -332,6 +332,11 @@ pub const PLANNING_MARGIN: f32 = 0.75;
 /// motion instead of one.
 pub const LEAD: f32 = 0.5;
 
+/// The predicted path past the eye's future that [`LEAD`] is measured along: this many
+/// eyes, evenly spaced up to twice the horizon (a turn of the lead takes at most as long
+/// as the turn to the future).
+pub const LEAD_PATH_STEPS: usize = 4;
+
 /// Textures are asked for this many valid angles apart along the eye's turn, one ahead
 /// of the eye's future at all times, so that the eye is always between two: the nearer
 /// shown, the other its partner. (Below 2, the middle between two is within

@@ -19,8 +19,9 @@ use super::choose::{Grade, held_covers};
 use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
-    MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK, PENDING_REACH,
-    REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
+    LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK,
+    PENDING_REACH, REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH, asked_for,
+    largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -76,12 +77,53 @@ pub(super) fn serve_within(
     }
 }
 
+/// The eye to make a predicted texture for, of an object centred on `centre` with
+/// `valid_angle`: the eye further along its predicted path (`beyond`, after `future`)
+/// where it has turned about `centre` by [`LEAD`] of the valid angle past `future` (at
+/// most the turn from `now` to `future` again; the path's last eye if it turns less).
+/// The texture is then first used [`LEAD`]·valid behind its own eye and stays in use as
+/// far ahead: it serves (1 + [`LEAD`]) valid angles of the motion instead of one. It
+/// stops short where the path's distance from the centre leaves
+/// [`PENDING_DISTANCE_SLACK`] of `future`'s: a request made farther would not count as
+/// covering `future` ([`Manager::pending_covers`]).
+///
+/// Along the path, not turned on about the centre: an eye passing close by an object
+/// turns about it in a plane tilted by the pass, and turned on in that plane it went
+/// under the rock the demo's orbit sweeps past — a texture no eye on the path could use,
+/// which held the next prediction back as pending.
+pub(super) fn lead(centre: Vec3, valid_angle: f32, now: Vec3, future: Vec3, beyond: &[Vec3]) -> Vec3 {
+    let turn = angle_between(centre, now, future);
+    let lead = (LEAD * valid_angle).min(turn);
+    if turn.is_nan() || lead <= MIN_LEAD {
+        return future;
+    }
+    let mut previous = (future, 0.0);
+    let distance = (future - centre).length();
+    for &eye in beyond {
+        let turn = angle_between(centre, future, eye);
+        let ratio = (eye - centre).length() / distance;
+        if turn.is_nan() || (ratio - 1.0).abs() >= PENDING_DISTANCE_SLACK {
+            break;
+        }
+        if turn >= lead {
+            // (Between two path eyes, in proportion to the turn.)
+            let (p, p_turn) = previous;
+            return p + (eye - p) * ((lead - p_turn) / (turn - p_turn)).clamp(0.0, 1.0);
+        }
+        previous = (eye, turn);
+    }
+    previous.0
+}
+
 /// What [`Manager::predict_for`] decides from ([`Manager::prediction`]).
 pub(super) struct Prediction {
     /// Seconds ahead.
     horizon: f64,
     /// The eye then, in the object's frame.
     future: Vec3,
+    /// The eye further on: [`LEAD_PATH_STEPS`] eyes up to twice the horizon ahead, in
+    /// the object's frame.
+    beyond: Vec<Vec3>,
     /// Each held texture's eye and its grade from `future`.
     held: Vec<(Vec3, Grade)>,
 }
@@ -234,22 +276,6 @@ impl Manager {
         }
     }
 
-    /// The eye to make a predicted texture for: `future` turned further about `centre`,
-    /// the way the eye turns from `now`, by [`LEAD`] of the object's valid angle (at
-    /// most the turn from `now` to `future` again). The texture is then first used
-    /// [`LEAD`]·valid behind its own eye and stays in use as far ahead: it serves
-    /// (1 + [`LEAD`]) valid angles of the motion instead of one.
-    fn lead(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Vec3 {
-        let (from, to) = (now - centre, future - centre);
-        let axis = from.cross(to);
-        let turn = from.angle_between(to);
-        let lead = (LEAD * self.valid_angle(k)).min(turn);
-        if turn.is_nan() || lead <= MIN_LEAD || axis.length_squared() <= f32::MIN_POSITIVE {
-            return future;
-        }
-        turned(centre, to, axis, lead)
-    }
-
     /// Where the eye will be once a request for object `k` made now comes back (in the
     /// object's frame, as `camera` is), and how each held texture grades there: what
     /// [`Manager::predict_for`] decides from. `None` where nothing is to be asked
@@ -261,12 +287,19 @@ impl Manager {
         }
         // The round trip to plan for, with time to spare, and the eye then.
         let horizon = (HORIZON_SPARE * self.latency(k) + HORIZON_MARGIN_S).min(MAX_HORIZON_S);
-        let future = self.predictor.predict(horizon)?;
+        let motion = self.predictor.motion()?;
+        let future = motion.at(horizon);
         let object = &scene.objects[k];
         // Drawn as geometry from there: nothing to ask for.
         if geometry_reason(object, future) == Some(GeometryReason::TooNear) {
             return None;
         }
+        // The path on past it, as far again, for the lead (up to an eye too near).
+        let beyond = (1..=LEAD_PATH_STEPS)
+            .map(|step| motion.at(horizon * (1.0 + step as f64 / LEAD_PATH_STEPS as f64)))
+            .take_while(|&eye| geometry_reason(object, eye) != Some(GeometryReason::TooNear))
+            .map(|eye| object.to_local(eye))
+            .collect();
         let future = object.to_local(future);
         // (Asked for as soon as a texture would pay: see `GEOMETRY_WHILE_WAITING`.)
         let grades = self.grades(scene, k, future, camera, 1.0)?;
@@ -274,6 +307,7 @@ impl Manager {
         Some(Prediction {
             horizon,
             future,
+            beyond,
             held,
         })
     }
@@ -292,6 +326,7 @@ impl Manager {
         let Some(Prediction {
             horizon,
             future,
+            beyond,
             held,
         }) = prediction
         else {
@@ -311,7 +346,7 @@ impl Manager {
         let quiet = self.objects[k].quiet_until.is_some_and(|t| Instant::now() < t);
         let ask = match (quiet, covered, ahead) {
             (true, _, _) => None,
-            (false, false, _) => Some(self.lead(k, centre, eye, future)),
+            (false, false, _) => Some(lead(centre, self.valid_angle(k), eye, future, &beyond)),
             (false, true, Ahead::AskAt(eye)) => Some(eye),
             (false, true, _) => None,
         };
@@ -364,5 +399,38 @@ mod tests {
             serve_within(centre, eye, 10.0, std::iter::empty()),
             MAX_SERVE_WITHIN
         );
+    }
+
+    /// An eye flying a straight line past an object, 1 above its centre: the lead
+    /// stays on the line, turned by the lead's share of the valid angle; it
+    /// stops where the line recedes past the distance a pending request covers from,
+    /// and is the future itself where the eye does not turn.
+    #[test]
+    fn a_lead_follows_the_eyes_path() {
+        let centre = Vec3::ZERO;
+        let on_line = |x: f32| Vec3::new(x, 1.0, 2.0);
+        let (now, future) = (on_line(-2.0), on_line(0.0));
+        let beyond: Vec<Vec3> = (1..=8).map(|k| on_line(k as f32 * 0.2)).collect();
+        let valid = 1.0;
+        let eye = lead(centre, valid, now, future, &beyond);
+        assert!((eye.y - 1.0).abs() < 1e-6 && (eye.z - 2.0).abs() < 1e-6, "{eye}");
+        let turn = angle_between(centre, future, eye);
+        assert!((turn - LEAD * valid).abs() < 1e-3, "{turn}");
+        // (Turned on about the centre instead, in the plane of the pass, it would sink
+        // below the line.)
+        let axis = (now - centre).cross(future - centre);
+        let about_centre = turned(centre, future - centre, axis, LEAD * valid);
+        assert!(about_centre.y < 0.9, "{about_centre}");
+
+        // A path receding fast: the lead stops within the pending slack.
+        let receding: Vec<Vec3> = (1..=4)
+            .map(|k| future * (1.0 + 0.15 * k as f32) + Vec3::X * 0.01 * k as f32)
+            .collect();
+        let eye = lead(centre, valid, now, future, &receding);
+        let ratio = eye.length() / future.length();
+        assert!((ratio - 1.0).abs() < PENDING_DISTANCE_SLACK, "{ratio}");
+
+        // No turn: the future.
+        assert_eq!(lead(centre, valid, future, future, &beyond), future);
     }
 }
