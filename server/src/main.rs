@@ -208,9 +208,11 @@ async fn serve(args: Args) -> Result<()> {
         .accept_compressed(CompressionEncoding::Zstd)
         .send_compressed(CompressionEncoding::Zstd)
         .max_decoding_message_size(MAX_UPLOAD_MESSAGE_BYTES);
+    // (Texture streams are sent plain: a texture's planes come compressed by its worker,
+    // and gRPC's zstd on top would cost the server a compression per texture per client
+    // for a few bytes — work any client could make it do by asking for it.)
     let impostors = pb::impostors_server::ImpostorsServer::new(service.clone())
         .accept_compressed(CompressionEncoding::Zstd)
-        .send_compressed(CompressionEncoding::Zstd)
         .max_decoding_message_size(MAX_REQUEST_MESSAGE_BYTES)
         .max_encoding_message_size(MAX_TEXTURE_MESSAGE_BYTES);
     let workers = pb::workers_server::WorkersServer::new(service)

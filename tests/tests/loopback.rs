@@ -96,6 +96,28 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
     assert_eq!(wire.encoding, pb::PlaneEncoding::Zstd as i32);
     assert!(wire.albedo.len() < results[1].texture.as_ref().unwrap().albedo.len());
     assert_eq!(texture_from_pb("texture", wire).unwrap(), local);
+    // A client that also takes gRPC's zstd gets the stream plain: its planes are
+    // compressed already, and compressing them again would only cost the server.
+    let mut zstd_client = pb::impostors_client::ImpostorsClient::new(
+        tonic::transport::Endpoint::from_shared(url.clone())
+            .unwrap()
+            .connect()
+            .await
+            .unwrap(),
+    )
+    .accept_compressed(tonic::codec::CompressionEncoding::Zstd);
+    req.request_id = 20;
+    let response = zstd_client.request(req.clone()).await.unwrap();
+    assert_eq!(
+        response.metadata().get("grpc-encoding"),
+        None,
+        "the texture stream is plain"
+    );
+    let plain = collect(response.into_inner()).await.unwrap();
+    assert_eq!(
+        texture_from_pb("texture", plain[0].texture.as_ref().unwrap()).unwrap(),
+        local
+    );
     req.zstd_planes = false;
     // A smaller request at the same eye: the bigger cached texture serves it.
     req.request_id = 3;
@@ -139,12 +161,12 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
     let stats = remote.stats().await.unwrap();
     assert_eq!(
         (stats.requests, stats.cache_hits, stats.served_nearby),
-        (6, 3, 1),
+        (7, 4, 1),
         "{stats:?}"
     );
     // Every request's latency is in the histogram, one count per bucket and one over.
     assert_eq!(stats.latency_counts.len(), stats.latency_bucket_ms.len() + 1);
-    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 6, "{stats:?}");
+    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 7, "{stats:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
