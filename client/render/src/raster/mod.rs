@@ -146,10 +146,13 @@ struct RowSpans {
     /// Per edge, where it crosses the rows; `None` for an edge parallel to them — all
     /// of a row or none, which the exact tests decide.
     edges: [Option<Crossing>; 3],
-    /// How far a span is widened against rounding (2 pixels, more for coordinates far
-    /// off screen).
-    slack: f32,
 }
+
+/// How many times `f32::EPSILON` of its size (see [`Crossing::margin`]) an edge's
+/// crossing is widened by: the crossing and the exact test each round a few products
+/// and differences (about 14 roundings between them at worst); twice that, so no pixel
+/// the exact test accepts is ever outside its row's span.
+const SPAN_ROUNDINGS: f32 = 32.0;
 
 /// Where an edge `p → q` crosses the rows: at `x = p.x + (y − p.y)·slope`.
 #[derive(Clone, Copy)]
@@ -159,27 +162,36 @@ struct Crossing {
     slope: f32,
     /// The inside lies right of the crossing (it is the span's left end).
     left_end: bool,
+    /// How far the crossing is widened, pixels: [`SPAN_ROUNDINGS`] roundings of the
+    /// largest term the crossing or the exact test sums at a row of the triangle — its
+    /// slope times the rows it spans, and its coordinates. An edge nearly parallel to
+    /// the rows (a steep slope) is widened most: there the exact test's rounding moves
+    /// its zero furthest along the row. (A fixed 2 pixels, before, left a thin leaf a
+    /// block of 8 pixels to test on most of its rows, where no centre lies inside.)
+    margin: f32,
 }
 
 impl RowSpans {
     /// The edges of the triangle `corners`, oriented by `sign`.
     fn new(corners: [Vec2; 3], sign: f32) -> RowSpans {
-        let mut largest = 0f32;
+        let largest = corners.iter().fold(0f32, |m, c| m.max(c.x.abs()).max(c.y.abs()));
+        let rows = corners.iter().map(|c| c.y).fold(f32::NEG_INFINITY, f32::max)
+            - corners.iter().map(|c| c.y).fold(f32::INFINITY, f32::min);
         let edges = [0, 1, 2].map(|k| {
             let (p, q) = (corners[(k + 1) % 3], corners[(k + 2) % 3]);
-            largest = largest.max(p.x.abs()).max(p.y.abs());
             let dy = q.y - p.y;
             // The inside of the edge p → q is where sign·E ≥ 0, E growing with x as −dy.
-            (dy != 0.0).then(|| Crossing {
-                p,
-                slope: (q.x - p.x) / dy,
-                left_end: sign * dy < 0.0,
+            (dy != 0.0).then(|| {
+                let slope = (q.x - p.x) / dy;
+                Crossing {
+                    p,
+                    slope,
+                    left_end: sign * dy < 0.0,
+                    margin: SPAN_ROUNDINGS * f32::EPSILON * (slope.abs() * (rows + 2.0) + largest + 1.0),
+                }
             })
         });
-        RowSpans {
-            edges,
-            slack: 2.0 + 1e-6 * largest,
-        }
+        RowSpans { edges }
     }
 
     /// The pixels `x` of row centre `py` in `bounds` whose centres the triangle can
@@ -190,17 +202,23 @@ impl RowSpans {
     #[inline]
     fn row(&self, py: f32, bounds: (usize, usize)) -> Option<(usize, usize)> {
         let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
-        for &Crossing { p, slope, left_end } in self.edges.iter().flatten() {
+        for &Crossing {
+            p,
+            slope,
+            left_end,
+            margin,
+        } in self.edges.iter().flatten()
+        {
             let crossing = p.x + (py - p.y) * slope;
             if left_end {
-                lo = lo.max(crossing);
+                lo = lo.max(crossing - margin);
             } else {
-                hi = hi.min(crossing);
+                hi = hi.min(crossing + margin);
             }
         }
         // (NaN bounds leave `max`/`min` unchanged: the whole box is tested.)
-        let first = ((lo - self.slack - 0.5).ceil().max(bounds.0 as f32) as usize).max(bounds.0);
-        let last = ((hi + self.slack - 0.5).floor().min(bounds.1 as f32) as usize).min(bounds.1);
+        let first = ((lo - 0.5).ceil().max(bounds.0 as f32) as usize).max(bounds.0);
+        let last = ((hi - 0.5).floor().min(bounds.1 as f32) as usize).min(bounds.1);
         (first <= last).then_some((first, last))
     }
 }
@@ -374,7 +392,10 @@ mod tests {
     use super::*;
 
     /// Every pixel the exact edge tests accept lies in its row's span, for triangles
-    /// of every size and orientation, on and far off screen.
+    /// of every size and orientation, on and far off screen; and for those where
+    /// rounding decides: corners on pixel centres and on quarter pixels (edges through
+    /// centres), slivers a thousandth of a pixel thin, and edges nearly parallel to the
+    /// rows. (Without the crossings' margin, spans miss pixels here.)
     #[test]
     fn row_spans_hold_every_covered_pixel() {
         let (w, h) = (64usize, 48usize);
@@ -386,9 +407,28 @@ mod tests {
             (seed as f32 / u32::MAX as f32 - 0.3) * scale
         };
         let (mut covered, mut spared) = (0usize, 0usize);
-        for n in 0..3000 {
+        for n in 0..6000 {
             let scale = [80.0, 400.0, 1e5, 3e7][n % 4];
-            let [a, b, c] = [(); 3].map(|_| Vec2::new(next(scale), next(scale)));
+            let [a, b, c] = match (n / 4) % 4 {
+                0 => [(); 3].map(|_| Vec2::new(next(scale), next(scale))),
+                // Corners on quarter pixels (a half: a centre).
+                1 => [(); 3].map(|_| (Vec2::new(next(80.0), next(80.0)) * 4.0).round() / 4.0),
+                // A sliver along a long edge.
+                2 => {
+                    let (a, b) = (
+                        Vec2::new(next(80.0), next(80.0)),
+                        Vec2::new(next(80.0), next(80.0)),
+                    );
+                    let along = (b - a).perp().normalize_or_zero() * 1e-3;
+                    [a, b, a.lerp(b, 0.5 + next(0.5)) + along]
+                }
+                // An edge nearly parallel to the rows.
+                _ => {
+                    let a = Vec2::new(next(80.0), next(80.0));
+                    let b = a + Vec2::new(next(400.0), next(1e-3));
+                    [a, b, Vec2::new(next(80.0), next(80.0))]
+                }
+            };
             let area = edge(b, c, a);
             if area == 0.0 {
                 continue;
