@@ -166,8 +166,9 @@ struct Crossing {
     /// largest term the crossing or the exact test sums at a row of the triangle — its
     /// slope times the rows it spans, and its coordinates. An edge nearly parallel to
     /// the rows (a steep slope) is widened most: there the exact test's rounding moves
-    /// its zero furthest along the row. (A fixed 2 pixels, before, left a thin leaf a
-    /// block of 8 pixels to test on most of its rows, where no centre lies inside.)
+    /// its zero furthest along the row. (A margin of whole pixels would leave a thin
+    /// leaf a block of 8 pixels to test on most of its rows, where no centre lies
+    /// inside.)
     margin: f32,
 }
 
