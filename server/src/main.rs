@@ -208,9 +208,10 @@ async fn serve(args: Args) -> Result<()> {
         .accept_compressed(CompressionEncoding::Zstd)
         .send_compressed(CompressionEncoding::Zstd)
         .max_decoding_message_size(MAX_UPLOAD_MESSAGE_BYTES);
-    // (Texture streams are sent plain: a texture's planes come compressed by its worker,
-    // and gRPC's zstd on top would cost the server a compression per texture per client
-    // for a few bytes — work any client could make it do by asking for it.)
+    // (Replies are sent plain: a `zstd_planes` client's planes come compressed by the
+    // worker, and for a client of raw planes gRPC's zstd would cost the server a
+    // compression per texture and client — work any client could make it do by asking.
+    // Such a client pays in bandwidth instead.)
     let impostors = pb::impostors_server::ImpostorsServer::new(service.clone())
         .accept_compressed(CompressionEncoding::Zstd)
         .max_decoding_message_size(MAX_REQUEST_MESSAGE_BYTES)

@@ -333,8 +333,8 @@ pub const PLANNING_MARGIN: f32 = 0.75;
 pub const LEAD: f32 = 0.5;
 
 /// The predicted path past the eye's future that [`LEAD`] is measured along: this many
-/// eyes, evenly spaced up to twice the horizon (a turn of the lead takes at most as long
-/// as the turn to the future).
+/// eyes, evenly spaced up to twice the horizon (at a steady turn, the lead's takes at
+/// most as long as the turn to the future; if the eye slows, the lead ends at the last).
 pub const LEAD_PATH_STEPS: usize = 4;
 
 /// Textures are asked for this many valid angles apart along the eye's turn, one ahead
@@ -369,8 +369,9 @@ pub const PENDING_DISTANCE_SLACK: f32 = 0.2;
 /// share their textures rather than each waiting for its own (see
 /// docs/load-test.md). At 0.5, 64 clients of `relief load` stalled 17–20 % of their
 /// frames where at 0.25 they stall 23–26 %, but a lone client over a 250 ms round
-/// trip went stale in 2.5–3.2 % of its frames where at 0.25 it does 1.1–1.4 % (and
-/// 0.9–1.4 % sharing nothing).
+/// trip went stale in 2.5–3.2 % of its frames where at 0.25 it did 1.1–1.4 % (and
+/// 0.9–1.4 % sharing nothing; both before predictions led along the path, since
+/// which it does 0–0.5 %).
 pub const SERVE_REACH: f32 = 0.25;
 
 /// Predictions farther than this many valid angles from both the eye and its future are

@@ -88,9 +88,11 @@ pub(super) fn serve_within(
 /// covering `future` ([`Manager::pending_covers`]).
 ///
 /// Along the path, not turned on about the centre: an eye passing close by an object
-/// turns about it in a plane tilted by the pass, and turned on in that plane it went
-/// under the rock the demo's orbit sweeps past — a texture no eye on the path could use,
-/// which held the next prediction back as pending.
+/// turns about it in a plane tilted by the pass, and turned on in that plane it can
+/// land where no eye on the path goes (under the object) — a texture no eye could use,
+/// which as a pending request would still hold the next prediction back. (Between two
+/// path eyes the lead is on the chord: on a path curving by tens of degrees between
+/// them it could dip under the distance slack, which the path's spacing keeps far off.)
 pub(super) fn lead(centre: Vec3, valid_angle: f32, now: Vec3, future: Vec3, beyond: &[Vec3]) -> Vec3 {
     let turn = angle_between(centre, now, future);
     let lead = (LEAD * valid_angle).min(turn);
@@ -122,7 +124,7 @@ pub(super) struct Prediction {
     /// The eye then, in the object's frame.
     future: Vec3,
     /// The eye further on: [`LEAD_PATH_STEPS`] eyes up to twice the horizon ahead, in
-    /// the object's frame.
+    /// the object's frame (fewer: it stops before an eye drawn as geometry, too near).
     beyond: Vec<Vec3>,
     /// Each held texture's eye and its grade from `future`.
     held: Vec<(Vec3, Grade)>,

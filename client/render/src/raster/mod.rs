@@ -150,8 +150,9 @@ struct RowSpans {
 
 /// How many times `f32::EPSILON` of its size (see [`Crossing::margin`]) an edge's
 /// crossing is widened by: the crossing and the exact test each round a few products
-/// and differences (about 14 roundings between them at worst); twice that, so no pixel
-/// the exact test accepts is ever outside its row's span.
+/// and differences (about 14 roundings between them at worst); more than twice that, so
+/// no pixel the exact test accepts is ever outside its row's span (the span test passes
+/// from 1).
 const SPAN_ROUNDINGS: f32 = 32.0;
 
 /// Where an edge `p → q` crosses the rows: at `x = p.x + (y − p.y)·slope`.
@@ -164,11 +165,11 @@ struct Crossing {
     left_end: bool,
     /// How far the crossing is widened, pixels: [`SPAN_ROUNDINGS`] roundings of the
     /// largest term the crossing or the exact test sums at a row of the triangle — its
-    /// slope times the rows it spans, and its coordinates. An edge nearly parallel to
-    /// the rows (a steep slope) is widened most: there the exact test's rounding moves
-    /// its zero furthest along the row. (A margin of whole pixels would leave a thin
-    /// leaf a block of 8 pixels to test on most of its rows, where no centre lies
-    /// inside.)
+    /// slope times the rows it spans, and the triangle's largest coordinate. An edge
+    /// nearly parallel to the rows (a large `slope`, dx/dy) is widened most: there the
+    /// exact test's rounding moves its zero furthest along the row. (A margin of whole
+    /// pixels would leave a thin leaf a block of 8 pixels to test on most of its rows,
+    /// where no centre lies inside.)
     margin: f32,
 }
 
