@@ -13,6 +13,8 @@ use relief_core::stats::percentile;
 use relief_proto::limits::MAX_SERVE_WITHIN;
 use relief_render::geometry::{GeometryReason, geometry_reason};
 
+use crate::predict::Motion;
+
 use super::Manager;
 use super::around::{angle_between, similar_distance, turned};
 use super::choose::{Grade, held_covers};
@@ -117,15 +119,26 @@ pub(super) fn lead(centre: Vec3, valid_angle: f32, now: Vec3, future: Vec3, beyo
     previous.0
 }
 
+/// The eye's path past the `horizon` ahead, as [`lead`] walks it: [`LEAD_PATH_STEPS`]
+/// eyes evenly spaced up to twice the horizon, in `object`'s frame (fewer: it stops
+/// before an eye drawn as geometry, too near). Worked out only when a prediction is
+/// asked for, not every frame.
+fn path_beyond(object: &SceneObject, motion: &Motion, horizon: f64) -> Vec<Vec3> {
+    (1..=LEAD_PATH_STEPS)
+        .map(|step| motion.at(horizon * (1.0 + step as f64 / LEAD_PATH_STEPS as f64)))
+        .take_while(|&eye| geometry_reason(object, eye) != Some(GeometryReason::TooNear))
+        .map(|eye| object.to_local(eye))
+        .collect()
+}
+
 /// What [`Manager::predict_for`] decides from ([`Manager::prediction`]).
 pub(super) struct Prediction {
     /// Seconds ahead.
     horizon: f64,
+    /// The eye's motion as fitted, to follow its path past `future` ([`path_beyond`]).
+    motion: Motion,
     /// The eye then, in the object's frame.
     future: Vec3,
-    /// The eye further on: [`LEAD_PATH_STEPS`] eyes up to twice the horizon ahead, in
-    /// the object's frame (fewer: it stops before an eye drawn as geometry, too near).
-    beyond: Vec<Vec3>,
     /// Each held texture's eye and its grade from `future`.
     held: Vec<(Vec3, Grade)>,
 }
@@ -296,20 +309,14 @@ impl Manager {
         if geometry_reason(object, future) == Some(GeometryReason::TooNear) {
             return None;
         }
-        // The path on past it, as far again, for the lead (up to an eye too near).
-        let beyond = (1..=LEAD_PATH_STEPS)
-            .map(|step| motion.at(horizon * (1.0 + step as f64 / LEAD_PATH_STEPS as f64)))
-            .take_while(|&eye| geometry_reason(object, eye) != Some(GeometryReason::TooNear))
-            .map(|eye| object.to_local(eye))
-            .collect();
         let future = object.to_local(future);
         // (Asked for as soon as a texture would pay: see `GEOMETRY_WHILE_WAITING`.)
         let grades = self.grades(scene, k, future, camera, 1.0)?;
         let held = (self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect();
         Some(Prediction {
             horizon,
+            motion,
             future,
-            beyond,
             held,
         })
     }
@@ -327,8 +334,8 @@ impl Manager {
     ) {
         let Some(Prediction {
             horizon,
+            motion,
             future,
-            beyond,
             held,
         }) = prediction
         else {
@@ -348,7 +355,10 @@ impl Manager {
         let quiet = self.objects[k].quiet_until.is_some_and(|t| Instant::now() < t);
         let ask = match (quiet, covered, ahead) {
             (true, _, _) => None,
-            (false, false, _) => Some(lead(centre, self.valid_angle(k), eye, future, &beyond)),
+            (false, false, _) => {
+                let beyond = path_beyond(&scene.objects[k], &motion, horizon);
+                Some(lead(centre, self.valid_angle(k), eye, future, &beyond))
+            }
             (false, true, Ahead::AskAt(eye)) => Some(eye),
             (false, true, _) => None,
         };
