@@ -5,6 +5,9 @@ use glam::Vec3;
 
 use relief_core::relief::{ReliefTexture, decode_normal_rgb8};
 
+use crate::warp::params::WarpLevels;
+use crate::warp::prewarp::pack_texel;
+
 /// Which sides of an object's surfaces can show.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Faces {
@@ -134,8 +137,9 @@ impl Impostor {
             }
             std::mem::swap(&mut row, &mut below);
         }
+        let levels = WarpLevels::new(texture.depth_bits);
         let packed = (texture.albedo.iter().zip(&texture.normal).zip(&texture.depth))
-            .map(|((&albedo, &normal), &level)| crate::warp::prewarp::pack_texel(albedo, normal, level))
+            .map(|((&albedo, &normal), &level)| pack_texel(albedo, normal, levels.entry(level)))
             .collect();
         Impostor {
             texture,

@@ -7,7 +7,7 @@ use anyhow::{Result, anyhow};
 use clap::Args;
 use serde::Serialize;
 
-use relief_core::relief::DepthBits;
+use relief_client::manager::policy::REQUESTED_DEPTH_BITS;
 use relief_lab::frame_plan::{FramePlan, FrameStats};
 use relief_lab::image_error::{MAX_HOLE_FRAC, compare};
 use relief_lab::methods::Method;
@@ -86,7 +86,7 @@ pub fn run(args: FrameArgs) -> Result<()> {
     let (scene, camera) = args.view.load()?;
     let (w, h) = (camera.width, camera.height);
     bar.set_message("baking impostors");
-    let plan = FramePlan::bake(&scene, &camera, args.source_angle, DepthBits::Eight);
+    let plan = FramePlan::bake(&scene, &camera, args.source_angle, REQUESTED_DEPTH_BITS);
     bar.set_message("rendering");
     let runs = args.runs as usize;
     let mut drawn = (GBuffer::new(w, h), None);

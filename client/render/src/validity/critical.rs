@@ -156,7 +156,8 @@ pub fn measured_gap(texture: &ReliefTexture, params: &WarpParams) -> f32 {
     let empty = texture.depth_bits.empty();
     let warped = |i: u32, j: u32| {
         let q = texture.depth[texture.index(i, j)];
-        (q != empty).then(|| params.warp(i as f32 + 0.5, j as f32 + 0.5, q as usize))
+        let entry = params.levels.entry(q) as usize;
+        (q != empty).then(|| params.warp(i as f32 + 0.5, j as f32 + 0.5, entry))
     };
     let mut widest = 0f32;
     for j in 0..c.height {

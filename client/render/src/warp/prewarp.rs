@@ -147,13 +147,14 @@ fn extent(params: &WarpParams, w: f32, h: f32) -> ((i32, i32), (i32, i32)) {
 pub(crate) struct Attributes(u64);
 
 /// A texel as the pre-warp reads it ([`Impostor::packed`]): albedo and encoded normal in
-/// the low six bytes, as [`Attributes`], and the depth level in the top two.
+/// the low six bytes, as [`Attributes`], and the table entry of its depth level
+/// ([`WarpLevels::entry`](super::params::WarpLevels::entry)) in the top two.
 pub(crate) fn pack_texel(albedo: [u8; 3], normal: [u8; 3], level: u16) -> u64 {
     let ([r, g, b], [x, y, z], [q0, q1]) = (albedo, normal, level.to_le_bytes());
     u64::from_le_bytes([r, g, b, x, y, z, q0, q1])
 }
 
-/// The depth level of a [`pack_texel`] texel.
+/// The depth level's table entry of a [`pack_texel`] texel.
 #[inline(always)]
 fn level_of(texel: u64) -> u16 {
     (texel >> 48) as u16
@@ -554,7 +555,7 @@ impl Job<'_> {
         let row = j * w..(j + 1) * w;
         let packed = &impostor.packed[row.clone()];
         let (right, down) = (&impostor.right[row.clone()], &impostor.down[row]);
-        let empty = texture.depth_bits.empty();
+        let empty = p.levels.empty();
         let v = j as f32 + 0.5;
         // With the back faces hidden, the eye seen from this row's texels (before their
         // column and depth): a texel is turned away when its normal points away from it.
