@@ -10,7 +10,7 @@ use relief_core::hash::ContentHash;
 use relief_core::relief::{DepthBits, MAX_TEXTURE_SIZE, ReliefTexture, SourceCamera, SourceProjection};
 
 use crate::pb;
-use crate::planes::planes;
+use crate::planes::{PlaneLayout, planes};
 
 pub(crate) fn invalid(field: &str, problem: impl std::fmt::Display) -> Status {
     Status::invalid_argument(format!("field `{field}`: {problem}"))
@@ -167,24 +167,17 @@ pub(crate) struct Checked<'a> {
 /// Every field of `t` checked.
 pub(crate) fn checked<'a>(field: &str, t: &'a pb::ReliefTexture) -> Result<Checked<'a>, Status> {
     let (camera, depth_bits, eye) = check_header(field, t)?;
-    let planes = planes(field, t, plane_sizes(&camera, depth_bits))?;
+    let planes = planes(
+        field,
+        t,
+        PlaneLayout::new(camera.width, camera.height, depth_bits),
+    )?;
     Ok(Checked {
         camera,
         depth_bits,
         eye,
         planes,
     })
-}
-
-/// The bytes of a texture's albedo, normal and depth planes (raw), for its camera and
-/// depth bits.
-fn plane_sizes(camera: &SourceCamera, depth_bits: DepthBits) -> [usize; 3] {
-    let texels = camera.width as usize * camera.height as usize;
-    let depth_bytes = match depth_bits {
-        DepthBits::Eight => 1,
-        DepthBits::Sixteen => 2,
-    };
-    [3 * texels, 3 * texels, depth_bytes * texels]
 }
 
 /// A texture's fields but its planes, checked: its camera, depth bits and eye.
