@@ -41,7 +41,8 @@ pub struct ShownTexture {
     pub turn_deg: f32,
     /// The texture's eye's distance from the object over the eye's.
     pub distance_ratio: f32,
-    /// The level drawn's texel, in pixels' angles.
+    /// The level drawn's texel, in the angles of pixels where it shows
+    /// ([`Camera::pixel_angle_towards`](relief_core::camera::Camera::pixel_angle_towards)).
     pub texel_pixels: f32,
     /// The growth of the widest gap its warp opens, pixels (the critical-point error),
     /// counted [`growth_weight`](super::policy::growth_weight) times over.
@@ -247,7 +248,7 @@ impl Manager {
         Some(ShownTexture {
             turn_deg: turn(texture)?,
             distance_ratio: (shown.eye - centre).length() / (eye - centre).length(),
-            texel_pixels: texel_angle(drawn, eye) / camera.pixel_angle(),
+            texel_pixels: texel_angle(drawn, eye) / camera.pixel_angle_towards(volume_centre(drawn)),
             growth_pixels: growth(shown, eye, camera),
             band_pixels: band(shown, centre, eye, camera),
             partner_turn_deg: partner.and_then(|(i, _)| turn(i)),

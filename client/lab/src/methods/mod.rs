@@ -226,7 +226,8 @@ pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<P
             max_deg: MAX_SHOWN_TURN_DEG,
         });
     }
-    let pixels = texel_angle(&texture.camera, camera.eye_f32()) / camera.pixel_angle();
+    let pixels = texel_angle(&texture.camera, camera.eye_f32())
+        / camera.pixel_angle_towards(volume_centre(&texture.camera));
     if let Some(fills) = fills
         && pixels > fills
     {

@@ -60,10 +60,12 @@ pub fn volume_centre(texture: &SourceCamera) -> Vec3 {
 }
 
 /// The resolution test (eq. 4-1): the texture is too coarse when a texel subtends more
-/// than `k` pixels' angle (`k ≥ 1` tolerates slightly blurry impostors). `camera` in the
-/// texture's frame.
+/// than `k` pixels' angle (`k ≥ 1` tolerates slightly blurry impostors) where the
+/// texture's volume shows ([`Camera::pixel_angle_towards`]: an object at the side of
+/// a wide view needs finer texels than at its centre). `camera` in the texture's frame.
 pub fn needs_finer_texture(texture: &SourceCamera, camera: &Camera, k: f32) -> bool {
-    texel_angle(texture, camera.eye_f32()) > k * camera.pixel_angle()
+    let pixel_angle = camera.pixel_angle_towards(volume_centre(texture));
+    texel_angle(texture, camera.eye_f32()) > k * pixel_angle
 }
 
 /// The texture edge for the object with `bounds` seen from `eye` through `camera`: the
@@ -82,9 +84,10 @@ pub fn resolution_for(
 ) -> Option<u32> {
     let unit = SourceCamera::facing(eye, bounds, 1, 1, projection).ok()?;
     let span = unit.texel_size_at(0.5 * (unit.depth_near + unit.depth_far));
-    let distance = volume_centre(&unit).distance(eye);
+    let centre = volume_centre(&unit);
+    let distance = centre.distance(eye);
     // texel_angle(N) = 2·atan(span / (2·N·distance)) ≤ k · pixel angle.
-    let edge = 0.5 * span / (distance * (0.5 * k * camera.pixel_angle()).tan());
+    let edge = 0.5 * span / (distance * (0.5 * k * camera.pixel_angle_towards(centre)).tan());
     Some(if edge.is_finite() {
         edge.ceil().clamp(1.0, u32::MAX as f32) as u32
     } else {
