@@ -38,6 +38,7 @@ fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::I
         projection: projection_to_pb(request.projection).into(),
         serve_within: request.serve_within,
         zstd_planes: true,
+        zstd_delta_planes: true,
     }
 }
 

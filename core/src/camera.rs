@@ -268,19 +268,19 @@ impl Camera {
         (self.eye + (d * (depth / d.dot(self.forward))).as_dvec3()).as_vec3()
     }
 
-    /// The angle one pixel subtends (Schaufler's β_screen), at the view's centre.
+    /// The angle one pixel subtends (Schaufler's β_screen): the view's height's angle
+    /// over its pixels.
     pub fn pixel_angle(&self) -> f32 {
         self.fov_y / self.height as f32
     }
 
     /// The angle one pixel subtends, on average, where point `p` shows:
-    /// [`Camera::pixel_angle`] times `cos^(3/2) θ`, `θ` being `p`'s angle off the view's
-    /// axis, held within the view (a point outside it takes the corner's). A flat frame
-    /// spreads an angle over more pixels away from its centre: by `1/cos²θ` along the
-    /// radius, `1/cosθ` across it, a texel's area by `1/cos³θ`. At the corner of a 60°
-    /// 16:9 frame a texel one pixel wide at the centre covers 2.4 × 1.5 pixels. (Along
-    /// the radius alone, `cos²θ`, the demo warped 58 % more texels a frame; this mean,
-    /// 37 %, for outlines about as close to the reference.)
+    /// [`Camera::pixel_angle`] times `(cos²θ)^`[`OFF_AXIS_POWER`], `θ` being `p`'s angle
+    /// off the view's axis, at most the view's corner's. A flat frame spreads an angle
+    /// over more pixels away from its centre: by `1/cos²θ` along the radius, `1/cosθ`
+    /// across it. At the corner of a 60° 16:9 frame a texel one pixel wide at the centre
+    /// covers 2.4 × 1.5 pixels. A point behind the eye, which may show anywhere when the
+    /// view turns to it, takes the centre's.
     pub fn pixel_angle_towards(&self, p: Vec3) -> f32 {
         let aspect = self.width as f32 / self.height as f32;
         let corner_tan_squared = self.tan_half_fov().powi(2) * (1.0 + aspect * aspect);
@@ -289,12 +289,19 @@ impl Camera {
         let cos_squared = if v.z > 0.0 {
             v.z * v.z / v.length_squared()
         } else {
-            corner_cos_squared
+            1.0
         };
-        // (A point at the eye, or not finite, takes the corner's.)
-        self.pixel_angle() * cos_squared.max(corner_cos_squared).min(1.0).powf(0.75)
+        // (A point that is not finite: the centre's, or the corner's, `max` ignoring
+        // NaN. Either is finite.)
+        self.pixel_angle() * cos_squared.max(corner_cos_squared).min(1.0).powf(OFF_AXIS_POWER)
     }
 }
+
+/// The power of `cos²θ` that scales a pixel's angle `θ` off the view's axis
+/// ([`Camera::pixel_angle_towards`]): ¾, the mean of the stretch along the radius (1)
+/// and across it (½). Along the radius alone the demo warped 58 % more texels a frame
+/// than at the centre's angle, at ¾ 37 %, its outlines about as close to the reference.
+pub const OFF_AXIS_POWER: f32 = 0.75;
 
 /// One leg of a camera path.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -531,14 +538,10 @@ impl Pose {
 mod tests {
     use super::*;
 
-    /// An eye a step of f64 from its target has no meaningful view direction and is
-    /// refused, naming the precision; an eye a step of f32 from it (a millionth of a
-    /// metre at a metre), eyes far from the origin looking at targets a millimetre
-    /// away, and ordinary cameras, are taken.
     /// Off the view's axis a pixel subtends less: along the middle row, the ratio to the
     /// centre's is the mean (geometric) of what neighbouring pixels' rays measure along
-    /// the row and across it, to 1 %; past the frame's corner and behind the eye, the
-    /// corner's.
+    /// the row and across it, to 1 %; past the frame's corner, the corner's; behind the
+    /// eye, the centre's.
     #[test]
     fn a_pixel_subtends_less_off_the_axis() {
         let camera = Camera::look_at(DVec3::ZERO, DVec3::Z, Vec3::Y, 60.0, 640, 360).unwrap();
@@ -558,12 +561,27 @@ mod tests {
             assert!((got / want - 1.0).abs() < 0.01, "x {x}: {got} against {want}");
         }
         let corner = camera.pixel_angle_towards(camera.unproject(0.0, 0.0, 5.0));
-        for p in [Vec3::new(100.0, 50.0, 1.0), Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO] {
-            assert!((camera.pixel_angle_towards(p) / corner - 1.0).abs() < 1e-4, "{p}");
-        }
+        let far_aside = Vec3::new(100.0, 50.0, 1.0);
+        assert!((camera.pixel_angle_towards(far_aside) / corner - 1.0).abs() < 1e-4);
         assert!(corner < 0.55 * camera.pixel_angle(), "{corner}");
+        for behind in [
+            Vec3::new(0.0, 0.0, -3.0),
+            Vec3::new(40.0, 0.0, -3.0),
+            Vec3::ZERO,
+            Vec3::NAN,
+        ] {
+            assert_eq!(
+                camera.pixel_angle_towards(behind),
+                camera.pixel_angle(),
+                "{behind}"
+            );
+        }
     }
 
+    /// An eye a step of f64 from its target has no meaningful view direction and is
+    /// refused, naming the precision; an eye a step of f32 from it (a millionth of a
+    /// metre at a metre), eyes far from the origin looking at targets a millimetre
+    /// away, and ordinary cameras, are taken.
     #[test]
     fn a_view_direction_below_f64_precision_is_refused() {
         let camera = |eye: DVec3, target: DVec3| Camera::look_at(eye, target, Vec3::Y, 40.0, 64, 64);

@@ -10,7 +10,7 @@ use relief_core::hash::ContentHash;
 use relief_core::relief::{DepthBits, MAX_TEXTURE_SIZE, ReliefTexture, SourceCamera, SourceProjection};
 
 use crate::pb;
-use crate::planes::{PlaneLayout, planes};
+use crate::planes::{PlaneLayout, Planes, ReadsPlanes, planes};
 
 pub(crate) fn invalid(field: &str, problem: impl std::fmt::Display) -> Status {
     Status::invalid_argument(format!("field `{field}`: {problem}"))
@@ -119,7 +119,7 @@ pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTextu
         depth_bits,
         eye,
         planes: [albedo, normal, depth],
-    } = checked(field, t)?;
+    } = checked(field, t, Planes::Raw)?;
     let depth: Vec<u16> = match depth_bits {
         DepthBits::Eight => depth.iter().map(|&q| q as u16).collect(),
         DepthBits::Sixteen => depth
@@ -150,7 +150,7 @@ pub fn check_texture_pb(
         depth_bits,
         eye,
         ..
-    } = checked(field, t)?;
+    } = checked(field, t, Planes::Checked)?;
     Ok((camera, depth_bits, eye))
 }
 
@@ -159,19 +159,20 @@ pub(crate) struct Checked<'a> {
     pub(crate) camera: SourceCamera,
     pub(crate) depth_bits: DepthBits,
     pub(crate) eye: Vec3,
-    /// Albedo, normal and depth, raw: borrowed where they came raw, decompressed where
-    /// they came compressed.
+    /// Albedo, normal and depth as `wanted` ([`Planes`]): borrowed where they came raw,
+    /// decompressed where they came compressed.
     pub(crate) planes: [Cow<'a, [u8]>; 3],
 }
 
-/// Every field of `t` checked.
-pub(crate) fn checked<'a>(field: &str, t: &'a pb::ReliefTexture) -> Result<Checked<'a>, Status> {
+/// Every field of `t` checked, its planes as `wanted`.
+pub(crate) fn checked<'a>(
+    field: &str,
+    t: &'a pb::ReliefTexture,
+    wanted: Planes,
+) -> Result<Checked<'a>, Status> {
     let (camera, depth_bits, eye) = check_header(field, t)?;
-    let planes = planes(
-        field,
-        t,
-        PlaneLayout::new(camera.width, camera.height, depth_bits),
-    )?;
+    let layout = PlaneLayout::new(camera.width, camera.height, depth_bits);
+    let planes = planes(field, t, layout, wanted)?;
     Ok(Checked {
         camera,
         depth_bits,
@@ -240,8 +241,8 @@ pub struct Request {
     /// How near another eye must be for its texture to serve this request, as a
     /// fraction of `eye`'s distance from the object's centre (0: this eye only).
     pub serve_within: f32,
-    /// The client reads compressed planes (see [`planes`](crate::planes)).
-    pub zstd_planes: bool,
+    /// The compressed planes the client reads (see [`planes`](crate::planes)).
+    pub reads_planes: ReadsPlanes,
 }
 
 /// The projection a request or job asks for.
@@ -313,7 +314,10 @@ pub fn request_from_pb(r: &pb::ImpostorRequest) -> Result<Request, Status> {
         progressive: r.progressive,
         projection: projection_from_pb("projection", r.projection)?,
         serve_within: serve_within_from_pb(r.serve_within)?,
-        zstd_planes: r.zstd_planes,
+        reads_planes: ReadsPlanes {
+            zstd: r.zstd_planes,
+            zstd_delta: r.zstd_delta_planes,
+        },
     })
 }
 
@@ -402,6 +406,7 @@ mod tests {
             projection: pb::SourceProjection::Perspective.into(),
             serve_within: 0.05,
             zstd_planes: true,
+            zstd_delta_planes: true,
         };
         assert_eq!(
             request_from_pb(&good).unwrap().projection,

@@ -57,6 +57,7 @@ impl PlaneLayout {
 /// regrouped by their place in the texel, each the difference from the same byte of the
 /// texel to its left. Undone by [`undelta`].
 fn delta(plane: &[u8], width: usize, texel_bytes: usize) -> Vec<u8> {
+    debug_assert_eq!(plane.len() % texel_bytes, 0, "whole texels");
     let texels = plane.len() / texel_bytes;
     let mut out = vec![0u8; plane.len()];
     for (lane, out) in out.chunks_exact_mut(texels.max(1)).enumerate() {
@@ -74,6 +75,7 @@ fn delta(plane: &[u8], width: usize, texel_bytes: usize) -> Vec<u8> {
 
 /// The plane [`delta`] predicted, restored.
 fn undelta(coded: &[u8], width: usize, texel_bytes: usize) -> Vec<u8> {
+    debug_assert_eq!(coded.len() % texel_bytes, 0, "whole texels");
     let texels = coded.len() / texel_bytes;
     let mut plane = vec![0u8; coded.len()];
     for (lane, coded) in coded.chunks_exact(texels.max(1)).enumerate() {
@@ -97,30 +99,31 @@ pub fn compressed(texture: pb::ReliefTexture) -> pb::ReliefTexture {
     }
     let raw = [&texture.albedo, &texture.normal, &texture.depth];
     let squeeze = |plane: &[u8]| zstd::bulk::compress(plane, PLANE_ZSTD_LEVEL).map(Bytes::from);
-    let plain: Result<Vec<Bytes>, _> = raw.iter().map(|plane| squeeze(plane)).collect();
+    // (zstd fails only out of memory: then the planes go as they are.)
+    let Ok(plain) = raw
+        .map(|plane| squeeze(plane))
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()
+    else {
+        return texture;
+    };
     // (Only planes of their layout's sizes are predicted; a worker's always are.)
     let layout = DepthBits::from_bits(texture.depth_bits)
         .ok()
         .map(|bits| PlaneLayout::new(texture.width, texture.height, bits))
         .filter(|layout| (0..3).all(|k| raw[k].len() == layout.size(k)));
-    let predicted: Option<Result<Vec<Bytes>, _>> = layout.map(|layout| {
+    let predicted = layout.and_then(|layout| {
         (0..3)
             .map(|k| squeeze(&delta(raw[k], layout.width, layout.texel_bytes[k])))
-            .collect()
+            .collect::<Result<Vec<_>, _>>()
+            .ok()
     });
-    let total = |planes: &Vec<Bytes>| planes.iter().map(Bytes::len).sum::<usize>();
-    let (planes, encoding) = match (plain, predicted) {
-        (Ok(plain), Some(Ok(predicted))) if total(&predicted) < total(&plain) => {
-            (predicted, pb::PlaneEncoding::ZstdDelta)
-        }
-        (Ok(plain), _) => (plain, pb::PlaneEncoding::Zstd),
-        // (zstd fails only out of memory: then the planes go as they are.)
-        (Err(_), _) => return texture,
+    let total = |planes: &[Bytes]| planes.iter().map(Bytes::len).sum::<usize>();
+    let (mut planes, encoding) = match predicted {
+        Some(predicted) if total(&predicted) < total(&plain) => (predicted, pb::PlaneEncoding::ZstdDelta),
+        _ => (plain, pb::PlaneEncoding::Zstd),
     };
-    let [albedo, normal, depth]: [Bytes; 3] = match planes.try_into() {
-        Ok(planes) => planes,
-        Err(_) => return texture,
-    };
+    let (depth, normal, albedo) = (planes.remove(2), planes.remove(1), planes.remove(0));
     pb::ReliefTexture {
         albedo,
         normal,
@@ -133,7 +136,7 @@ pub fn compressed(texture: pb::ReliefTexture) -> pb::ReliefTexture {
 /// `texture` with raw planes (decompressed, when they came compressed), every field
 /// checked. `field` prefixes the names in errors.
 pub fn raw(field: &str, texture: &pb::ReliefTexture) -> Result<pb::ReliefTexture, Status> {
-    let [albedo, normal, depth] = crate::convert::checked(field, texture)?.planes;
+    let [albedo, normal, depth] = crate::convert::checked(field, texture, Planes::Raw)?.planes;
     if texture.encoding == pb::PlaneEncoding::Raw as i32 {
         return Ok(texture.clone());
     }
@@ -147,13 +150,44 @@ pub fn raw(field: &str, texture: &pb::ReliefTexture) -> Result<pb::ReliefTexture
     })
 }
 
-/// The planes of `texture` as raw bytes (borrowed when they came raw), each checked to
-/// be its `layout`'s size: a compressed plane is decompressed into no more than its
-/// size, so a small message cannot claim a huge one.
+/// The plane encodings a client reads (`ImpostorRequest.zstd_planes` and
+/// `zstd_delta_planes`); raw ones, always.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ReadsPlanes {
+    pub zstd: bool,
+    pub zstd_delta: bool,
+}
+
+impl ReadsPlanes {
+    /// Whether planes encoded `encoding` can go to this client as they are.
+    pub fn reads(self, encoding: i32) -> bool {
+        match pb::PlaneEncoding::try_from(encoding) {
+            Ok(pb::PlaneEncoding::Raw) => true,
+            Ok(pb::PlaneEncoding::Zstd) => self.zstd,
+            Ok(pb::PlaneEncoding::ZstdDelta) => self.zstd && self.zstd_delta,
+            Err(_) => false,
+        }
+    }
+}
+
+/// What [`planes`] returns of a texture's planes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Planes {
+    /// Raw: decompressed, and the prediction undone.
+    Raw,
+    /// Decompressed only, to be checked and dropped (prediction keeps a plane's size).
+    Checked,
+}
+
+/// The planes of `texture` as raw bytes (borrowed when they came raw; with
+/// [`Planes::Checked`], still predicted if they came so), each checked to be its
+/// `layout`'s size: a compressed plane is decompressed into no more than its size, so a
+/// small message cannot claim a huge one.
 pub(crate) fn planes<'a>(
     field: &str,
     texture: &'a pb::ReliefTexture,
     layout: PlaneLayout,
+    wanted: Planes,
 ) -> Result<[Cow<'a, [u8]>; 3], Status> {
     let invalid = |f: &str, problem: String| crate::convert::invalid(&format!("{field}.{f}"), problem);
     let (compressed, predicted) = match pb::PlaneEncoding::try_from(texture.encoding) {
@@ -180,7 +214,7 @@ pub(crate) fn planes<'a>(
         if bytes.len() != size {
             return Err(invalid(f, format!("{} bytes, expected {size}", bytes.len())));
         }
-        Ok(if predicted {
+        Ok(if predicted && wanted == Planes::Raw {
             Cow::Owned(undelta(&bytes, layout.width, layout.texel_bytes[k]))
         } else {
             bytes

@@ -70,10 +70,10 @@ pub struct ResultStream {
     shared: Arc<Shared>,
     client_id: String,
     request_id: u64,
-    /// The client reads compressed planes (see `relief_proto::planes`); for one that
-    /// does not, each texture's planes are decompressed here, on its own stream, not
-    /// where the state is held.
-    zstd_planes: bool,
+    /// The compressed planes the client reads (see `relief_proto::planes`); for one
+    /// that does not read a texture's, its planes are decompressed here, on its own
+    /// stream, not where the state is held.
+    reads_planes: relief_proto::planes::ReadsPlanes,
 }
 
 impl Stream for ResultStream {
@@ -83,11 +83,11 @@ impl Stream for ResultStream {
         mut self: Pin<&mut Self>,
         cx: &mut std::task::Context<'_>,
     ) -> std::task::Poll<Option<Self::Item>> {
-        let zstd_planes = self.zstd_planes;
+        let reads_planes = self.reads_planes;
         Pin::new(&mut self.results).poll_next(cx).map(|item| {
             item.map(|result| {
                 result.and_then(|r| match r.texture {
-                    Some(texture) if !zstd_planes && texture.encoding != pb::PlaneEncoding::Raw as i32 => {
+                    Some(texture) if !reads_planes.reads(texture.encoding) => {
                         // (Checked as it arrived: this fails only on the server's own
                         // mistake.)
                         let raw = relief_proto::planes::raw("texture", &texture)
@@ -350,7 +350,7 @@ impl pb::impostors_server::Impostors for Service {
             shared: self.0.clone(),
             client_id: r.client_id.clone(),
             request_id: r.request_id,
-            zstd_planes: r.zstd_planes,
+            reads_planes: r.reads_planes,
         }))
     }
 

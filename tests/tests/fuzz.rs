@@ -20,7 +20,9 @@ use relief_core::obj::{count_triangles, load_obj};
 use relief_core::reach::Reach;
 use relief_core::scene::{SceneLimits, builtin_names, builtin_text, file::parse};
 use relief_proto::bundle::{Bundle, bundle_for};
-use relief_proto::convert::{check_register, request_from_pb, texture_from_pb, texture_to_pb};
+use relief_proto::convert::{
+    check_register, check_texture_pb, request_from_pb, texture_from_pb, texture_to_pb,
+};
 use relief_proto::pb;
 
 /// Cases per property: the issue asked for minutes of fuzzing in CI; this many take
@@ -153,9 +155,18 @@ proptest! {
             relief_core::relief::DepthBits::Sixteen,
             glam::Vec3::new(0.0, 0.0, 5.0),
         );
-        let valid = texture_to_pb(&texture).encode_to_vec();
-        if let Ok(texture) = pb::ReliefTexture::decode(edited(&valid, &edits).as_slice()) {
-            let _ = texture_from_pb("texture", &texture);
+        let raw = texture_to_pb(&texture);
+        // (And compressed, marked predicted whichever the worker would pick: every
+        // decoding path.)
+        let predicted = pb::ReliefTexture {
+            encoding: pb::PlaneEncoding::ZstdDelta.into(),
+            ..relief_proto::planes::compressed(raw.clone())
+        };
+        for valid in [raw.encode_to_vec(), predicted.encode_to_vec()] {
+            if let Ok(texture) = pb::ReliefTexture::decode(edited(&valid, &edits).as_slice()) {
+                let _ = texture_from_pb("texture", &texture);
+                let _ = check_texture_pb("texture", &texture);
+            }
         }
     }
 

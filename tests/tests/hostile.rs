@@ -56,6 +56,7 @@ fn ask(scene: &str, id: u64, size: u32, client_id: &str) -> pb::ImpostorRequest 
         projection: pb::SourceProjection::Orthographic.into(),
         serve_within: 0.0,
         zstd_planes: false,
+        zstd_delta_planes: false,
     }
 }
 

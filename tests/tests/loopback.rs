@@ -42,6 +42,7 @@ fn request(
         projection: pb::SourceProjection::Perspective.into(),
         serve_within: 0.0,
         zstd_planes: false,
+        zstd_delta_planes: false,
     }
 }
 
@@ -90,6 +91,7 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
     req.request_id = 2;
     req.progressive = false;
     req.zstd_planes = true;
+    req.zstd_delta_planes = true;
     let again = collect(remote.request(req.clone()).await.unwrap()).await.unwrap();
     assert_eq!(again.len(), 1);
     let wire = again[0].texture.as_ref().unwrap();
@@ -97,6 +99,19 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
     assert!(compressed.contains(&wire.encoding), "encoding {}", wire.encoding);
     assert!(wire.albedo.len() < results[1].texture.as_ref().unwrap().albedo.len());
     assert_eq!(texture_from_pb("texture", wire).unwrap(), local);
+    // A client that reads zstd but not predicted planes never gets those: raw instead.
+    req.request_id = 21;
+    req.zstd_delta_planes = false;
+    let plain_zstd = collect(remote.request(req.clone()).await.unwrap()).await.unwrap();
+    let plain_wire = plain_zstd[0].texture.as_ref().unwrap();
+    let expected = if wire.encoding == pb::PlaneEncoding::ZstdDelta as i32 {
+        pb::PlaneEncoding::Raw
+    } else {
+        pb::PlaneEncoding::Zstd
+    };
+    assert_eq!(plain_wire.encoding, expected as i32);
+    assert_eq!(texture_from_pb("texture", plain_wire).unwrap(), local);
+    req.zstd_delta_planes = true;
     // A client that also takes gRPC's zstd gets the stream plain: its planes are
     // compressed already, and compressing them again would only cost the server.
     let mut zstd_client = pb::impostors_client::ImpostorsClient::new(
@@ -162,12 +177,12 @@ async fn a_texture_over_the_network_equals_a_local_bake() {
     let stats = remote.stats().await.unwrap();
     assert_eq!(
         (stats.requests, stats.cache_hits, stats.served_nearby),
-        (7, 4, 1),
+        (8, 5, 1),
         "{stats:?}"
     );
     // Every request's latency is in the histogram, one count per bucket and one over.
     assert_eq!(stats.latency_counts.len(), stats.latency_bucket_ms.len() + 1);
-    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 7, "{stats:?}");
+    assert_eq!(stats.latency_counts.iter().sum::<u64>(), 8, "{stats:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -45,8 +45,9 @@ pub struct Impostor {
     pub right: Vec<bool>,
     /// Texel `k` is connected to the neighbour below.
     pub down: Vec<bool>,
-    /// Texel `k`'s albedo, encoded normal and depth level packed in one word: all the
-    /// pre-warp reads of a texel, in one load (measured: 8 % of its time).
+    /// Texel `k`'s albedo, encoded normal and its depth's table entry
+    /// ([`WarpLevels::entry`]) packed in one word: all the pre-warp reads of a texel, in
+    /// one load (measured: 8 % of its time).
     pub packed: Vec<u64>,
     /// Which sides of the surfaces can show.
     pub faces: Faces,

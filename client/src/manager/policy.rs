@@ -215,7 +215,9 @@ pub const SHEET_RIM_SHARE: f32 = 0.05;
 /// shading (the sphere at its own eye: 31.6 dB with 121² texels, 38.0 with 242²,
 /// geometry 37.2). In the demo (3 runs each) the sphere's median gap to geometry was
 /// 3.0–3.6 dB at 0.7, 3.2–4.6 at 0.5 (5 runs) and 5.2–6.4 at one pixel; 0.7 warps
-/// 15 % more texels a frame than one pixel, 0.5 22 %.
+/// 15 % more texels a frame than one pixel, 0.5 22 %. (Measured, as the figures
+/// of [`FINE_TEXEL_MAX_EDGE`], with the pixel's angle at the view's centre, before the
+/// resolution test took it where the object shows, `Camera::pixel_angle_towards`.)
 pub const FINE_TEXEL_PIXELS: f32 = 0.7;
 
 /// The largest texture edge [`FINE_TEXEL_PIXELS`] may ask for: a pre-warp costs per

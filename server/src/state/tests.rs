@@ -84,7 +84,7 @@ fn request(scene: ContentHash, id: u64, eye: Vec3, urgency: Urgency) -> Request 
         progressive: false,
         projection: SourceProjection::Orthographic,
         serve_within: 0.0,
-        zstd_planes: false,
+        reads_planes: Default::default(),
     }
 }
 

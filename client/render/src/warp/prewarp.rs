@@ -142,21 +142,22 @@ fn extent(params: &WarpParams, w: f32, h: f32) -> ((i32, i32), (i32, i32)) {
 /// A texel's albedo and encoded normal: six bytes in the low bytes of a `u64`, so one
 /// interpolation blends all six at once (two multiplies on a vector of 16-bit lanes;
 /// see [`Attributes::lerp`]). The top two
-/// bytes are not read; a source texel keeps its depth level there (see [`pack_texel`]).
+/// bytes are not read; a source texel keeps its depth's table entry there (see
+/// [`pack_texel`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Attributes(u64);
 
 /// A texel as the pre-warp reads it ([`Impostor::packed`]): albedo and encoded normal in
 /// the low six bytes, as [`Attributes`], and the table entry of its depth level
 /// ([`WarpLevels::entry`](super::params::WarpLevels::entry)) in the top two.
-pub(crate) fn pack_texel(albedo: [u8; 3], normal: [u8; 3], level: u16) -> u64 {
-    let ([r, g, b], [x, y, z], [q0, q1]) = (albedo, normal, level.to_le_bytes());
+pub(crate) fn pack_texel(albedo: [u8; 3], normal: [u8; 3], entry: u16) -> u64 {
+    let ([r, g, b], [x, y, z], [q0, q1]) = (albedo, normal, entry.to_le_bytes());
     u64::from_le_bytes([r, g, b, x, y, z, q0, q1])
 }
 
-/// The depth level's table entry of a [`pack_texel`] texel.
+/// The depth's table entry of a [`pack_texel`] texel.
 #[inline(always)]
-fn level_of(texel: u64) -> u16 {
+fn entry_of(texel: u64) -> u16 {
     (texel >> 48) as u16
 }
 
@@ -600,7 +601,7 @@ impl Job<'_> {
         for step in 0..texels.len() {
             let i = visited::<RIGHT>(&texels, step);
             let texel = packed[i];
-            let q = level_of(texel);
+            let q = entry_of(texel);
             if q == empty || turned_away(i, texel, q) {
                 if in_run {
                     close(&previous, last_gap, sink);
@@ -617,7 +618,7 @@ impl Job<'_> {
                 cell: Cell {
                     v: (v + p.add_v[q]) * scale,
                     depth: p.depth[q],
-                    // (The depth level in the top lanes blends along unread.)
+                    // (The depth's table entry in the top lanes blends along unread.)
                     attributes: Attributes(texel),
                     down: down[i],
                     filler: false,

@@ -122,6 +122,7 @@ pub fn run(args: RpcArgs) -> Result<()> {
                 projection: pb::SourceProjection::Perspective.into(),
                 serve_within: 0.0,
                 zstd_planes: true,
+                zstd_delta_planes: true,
             };
             let start = Instant::now();
             let mut stream = remote.request(request).await?;

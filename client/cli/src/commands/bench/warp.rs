@@ -137,6 +137,8 @@ pub fn run(args: WarpArgs) -> Result<()> {
     let bar = progress::spinner("baking");
     let scene = crate::args::load_scene(&args.scene)?;
     let solo = Solo::new(&scene, &args.object, 3.0)?;
+    // (8-bit depth, as the thesis' table 8.1 measures; a client's 16-bit textures warp
+    // through tables of 12-bit entries, `WarpLevels`, in the same loop.)
     let impostor = Impostor::new(solo.bake(solo.eye(0.0), args.size, DepthBits::Eight)?);
     let camera = solo.camera(solo.eye(args.angle), args.frame_size)?;
     let params = WarpParams::new(&impostor.texture, camera.eye_f32())
@@ -179,7 +181,8 @@ pub fn run(args: WarpArgs) -> Result<()> {
         for (k, out) in warped.iter_mut().enumerate() {
             let q = texture.depth[k];
             if q != empty {
-                *out = params.warp((k % w) as f32 + 0.5, (k / w) as f32 + 0.5, q as usize);
+                let entry = params.levels.entry(q) as usize;
+                *out = params.warp((k % w) as f32 + 0.5, (k / w) as f32 + 0.5, entry);
             }
         }
         std::hint::black_box(&warped);
@@ -311,7 +314,8 @@ pub fn run(args: WarpArgs) -> Result<()> {
     };
     bar.set_message("taking a texture in");
     let taking_in = {
-        // (As a client receives it: its planes compressed.)
+        // (As a client receives it, its planes compressed; but with 8-bit depth, half
+        // the depth bytes a client's 16 bits take.)
         let wire = relief_proto::planes::compressed(relief_proto::convert::texture_to_pb(texture));
         let decode =
             || relief_proto::convert::texture_from_pb("texture", &wire).map_err(|e| anyhow::anyhow!("{e}"));
