@@ -45,7 +45,7 @@ impl ReadyTexture {
     pub fn new(texture: ReliefTexture, faces: Faces) -> ReadyTexture {
         let arrived = Instant::now();
         let critical = CriticalPoints::find(&texture, CRITICAL_REGIONS, CRITICAL_REGIONS);
-        let baseline = WarpParams::new(&texture, texture.eye).map_or_else(
+        let baseline = WarpParams::without_tables(&texture, texture.eye).map_or_else(
             |_| vec![0.0; critical.pairs.len()],
             |params| critical.region_gaps(&params),
         );

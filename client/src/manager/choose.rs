@@ -80,7 +80,7 @@ pub(super) fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     if angle_between(middle, held.eye, eye) > MAX_TURN || !similar_distance(middle, eye, held.eye) {
         return f32::INFINITY;
     }
-    let Ok(params) = WarpParams::new(texture, eye) else {
+    let Ok(params) = WarpParams::without_tables(texture, eye) else {
         return f32::INFINITY;
     };
     let focal = camera.focal_pixels();

@@ -61,11 +61,28 @@ pub fn volume_centre(texture: &SourceCamera) -> Vec3 {
 
 /// The resolution test (eq. 4-1): the texture is too coarse when a texel subtends more
 /// than `k` pixels' angle (`k ≥ 1` tolerates slightly blurry impostors) where the
-/// texture's volume shows ([`Camera::pixel_angle_towards`]: an object at the side of
-/// a wide view needs finer texels than at its centre). `camera` in the texture's frame.
+/// texture's volume shows: for a solid [`Camera::pixel_angle_towards`] (at the side of
+/// a wide view it needs finer texels than at its centre), for leaves the centre's
+/// (see `pixel_angle` here). `camera` in the texture's frame.
 pub fn needs_finer_texture(texture: &SourceCamera, camera: &Camera, k: f32) -> bool {
-    let pixel_angle = camera.pixel_angle_towards(volume_centre(texture));
-    texel_angle(texture, camera.eye_f32()) > k * pixel_angle
+    let projection = match texture.centre {
+        Some(_) => SourceProjection::Perspective,
+        None => SourceProjection::Orthographic,
+    };
+    texel_angle(texture, camera.eye_f32()) > k * pixel_angle(camera, projection, volume_centre(texture))
+}
+
+/// The pixel angle a texture in `projection` is held to where `centre` shows: a
+/// solid's, [`Camera::pixel_angle_towards`]; a sheet's (leaves: perspective textures),
+/// the view's centre's, [`Camera::pixel_angle`]. Leaves are nearly all edge, moved by
+/// up to half a texel wherever they show; held to the pixel at the side of a wide view,
+/// the forest's trees there asked for textures past what is drawn as geometry, and its
+/// 1280×720 frames took twice as long.
+fn pixel_angle(camera: &Camera, projection: SourceProjection, centre: Vec3) -> f32 {
+    match projection {
+        SourceProjection::Orthographic => camera.pixel_angle_towards(centre),
+        SourceProjection::Perspective => camera.pixel_angle(),
+    }
 }
 
 /// The texture edge for the object with `bounds` seen from `eye` through `camera`: the
@@ -87,7 +104,7 @@ pub fn resolution_for(
     let centre = volume_centre(&unit);
     let distance = centre.distance(eye);
     // texel_angle(N) = 2·atan(span / (2·N·distance)) ≤ k · pixel angle.
-    let edge = 0.5 * span / (distance * (0.5 * k * camera.pixel_angle_towards(centre)).tan());
+    let edge = 0.5 * span / (distance * (0.5 * k * pixel_angle(camera, projection, centre)).tan());
     Some(if edge.is_finite() {
         edge.ceil().clamp(1.0, u32::MAX as f32) as u32
     } else {

@@ -114,7 +114,8 @@ pub struct WarpParams {
     source: (f32, Vec2),
     /// Which table entry each depth level uses.
     pub levels: WarpLevels,
-    /// Displacement of each table entry.
+    /// Displacement of each table entry (this and the three tables below are left
+    /// empty by [`WarpParams::without_tables`]).
     pub depth: Vec<f32>,
     /// `add_u(d)` per entry.
     pub add_u: Vec<f32>,
@@ -134,6 +135,22 @@ impl WarpParams {
     /// The constants for showing `texture` from `eye`; an error when the eye is in or
     /// behind the texture plane (or anything is non-finite), where no warp exists.
     pub fn new(texture: &ReliefTexture, eye: Vec3) -> Result<Self, WarpError> {
+        let mut params = Self::without_tables(texture, eye)?;
+        params.depth = params.levels.depths(&texture.camera);
+        // (One straight loop per table, which the compiler vectorises: a 16-bit
+        // texture's 4,096 entries are built for every warp.)
+        params.add_u = params.depth.iter().map(|&d| params.at_depth(d).0.x).collect();
+        params.add_v = params.depth.iter().map(|&d| params.at_depth(d).0.y).collect();
+        params.scale = params.depth.iter().map(|&d| params.at_depth(d).1).collect();
+        Ok(params)
+    }
+
+    /// The constants without the tables: for warping points at any displacement
+    /// ([`WarpParams::warp_at`], [`WarpParams::warp_v`]), as the gap predictions do for
+    /// every texture held at every eye weighed — where building a 16-bit texture's
+    /// 4,096 entries each time cost the forest's frames 11–16 ms. [`WarpParams::warp`]
+    /// and the pre-warp need [`WarpParams::new`]'s tables. Refused as `new` refuses.
+    pub fn without_tables(texture: &ReliefTexture, eye: Vec3) -> Result<Self, WarpError> {
         let c = &texture.camera;
         super::ensure_finite(c, eye)?;
         let to_eye = eye - c.origin;
@@ -166,9 +183,7 @@ impl WarpParams {
         if !epipole.is_finite() || !foot.is_finite() {
             return Err(WarpError::NonFinite);
         }
-        let levels = WarpLevels::new(texture.depth_bits);
-        let depth = levels.depths(c);
-        let mut params = WarpParams {
+        let params = WarpParams {
             eye,
             h,
             k3: 1.0 / h,
@@ -176,23 +191,25 @@ impl WarpParams {
             epipole,
             outward,
             source,
-            levels,
+            levels: WarpLevels::new(texture.depth_bits),
+            depth: Vec::new(),
             add_u: Vec::new(),
             add_v: Vec::new(),
             scale: Vec::new(),
-            depth,
         };
-        // (One straight loop per table, which the compiler vectorises: a 16-bit
-        // texture's 4,096 entries are built for every warp.)
-        params.add_u = params.depth.iter().map(|&d| params.at_depth(d).0.x).collect();
-        params.add_v = params.depth.iter().map(|&d| params.at_depth(d).0.y).collect();
-        params.scale = params.depth.iter().map(|&d| params.at_depth(d).1).collect();
         // Finite tables keep every pre-warped position finite: the warps' loops over
-        // the pixels between two positions rely on it.
-        let tables = [&params.depth, &params.add_u, &params.add_v, &params.scale];
-        // (A fold without a shortcut, which vectorises: most tables are finite.)
-        let finite = |t: &Vec<f32>| t.iter().fold(true, |finite, x| finite & x.is_finite());
-        if !tables.into_iter().all(finite) {
+        // the pixels between two positions rely on it. `add(d)` and `s(d)` are each a
+        // ratio of two linear functions of `d`: finite at both ends of the depth range,
+        // with no pole between (a denominator keeping its sign), they are finite
+        // throughout.
+        let (near, far) = (c.depth_near, c.depth_far);
+        let ends = [params.at_depth(near), params.at_depth(far)];
+        let ends_finite = ends.iter().all(|(add, s)| add.is_finite() && s.is_finite());
+        let one_sign = |a: f32, b: f32| a * b > 0.0;
+        let inverse_h_s = params.source.0;
+        let no_pole =
+            one_sign(h + near, h + far) && one_sign(1.0 + near * inverse_h_s, 1.0 + far * inverse_h_s);
+        if !(ends_finite && no_pole) {
             return Err(WarpError::NonFinite);
         }
         Ok(params)
@@ -379,5 +396,30 @@ mod tests {
                 .chain(&p.scale)
                 .all(|x| x.is_finite())
         );
+        // Without the tables: refused alike, and the same constants. A perspective
+        // texture seen from beyond its centre's distance too.
+        let mut perspective = texture(SourceProjection::Perspective);
+        perspective.camera.depth_far *= 50.0;
+        for (t, eye) in [
+            (&t, in_plane),
+            (&t, behind),
+            (&t, Vec3::NAN),
+            (&deep, eye),
+            (&t, near),
+            (&t, t.eye),
+            (&perspective, perspective.eye * 3.0),
+        ] {
+            let (with, without) = (WarpParams::new(t, eye), WarpParams::without_tables(t, eye));
+            match (with, without) {
+                (Ok(with), Ok(without)) => {
+                    assert_eq!(
+                        (with.h, with.foot, with.epipole),
+                        (without.h, without.foot, without.epipole)
+                    );
+                    assert!(without.depth.is_empty() && without.scale.is_empty());
+                }
+                (with, without) => assert_eq!(with.err(), without.err(), "{eye}"),
+            }
+        }
     }
 }
