@@ -53,39 +53,38 @@ impl PlaneLayout {
     }
 }
 
-/// `plane` (rows of `width` texels of `texel_bytes` bytes) predicted: its bytes
-/// regrouped by their place in the texel, each the difference from the same byte of the
-/// texel to its left. Undone by [`undelta`].
+/// The order of a predicted plane's bytes (rows of `width` texels of `texel_bytes`
+/// bytes, `len` in all): each byte's index in the plane, lane by lane (every texel's
+/// first byte, then every texel's second, ...), and whether it starts a row (its left
+/// neighbour counts as 0). The one definition [`delta`] and [`undelta`] share.
+fn predicted_order(len: usize, width: usize, texel_bytes: usize) -> impl Iterator<Item = (usize, bool)> {
+    let texels = len / texel_bytes;
+    (0..texel_bytes)
+        .flat_map(move |lane| (0..texels).map(move |t| (t * texel_bytes + lane, t % width.max(1) == 0)))
+}
+
+/// `plane` predicted: its bytes in [`predicted_order`], each the difference from the
+/// same byte of the texel to its left. Undone by [`undelta`].
 fn delta(plane: &[u8], width: usize, texel_bytes: usize) -> Vec<u8> {
     debug_assert_eq!(plane.len() % texel_bytes, 0, "whole texels");
-    let texels = plane.len() / texel_bytes;
-    let mut out = vec![0u8; plane.len()];
-    for (lane, out) in out.chunks_exact_mut(texels.max(1)).enumerate() {
-        for (row, out) in out.chunks_mut(width.max(1)).enumerate() {
-            let mut left = 0u8;
-            for (i, out) in out.iter_mut().enumerate() {
-                let byte = plane[(row * width + i) * texel_bytes + lane];
-                *out = byte.wrapping_sub(left);
-                left = byte;
-            }
-        }
-    }
-    out
+    let mut left = 0u8;
+    predicted_order(plane.len(), width, texel_bytes)
+        .map(|(k, row_start)| {
+            let (byte, before) = (plane[k], if row_start { 0 } else { left });
+            left = byte;
+            byte.wrapping_sub(before)
+        })
+        .collect()
 }
 
 /// The plane [`delta`] predicted, restored.
 fn undelta(coded: &[u8], width: usize, texel_bytes: usize) -> Vec<u8> {
     debug_assert_eq!(coded.len() % texel_bytes, 0, "whole texels");
-    let texels = coded.len() / texel_bytes;
     let mut plane = vec![0u8; coded.len()];
-    for (lane, coded) in coded.chunks_exact(texels.max(1)).enumerate() {
-        for (row, coded) in coded.chunks(width.max(1)).enumerate() {
-            let mut left = 0u8;
-            for (i, &difference) in coded.iter().enumerate() {
-                left = left.wrapping_add(difference);
-                plane[(row * width + i) * texel_bytes + lane] = left;
-            }
-        }
+    let mut left = 0u8;
+    for (&difference, (k, row_start)) in coded.iter().zip(predicted_order(coded.len(), width, texel_bytes)) {
+        left = if row_start { 0 } else { left }.wrapping_add(difference);
+        plane[k] = left;
     }
     plane
 }
@@ -98,13 +97,8 @@ pub fn compressed(texture: pb::ReliefTexture) -> pb::ReliefTexture {
         return texture;
     }
     let raw = [&texture.albedo, &texture.normal, &texture.depth];
-    let squeeze = |plane: &[u8]| zstd::bulk::compress(plane, PLANE_ZSTD_LEVEL).map(Bytes::from);
     // (zstd fails only out of memory: then the planes go as they are.)
-    let Ok(plain) = raw
-        .map(|plane| squeeze(plane))
-        .into_iter()
-        .collect::<Result<Vec<_>, _>>()
-    else {
+    let Some(plain) = squeezed(raw) else {
         return texture;
     };
     // (Only planes of their layout's sizes are predicted; a worker's always are.)
@@ -113,17 +107,15 @@ pub fn compressed(texture: pb::ReliefTexture) -> pb::ReliefTexture {
         .map(|bits| PlaneLayout::new(texture.width, texture.height, bits))
         .filter(|layout| (0..3).all(|k| raw[k].len() == layout.size(k)));
     let predicted = layout.and_then(|layout| {
-        (0..3)
-            .map(|k| squeeze(&delta(raw[k], layout.width, layout.texel_bytes[k])))
-            .collect::<Result<Vec<_>, _>>()
-            .ok()
+        squeezed(std::array::from_fn::<_, 3, _>(|k| {
+            delta(raw[k], layout.width, layout.texel_bytes[k])
+        }))
     });
-    let total = |planes: &[Bytes]| planes.iter().map(Bytes::len).sum::<usize>();
-    let (mut planes, encoding) = match predicted {
+    let total = |planes: &[Bytes; 3]| planes.iter().map(Bytes::len).sum::<usize>();
+    let ([albedo, normal, depth], encoding) = match predicted {
         Some(predicted) if total(&predicted) < total(&plain) => (predicted, pb::PlaneEncoding::ZstdDelta),
         _ => (plain, pb::PlaneEncoding::Zstd),
     };
-    let (depth, normal, albedo) = (planes.remove(2), planes.remove(1), planes.remove(0));
     pb::ReliefTexture {
         albedo,
         normal,
@@ -131,6 +123,12 @@ pub fn compressed(texture: pb::ReliefTexture) -> pb::ReliefTexture {
         encoding: encoding.into(),
         ..texture
     }
+}
+
+/// Each of `planes` as one zstd frame; `None` when zstd fails.
+fn squeezed<P: AsRef<[u8]>>(planes: [P; 3]) -> Option<[Bytes; 3]> {
+    let [albedo, normal, depth] = planes.map(|plane| zstd::bulk::compress(plane.as_ref(), PLANE_ZSTD_LEVEL));
+    Some([albedo.ok()?, normal.ok()?, depth.ok()?].map(Bytes::from))
 }
 
 /// `texture` with raw planes (decompressed, when they came compressed), every field
