@@ -8,8 +8,11 @@
 //! texture can come from it then. [`Health`] says so once on stderr when it begins and
 //! when it ends, and counts its seconds for the run's summary; meanwhile the requests
 //! go to the in-process generator (see [`source`](crate::source)), and back to the
-//! server as soon as a look at its counters finds it serving again — with the scene
-//! uploaded again at once when it had been unreachable (it may have restarted).
+//! server as soon as a look at its counters finds it serving again. A look that finds
+//! the server restarted (its `instance` changed) uploads the scene again at once; one
+//! that cannot tell (a server that does not say) does so when it had been unreachable.
+//! A look unanswered while results still come from the server finds it busy, not
+//! lost: it counts as a report of saturation, not towards [`SILENT_LOOKS`].
 //!
 //! # Uploading again
 //!
@@ -18,7 +21,7 @@
 //! for the one upload), and after a failed upload waits [`REUPLOAD_BACKOFF_FIRST`],
 //! doubling, before trying again — a server refusing the scene is not sent it in a loop.
 
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
@@ -146,6 +149,11 @@ pub struct Link {
     uploads: tokio::sync::Mutex<Uploads>,
     /// Looks given up in a row (see [`SILENT_LOOKS`]).
     silent_looks: AtomicU32,
+    /// When a message last came from the server (see [`Link::heard`]).
+    last_heard: Mutex<Option<Instant>>,
+    /// The server's `instance` at the last look (0: none seen yet, or a server that
+    /// does not say).
+    instance: AtomicU64,
 }
 
 /// Why the scene could not be uploaded again.
@@ -167,6 +175,8 @@ impl Link {
             scene_hash,
             health: Health::default(),
             silent_looks: AtomicU32::new(0),
+            last_heard: Mutex::new(None),
+            instance: AtomicU64::new(0),
             uploads: tokio::sync::Mutex::new(Uploads {
                 done: 0,
                 failures: 0,
@@ -215,25 +225,57 @@ impl Link {
         }
     }
 
+    /// A message came from the server (a result on a request's stream): it is there,
+    /// however slowly it answers a look.
+    pub fn heard(&self) {
+        *self.last_heard.lock().unwrap_or_else(|p| p.into_inner()) = Some(Instant::now());
+    }
+
+    /// Whether a message came from the server at or after `since`.
+    fn heard_since(&self, since: Instant) -> bool {
+        self.last_heard
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .is_some_and(|at| at >= since)
+    }
+
     /// Looks once at the server's counters (at most [`HEALTH_POLL_TIMEOUT`]) and
     /// brings [`Link::health`] up to date: before a flight, so that its first requests
     /// go where textures can come from. Returns the wait the server foresees for a new
-    /// job, when it answered with one.
+    /// job, when it answered with one — and, when it did not answer in time but results
+    /// came from it meanwhile, the look's own wait: a server that busy is saturated,
+    /// not lost.
     pub async fn look(&self) -> Option<Duration> {
+        let started = Instant::now();
         let look = tokio::time::timeout(HEALTH_POLL_TIMEOUT, self.remote.clone().stats()).await;
+        // Unanswered, but results came meanwhile: the server is there, and busy. (At
+        // 64 clients on two cores, such looks counted as lost sent clients to their
+        // own generators, whose bakes took the workers' cores: the farm served a fifth
+        // of what it served 32 clients.)
+        let busy = look.is_err() && self.heard_since(started);
         let wait = match &look {
             Ok(Ok(stats)) => Some(Duration::from_millis(stats.estimated_wait_ms.into())),
+            _ if busy => Some(HEALTH_POLL_TIMEOUT),
             _ => None,
         };
-        if look.is_ok() {
+        if look.is_ok() || busy {
             self.silent_looks.store(0, Ordering::Relaxed);
+        }
+        if busy {
+            return wait;
         }
         match look {
             Ok(Ok(stats)) if stats.workers == 0 => self.health.degrade(Degraded::NoWorkers),
-            Ok(Ok(_)) => {
-                // A server back from being unreachable may be a new one (restarted):
-                // upload the scene at once rather than when a request finds it gone.
-                if let Some(Degraded::Unreachable(_)) = self.health.restore() {
+            Ok(Ok(stats)) => {
+                // A server restarted has lost the scene: upload it at once rather than
+                // when a request finds it gone. The server says whether it restarted;
+                // one that does not say, back from being unreachable, may have. (Every
+                // client uploading again after a blip sent the server the scene once
+                // per client.)
+                let seen = self.instance.swap(stats.instance, Ordering::Relaxed);
+                let restarted = (seen != 0 && stats.instance != 0).then_some(seen != stats.instance);
+                let was_unreachable = matches!(self.health.restore(), Some(Degraded::Unreachable(_)));
+                if restarted.unwrap_or(was_unreachable) {
                     let done = self.uploads_done().await;
                     if let Err(e) = self.upload_again(done).await {
                         tracing::warn!("{e}");

@@ -158,6 +158,7 @@ async fn serve_request(
         let uploads = link.uploads_done().await;
         match remote.request(wire.clone()).await {
             Ok(s) => {
+                link.heard();
                 stream = Some(s);
                 break;
             }
@@ -193,18 +194,33 @@ async fn serve_request(
         };
         match message {
             Ok(Some(result)) => {
-                finished |= result.r#final;
+                link.heard();
+                let is_final = result.r#final;
+                finished |= is_final;
                 tokio::time::sleep(half).await;
-                match result.texture.as_ref().map(|t| texture_from_pb("texture", t)) {
-                    Some(Ok(texture)) => {
+                let Some(texture) = result.texture else {
+                    fail(Failure::Refused("a result without a texture".into()));
+                    continue;
+                };
+                // Decoding and making ready take milliseconds of CPU a texture: off the
+                // runtime's threads, whose timers (the link's looks among them) they
+                // held up — with many clients in one process, long enough for a busy
+                // server to look lost.
+                let ready = tokio::task::spawn_blocking(move || {
+                    texture_from_pb("texture", &texture).map(|t| Box::new(ReadyTexture::new(t, faces)))
+                })
+                .await;
+                match ready {
+                    Ok(Ok(texture)) => {
                         let _ = arrivals.send(Arrival::Texture {
                             id,
-                            texture: Box::new(ReadyTexture::new(texture, faces)),
-                            is_final: result.r#final,
+                            texture,
+                            is_final,
                         });
                     }
-                    Some(Err(e)) => fail(Failure::Refused(e.message().to_string())),
-                    None => fail(Failure::Refused("a result without a texture".into())),
+                    Ok(Err(e)) => fail(Failure::Refused(e.message().to_string())),
+                    // (Only a panic while decoding, or a runtime shutting down.)
+                    Err(e) => fail(Failure::Refused(format!("making the texture ready: {e}"))),
                 }
             }
             // After the final texture nothing more is owed. Before it, the end is a

@@ -76,6 +76,9 @@ pub struct Limits {
 pub struct State {
     limits: Limits,
     epoch: Instant,
+    /// Chosen at random at start ([`instance_id`]): a client seeing it change knows the
+    /// server restarted and lost the scenes it held.
+    instance: u64,
     scenes: Scenes,
     jobs: HashMap<u64, Job>,
     queue: FairQueue,
@@ -108,6 +111,19 @@ pub struct State {
     pub counters: Counters,
 }
 
+/// A number unlikely to repeat across the server's starts: the clock hashed with the
+/// process's random hashing keys (which the standard library seeds from the OS).
+fn instance_id() -> u64 {
+    use std::hash::{BuildHasher, Hasher};
+    let mut hasher = std::collections::hash_map::RandomState::new().build_hasher();
+    let since_epoch = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap_or_default();
+    hasher.write_u128(since_epoch.as_nanos());
+    hasher.write_u32(std::process::id());
+    hasher.finish().max(1)
+}
+
 /// How a request was taken in.
 #[derive(Debug)]
 pub enum Admission {
@@ -122,6 +138,7 @@ impl State {
         State {
             limits,
             epoch: Instant::now(),
+            instance: instance_id(),
             scenes: Scenes::default(),
             jobs: HashMap::new(),
             queue: FairQueue::default(),

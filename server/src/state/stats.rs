@@ -2,7 +2,7 @@
 
 use std::collections::{BTreeMap, VecDeque};
 
-use relief_core::stats::sorted_percentile;
+use relief_core::stats::percentile;
 use relief_proto::pb;
 
 use super::State;
@@ -79,14 +79,10 @@ impl State {
 
     /// The counters as the protocol's `StatsReply`.
     pub fn stats(&self) -> pb::StatsReply {
-        let sorted = |samples: &VecDeque<f32>| {
-            let mut v: Vec<f64> = samples.iter().map(|&s| f64::from(s)).collect();
-            v.sort_by(f64::total_cmp);
-            v
-        };
-        let (latencies, handling) = (sorted(&self.latencies), sorted(&self.handling));
+        let samples = |samples: &VecDeque<f32>| samples.iter().map(|&s| f64::from(s)).collect::<Vec<f64>>();
+        let (latencies, handling) = (samples(&self.latencies), samples(&self.handling));
         // (0 before any sample, as the protocol says.)
-        let percentile = |v: &[f64], p: f64| match sorted_percentile(v, p) {
+        let percentile = |v: &[f64], p: f64| match percentile(v, p) {
             q if q.is_nan() => 0.0,
             q => q as f32,
         };
@@ -100,6 +96,7 @@ impl State {
             cache_hits: self.counters.cache_hits,
             merged: self.counters.merged,
             served_nearby: self.counters.served_nearby,
+            instance: self.instance,
             withdrawn: self.counters.withdrawn,
             requeued: self.counters.requeued,
             cache_bytes: self.cache_bytes as u64,

@@ -15,6 +15,7 @@ use serde::Serialize;
 use relief_client::flight::Flight;
 use relief_client::link::Link;
 use relief_client::manager::{Config, Counters, Manager};
+use relief_client::remote::Remote;
 use relief_client::source::remote_manager;
 use relief_core::scene::Scene;
 use relief_core::stats::{finite_mean, finite_min, percentile};
@@ -278,12 +279,23 @@ impl Setup<'_> {
             &self.bundle,
             Some(args.workers),
         ))?;
+        // Each client on a connection of its own, as clients on their own machines
+        // are: on one shared connection, a keepalive ping answered late on the loaded
+        // machine broke every client's streams at once.
+        let remotes = (0..clients)
+            .map(|c| {
+                self.runtime
+                    .block_on(Remote::connect(&service.url, None, &format!("load-{c}")))
+                    .map_err(|e| anyhow!("simulated client {c}: {e}"))
+            })
+            .collect::<Result<Vec<_>>>()?;
         let started = Instant::now();
         let mut stats_remote = remote.clone();
-        let handles: Vec<_> = (0..clients)
-            .map(|c| {
-                let mut remote = remote.clone();
-                remote.client_id = format!("load-{c}");
+        let handles: Vec<_> = remotes
+            .into_iter()
+            .enumerate()
+            .map(|(c, remote)| {
+                let c = c as u32;
                 let config = Config {
                     tolerance,
                     ..Config::default()
