@@ -448,6 +448,9 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
     assert!(pickup >= ms(to_pickup), "pickup {pickup} ms");
     // (Counted apart: the latency leaves the pick-up out.)
     assert!(latency < ms(to_arrival + to_pickup) - 5.0, "latency {latency} ms");
+    // A request for now: among those needed now, and no prediction's lateness.
+    assert_eq!(manager.counters.latencies_now_ms, vec![latency]);
+    assert!(manager.counters.prediction_lateness_ms.is_empty());
     // Shown again after a while, then not (the eye too near: geometry).
     std::thread::sleep(shown_for);
     manager.frame(&scene, &camera, 0.2);
@@ -548,6 +551,67 @@ fn a_saturated_server_lengthens_the_textures_lives() {
         report(&mut manager, Duration::ZERO);
     }
     assert_eq!(manager.tolerance(), asked);
+}
+
+/// A prediction's texture is counted by its arrival against the time it was predicted
+/// to be needed: late by what it came after, early (negative) by what it came before.
+#[test]
+fn a_prediction_is_counted_late_or_early_against_its_need() {
+    use relief_client::manager::{Arrival, ReadyTexture};
+    use relief_core::relief::DepthBits;
+    use relief_trace::bake;
+    use relief_trace::tracer::ObjectTracer;
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let sphere = index(&scene, "sphere");
+    let centre = scene.objects[sphere].world_bounds().center();
+    let tracer = ObjectTracer::new(&scene.objects[sphere]);
+    // Orbits the sphere until a prediction is asked for; answers it `after` its need
+    // (before, when negative); returns the lateness counted, ms.
+    let lateness = |after_ms: i64| -> f64 {
+        let (commands_tx, mut commands) = unbounded_channel();
+        let (arrivals, arrivals_rx) = unbounded_channel();
+        let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+        let request = (0..30)
+            .find_map(|frame| {
+                let t = frame as f32 / 30.0;
+                manager.frame(&scene, &camera_round(centre, 30.0 * t), t as f64);
+                std::iter::from_fn(|| commands.try_recv().ok()).find_map(|c| match c {
+                    Command::Request(r) if r.needed_in_ms.is_some() && r.object == "sphere" => Some(r),
+                    _ => None,
+                })
+            })
+            .expect("a prediction for the sphere");
+        let asked = std::time::Instant::now();
+        let need = request.needed_in_ms.unwrap() as i64;
+        let texture = bake(
+            &tracer,
+            scene.objects[sphere].to_world(request.eye).as_vec3(),
+            64,
+            DepthBits::Eight,
+            relief_core::relief::SourceProjection::Perspective,
+        )
+        .unwrap();
+        let arrive_at = asked + Duration::from_millis((need + after_ms).max(0) as u64);
+        std::thread::sleep(arrive_at.saturating_duration_since(std::time::Instant::now()));
+        let ready = ReadyTexture::new(texture, relief_render::impostor::Faces::Front);
+        arrivals
+            .send(Arrival::Texture {
+                id: request.id,
+                texture: Box::new(ready),
+                is_final: true,
+            })
+            .unwrap();
+        manager.frame(&scene, &camera_round(centre, 30.0), 1.0);
+        assert!(manager.counters.latencies_now_ms.is_empty());
+        assert_eq!(manager.counters.prediction_lateness_ms.len(), 1);
+        manager.counters.prediction_lateness_ms[0]
+    };
+    // (The request was asked a little before `asked`: at most a frame's work early.)
+    let late = lateness(80);
+    assert!((80.0..110.0).contains(&late), "late by {late} ms");
+    let early = lateness(-150);
+    assert!((-150.0..-120.0).contains(&early), "early by {early} ms");
 }
 
 /// Two placements of one knot, the second turned so that the camera sees it from the

@@ -28,8 +28,15 @@ pub struct Counters {
     /// The factor the server's load put on the tolerance, summed over the frames drawn
     /// (over their count: its mean; see [`LOAD_HIGH_WAIT`](super::policy::LOAD_HIGH_WAIT)).
     pub load_scale_sum: f64,
-    /// Request sent → final texture received by the client, milliseconds.
+    /// Request sent → final texture received by the client, milliseconds …
     pub latencies_ms: Vec<f64>,
+    /// … of the requests needed now alone (a frame waits on them) …
+    pub latencies_now_ms: Vec<f64>,
+    /// … and of the predicted ones, their texture's arrival against the time it was
+    /// predicted to be needed, milliseconds: late when positive. (A prediction is
+    /// asked for a round trip ahead: its latency is long by design, its lateness is
+    /// what a frame sees.)
+    pub prediction_lateness_ms: Vec<f64>,
     /// Final texture received → taken in by a frame (made ready, and the frame loop
     /// come round), milliseconds.
     pub pickup_ms: Vec<f64>,
@@ -48,6 +55,12 @@ pub struct Counters {
     pub stale_causes: StaleCauses,
     /// Where each [`Manager::render`](super::Manager::render) spent its time.
     pub render_stages: Vec<RenderStages>,
+}
+
+/// Of predictions' lateness ([`Counters::prediction_lateness_ms`]), the fraction
+/// late; NaN (`null` in JSON) for none.
+pub fn late_fraction(lateness_ms: &[f64]) -> f64 {
+    lateness_ms.iter().filter(|&&ms| ms > 0.0).count() as f64 / lateness_ms.len() as f64
 }
 
 /// How long final textures served: seconds from each one's arrival to the last frame

@@ -53,7 +53,7 @@ use crate::predict::Predictor;
 
 pub use cache::ReadyTexture;
 pub use choose::{Show, ShownTexture};
-pub use counters::{Counters, RenderStages, StaleCauses, TextureLifetimes};
+pub use counters::{Counters, RenderStages, StaleCauses, TextureLifetimes, late_fraction};
 pub use messages::{Arrival, Command, Failure, TextureRequest};
 pub use policy::Config;
 pub use requests::texture_ladder;
@@ -278,7 +278,7 @@ impl Manager {
                         .filter(|p| p.object == k)
                         .map(|p| {
                             let degrees = angle_between(centre, p.eye, eye).to_degrees();
-                            (p.sent.elapsed().as_millis(), p.predicted, degrees)
+                            (p.sent.elapsed().as_millis(), p.predicted(), degrees)
                         })
                         .collect();
                     let shown_deg = shown_turn.map(f32::to_degrees);
@@ -299,7 +299,7 @@ impl Manager {
             // One request for now in flight per object: when textures stay valid for
             // less than the eye takes to leave them, a request each frame would only
             // queue textures that are stale on arrival.
-            let asking_now = self.pending.values().any(|p| p.object == k && !p.predicted);
+            let asking_now = self.pending.values().any(|p| p.object == k && !p.predicted());
             if (!valid || want_finer) && !asked_for && !asking_now {
                 self.request(scene, k, eye, camera, None);
             }

@@ -31,8 +31,15 @@ pub(super) struct Pending {
     pub(super) object: usize,
     /// In the object's frame, as every eye the manager keeps.
     pub(super) eye: Vec3,
-    pub(super) predicted: bool,
     pub(super) sent: Instant,
+    /// When a predicted request's texture is needed; `None` for one needed now.
+    pub(super) needed_at: Option<Instant>,
+}
+
+impl Pending {
+    pub(super) fn predicted(&self) -> bool {
+        self.needed_at.is_some()
+    }
 }
 
 /// Whether an object has a texture ahead of the eye's turn about it (see
@@ -151,13 +158,22 @@ impl Manager {
     pub(super) fn record_round_trip(&mut self, pending: &Pending, arrived: Instant) {
         let ms_between = |from: Instant, to: Instant| to.saturating_duration_since(from).as_secs_f64() * 1e3;
         let now = Instant::now();
-        self.counters.latencies_ms.push(ms_between(pending.sent, arrived));
+        let latency = ms_between(pending.sent, arrived);
+        self.counters.latencies_ms.push(latency);
+        match pending.needed_at {
+            None => self.counters.latencies_now_ms.push(latency),
+            // (Signed: early is negative.)
+            Some(needed) => self
+                .counters
+                .prediction_lateness_ms
+                .push(ms_between(needed, arrived) - ms_between(arrived, needed)),
+        }
         self.counters.pickup_ms.push(ms_between(arrived, now));
         let ms = ms_between(pending.sent, now);
         tracing::debug!(
             object = pending.object,
             ms,
-            predicted = pending.predicted,
+            predicted = pending.predicted(),
             "round trip"
         );
         for recent in [
@@ -246,13 +262,14 @@ impl Manager {
         if self.commands.send(Command::Request(request)).is_err() {
             return;
         }
+        let sent = Instant::now();
         self.pending.insert(
             id,
             Pending {
                 object,
                 eye,
-                predicted: needed_in_ms.is_some(),
-                sent: Instant::now(),
+                sent,
+                needed_at: needed_in_ms.map(|ms| sent + std::time::Duration::from_millis(ms)),
             },
         );
         match needed_in_ms {
@@ -370,7 +387,7 @@ impl Manager {
         let stale: Vec<u64> = self
             .pending
             .iter()
-            .filter(|(_, p)| p.object == k && p.predicted)
+            .filter(|(_, p)| p.object == k && p.predicted())
             .filter(|(_, p)| {
                 angle_between(centre, p.eye, eye) > reach && angle_between(centre, p.eye, future) > reach
             })

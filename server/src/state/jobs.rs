@@ -189,6 +189,13 @@ impl State {
                 .then(|| self.express_worker(&owner, first))
                 .flatten();
             let chosen = free.or(express);
+            // A prediction the slot would start past its use is refused instead.
+            let now = Instant::now();
+            if chosen.is_some() && self.outlived(&first, now) {
+                let needed = self.epoch + std::time::Duration::from_micros(first.deadline_us);
+                self.shed_queued(first.id, now.saturating_duration_since(needed));
+                continue;
+            }
             let Some((worker_id, worker)) = chosen.and_then(|id| self.workers.get_mut(&id).map(|w| (id, w)))
             else {
                 // (A slot taken back is lent at once: hand it out.)

@@ -284,16 +284,13 @@ impl State {
                     && let Some(wait) = self.too_late(in_ms)
                 {
                     self.counters.shed += 1;
-                    let ms = wait.as_millis().min(u128::from(u32::MAX));
-                    let mut refusal = Status::resource_exhausted(format!(
-                        "saturated: a texture needed in {in_ms} ms would be ready in about {ms} ms"
+                    return Err(admission::saturated(
+                        format!(
+                            "saturated: a texture needed in {in_ms} ms would be ready in about {} ms",
+                            wait.as_millis()
+                        ),
+                        wait,
                     ));
-                    if let Ok(value) = ms.to_string().parse() {
-                        refusal
-                            .metadata_mut()
-                            .insert(relief_proto::SATURATED_METADATA, value);
-                    }
-                    return Err(refusal);
                 }
                 let id = self.next();
                 let priority = Priority {

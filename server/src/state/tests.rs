@@ -983,3 +983,48 @@ fn predictions_the_workers_cannot_finish_in_time_are_refused() {
     assert_eq!(s.stats().predictions_shed, 1);
     assert!(s.stats().estimated_wait_ms > 0);
 }
+
+/// A prediction admitted in time that waits in the queue past its use — a free slot
+/// would start it more than `SHED_SLACK` after it was needed — is refused as
+/// saturated (saying how late in its metadata) instead of baked, and the slot goes to
+/// the next job.
+#[test]
+fn a_queued_prediction_past_its_use_is_refused_not_baked() {
+    let (mut s, hash) = state_with_scene();
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    let (tx, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 0.5, tx);
+    s.dispatch();
+    let running = next_job(&mut wrx).unwrap();
+    let predicted =
+        |id: u64, x: f32, in_ms: u64| request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Predicted { in_ms });
+    let (soon_tx, mut soon_rx) = unbounded_channel();
+    s.admit(&predicted(2, 2.0, 0), OWNER, soon_tx).unwrap();
+    let (later_tx, mut later_rx) = unbounded_channel();
+    s.admit(&predicted(3, 3.0, 60_000), OWNER, later_tx).unwrap();
+    // Both wait behind the running job; nothing is refused while no slot is free.
+    s.dispatch();
+    assert!(soon_rx.try_recv().is_err());
+    // Two seconds on (the clock the deadlines count from, moved back), the slot frees.
+    let late = admission::SHED_SLACK + Duration::from_millis(500);
+    s.epoch -= late;
+    s.result(running.job_id, pb::ReliefTexture::default(), true, 10);
+    s.dispatch();
+    let refused = soon_rx.try_recv().unwrap().unwrap_err();
+    assert_eq!(refused.code(), tonic::Code::ResourceExhausted, "{refused:?}");
+    let said: u64 = refused
+        .metadata()
+        .get(relief_proto::SATURATED_METADATA)
+        .unwrap()
+        .to_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(said >= late.as_millis() as u64, "{said} ms late");
+    assert_eq!(s.stats().predictions_shed, 1);
+    // The slot went to the prediction still in time.
+    let next = next_job(&mut wrx).unwrap();
+    assert_eq!(next.eye.unwrap().x, 3.0);
+    assert!(later_rx.try_recv().is_err());
+}

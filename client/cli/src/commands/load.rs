@@ -14,7 +14,7 @@ use serde::Serialize;
 
 use relief_client::flight::Flight;
 use relief_client::link::Link;
-use relief_client::manager::{Config, Counters, Manager};
+use relief_client::manager::{Config, Counters, Manager, late_fraction};
 use relief_client::remote::Remote;
 use relief_client::source::remote_manager;
 use relief_core::scene::Scene;
@@ -87,6 +87,12 @@ struct Row {
     /// came out.
     latency_ms_p99_lo: f64,
     latency_ms_p99_hi: f64,
+    /// The p99 latency of the requests needed now (a frame waits on them).
+    latency_now_ms_p99: f64,
+    /// Of the predictions answered, the fraction whose texture came after the time it
+    /// was predicted to be needed, and the p99 of that lateness (negative: early).
+    predictions_late_frac: f64,
+    prediction_lateness_ms_p99: f64,
     /// Fraction of client frames with an impostor beyond tolerance or missing.
     stall_frac: f64,
     /// Final textures received per client per second of flight.
@@ -107,12 +113,12 @@ struct Row {
     load_scale_mean: f64,
 }
 
-const HEADER: &str = "tolerance_px,clients,repeats,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,latency_ms_p99_lo,latency_ms_p99_hi,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min,requests_shed,served_nearby_frac,load_scale_mean";
+const HEADER: &str = "tolerance_px,clients,repeats,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,latency_ms_p99_lo,latency_ms_p99_hi,latency_now_ms_p99,predictions_late_frac,prediction_lateness_ms_p99,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min,requests_shed,served_nearby_frac,load_scale_mean";
 
 impl Row {
     fn csv(&self) -> String {
         format!(
-            "{},{},{},{},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.3},{:.3},{:.3},{:.2},{:.2},{},{:.3},{:.2}",
+            "{},{},{},{},{},{},{:.2},{:.2},{:.2},{:.2},{:.2},{:.2},{:.4},{:.2},{:.4},{:.3},{:.3},{:.3},{:.2},{:.2},{},{:.3},{:.2}",
             self.tolerance_px,
             self.clients,
             self.repeats,
@@ -124,6 +130,9 @@ impl Row {
             self.latency_ms_p99,
             self.latency_ms_p99_lo,
             self.latency_ms_p99_hi,
+            self.latency_now_ms_p99,
+            self.predictions_late_frac,
+            self.prediction_lateness_ms_p99,
             self.stall_frac,
             self.textures_per_client_s,
             self.lifetime_s_p10,
@@ -385,6 +394,12 @@ fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
         })
         .filter(|p| p.is_finite())
         .collect();
+    let latencies_now: Vec<f64> = results()
+        .flat_map(|r| r.counters.latencies_now_ms.iter().copied())
+        .collect();
+    let lateness: Vec<f64> = results()
+        .flat_map(|r| r.counters.prediction_lateness_ms.iter().copied())
+        .collect();
     let psnr: Vec<f64> = results().flat_map(|r| r.psnr.iter().copied()).collect();
     let lifetimes: Vec<f64> = results().flat_map(|r| r.lifetimes_s.iter().copied()).collect();
     let sum = |f: &dyn Fn(&ClientResult) -> u64| results().map(f).sum::<u64>();
@@ -405,6 +420,9 @@ fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
         latency_ms_p99: percentile(&latencies, 0.99),
         latency_ms_p99_lo: p99_of_runs.iter().copied().reduce(f64::min).unwrap_or(f64::NAN),
         latency_ms_p99_hi: p99_of_runs.iter().copied().reduce(f64::max).unwrap_or(f64::NAN),
+        latency_now_ms_p99: percentile(&latencies_now, 0.99),
+        predictions_late_frac: late_fraction(&lateness),
+        prediction_lateness_ms_p99: percentile(&lateness, 0.99),
         stall_frac: sum(&|r| r.counters.stale_frames) as f64 / frames as f64,
         // (Each run's clients flew for its time: client-seconds are clients × the total.)
         textures_per_client_s: sum(&|r| r.received) as f64 / (clients as f64 * seconds),

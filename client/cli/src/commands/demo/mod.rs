@@ -15,7 +15,7 @@ use clap::Args;
 
 use relief_client::flight::{Flight, WARM_UP_LIMIT};
 use relief_client::link::Link;
-use relief_client::manager::Config;
+use relief_client::manager::{Config, late_fraction};
 use relief_client::source::{local_manager, remote_manager};
 use relief_core::stats::{finite_mean, finite_median, finite_min, median, percentile};
 use relief_proto::bundle::bundle_for;
@@ -258,6 +258,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         degraded_s: health.as_ref().map(|h| h.degraded_s()),
         latency_ms_p50: percentile(&counters.latencies_ms, 0.5),
         latency_ms_p99: percentile(&counters.latencies_ms, 0.99),
+        latency_now_ms_p99: percentile(&counters.latencies_now_ms, 0.99),
+        predictions_late_frac: late_fraction(&counters.prediction_lateness_ms),
         pickup_ms_p50: percentile(&counters.pickup_ms, 0.5),
         pickup_ms_p99: percentile(&counters.pickup_ms, 0.99),
         texture_lifetime_s_p10: percentile(&lifetimes.seconds, 0.1),

@@ -71,6 +71,11 @@ pub(super) struct Summary {
     /// Request sent → final texture received by the client.
     pub(super) latency_ms_p50: f64,
     pub(super) latency_ms_p99: f64,
+    /// The same of the requests needed now alone (a frame waits on them).
+    pub(super) latency_now_ms_p99: f64,
+    /// Of the predictions answered, the fraction whose texture came after the time it
+    /// was predicted to be needed; `null` without any.
+    pub(super) predictions_late_frac: f64,
     /// Final texture received → taken in by a frame.
     pub(super) pickup_ms_p50: f64,
     pub(super) pickup_ms_p99: f64,
