@@ -279,6 +279,8 @@ impl Link {
                     let done = self.uploads_done().await;
                     if let Err(e) = self.upload_again(done).await {
                         tracing::warn!("{e}");
+                        // (The next look tries again: to it, the server is still new.)
+                        self.instance.store(seen, Ordering::Relaxed);
                     }
                 }
             }

@@ -239,6 +239,8 @@ async fn serve_request(
                     .degrade(Degraded::Unreachable(e.message().to_string()));
                 return to_local(request);
             }
+            // A prediction the saturated server gave up on before starting it.
+            Err(e) if let Some(wait) = saturated_wait(&e) => return fail(Failure::Shed(wait)),
             Err(e) => return fail(Failure::Refused(e.message().to_string())),
         }
     }

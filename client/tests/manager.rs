@@ -607,11 +607,12 @@ fn a_prediction_is_counted_late_or_early_against_its_need() {
         assert_eq!(manager.counters.prediction_lateness_ms.len(), 1);
         manager.counters.prediction_lateness_ms[0]
     };
-    // (The request was asked a little before `asked`: at most a frame's work early.)
+    // (The request was sent a little before `asked`, and sleeps overrun: slack for a
+    // loaded machine, well short of telling late from early.)
     let late = lateness(80);
-    assert!((80.0..110.0).contains(&late), "late by {late} ms");
+    assert!((80.0..200.0).contains(&late), "late by {late} ms");
     let early = lateness(-150);
-    assert!((-150.0..-120.0).contains(&early), "early by {early} ms");
+    assert!((-150.0..-40.0).contains(&early), "early by {early} ms");
 }
 
 /// Two placements of one knot, the second turned so that the camera sees it from the

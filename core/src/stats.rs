@@ -24,15 +24,6 @@ fn nearest_rank(len: usize, p: f64) -> usize {
     ((len - 1) as f64 * p.clamp(0.0, 1.0)).round() as usize
 }
 
-/// [`percentile`] of values already sorted in ascending order (several quantiles of
-/// one set sort it once).
-pub fn sorted_percentile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    sorted[nearest_rank(sorted.len(), p)]
-}
-
 /// The mean of the finite values; `None` without any.
 pub fn finite_mean(values: &[f64]) -> Option<f64> {
     let finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
@@ -94,7 +85,7 @@ mod tests {
         sorted.sort_by(f64::total_cmp);
         for k in 0..=100 {
             let p = k as f64 / 100.0;
-            let (selected, expected) = (percentile(&values, p), sorted_percentile(&sorted, p));
+            let (selected, expected) = (percentile(&values, p), sorted[nearest_rank(sorted.len(), p)]);
             assert_eq!(selected.to_bits(), expected.to_bits(), "p = {p}");
         }
     }

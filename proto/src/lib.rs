@@ -42,7 +42,8 @@ pub mod shutdown;
 pub const WITHDRAWN: &str = "withdrawn";
 
 /// The gRPC metadata key on a `RESOURCE_EXHAUSTED` refusal of a predicted request the
-/// server could not finish before it is needed: the wait it foresaw, milliseconds. A
+/// server could not make in time, milliseconds: refused on arrival, the wait it
+/// foresaw; refused from its queue, how late past its need it would have started. A
 /// client takes it as "saturated" (see `StatsReply.estimated_wait_ms`).
 pub const SATURATED_METADATA: &str = "relief-saturated-wait-ms";
 

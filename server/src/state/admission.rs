@@ -1,5 +1,7 @@
 //! Admission under load: how long a new job would wait, and which predicted requests
-//! are refused because they could not be ready when needed.
+//! are refused because they could not be ready when needed — on arrival (the wait
+//! foreseen), or from the queue when a slot would start them past their use
+//! ([`State::outlived`]).
 //!
 //! Without it, a server with more asked of it than its workers can bake queues
 //! everything: at 64 clients on 2 workers every request waited seconds (p99 3.4 s) and
@@ -90,14 +92,19 @@ impl State {
         (wait > limit && Duration::from_secs_f64(self.mean_wait_s) > limit).then_some(wait)
     }
 
-    /// Whether a queued predicted job has outlived its use: a slot free for it now
-    /// would start it more than [`SHED_SLACK`] after its texture was needed. (Admitted
-    /// in time, a prediction can still wait behind the queue until then: at 64 clients
-    /// on two cores 12–13 % of predictions came late, the latest 4.2–4.4 s late — work
-    /// the workers baked for nothing while timely requests waited.)
-    pub(super) fn outlived(&self, job: &Priority, now: Instant) -> bool {
-        let now_us = now.saturating_duration_since(self.epoch).as_micros() as u64;
-        job.predicted && now_us > job.deadline_us.saturating_add(SHED_SLACK.as_micros() as u64)
+    /// How late a queued predicted job would start, if it has outlived its use: a slot
+    /// free for it now would start it more than [`SHED_SLACK`] after the latest need
+    /// of its requests. (Admitted in time, a prediction can still wait behind the
+    /// queue until then: at 64 clients on two cores 12–13 % of predictions came late,
+    /// the latest 4.2–4.4 s late — work the workers baked for nothing while timely
+    /// requests waited.) Unlike admission, which weighs when a new job would finish,
+    /// this weighs when it would start: a job past its use at its start is past it.
+    pub(super) fn outlived(&self, queued: &Priority, now: Instant) -> Option<Duration> {
+        let need = self.jobs.get(&queued.id)?.latest_need_us;
+        let late = now
+            .saturating_duration_since(self.epoch)
+            .saturating_sub(Duration::from_micros(need));
+        (queued.predicted && late > SHED_SLACK).then_some(late)
     }
 
     /// Ends queued job `job_id`, which [outlived](State::outlived) its use, refusing

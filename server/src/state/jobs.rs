@@ -154,6 +154,11 @@ pub(super) struct Job {
     pub(super) spec: pb::Job,
     pub(super) state: JobState,
     pub(super) waiters: HashSet<WaiterId>,
+    /// The latest need of its requests, µs since the state's epoch (a request needed
+    /// now counts as needed at once): while it is queued, its priority keeps the
+    /// earliest; it has outlived its use only when the latest has passed (see
+    /// `State::outlived`).
+    pub(super) latest_need_us: u64,
     /// It was taken back once for another client's request (see
     /// `State::preempt_for`): never again.
     pub(super) preempted: bool,
@@ -190,10 +195,13 @@ impl State {
                 .flatten();
             let chosen = free.or(express);
             // A prediction the slot would start past its use is refused instead.
-            let now = Instant::now();
-            if chosen.is_some() && self.outlived(&first, now) {
-                let needed = self.epoch + std::time::Duration::from_micros(first.deadline_us);
-                self.shed_queued(first.id, now.saturating_duration_since(needed));
+            if chosen.is_some()
+                && let Some(late) = self.outlived(&first, Instant::now())
+            {
+                // (Out of the queue first, whatever the job's state says: the loop
+                // must move on.)
+                self.queue.remove(&owner, &first);
+                self.shed_queued(first.id, late);
                 continue;
             }
             let Some((worker_id, worker)) = chosen.and_then(|id| self.workers.get_mut(&id).map(|w| (id, w)))

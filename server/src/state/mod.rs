@@ -248,17 +248,18 @@ impl State {
             )));
         }
         let now = Instant::now();
-        let deadline_us = now.duration_since(self.epoch).as_micros() as u64
-            + match request.urgency {
+        let deadline_us =
+            (now.duration_since(self.epoch).as_micros() as u64).saturating_add(match request.urgency {
                 Urgency::Now => 0,
                 Urgency::Predicted { in_ms } => in_ms.saturating_mul(1000),
-            };
+            });
         let predicted = matches!(request.urgency, Urgency::Predicted { .. });
         let job_id = match self.job_for(&wanted) {
             Some(id) => {
                 self.counters.merged += 1;
                 if let Some(job) = self.jobs.get_mut(&id) {
                     self.counters.served_nearby += u64::from(job.key.eye() != key.eye());
+                    job.latest_need_us = job.latest_need_us.max(deadline_us);
                     // A more urgent request moves a queued job forward.
                     if let JobState::Queued(p) = job.state {
                         let better = Priority {
@@ -316,6 +317,7 @@ impl State {
                         spec,
                         state: JobState::Queued(priority),
                         waiters: HashSet::new(),
+                        latest_need_us: deadline_us,
                         preempted: false,
                     },
                 );

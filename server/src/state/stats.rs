@@ -82,7 +82,7 @@ impl State {
         let samples = |samples: &VecDeque<f32>| samples.iter().map(|&s| f64::from(s)).collect::<Vec<f64>>();
         let (latencies, handling) = (samples(&self.latencies), samples(&self.handling));
         // (0 before any sample, as the protocol says.)
-        let percentile = |v: &[f64], p: f64| match percentile(v, p) {
+        let quantile_or_zero = |v: &[f64], p: f64| match percentile(v, p) {
             q if q.is_nan() => 0.0,
             q => q as f32,
         };
@@ -100,10 +100,10 @@ impl State {
             withdrawn: self.counters.withdrawn,
             requeued: self.counters.requeued,
             cache_bytes: self.cache_bytes as u64,
-            latency_ms_p50: percentile(&latencies, 0.5),
-            latency_ms_p99: percentile(&latencies, 0.99),
-            handling_us_p50: percentile(&handling, 0.5),
-            handling_us_p99: percentile(&handling, 0.99),
+            latency_ms_p50: quantile_or_zero(&latencies, 0.5),
+            latency_ms_p99: quantile_or_zero(&latencies, 0.99),
+            handling_us_p50: quantile_or_zero(&handling, 0.5),
+            handling_us_p99: quantile_or_zero(&handling, 0.99),
             jobs_stopped: self.counters.stopped,
             jobs_timed_out: self.counters.timed_out,
             latency_bucket_ms: LATENCY_BUCKETS_MS.to_vec(),

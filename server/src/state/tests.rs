@@ -1028,3 +1028,38 @@ fn a_queued_prediction_past_its_use_is_refused_not_baked() {
     assert_eq!(next.eye.unwrap().x, 3.0);
     assert!(later_rx.try_recv().is_err());
 }
+
+/// A queued job serves every request joined to it: one long past its need does not
+/// get it refused while another still needs it.
+#[test]
+fn a_queued_prediction_still_needed_by_a_later_request_is_kept() {
+    let (mut s, hash) = state_with_scene();
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    let (tx, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 0.5, tx);
+    s.dispatch();
+    let running = next_job(&mut wrx).unwrap();
+    let at = Vec3::new(2.0, 0.0, 5.0);
+    let (early_tx, mut early_rx) = unbounded_channel();
+    s.admit(
+        &request(hash, 2, at, Urgency::Predicted { in_ms: 0 }),
+        OWNER,
+        early_tx,
+    )
+    .unwrap();
+    let (later_tx, mut later_rx) = unbounded_channel();
+    s.admit(
+        &request(hash, 3, at, Urgency::Predicted { in_ms: 60_000 }),
+        OWNER,
+        later_tx,
+    )
+    .unwrap();
+    assert_eq!(s.stats().merged, 1, "one job for both");
+    s.epoch -= admission::SHED_SLACK + Duration::from_millis(500);
+    s.result(running.job_id, pb::ReliefTexture::default(), true, 10);
+    s.dispatch();
+    assert_eq!(next_job(&mut wrx).unwrap().eye.unwrap().x, 2.0, "baked");
+    assert_eq!(s.stats().predictions_shed, 0);
+    assert!(early_rx.try_recv().is_err() && later_rx.try_recv().is_err());
+}
