@@ -125,6 +125,8 @@ impl State {
             );
             if self.end_waiter(&waiter, refusal) {
                 self.counters.shed += 1;
+                // (Refused as at admission, so counted as such too.)
+                self.count_refusal(tonic::Code::ResourceExhausted);
             }
         }
         // (Gone with its last request; ended here too should it have had none, so

@@ -1023,6 +1023,8 @@ fn a_queued_prediction_past_its_use_is_refused_not_baked() {
         .unwrap();
     assert!(said >= late.as_millis() as u64, "{said} ms late");
     assert_eq!(s.stats().predictions_shed, 1);
+    let refused = s.counters.refused.get(&(tonic::Code::ResourceExhausted as i32));
+    assert_eq!(refused, Some(&1), "counted among refusals by code");
     // The slot went to the prediction still in time.
     let next = next_job(&mut wrx).unwrap();
     assert_eq!(next.eye.unwrap().x, 3.0);
