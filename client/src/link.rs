@@ -277,10 +277,20 @@ impl Link {
                 let was_unreachable = matches!(self.health.restore(), Some(Degraded::Unreachable(_)));
                 if restarted.unwrap_or(was_unreachable) {
                     let done = self.uploads_done().await;
-                    if let Err(e) = self.upload_again(done).await {
-                        tracing::warn!("{e}");
-                        // (The next look tries again: to it, the server is still new.)
-                        self.instance.store(seen, Ordering::Relaxed);
+                    match self.upload_again(done).await {
+                        Ok(()) => {}
+                        // The next look tries again (to it, the server is still new):
+                        // after a failure, once the back-off allows.
+                        Err(e @ UploadError::Failed(_)) => {
+                            tracing::warn!("{e}");
+                            self.instance.store(seen, Ordering::Relaxed);
+                        }
+                        Err(e @ UploadError::BackingOff(..)) => {
+                            tracing::debug!("{e}");
+                            self.instance.store(seen, Ordering::Relaxed);
+                        }
+                        // (Not again: it would be stored under the other hash again.)
+                        Err(e @ UploadError::OtherHash(..)) => tracing::warn!("{e}"),
                     }
                 }
             }

@@ -61,7 +61,8 @@ pub enum Failure {
     /// No answer came within the request's deadline; it was withdrawn.
     #[error("no texture within {0:?}: withdrawn")]
     TimedOut(std::time::Duration),
-    /// A prediction the saturated server refused: it foresaw this wait.
-    #[error("the server is saturated: it would be ready in {0:?}")]
+    /// A prediction the saturated server refused: on arrival, foreseeing this wait;
+    /// from its queue, this late past its need.
+    #[error("the server is saturated ({0:?} foreseen, or late)")]
     Shed(std::time::Duration),
 }
