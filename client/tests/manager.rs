@@ -7,9 +7,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use glam::Vec3;
-use tokio::sync::mpsc::{UnboundedReceiver, unbounded_channel};
+use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
 
-use relief_client::manager::{Command, Config, Manager, Show, texture_ladder};
+use relief_client::manager::{Arrival, Command, Config, Manager, ReadyTexture, Show, texture_ladder};
 use relief_client::source::spawn_local;
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
@@ -82,6 +82,18 @@ fn unanswered(scene: &Scene, config: Config) -> (Manager, UnboundedReceiver<Comm
     let (commands_tx, commands_rx) = unbounded_channel();
     let (_arrivals_tx, arrivals_rx) = unbounded_channel();
     (Manager::new(scene, config, commands_tx, arrivals_rx), commands_rx)
+}
+
+/// The final texture `ready` arrives for request `id`.
+fn arrive(arrivals: &UnboundedSender<Arrival>, id: u64, ready: ReadyTexture) {
+    let texture = Box::new(ready);
+    arrivals
+        .send(Arrival::Texture {
+            id,
+            texture,
+            is_final: true,
+        })
+        .unwrap();
 }
 
 /// The eye 6 m from `centre`, `angle` radians round it, 0.5 m above.
@@ -394,7 +406,6 @@ fn an_object_off_screen_is_not_needed_now() {
 /// (or not) give known bounds on each figure.
 #[test]
 fn latency_pickup_and_lifetime_are_counted_from_arrival() {
-    use relief_client::manager::{Arrival, ReadyTexture};
     use relief_core::relief::DepthBits;
     use relief_trace::bake;
     use relief_trace::tracer::ObjectTracer;
@@ -433,13 +444,7 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
     std::thread::sleep(to_arrival);
     let ready = ReadyTexture::new(texture, relief_render::impostor::Faces::Front);
     std::thread::sleep(to_pickup);
-    arrivals
-        .send(Arrival::Texture {
-            id: request.id,
-            texture: Box::new(ready),
-            is_final: true,
-        })
-        .unwrap();
+    arrive(&arrivals, request.id, ready);
     let shows = manager.frame(&scene, &camera, 0.1);
     assert!(matches!(shows[sphere], Show::Impostor { .. }), "{shows:?}");
     let latency = manager.counters.latencies_ms[0];
@@ -519,7 +524,6 @@ fn failed_requests_are_counted_by_how_they_ended() {
 /// user's — and one with room again brings it back, a step per report, to the user's.
 #[test]
 fn a_saturated_server_lengthens_the_textures_lives() {
-    use relief_client::manager::Arrival;
     use relief_client::manager::policy::{LOAD_HIGH_WAIT, LOAD_LOW_WAIT, LOAD_STEP, MAX_LOAD_SCALE};
 
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
@@ -557,7 +561,6 @@ fn a_saturated_server_lengthens_the_textures_lives() {
 /// to be needed: late by what it came after, early (negative) by what it came before.
 #[test]
 fn a_prediction_is_counted_late_or_early_against_its_need() {
-    use relief_client::manager::{Arrival, ReadyTexture};
     use relief_core::relief::DepthBits;
     use relief_trace::bake;
     use relief_trace::tracer::ObjectTracer;
@@ -595,13 +598,7 @@ fn a_prediction_is_counted_late_or_early_against_its_need() {
         let arrive_at = asked + Duration::from_millis((need + after_ms).max(0) as u64);
         std::thread::sleep(arrive_at.saturating_duration_since(std::time::Instant::now()));
         let ready = ReadyTexture::new(texture, relief_render::impostor::Faces::Front);
-        arrivals
-            .send(Arrival::Texture {
-                id: request.id,
-                texture: Box::new(ready),
-                is_final: true,
-            })
-            .unwrap();
+        arrive(&arrivals, request.id, ready);
         manager.frame(&scene, &camera_round(centre, 30.0), 1.0);
         assert!(manager.counters.latencies_now_ms.is_empty());
         assert_eq!(manager.counters.prediction_lateness_ms.len(), 1);
@@ -674,7 +671,6 @@ fn placements_seen_alike_share_one_texture() {
 #[test]
 fn a_texture_for_a_nearby_eye_is_held_under_its_own_eye() {
     use relief_client::manager::policy::SERVE_REACH;
-    use relief_client::manager::{Arrival, ReadyTexture};
     use relief_core::relief::DepthBits;
     use relief_trace::bake;
     use relief_trace::tracer::ObjectTracer;
@@ -721,13 +717,11 @@ fn a_texture_for_a_nearby_eye_is_held_under_its_own_eye() {
         relief_core::relief::SourceProjection::Perspective,
     )
     .unwrap();
-    arrivals
-        .send(Arrival::Texture {
-            id: first.id,
-            texture: Box::new(ReadyTexture::new(texture, relief_render::impostor::Faces::Front)),
-            is_final: true,
-        })
-        .unwrap();
+    arrive(
+        &arrivals,
+        first.id,
+        ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
+    );
     let shows = manager.frame(&scene, &camera, 0.1);
     let shown = manager
         .describe(&scene, sphere, &shows[sphere], &camera)

@@ -288,6 +288,14 @@ impl SourceCamera {
         self.centre_distance().is_none_or(|h| h.is_normal() && h > 0.0)
     }
 
+    /// The projection its rays follow: perspective when it has a centre.
+    pub fn projection(&self) -> SourceProjection {
+        match self.centre {
+            Some(_) => SourceProjection::Perspective,
+            None => SourceProjection::Orthographic,
+        }
+    }
+
     /// The distance `h` of a perspective texture's centre of projection in front of its
     /// image plane; `None` for an orthographic texture.
     #[inline]

@@ -115,15 +115,15 @@ impl State {
             .get(&job_id)
             .map(|job| job.waiters.iter().cloned().collect())
             .unwrap_or_default();
+        let refusal = saturated(
+            format!(
+                "saturated: the texture was needed {} ms ago and no worker has started it",
+                late.as_millis()
+            ),
+            late,
+        );
         for waiter in waiters {
-            let refusal = saturated(
-                format!(
-                    "saturated: the texture was needed {} ms ago and no worker has started it",
-                    late.as_millis()
-                ),
-                late,
-            );
-            if self.end_waiter(&waiter, refusal) {
+            if self.end_waiter(&waiter, refusal.clone()) {
                 self.counters.shed += 1;
                 // (Refused as at admission, so counted as such too.)
                 self.count_refusal(tonic::Code::ResourceExhausted);

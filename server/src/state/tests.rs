@@ -108,6 +108,44 @@ fn next_job(
     }
 }
 
+/// The milliseconds a refusal for saturation says (its metadata).
+fn saturated_ms(refused: &Status) -> u64 {
+    refused
+        .metadata()
+        .get(relief_proto::SATURATED_METADATA)
+        .unwrap()
+        .to_str()
+        .unwrap()
+        .parse()
+        .unwrap()
+}
+
+/// A state with one worker of one slot, busy on a job needed now: what is admitted
+/// next waits. Returns the worker's end of its session and the running job.
+fn one_slot_busy() -> (
+    State,
+    ContentHash,
+    tokio::sync::mpsc::UnboundedReceiver<Result<pb::ServerMessage, Status>>,
+    pb::Job,
+) {
+    let (mut s, hash) = state_with_scene();
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    let (tx, _rx) = unbounded_channel();
+    admit_now(&mut s, hash, 1, 0.5, tx);
+    s.dispatch();
+    let running = next_job(&mut wrx).unwrap();
+    (s, hash, wrx, running)
+}
+
+/// `late` passes (the clock the deadlines count from, moved back), and the busy slot
+/// of [`one_slot_busy`] frees.
+fn later_the_slot_frees(s: &mut State, running: &pb::Job, late: Duration) {
+    s.epoch -= late;
+    s.result(running.job_id, pb::ReliefTexture::default(), true, 10);
+    s.dispatch();
+}
+
 #[test]
 fn now_before_predicted_nearest_deadline_first_and_merging() {
     let (mut s, hash) = state_with_scene();
@@ -965,14 +1003,7 @@ fn predictions_the_workers_cannot_finish_in_time_are_refused() {
     s.mean_wait_s = wait.as_secs_f64();
     let refused = s.admit(&predicted(41, 41.0, 0), OWNER, tx.clone()).unwrap_err();
     assert_eq!(refused.code(), tonic::Code::ResourceExhausted);
-    let said: u64 = refused
-        .metadata()
-        .get(relief_proto::SATURATED_METADATA)
-        .unwrap()
-        .to_str()
-        .unwrap()
-        .parse()
-        .unwrap();
+    let said = saturated_ms(&refused);
     assert_eq!(said, wait.as_millis() as u64);
     assert_eq!(s.stats().predictions_shed, 1);
     // Needed later than the wait (less the slack): taken.
@@ -990,13 +1021,7 @@ fn predictions_the_workers_cannot_finish_in_time_are_refused() {
 /// the next job.
 #[test]
 fn a_queued_prediction_past_its_use_is_refused_not_baked() {
-    let (mut s, hash) = state_with_scene();
-    let (wtx, mut wrx) = unbounded_channel();
-    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
-    let (tx, _rx) = unbounded_channel();
-    admit_now(&mut s, hash, 1, 0.5, tx);
-    s.dispatch();
-    let running = next_job(&mut wrx).unwrap();
+    let (mut s, hash, mut wrx, running) = one_slot_busy();
     let predicted =
         |id: u64, x: f32, in_ms: u64| request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Predicted { in_ms });
     let (soon_tx, mut soon_rx) = unbounded_channel();
@@ -1006,21 +1031,12 @@ fn a_queued_prediction_past_its_use_is_refused_not_baked() {
     // Both wait behind the running job; nothing is refused while no slot is free.
     s.dispatch();
     assert!(soon_rx.try_recv().is_err());
-    // Two seconds on (the clock the deadlines count from, moved back), the slot frees.
+    // Two seconds on, the slot frees.
     let late = admission::SHED_SLACK + Duration::from_millis(500);
-    s.epoch -= late;
-    s.result(running.job_id, pb::ReliefTexture::default(), true, 10);
-    s.dispatch();
+    later_the_slot_frees(&mut s, &running, late);
     let refused = soon_rx.try_recv().unwrap().unwrap_err();
     assert_eq!(refused.code(), tonic::Code::ResourceExhausted, "{refused:?}");
-    let said: u64 = refused
-        .metadata()
-        .get(relief_proto::SATURATED_METADATA)
-        .unwrap()
-        .to_str()
-        .unwrap()
-        .parse()
-        .unwrap();
+    let said = saturated_ms(&refused);
     assert!(said >= late.as_millis() as u64, "{said} ms late");
     assert_eq!(s.stats().predictions_shed, 1);
     let refused = s.counters.refused.get(&(tonic::Code::ResourceExhausted as i32));
@@ -1035,13 +1051,7 @@ fn a_queued_prediction_past_its_use_is_refused_not_baked() {
 /// get it refused while another still needs it.
 #[test]
 fn a_queued_prediction_still_needed_by_a_later_request_is_kept() {
-    let (mut s, hash) = state_with_scene();
-    let (wtx, mut wrx) = unbounded_channel();
-    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
-    let (tx, _rx) = unbounded_channel();
-    admit_now(&mut s, hash, 1, 0.5, tx);
-    s.dispatch();
-    let running = next_job(&mut wrx).unwrap();
+    let (mut s, hash, mut wrx, running) = one_slot_busy();
     let at = Vec3::new(2.0, 0.0, 5.0);
     let (early_tx, mut early_rx) = unbounded_channel();
     s.admit(
@@ -1058,9 +1068,11 @@ fn a_queued_prediction_still_needed_by_a_later_request_is_kept() {
     )
     .unwrap();
     assert_eq!(s.stats().merged, 1, "one job for both");
-    s.epoch -= admission::SHED_SLACK + Duration::from_millis(500);
-    s.result(running.job_id, pb::ReliefTexture::default(), true, 10);
-    s.dispatch();
+    later_the_slot_frees(
+        &mut s,
+        &running,
+        admission::SHED_SLACK + Duration::from_millis(500),
+    );
     assert_eq!(next_job(&mut wrx).unwrap().eye.unwrap().x, 2.0, "baked");
     assert_eq!(s.stats().predictions_shed, 0);
     assert!(early_rx.try_recv().is_err() && later_rx.try_recv().is_err());

@@ -19,6 +19,7 @@ use std::fmt;
 use std::str::FromStr;
 
 use relief_core::camera::Camera;
+use relief_core::relief::SourceProjection;
 use relief_render::gbuffer::GBuffer;
 use relief_render::impostor::Impostor;
 use relief_render::validity::schaufler::{texel_angle, volume_centre};
@@ -213,7 +214,7 @@ pub fn prepare(method: Method, impostor: &Impostor, camera: &Camera) -> Result<P
         _ => return Err(DisplayError::NeedsPreviousFrame),
     };
     let texture = &impostor.texture;
-    if texture.camera.centre.is_some() {
+    if texture.camera.projection() == SourceProjection::Perspective {
         return Err(DisplayError::NeedsOrthographic { method });
     }
     let centre = volume_centre(&texture.camera);

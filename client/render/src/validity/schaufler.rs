@@ -65,11 +65,8 @@ pub fn volume_centre(texture: &SourceCamera) -> Vec3 {
 /// a wide view it needs finer texels than at its centre), for leaves the centre's
 /// (see `pixel_angle` here). `camera` in the texture's frame.
 pub fn needs_finer_texture(texture: &SourceCamera, camera: &Camera, k: f32) -> bool {
-    let projection = match texture.centre {
-        Some(_) => SourceProjection::Perspective,
-        None => SourceProjection::Orthographic,
-    };
-    texel_angle(texture, camera.eye_f32()) > k * pixel_angle(camera, projection, volume_centre(texture))
+    let held_to = pixel_angle(camera, texture.projection(), volume_centre(texture));
+    texel_angle(texture, camera.eye_f32()) > k * held_to
 }
 
 /// The pixel angle a texture in `projection` is held to where `centre` shows: a
