@@ -33,6 +33,10 @@
 //!   eq. 8-1, solved here in closed form for orthographic textures) instead of a linear
 //!   blend; a perspective texture's samples blend linearly.
 //! - [`Variant::Interleaved`]: one pass; each row sample goes straight into its column.
+//!   Where a surface is smooth it takes eight texels at a time ([`lanes`]), to the bit
+//!   the same image.
+
+mod lanes;
 
 use wide::bytemuck::cast;
 use wide::{i16x8, u8x16, u16x8, u64x2};
@@ -41,6 +45,7 @@ use glam::{DVec3, Vec2, Vec3};
 use relief_core::camera::Camera;
 use relief_core::relief::SourceCamera;
 
+use self::lanes::{Columns, DOWN_LINK, Emitted, LANES, RIGHT_LINK, RowSamples, VALID, row_block};
 use super::params::WarpParams;
 use crate::EMPTY_DEPTH;
 use crate::impostor::{Faces, Impostor};
@@ -454,12 +459,18 @@ impl Output<'_> {
     /// within it: a column of the pass) and plane row `y`, if that row is held.
     #[inline(always)]
     fn put(&mut self, xi: usize, y: i64, cell: &Cell) {
+        self.put_texel(xi, y, cell.attributes.texel(cell.depth));
+    }
+
+    /// Writes `texel` as [`Output::put`] writes a cell.
+    #[inline(always)]
+    fn put_texel(&mut self, xi: usize, y: i64, texel: PTexel) {
         let yy = y - self.v0;
         if yy < 0 {
             return;
         }
         if let Some(t) = self.texels.get_mut(yy as usize * self.width + xi) {
-            *t = cell.attributes.texel(cell.depth);
+            *t = texel;
         }
     }
 }
@@ -468,13 +479,22 @@ impl Output<'_> {
 trait RowSink {
     /// The row pass made `cell` for pre-warped column `x`.
     fn emit(&mut self, x: i64, cell: Cell);
+
+    /// The row pass made `emitted`, for consecutive columns (see
+    /// [`lanes::row_block`]).
+    #[inline(always)]
+    fn emit_block(&mut self, emitted: &Emitted) {
+        for l in 0..emitted.count {
+            self.emit(emitted.first + l as i64, emitted.cell(l));
+        }
+    }
 }
 
 /// [`Variant::Interleaved`]: each row sample straight into its column, row number
 /// `seq` of a half visited downwards when `DOWN`.
 struct IntoColumns<'a, 'b, 'o, const DOWN: bool> {
     job: &'a Job<'a>,
-    columns: &'b mut [Column],
+    columns: &'b mut Columns,
     out: &'b mut Output<'o>,
     seq: u32,
 }
@@ -484,6 +504,25 @@ impl<const DOWN: bool> RowSink for IntoColumns<'_, '_, '_, DOWN> {
     fn emit(&mut self, x: i64, cell: Cell) {
         self.job
             .push_column::<DOWN>(self.columns, self.out, x, cell, self.seq);
+    }
+
+    /// Eight columns at once where they continue their runs simply
+    /// ([`Columns::take_block`]), the others one by one.
+    #[inline(always)]
+    fn emit_block(&mut self, emitted: &Emitted) {
+        let (n, base) = (emitted.count as i64, emitted.first - self.job.u0);
+        let others = if base >= 0 && base + n <= self.columns.len() as i64 {
+            self.columns
+                .take_block::<DOWN>(emitted, base as usize, self.seq, self.out)
+        } else {
+            (1 << n) - 1
+        };
+        let mut lanes = others;
+        while lanes != 0 {
+            let l = lanes.trailing_zeros() as usize;
+            lanes &= lanes - 1;
+            self.emit(emitted.first + l as i64, emitted.cell(l));
+        }
     }
 }
 
@@ -514,6 +553,9 @@ struct Job<'a> {
     /// The texels of each row visited: those before the epipole, and those after it —
     /// all, or those that can land where the screen sees.
     row_halves: [std::ops::Range<usize>; 2],
+    /// Whether the interleaved variant takes texels eight at a time where it can
+    /// ([`lanes`]); off only to test that it makes the same image.
+    lanes: bool,
 }
 
 impl Job<'_> {
@@ -526,29 +568,27 @@ impl Job<'_> {
         j: usize,
         interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell + Copy,
         sink: &mut impl RowSink,
+        samples: &mut RowSamples,
     ) {
         let [before, after] = &self.row_halves;
         if self.params.outward {
-            self.row_half::<false>(j, before.clone(), interpolate, sink);
-            self.row_half::<true>(j, after.clone(), interpolate, sink);
+            self.row_half::<false>(j, before.clone(), interpolate, sink, samples);
+            self.row_half::<true>(j, after.clone(), interpolate, sink, samples);
         } else {
-            self.row_half::<true>(j, before.clone(), interpolate, sink);
-            self.row_half::<false>(j, after.clone(), interpolate, sink);
+            self.row_half::<true>(j, before.clone(), interpolate, sink, samples);
+            self.row_half::<false>(j, after.clone(), interpolate, sink, samples);
         }
     }
 
-    /// The texels `texels` of source row `j`, visited rightwards when `RIGHT`:
-    /// consecutive connected texels A, B produce every pixel whose centre lies in
-    /// `(A', B']`, made by `interpolate(a, b, centre, t)`; a run's end samples reach
-    /// half a span beyond it ([`half_gap`]); a texel alone (without a connected
-    /// neighbour, or folding back behind it) produces the pixel it lands in.
+    /// The texels `texels` of source row `j` into `samples`, in visiting order
+    /// (rightwards when `RIGHT`): where each lands and what it carries; a texel that is
+    /// empty, or a back face turned away from the eye, is not [`VALID`].
     #[inline(always)]
-    fn row_half<const RIGHT: bool>(
+    fn sample_row<const RIGHT: bool>(
         &self,
         j: usize,
         texels: std::ops::Range<usize>,
-        interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell,
-        sink: &mut impl RowSink,
+        samples: &mut RowSamples,
     ) {
         let (impostor, p) = (self.impostor, self.params);
         let texture = &impostor.texture;
@@ -580,6 +620,61 @@ impl Job<'_> {
                 n.dot(to_eye) < 0.0
             })
         };
+        let n = texels.len();
+        // (The tables' slices in locals: reached through `self` inside the loop, they
+        // were loaded again for every texel, the stores below possibly aliasing them.)
+        let (scales, add_us, add_vs, table_depths) = (&p.scale[..], &p.add_u[..], &p.add_v[..], &p.depth[..]);
+        samples.resize(n);
+        let (us, vs, depths) = (&mut samples.u[..n], &mut samples.v[..n], &mut samples.depth[..n]);
+        let (attributes, flags) = (&mut samples.attributes[..n], &mut samples.flags[..n]);
+        for step in 0..n {
+            let i = visited::<RIGHT>(&texels, step);
+            let texel = packed[i];
+            let q = entry_of(texel);
+            let valid = q != empty && !turned_away(i, texel, q);
+            let (u, v, depth) = if valid {
+                let q = q as usize;
+                let scale = scales[q];
+                (
+                    (i as f32 + 0.5 + add_us[q]) * scale,
+                    (v + add_vs[q]) * scale,
+                    table_depths[q],
+                )
+            } else {
+                (0.0, 0.0, 0.0)
+            };
+            (us[step], vs[step], depths[step]) = (u, v, depth);
+            // (The depth's table entry in the top lanes blends along unread.)
+            attributes[step] = texel;
+            flags[step] =
+                u8::from(valid) * VALID + u8::from(right[i]) * RIGHT_LINK + u8::from(down[i]) * DOWN_LINK;
+        }
+    }
+
+    /// The texels `texels` of source row `j`, visited rightwards when `RIGHT`:
+    /// consecutive connected texels A, B produce every pixel whose centre lies in
+    /// `(A', B']`, made by `interpolate(a, b, centre, t)`; a run's end samples reach
+    /// half a span beyond it ([`half_gap`]); a texel alone (without a connected
+    /// neighbour, or folding back behind it) produces the pixel it lands in.
+    ///
+    /// The interleaved variant takes eight texels at once where the run goes on simply
+    /// ([`lanes`]): the same pixels.
+    #[inline(always)]
+    fn row_half<const RIGHT: bool>(
+        &self,
+        j: usize,
+        texels: std::ops::Range<usize>,
+        interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell,
+        sink: &mut impl RowSink,
+        samples: &mut RowSamples,
+    ) {
+        self.sample_row::<RIGHT>(j, texels.clone(), samples);
+        let in_lanes = self.lanes && self.variant == Variant::Interleaved;
+        let sample = |k: usize| RowSample {
+            source: visited::<RIGHT>(&texels, k) as f32 + 0.5,
+            u: samples.u[k],
+            cell: samples.cell(k),
+        };
         // The previous texel visited, and whether it is there and connected to the next.
         let mut previous = RowSample {
             source: 0.0,
@@ -598,35 +693,43 @@ impl Job<'_> {
             reach_ahead::<RIGHT>(previous.u, last_gap, end, |x| RowSink::emit(sink, x, cell))
         };
         let mut in_run = false;
-        for step in 0..texels.len() {
-            let i = visited::<RIGHT>(&texels, step);
-            let texel = packed[i];
-            let q = entry_of(texel);
-            if q == empty || turned_away(i, texel, q) {
+        let n = texels.len();
+        let mut emitted = Emitted::default();
+        let mut k = 0;
+        while k < n {
+            if in_lanes && in_run && !last_gap.is_nan() && k + LANES <= n {
+                let taken = row_block::<RIGHT>(samples, k, end, &mut emitted);
+                if taken > 0 {
+                    sink.emit_block(&emitted);
+                    k += taken;
+                    let last = k - 1;
+                    last_gap = samples.u[last] - samples.u[last - 1];
+                    previous = sample(last);
+                    previous_linked = !RIGHT || samples.flags[last] & RIGHT_LINK != 0;
+                    if taken == LANES || k == n {
+                        continue;
+                    }
+                }
+            }
+            let flags = samples.flags[k];
+            if flags & VALID == 0 {
                 if in_run {
                     close(&previous, last_gap, sink);
                     in_run = false;
                 }
                 previous_linked = false;
+                // (And the empty texels after it: a third of a compact object's.)
+                k += 1;
+                while k < n && samples.flags[k] & VALID == 0 {
+                    k += 1;
+                }
                 continue;
             }
-            let q = q as usize;
-            let (scale, source) = (p.scale[q], i as f32 + 0.5);
-            let sample = RowSample {
-                source,
-                u: (source + p.add_u[q]) * scale,
-                cell: Cell {
-                    v: (v + p.add_v[q]) * scale,
-                    depth: p.depth[q],
-                    // (The depth's table entry in the top lanes blends along unread.)
-                    attributes: Attributes(texel),
-                    down: down[i],
-                    filler: false,
-                },
-            };
+            let sample = sample(k);
+            let right = flags & RIGHT_LINK != 0;
             // Visiting rightwards the left texel carries the link; leftwards this one.
             let spanned = previous_linked
-                && (RIGHT || right[i])
+                && (RIGHT || right)
                 && between::<RIGHT>(previous.u, sample.u, end, |x, t| {
                     sink.emit(x, interpolate(&previous, &sample, x as f32 + 0.5, t))
                 });
@@ -650,7 +753,8 @@ impl Job<'_> {
             }
             in_run = true;
             previous = sample;
-            previous_linked = !RIGHT || right[i];
+            previous_linked = !RIGHT || right;
+            k += 1;
         }
         if in_run {
             close(&previous, last_gap, sink);
@@ -665,18 +769,19 @@ impl Job<'_> {
     #[inline(always)]
     fn push_column<const DOWN: bool>(
         &self,
-        columns: &mut [Column],
+        columns: &mut Columns,
         out: &mut Output,
         x: i64,
         cell: Cell,
         seq: u32,
     ) {
         let xi = x - self.u0;
-        let Some(column) = (xi >= 0).then(|| columns.get_mut(xi as usize)).flatten() else {
+        if xi < 0 || xi >= columns.len() as i64 {
             return;
-        };
+        }
         // (The image has a column per pass column: this one is within it.)
         let column_index = xi as usize;
+        let column = &columns.get(column_index);
         // Visiting downwards the previous row's sample carries the link; upwards this one.
         let last = column.last;
         let adjacent = seq != 0 && column.next_row == seq;
@@ -704,26 +809,30 @@ impl Job<'_> {
             }
             f32::NAN
         };
-        *column = Column {
-            last: cell,
-            next_row: seq + 1,
-            last_gap,
-        };
+        columns.set(
+            column_index,
+            Column {
+                last: cell,
+                next_row: seq + 1,
+                last_gap,
+            },
+        );
     }
 
     /// Draws the ends of the column runs still open after the last row. (A run a row
     /// does not continue is closed when its column's next sample comes: only that
     /// column's writes are ordered with it, so later is as good as at once.)
-    fn close_columns<const DOWN: bool>(&self, columns: &[Column], out: &mut Output) {
-        for (index, column) in columns.iter().enumerate() {
-            column.close::<DOWN>(index, out);
+    fn close_columns<const DOWN: bool>(&self, columns: &Columns, out: &mut Output) {
+        for index in 0..columns.len() {
+            columns.get(index).close::<DOWN>(index, out);
         }
     }
 
     /// Pre-warps the source rows `rows`, visited downwards when `DOWN` (else upwards),
     /// into `out`.
     fn half<const DOWN: bool>(&self, rows: std::ops::Range<usize>, out: &mut Output) {
-        let mut columns = vec![Column::START; self.columns];
+        let mut columns = Columns::new(self.columns);
+        let mut samples = RowSamples::default();
         let linear = |a: &RowSample, b: &RowSample, _, t| a.cell.lerp(&b.cell, t);
         match self.variant {
             Variant::Interleaved => {
@@ -734,19 +843,19 @@ impl Job<'_> {
                         out,
                         seq: seq as u32,
                     };
-                    self.row(visited::<DOWN>(&rows, seq), linear, &mut sink);
+                    self.row(visited::<DOWN>(&rows, seq), linear, &mut sink, &mut samples);
                 }
                 self.close_columns::<DOWN>(&columns, out);
             }
             // (Its closed form is the orthographic warp's: a perspective texture's samples
             // blend linearly.)
             Variant::Compensated if !self.params.perspective() => {
-                self.two_pass::<DOWN>(rows, &mut columns, out, |a, b, centre, _| {
+                self.two_pass::<DOWN>(rows, &mut columns, &mut samples, out, |a, b, centre, _| {
                     compensated(a, b, centre, self.params)
                 })
             }
             Variant::Compensated | Variant::OneD | Variant::Asymmetric => {
-                self.two_pass::<DOWN>(rows, &mut columns, out, linear)
+                self.two_pass::<DOWN>(rows, &mut columns, &mut samples, out, linear)
             }
         }
     }
@@ -756,7 +865,8 @@ impl Job<'_> {
     fn two_pass<const DOWN: bool>(
         &self,
         rows: std::ops::Range<usize>,
-        columns: &mut [Column],
+        columns: &mut Columns,
+        samples: &mut RowSamples,
         out: &mut Output,
         interpolate: impl Fn(&RowSample, &RowSample, f32, f32) -> Cell + Copy,
     ) {
@@ -766,7 +876,7 @@ impl Job<'_> {
                 row: &mut intermediate[seq * self.columns..(seq + 1) * self.columns],
                 u0: self.u0,
             };
-            self.row(visited::<DOWN>(&rows, seq), interpolate, &mut sink);
+            self.row(visited::<DOWN>(&rows, seq), interpolate, &mut sink, samples);
         }
         for seq in 0..rows.len() {
             let j = visited::<DOWN>(&rows, seq);
@@ -788,7 +898,7 @@ impl Job<'_> {
 
 /// Pre-warps `impostor` for the eye of `params`, on the calling thread.
 pub fn prewarp(impostor: &Impostor, params: &WarpParams, variant: Variant) -> PrewarpImage {
-    prewarp_with(impostor, params, variant, None, false)
+    prewarp_with(impostor, params, variant, None, false, true)
 }
 
 /// As [`prewarp`], with the halves above and below the epipole on two threads when
@@ -804,7 +914,7 @@ pub fn prewarp_split(
     variant: Variant,
     seen: Option<&PlaneWindow>,
 ) -> PrewarpImage {
-    prewarp_with(impostor, params, variant, seen, true)
+    prewarp_with(impostor, params, variant, seen, true, true)
 }
 
 /// A rectangle of the source plane, in texel coordinates: `u ∈ [u0, u1], v ∈ [v0, v1]`.
@@ -918,6 +1028,7 @@ fn prewarp_with(
     variant: Variant,
     seen: Option<&PlaneWindow>,
     parallel: bool,
+    lanes: bool,
 ) -> PrewarpImage {
     let c = &impostor.texture.camera;
     let (w, h) = (c.width as usize, c.height as usize);
@@ -969,6 +1080,7 @@ fn prewarp_with(
         u0: u0 as i64,
         columns: width,
         row_halves,
+        lanes,
     };
     // Output rows whose centres lie above the epipole belong to the upper half.
     let split = ((params.epipole.y - 0.5).ceil() as i64 - v0 as i64).clamp(0, height as i64) as usize;
