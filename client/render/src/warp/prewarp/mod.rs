@@ -33,7 +33,7 @@
 //!   eq. 8-1, solved here in closed form for orthographic textures) instead of a linear
 //!   blend; a perspective texture's samples blend linearly.
 //! - [`Variant::Interleaved`]: one pass; each row sample goes straight into its column.
-//!   Where a surface is smooth it takes eight texels at a time ([`lanes`]), to the bit
+//!   Where a surface is smooth it takes eight texels at a time (module `lanes`), to the bit
 //!   the same image.
 
 mod lanes;
