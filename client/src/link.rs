@@ -242,7 +242,8 @@ impl Link {
     /// Looks once at the server's counters (at most [`HEALTH_POLL_TIMEOUT`]) and
     /// brings [`Link::health`] up to date: before a flight, so that its first requests
     /// go where textures can come from. Returns the wait the server foresees for a new
-    /// job, when it answered with one — and, when it did not answer in time but results
+    /// job behind the others (`queue_wait_ms`), when it answered — and, when it did not
+    /// answer in time but results
     /// came from it meanwhile, the look's own wait: a server that busy is saturated,
     /// not lost.
     pub async fn look(&self) -> Option<Duration> {
@@ -254,7 +255,7 @@ impl Link {
         // of what it served 32 clients.)
         let busy = look.is_err() && self.heard_since(started);
         let wait = match &look {
-            Ok(Ok(stats)) => Some(Duration::from_millis(stats.estimated_wait_ms.into())),
+            Ok(Ok(stats)) => Some(Duration::from_millis(stats.queue_wait_ms.into())),
             _ if busy => Some(HEALTH_POLL_TIMEOUT),
             _ => None,
         };

@@ -110,6 +110,13 @@ impl Collector for ServerCollector {
         )?;
         encode_one(
             e,
+            "queue_wait_milliseconds",
+            "How long a job queued now would wait behind the others: the part of the estimated wait that is saturation",
+            Gauge,
+            stats.queue_wait_ms.into(),
+        )?;
+        encode_one(
+            e,
             "cache_bytes",
             "Bytes of finished textures cached",
             Gauge,

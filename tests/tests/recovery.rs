@@ -340,14 +340,18 @@ const LOSSY: Link = Link {
     loss: 0.02,
 };
 
-/// The most of its frames a flight over [`LOSSY`] may show stale. The target is 2 %:
-/// alone on the 2-core machine, 0–0.3 % in 9 runs; in one full `.ci/run` on it,
-/// answers came a half slower (p50 622 ms) and 7 % went stale. A breakdown shows far
-/// above this: 14 % flying beside another flight, 35–49 % over 250 ms links.
-const LOSSY_STALE_AT_MOST: f64 = 0.10;
+/// The most of its frames a 20 s flight over [`LOSSY`] may show stale. The target is
+/// 2 %, not met: 3.3–8.2 % in 4 runs alone on the 2-core machine, textures coming
+/// after the view has moved past their tolerance (answers take 350–420 ms at the
+/// median). (An earlier 0–0.3 % was the client taking the workers' round trip for
+/// saturation, and letting its textures live 8× longer than asked all flight.) A
+/// breakdown shows far above this: 35–49 % over 250 ms links.
+const LOSSY_STALE_AT_MOST: f64 = 0.15;
 
 /// A flight whose client and workers reach the server over [`LOSSY`] links, predicting
-/// ahead: its textures come in time for nearly every frame.
+/// ahead: its textures come in time for most frames. The workers take two jobs at
+/// once, as workers a round trip away should: one job's texture travels while the
+/// next bakes.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_flight_over_a_lossy_link_stays_fresh() {
     let _flight = ONE_FLIGHT.lock().await;
@@ -355,14 +359,14 @@ async fn a_flight_over_a_lossy_link_stays_fresh() {
     let target = url.strip_prefix("http://").unwrap();
     let to_workers = Relay::start_link("127.0.0.1:0", target, LOSSY).await;
     let _workers = [
-        start_worker(&to_workers.url(), &[]),
-        start_worker(&to_workers.url(), &[]),
+        start_worker(&to_workers.url(), &["--slots", "2"]),
+        start_worker(&to_workers.url(), &["--slots", "2"]),
     ];
     let mut watch = Remote::connect(&url, None, "watch").await.unwrap();
     wait_for(&mut watch, "two workers", |s| s.workers == 2).await;
     let to_client = Relay::start_link("127.0.0.1:0", target, LOSSY).await;
     let out = scratch("lossy");
-    let demo = fly(&to_client.url(), 300, &out, &["--max-stale-frac", "1"]);
+    let demo = fly(&to_client.url(), 600, &out, &["--max-stale-frac", "1"]);
     let (status, summary, lines) = finish(demo, Duration::from_secs(120));
     assert!(status.success(), "{status}: {}", text(&lines));
     let frames = summary["frames"].as_f64().unwrap();

@@ -409,11 +409,12 @@ pub const ASSESSMENTS_PER_TASK: usize = 16;
 
 // ---- The server's load ------------------------------------------------------------------
 
-/// A server foreseeing a wait longer than this for a new job (its
-/// `estimated_wait_ms`) is saturated: textures asked for now come late, so the client
-/// lets the ones it holds live longer — its tolerance times [`LOAD_STEP`] at each of
-/// the server's reports (every [`HEALTH_POLL`](crate::link::HEALTH_POLL)) — and asks
-/// for fewer. (Unloaded on loopback a job waits 20–50 ms.)
+/// A server foreseeing that a new job would wait longer than this behind the others
+/// (its `queue_wait_ms`), or refusing a prediction, is saturated: textures asked for
+/// now come late, so the client lets the ones it holds live longer — its tolerance
+/// times [`LOAD_STEP`] at each of the server's reports (every
+/// [`HEALTH_POLL`](crate::link::HEALTH_POLL)) — and asks for fewer. (Unloaded, a job
+/// waits behind none: 0.)
 pub const LOAD_HIGH_WAIT: Duration = Duration::from_millis(250);
 
 /// … and below this it has room again: the factor falls back by [`LOAD_STEP`] at each

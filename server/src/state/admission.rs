@@ -19,8 +19,8 @@ use super::State;
 use super::queue::Priority;
 
 /// The time a job takes is the median of this many of the latest: it follows a change
-/// of texture size or load within a few jobs, and a worker's first job of a scene,
-/// which loads the scene too (once), does not count as the jobs to come.
+/// of texture size or load within a few jobs. (A job whose worker loaded the scene for
+/// it is not counted: see `Job::loaded_scene`.)
 pub const JOB_TIMES_KEPT: usize = 15;
 
 /// A predicted request is refused when the foreseen wait exceeds the time until it is
@@ -53,10 +53,19 @@ impl State {
         times.get(times.len() / 2).copied()
     }
 
-    /// How long a job queued now would take to finish: the jobs queued and running
-    /// shared over the workers' slots, each taking the median time, then its own.
-    /// `None` before any job has finished, or without a worker.
+    /// How long a job queued now would take to finish: its [`State::queue_wait`], then
+    /// its own median time. `None` before any job has finished, or without a worker.
     pub fn estimated_wait(&self) -> Option<Duration> {
+        Some(self.queue_wait()? + Duration::from_secs_f64(self.job_time()?))
+    }
+
+    /// How long a job queued now would wait behind the others: the jobs queued and
+    /// running shared over the workers' slots, each taking the median time. The
+    /// server's saturation, apart from a job's own time — which, with workers a
+    /// round trip of 100 ms away, never fell below the clients' threshold of room
+    /// (`LOAD_LOW_WAIT`), and held their tolerance at its most for whole flights.
+    /// `None` before any job has finished, or without a worker.
+    pub fn queue_wait(&self) -> Option<Duration> {
         let job_time = self.job_time()?;
         let slots: usize = self.workers.values().map(|w| w.slots).sum();
         if slots == 0 {
@@ -64,8 +73,7 @@ impl State {
         }
         let running: usize = self.workers.values().map(|w| w.running.len()).sum();
         let backlog = self.queue.count(false) + self.queue.count(true) + running;
-        let rounds = backlog as f64 / slots as f64 + 1.0;
-        Some(Duration::from_secs_f64(job_time * rounds))
+        Some(Duration::from_secs_f64(job_time * backlog as f64 / slots as f64))
     }
 
     /// Folds the wait foreseen now into its mean over time (see

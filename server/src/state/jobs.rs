@@ -162,6 +162,10 @@ pub(super) struct Job {
     /// It was taken back once for another client's request (see
     /// `State::preempt_for`): never again.
     pub(super) preempted: bool,
+    /// Its worker fetched the job's scene while it held it (see
+    /// `State::scene_for_worker`): its time is the scene's load as much as a bake, and
+    /// is not one the jobs to come will take (see `State::job_took`).
+    pub(super) loaded_scene: bool,
 }
 
 /// A client's request: `(client_id, request_id)`.
@@ -271,7 +275,9 @@ impl State {
             };
             let bytes = texture.albedo.len() + texture.normal.len() + texture.depth.len();
             let key = job.key.clone();
-            if let Some(started) = started {
+            if let Some(started) = started
+                && !job.loaded_scene
+            {
                 self.job_took(started);
             }
             self.cache_insert(key, texture, bytes);

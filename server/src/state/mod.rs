@@ -319,6 +319,7 @@ impl State {
                         waiters: HashSet::new(),
                         latest_need_us: deadline_us,
                         preempted: false,
+                        loaded_scene: false,
                     },
                 );
                 self.queue.insert(&owner, priority);

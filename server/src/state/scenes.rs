@@ -149,15 +149,25 @@ impl State {
     }
 
     /// The scene `hash`, if a worker session of `credential` holds a job on it (marked
-    /// used).
+    /// used). The jobs on it those sessions hold wait for the scene's load: their times
+    /// are not counted as a job's (see [`Job::loaded_scene`](super::jobs::Job)).
     pub fn scene_for_worker(&mut self, hash: &ContentHash, credential: &str) -> Option<Arc<StoredScene>> {
-        let holds_job_on_it = (self.workers.values())
+        let on_it: Vec<u64> = (self.workers.values())
             .filter(|w| &*w.credential == credential)
-            .flat_map(|w| &w.running)
-            .filter_map(|id| self.jobs.get(id))
-            .any(|job| job.key.subject.scene == *hash);
-        if !holds_job_on_it {
+            .flat_map(|w| w.running.iter().copied())
+            .filter(|id| {
+                self.jobs
+                    .get(id)
+                    .is_some_and(|job| job.key.subject.scene == *hash)
+            })
+            .collect();
+        if on_it.is_empty() {
             return None;
+        }
+        for id in on_it {
+            if let Some(job) = self.jobs.get_mut(&id) {
+                job.loaded_scene = true;
+            }
         }
         self.scenes.touch(hash).map(|e| e.scene.clone())
     }

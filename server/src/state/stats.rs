@@ -115,11 +115,15 @@ impl State {
             scenes_evicted: self.counters.scenes_evicted,
             jobs_stalled: self.counters.stalled,
             jobs_preempted: self.counters.preempted,
-            estimated_wait_ms: self
-                .estimated_wait()
-                .map_or(0, |wait| wait.as_millis().min(u128::from(u32::MAX)) as u32),
+            estimated_wait_ms: millis_or_zero(self.estimated_wait()),
+            queue_wait_ms: millis_or_zero(self.queue_wait()),
             predictions_shed: self.counters.shed,
             scene_bytes: self.scene_bytes() as u64,
         }
     }
+}
+
+/// A wait in whole milliseconds (at most `u32::MAX`), 0 when there is none.
+fn millis_or_zero(wait: Option<std::time::Duration>) -> u32 {
+    wait.map_or(0, |wait| wait.as_millis().min(u128::from(u32::MAX)) as u32)
 }

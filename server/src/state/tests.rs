@@ -963,7 +963,8 @@ fn a_stop_never_answered_holds_preemption_off_for_a_grace_only() {
 }
 
 /// The wait foreseen for a new job is the jobs ahead shared over the slots, each
-/// taking the mean time a job took; a prediction that wait would make more than
+/// taking the mean time a job took, then its own (the part behind the others is what
+/// clients are told as saturation); a prediction that wait would make more than
 /// `SHED_SLACK` late is refused — saying the wait in its metadata — where one needed
 /// later, a needed-now one and one joining a job already there are taken.
 #[test]
@@ -981,6 +982,9 @@ fn predictions_the_workers_cannot_finish_in_time_are_refused() {
     s.result(job.job_id, pb::ReliefTexture::default(), true, 100);
     let took = s.estimated_wait().unwrap();
     assert!(took >= std::time::Duration::from_millis(100), "{took:?}");
+    // With the slot free, a new job waits behind none: its own time is all.
+    assert_eq!(s.queue_wait(), Some(std::time::Duration::ZERO));
+    assert_eq!(s.stats().queue_wait_ms, 0);
     // Thirty more needed now (one running, 29 queued): a new job waits 31 jobs' time,
     // past the slack.
     for id in 2..32 {
@@ -992,6 +996,13 @@ fn predictions_the_workers_cannot_finish_in_time_are_refused() {
         (wait.as_secs_f64() / took.as_secs_f64() - 31.0).abs() < 1e-6,
         "{wait:?} {took:?}"
     );
+    // Thirty of them behind the others: the saturation clients see.
+    let behind = s.queue_wait().unwrap();
+    assert!(
+        (behind.as_secs_f64() / took.as_secs_f64() - 30.0).abs() < 1e-6,
+        "{behind:?}"
+    );
+    assert_eq!(s.stats().queue_wait_ms, behind.as_millis() as u32);
     assert!(wait > admission::SHED_SLACK, "{wait:?}");
     let predicted =
         |id: u64, x: f32, in_ms: u64| request(hash, id, Vec3::new(x, 0.0, 5.0), Urgency::Predicted { in_ms });
@@ -1013,6 +1024,29 @@ fn predictions_the_workers_cannot_finish_in_time_are_refused() {
     assert!(s.admit(&predicted(43, 5.0, 0), OWNER, tx.clone()).is_ok());
     assert_eq!(s.stats().predictions_shed, 1);
     assert!(s.stats().estimated_wait_ms > 0);
+}
+
+/// A job whose worker fetched its scene for it took the scene's load as well as a
+/// bake: its time does not count as what the jobs to come will take (at a worker 100
+/// ms away over a lossy link, the first jobs' seconds held the foreseen wait long
+/// enough to refuse a lone client's predictions at its flight's start).
+#[test]
+fn a_job_that_loaded_its_scene_is_not_timed() {
+    let (mut s, hash) = state_with_scene();
+    let (tx, _rx) = unbounded_channel();
+    let (wtx, mut wrx) = unbounded_channel();
+    s.add_worker("w".into(), "worker-1".into(), 1, 1, wtx);
+    admit_now(&mut s, hash, 1, 1.0, tx.clone());
+    s.dispatch();
+    let first = next_job(&mut wrx).unwrap();
+    assert!(s.scene_for_worker(&hash, "worker-1").is_some());
+    s.result(first.job_id, pb::ReliefTexture::default(), true, 100);
+    assert_eq!(s.estimated_wait(), None, "the scene's load counted as a job");
+    admit_now(&mut s, hash, 2, 2.0, tx);
+    s.dispatch();
+    let second = next_job(&mut wrx).unwrap();
+    s.result(second.job_id, pb::ReliefTexture::default(), true, 100);
+    assert!(s.estimated_wait().is_some());
 }
 
 /// A prediction admitted in time that waits in the queue past its use — a free slot
