@@ -150,7 +150,7 @@ impl State {
 
     /// The scene `hash`, if a worker session of `credential` holds a job on it (marked
     /// used). The jobs on it those sessions hold wait for the scene's load: their times
-    /// are not counted as a job's (see [`Job::loaded_scene`](super::jobs::Job)).
+    /// are not counted as a job's (see `Job::loaded_scene`).
     pub fn scene_for_worker(&mut self, hash: &ContentHash, credential: &str) -> Option<Arc<StoredScene>> {
         let on_it: Vec<u64> = (self.workers.values())
             .filter(|w| &*w.credential == credential)
