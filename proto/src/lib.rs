@@ -44,7 +44,7 @@ pub const WITHDRAWN: &str = "withdrawn";
 /// The gRPC metadata key on a `RESOURCE_EXHAUSTED` refusal of a predicted request the
 /// server could not make in time, milliseconds: refused on arrival, the wait it
 /// foresaw; refused from its queue, how late past its need it would have started. A
-/// client takes it as "saturated" (see `StatsReply.queue_wait_ms`).
+/// client takes it as "saturated", as it does a long `StatsReply.queue_wait_ms`.
 pub const SATURATED_METADATA: &str = "relief-saturated-wait-ms";
 
 /// The generated messages, clients and servers of package `relief.v1`.

@@ -289,7 +289,13 @@ impl pb::scenes_server::Scenes for Service {
                 false => None,
             };
             match (as_client, caller.may(Role::Worker)) {
-                (Some(scene), _) => Some(scene),
+                // (One credential in both roles — open, or one shared token — may be a
+                // worker loading it.)
+                (Some(scene), true) => {
+                    state.worker_fetches(&hash, &caller.name);
+                    Some(scene)
+                }
+                (Some(scene), false) => Some(scene),
                 (None, true) => state.scene_for_worker(&hash, &caller.name),
                 (None, false) => None,
             }

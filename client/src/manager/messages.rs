@@ -45,8 +45,8 @@ pub enum Arrival {
         id: u64,
         failure: Failure,
     },
-    /// How long the server said a new job would wait now (its load; see
-    /// [`LOAD_HIGH_WAIT`](super::policy::LOAD_HIGH_WAIT)).
+    /// How long the server said a new job would wait now for a slot, or the wait a
+    /// refusal carried (its load; see [`LOAD_HIGH_WAIT`](super::policy::LOAD_HIGH_WAIT)).
     ServerLoad {
         wait: std::time::Duration,
     },

@@ -132,8 +132,8 @@ impl Manager {
         self.config.tolerance * self.load_scale
     }
 
-    /// Takes the server's load in: the wait it foresees for a new job raises the
-    /// tolerance a step when long, lowers it a step when short.
+    /// Takes the server's load in: the wait it foresees for a new job's slot (or a
+    /// refusal's) raises the tolerance a step when long, lowers it a step when short.
     fn feel_load(&mut self, wait: Duration) {
         self.load_scale = if wait > policy::LOAD_HIGH_WAIT {
             (self.load_scale * policy::LOAD_STEP).min(policy::MAX_LOAD_SCALE)

@@ -53,27 +53,42 @@ impl State {
         times.get(times.len() / 2).copied()
     }
 
-    /// How long a job queued now would take to finish: its [`State::queue_wait`], then
-    /// its own median time. `None` before any job has finished, or without a worker.
+    /// How long a job queued now would take to finish: the jobs queued and running
+    /// shared over the workers' slots, each taking the median time, then its own.
+    /// `None` before any job has finished, or without a worker.
     pub fn estimated_wait(&self) -> Option<Duration> {
-        Some(self.queue_wait()? + Duration::from_secs_f64(self.job_time()?))
+        let (job_time, slots, backlog) = self.backlog()?;
+        Some(Duration::from_secs_f64(
+            job_time * (backlog as f64 / slots as f64 + 1.0),
+        ))
     }
 
-    /// How long a job queued now would wait behind the others: the jobs queued and
-    /// running shared over the workers' slots, each taking the median time. The
-    /// server's saturation, apart from a job's own time — which, with workers a
+    /// How long a job queued now would wait for a slot: none while one is free, else the
+    /// jobs ahead of it past the slots, shared over them, each taking the median time.
+    /// The server's saturation, apart from a job's own time — which, with workers a
     /// round trip of 100 ms away, never fell below the clients' threshold of room
     /// (`LOAD_LOW_WAIT`), and held their tolerance at its most for whole flights.
     /// `None` before any job has finished, or without a worker.
     pub fn queue_wait(&self) -> Option<Duration> {
+        let (job_time, slots, backlog) = self.backlog()?;
+        let ahead = (backlog + 1).saturating_sub(slots);
+        Some(Duration::from_secs_f64(job_time * ahead as f64 / slots as f64))
+    }
+
+    /// The median job time, the workers' slots (at least one) and the jobs queued and
+    /// running; `None` before any job has finished, or without a slot.
+    fn backlog(&self) -> Option<(f64, usize, usize)> {
         let job_time = self.job_time()?;
         let slots: usize = self.workers.values().map(|w| w.slots).sum();
         if slots == 0 {
             return None;
         }
         let running: usize = self.workers.values().map(|w| w.running.len()).sum();
-        let backlog = self.queue.count(false) + self.queue.count(true) + running;
-        Some(Duration::from_secs_f64(job_time * backlog as f64 / slots as f64))
+        Some((
+            job_time,
+            slots,
+            self.queue.count(false) + self.queue.count(true) + running,
+        ))
     }
 
     /// Folds the wait foreseen now into its mean over time (see

@@ -490,6 +490,8 @@ impl State {
             id,
         };
         job.state = JobState::Queued(priority);
+        // (Its next worker may hold the scene already: timed again.)
+        job.loaded_scene = false;
         self.queue.stopped(&job.owner);
         self.queue.insert(&job.owner, priority);
         true

@@ -149,9 +149,20 @@ impl State {
     }
 
     /// The scene `hash`, if a worker session of `credential` holds a job on it (marked
-    /// used). The jobs on it those sessions hold wait for the scene's load: their times
-    /// are not counted as a job's (see `Job::loaded_scene`).
+    /// used, and its fetch noted: [`State::worker_fetches`]).
     pub fn scene_for_worker(&mut self, hash: &ContentHash, credential: &str) -> Option<Arc<StoredScene>> {
+        if !self.worker_fetches(hash, credential) {
+            return None;
+        }
+        self.scenes.touch(hash).map(|e| e.scene.clone())
+    }
+
+    /// Notes that a worker of `credential` fetches scene `hash`: the jobs on it that
+    /// the credential's sessions hold wait for the scene's load, and their times are
+    /// not counted as a job's (see `Job::loaded_scene`). Whether they hold any. (By
+    /// credential: the fetch does not name its session, so where workers share one,
+    /// all their jobs on the scene go untimed then.)
+    pub fn worker_fetches(&mut self, hash: &ContentHash, credential: &str) -> bool {
         let on_it: Vec<u64> = (self.workers.values())
             .filter(|w| &*w.credential == credential)
             .flat_map(|w| w.running.iter().copied())
@@ -161,15 +172,12 @@ impl State {
                     .is_some_and(|job| job.key.subject.scene == *hash)
             })
             .collect();
-        if on_it.is_empty() {
-            return None;
-        }
-        for id in on_it {
+        for &id in &on_it {
             if let Some(job) = self.jobs.get_mut(&id) {
                 job.loaded_scene = true;
             }
         }
-        self.scenes.touch(hash).map(|e| e.scene.clone())
+        !on_it.is_empty()
     }
 
     /// The bounds of `object` of scene `hash`, if both are stored.

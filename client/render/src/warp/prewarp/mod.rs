@@ -45,7 +45,7 @@ use glam::{DVec3, Vec2, Vec3};
 use relief_core::camera::Camera;
 use relief_core::relief::SourceCamera;
 
-use self::lanes::{Columns, DOWN_LINK, Emitted, LANES, RIGHT_LINK, RowSamples, VALID, row_block};
+use self::lanes::{Columns, DOWN_LINK, Emitted, LANES, RIGHT_LINK, RowSamples, VALID, first, row_block};
 use super::params::WarpParams;
 use crate::EMPTY_DEPTH;
 use crate::impostor::{Faces, Impostor};
@@ -515,7 +515,7 @@ impl<const DOWN: bool> RowSink for IntoColumns<'_, '_, '_, DOWN> {
             self.columns
                 .take_block::<DOWN>(emitted, base as usize, self.seq, self.out)
         } else {
-            (1 << n) - 1
+            first(n as u32)
         };
         let mut lanes = others;
         while lanes != 0 {
@@ -700,7 +700,9 @@ impl Job<'_> {
             if in_lanes && in_run && !last_gap.is_nan() && k + LANES <= n {
                 let taken = row_block::<RIGHT>(samples, k, end, &mut emitted);
                 if taken > 0 {
-                    sink.emit_block(&emitted);
+                    if emitted.count > 0 {
+                        sink.emit_block(&emitted);
+                    }
                     k += taken;
                     let last = k - 1;
                     last_gap = samples.u[last] - samples.u[last - 1];
