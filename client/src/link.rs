@@ -243,9 +243,8 @@ impl Link {
     /// brings [`Link::health`] up to date: before a flight, so that its first requests
     /// go where textures can come from. Returns the wait the server foresees for a new
     /// job behind the others (`queue_wait_ms`), when it answered — and, when it did not
-    /// answer in time but results
-    /// came from it meanwhile, the look's own wait: a server that busy is saturated,
-    /// not lost.
+    /// answer in time but results came from it meanwhile, the look's own wait: a server
+    /// that busy is saturated, not lost.
     pub async fn look(&self) -> Option<Duration> {
         let started = Instant::now();
         let look = tokio::time::timeout(HEALTH_POLL_TIMEOUT, self.remote.clone().stats()).await;

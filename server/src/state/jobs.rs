@@ -163,7 +163,7 @@ pub(super) struct Job {
     /// `State::preempt_for`): never again.
     pub(super) preempted: bool,
     /// Its worker fetched the job's scene while it held it (see
-    /// `State::scene_for_worker`): its time is the scene's load as much as a bake, and
+    /// `State::worker_fetches`): its time is the scene's load as much as a bake, and
     /// is not one the jobs to come will take (see `State::job_took`).
     pub(super) loaded_scene: bool,
 }
