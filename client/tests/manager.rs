@@ -191,6 +191,86 @@ fn a_texture_far_too_coarse_for_the_screen_gives_way_to_geometry() {
     assert_eq!(manager.frame(&scene, &large, 0.1)[sphere], Show::Geometry);
 }
 
+/// A texture magnified past `REFINE_TEXEL` (the eye drawing near, or here the screen
+/// growing) is still shown, and a finer one asked for at once; at the size it was made
+/// for, none is.
+#[test]
+fn a_texture_magnified_past_a_pixel_is_replaced_while_shown() {
+    use relief_client::manager::policy::{COARSEST_SHOWN, REFINE_TEXEL};
+    use relief_trace::bake;
+    use relief_trace::tracer::ObjectTracer;
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let sphere = index(&scene, "sphere");
+    let (commands_tx, mut commands) = unbounded_channel();
+    let (arrivals, arrivals_rx) = unbounded_channel();
+    let config = Config {
+        predict: false,
+        ..Config::default()
+    };
+    let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
+    let centre = scene.objects[sphere].world_bounds().center();
+    let eye = centre + Vec3::new(0.0, 1.0, 6.0);
+    let camera = |width: u32| Camera::look_at(eye, centre, Vec3::Y, 60.0, width, width * 9 / 16).unwrap();
+    // The requests for now a frame on a screen `width` pixels wide makes, and how it
+    // shows the sphere.
+    let mut frame = |manager: &mut Manager, width: u32, t: f64| {
+        let shows = manager.frame(&scene, &camera(width), t);
+        let asked: Vec<_> = std::iter::from_fn(|| commands.try_recv().ok())
+            .filter_map(|c| match c {
+                Command::Request(r) if r.needed_in_ms.is_none() => Some(r),
+                _ => None,
+            })
+            .collect();
+        (asked, shows[sphere])
+    };
+    let (asked, _) = frame(&mut manager, 320, 0.0);
+    let first = asked.first().expect("a request for now").clone();
+    let texture = bake(
+        &ObjectTracer::new(&scene.objects[sphere]),
+        first.eye,
+        first.size,
+        first.depth_bits,
+        first.projection,
+    )
+    .unwrap();
+    arrive(
+        &arrivals,
+        first.id,
+        ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
+    );
+    let (asked, show) = frame(&mut manager, 320, 0.1);
+    assert!(
+        matches!(show, Show::Impostor { .. }) && asked.is_empty(),
+        "{show:?} {asked:?}"
+    );
+    let texel = manager
+        .describe(&scene, sphere, &show, &camera(320))
+        .expect("described")
+        .texel_pixels;
+    // A screen on which the texel covers midway between refining and giving way.
+    let wanted = 0.5 * (REFINE_TEXEL + COARSEST_SHOWN);
+    let width = (320.0 * wanted / texel).round() as u32;
+    let (asked, show) = frame(&mut manager, width, 0.2);
+    let shown = manager
+        .describe(&scene, sphere, &show, &camera(width))
+        .expect("still shown");
+    assert!(
+        shown.texel_pixels > REFINE_TEXEL && shown.texel_pixels < COARSEST_SHOWN,
+        "texel {} px",
+        shown.texel_pixels
+    );
+    let finer = asked
+        .first()
+        .unwrap_or_else(|| panic!("no finer texture asked at {} px", shown.texel_pixels));
+    assert!(
+        finer.size > first.size,
+        "asked {} after {}",
+        finer.size,
+        first.size
+    );
+}
+
 #[test]
 fn one_request_for_now_is_in_flight_per_object() {
     let scene = Scene::load("default").unwrap();

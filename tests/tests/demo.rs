@@ -122,11 +122,13 @@ fn the_demo_flies_and_summarises() {
         "pixels",
         "drawn_px",
         "turn_deg",
+        "distance_ratio",
         "texel_px",
         "growth_px",
         "band_px",
     ]
     .map(|c| column(&format!("{c}_knot")));
+    let (edge, level) = (column("edge_knot"), column("level_knot"));
     column("partner_turn_deg_knot");
     let mut drawn = 0;
     for line in lines {
@@ -146,9 +148,22 @@ fn the_demo_flies_and_summarises() {
                 let v: f32 = row[*k].parse().unwrap();
                 assert!(v.is_finite() && v >= 0.0, "{line}");
             }
+            // The level drawn: within the pyramid of a texture the ladder asks for.
+            let (edge, level) = (
+                row[edge].parse::<u32>().unwrap(),
+                row[level].parse::<u32>().unwrap(),
+            );
+            assert!((16..=720).contains(&edge) && level < 6, "{line}");
         }
     }
     assert!(drawn > 0, "the knot was never drawn as an impostor: {csv}");
+    // Its worst paired frame, cropped from the three images side by side.
+    let worst = image::open(out.join("worst_knot.png")).expect("worst_knot.png");
+    assert!(
+        worst.width() > 3 * worst.height() / 4,
+        "{:?}",
+        (worst.width(), worst.height())
+    );
     // Every 15th frame drawn is written, named by its path frame.
     let written = std::fs::read_dir(&out)
         .unwrap()

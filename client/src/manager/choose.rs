@@ -16,7 +16,7 @@ use super::cache::Held;
 use super::policy::{
     COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LONE_BAND, LONE_MAX_TURN, MAX_TEXEL_PIXELS,
     MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
-    cheaper_as_geometry,
+    REFINE_TEXEL, cheaper_as_geometry,
 };
 
 /// How an object is drawn this frame.
@@ -44,6 +44,10 @@ pub struct ShownTexture {
     /// The level drawn's texel, in the angles of pixels where it shows
     /// ([`Camera::pixel_angle_towards`](relief_core::camera::Camera::pixel_angle_towards)).
     pub texel_pixels: f32,
+    /// The level drawn's texels a side, and the level (0, the texture as made; each
+    /// next one half as many a side).
+    pub edge: u32,
+    pub level: usize,
     /// The growth of the widest gap its warp opens, pixels (the critical-point error),
     /// counted [`growth_weight`](super::policy::growth_weight) times over.
     pub growth_pixels: f32,
@@ -65,8 +69,8 @@ pub(super) struct Grade {
     /// Too coarse to be shown: its texels would cover more than [`COARSEST_SHOWN`]
     /// pixels (eq. 4-1).
     pub(super) too_coarse: bool,
-    /// … and a finer texture can be had (the edge asked for now,
-    /// [`Manager::size_for`], is larger).
+    /// Coarser than [`REFINE_TEXEL`] pixels (shown or not) and a finer texture can be
+    /// had (the edge asked for now, [`Manager::size_for`], is larger).
     pub(super) finer_available: bool,
 }
 
@@ -216,12 +220,12 @@ impl Manager {
         };
         let grade = |h: &Held| {
             let texture = &h.pyramid.levels[0].texture.camera;
-            let too_coarse = needs_finer_texture(texture, &at_eye, COARSEST_SHOWN);
+            let coarse = needs_finer_texture(texture, &at_eye, REFINE_TEXEL);
             Grade {
                 growth: growth(h, eye, camera),
                 band: band(h, centre, eye, camera),
-                too_coarse,
-                finer_available: too_coarse && texture.width < wanted,
+                too_coarse: needs_finer_texture(texture, &at_eye, COARSEST_SHOWN),
+                finer_available: coarse && texture.width < wanted,
             }
         };
         Some(self.objects[object].held.iter().map(grade).collect())
@@ -249,6 +253,8 @@ impl Manager {
             turn_deg: turn(texture)?,
             distance_ratio: (shown.eye - centre).length() / (eye - centre).length(),
             texel_pixels: texel_angle(drawn, eye) / camera.pixel_angle_towards(volume_centre(drawn)),
+            edge: drawn.width.max(drawn.height),
+            level,
             growth_pixels: growth(shown, eye, camera),
             band_pixels: band(shown, centre, eye, camera),
             partner_turn_deg: partner.and_then(|(i, _)| turn(i)),

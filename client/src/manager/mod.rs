@@ -255,8 +255,12 @@ impl Manager {
                 .is_some_and(|((_, g), turn)| !may_show(&g, turn, partner.is_some(), 1.0, tolerance));
             let within_any = grades.iter().any(|g| g.growth <= tolerance);
             let valid = within_any && !too_far;
-            let want_finer =
-                !within(best) && grades.iter().any(|g| g.growth <= tolerance && g.finer_available);
+            // A finer texture is asked for while the shown one is still shown, once its
+            // texels grow past `REFINE_TEXEL` (the eye drawing near), as when the only
+            // one within tolerance is too coarse to be shown at all.
+            let finer_wanted = |g: &Grade| g.growth <= tolerance && g.finer_available;
+            let want_finer = best.is_some_and(|(_, g)| finer_wanted(&g))
+                || (!within(best) && grades.iter().any(finer_wanted));
             let asked_for = self.pending_covers(scene, k, centre, eye);
             if valid || asked_for {
                 self.counters.prediction_hits += 1;

@@ -116,6 +116,13 @@ pub const PARTNERED_BAND: f32 = 4.0;
 /// where even the largest texture is that coarse, while the eye stays that near).
 pub const COARSEST_SHOWN: f32 = 2.0 * MAX_TEXEL_PIXELS;
 
+/// A texture whose texels cover more than this many pixels' angle at the eye is
+/// replaced by a finer one where one can be had: asked for while it is still shown (up
+/// to [`COARSEST_SHOWN`]), and planned for where the eye is going. Textures magnified
+/// past a pixel as the eye drew near were the default demo's worst frames (texels of
+/// 1.2–1.5 px: the knot, the rock and the sphere 5–6 dB below exact geometry).
+pub const REFINE_TEXEL: f32 = 1.1 * MAX_TEXEL_PIXELS;
+
 /// A texture this many times over the tolerance is not shown: geometry is drawn until a
 /// better one arrives (the frame still counts as stale).
 pub const SHOWN_STALE: f32 = 2.0;
@@ -154,8 +161,12 @@ pub const PARTNER_LEVELS_COARSER: usize = 1;
 pub const TEXTURE_LADDER: [u32; 10] = [32, 48, 64, 88, 128, 184, 256, 360, 512, 720];
 
 /// The largest texture edge asked for a solid: beyond it a texture costs more to warp
-/// each frame than the object's few screen-filling frames gain.
-pub const SOLID_MAX_EDGE: u32 = 512;
+/// each frame than the object's few screen-filling frames gain. At 512, the demo's
+/// near passes showed the sphere and the rock at texels of 1.4–1.6 pixels, 4–7 dB below
+/// exact geometry; at 720 the rock's texel stays under a pixel, and the sphere, whose
+/// 720² texture would cost more than its triangles, is drawn as geometry there
+/// ([`cheaper_as_geometry`]).
+pub const SOLID_MAX_EDGE: u32 = 720;
 
 /// The largest texture edge asked for in `projection`: [`SHEET_MAX_EDGE`] for the
 /// perspective textures of leaves and sheets ([`projection_for`]), else
@@ -263,8 +274,9 @@ pub const WARP_NS_PER_TEXEL: f32 = 12.0;
 /// Whether `object` costs no more drawn as geometry than as an impostor whose texture
 /// has `edge` texels a side (then it is drawn as geometry, which is exact). With the
 /// costs above, the default scene's tree is drawn as geometry once its texture would
-/// pass 351 texels a side; the sphere (20 k triangles) would past 522, beyond a
-/// solid's largest texture, so it, the knot and the rock never are. In the demo (whole
+/// pass 351 texels a side, the sphere (20 k triangles) past 522 (only as near as its
+/// texture would be a solid's largest), the knot (46 k) past 784, beyond a solid's
+/// largest texture, and the rock (a million) never. In the demo (whole
 /// path, rtt 0 and 100, against the same before) the tree then matched geometry where
 /// its impostor was 2.9–3.3 dB below, the frame took 6.45–6.64 ms where it took
 /// 6.63–6.73, and 84–119 textures were asked for where 125–143 were.
@@ -536,8 +548,8 @@ mod tests {
         assert_eq!((knot, sphere), (1.0, 1.0));
     }
 
-    /// Leaves are drawn as geometry where their texture would be large; the default
-    /// scene's solids never are.
+    /// Leaves are drawn as geometry where their texture would be large, the sphere only
+    /// where its texture would be a solid's largest; the knot and the rock never are.
     #[test]
     fn geometry_where_it_costs_no_more() {
         let scene = Scene::load("default").expect("default scene");
@@ -548,9 +560,10 @@ mod tests {
         // With nothing to show, the tree waits as geometry at 256 texels, not at 184.
         assert!(cheaper_as_geometry(tree, 256, GEOMETRY_WHILE_WAITING));
         assert!(!cheaper_as_geometry(tree, 184, GEOMETRY_WHILE_WAITING));
-        for solid in [sphere, knot, rock] {
+        for solid in [knot, rock] {
             assert!(!cheaper_as_geometry(solid, SOLID_MAX_EDGE, 1.0), "{}", solid.name);
         }
+        assert!(cheaper_as_geometry(sphere, SOLID_MAX_EDGE, 1.0) && !cheaper_as_geometry(sphere, 512, 1.0));
     }
 
     /// Small textures of solids get the fine texel, those the frame is full of the

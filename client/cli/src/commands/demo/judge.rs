@@ -1,6 +1,7 @@
 //! The demo's compared frames judged after the flight: each against the ray-traced
 //! references (point-sampled and anti-aliased), as drawn and as exact geometry, whole
-//! and per object; `psnr.csv` and the worst frame written.
+//! and per object; `psnr.csv`, the worst frame and each object's worst frame
+//! ([`worst`]) written.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -16,6 +17,7 @@ use relief_render::gbuffer::GBuffer;
 use relief_render::geometry::{is_cheap, render_geometry};
 use relief_trace::{ANTIALIASED_SAMPLES, SceneTracer, render_reference};
 
+use super::worst;
 use crate::progress;
 
 /// The image error of the compared frames, each as drawn and as all geometry.
@@ -78,11 +80,13 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
     for (_, name) in &candidates {
         let name = column(name);
         log.push_str(&format!(
-            ",psnr_aa_db_{name},geometry_psnr_aa_db_{name},pixels_{name},drawn_px_{name},turn_deg_{name},texel_px_{name},growth_px_{name},band_px_{name},partner_turn_deg_{name}"
+            ",psnr_aa_db_{name},geometry_psnr_aa_db_{name},pixels_{name},drawn_px_{name},turn_deg_{name},distance_ratio_{name},texel_px_{name},edge_{name},level_{name},growth_px_{name},band_px_{name},partner_turn_deg_{name}"
         ));
     }
     log.push('\n');
     let mut worst = f64::INFINITY;
+    // Each object's lowest paired gap so far, as a picture (`worst::side_by_side`).
+    let mut worst_pictures = BTreeMap::new();
     for Compared {
         path_frame: frame,
         camera,
@@ -108,11 +112,13 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
             if let (Some(a), Some(b)) = (own, own_floor)
                 && covered >= MIN_JUDGED_OBJECT_PIXELS
             {
-                judged
-                    .gap_by_object
-                    .entry(name.to_string())
-                    .or_default()
-                    .push(a - b);
+                let gaps = judged.gap_by_object.entry(name.to_string()).or_default();
+                if gaps.iter().all(|&g| g > a - b)
+                    && let Some(picture) = worst::side_by_side([image, &antialiased, &geometry], k)
+                {
+                    worst_pictures.insert(name, picture);
+                }
+                gaps.push(a - b);
             }
             for (value, into) in [
                 (own, &mut judged.by_object),
@@ -129,21 +135,24 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
             let how = shown.get(k as usize).copied().flatten();
             let fields = how.map(|s| {
                 (
-                    s.turn_deg,
+                    (s.turn_deg, s.distance_ratio),
                     s.texel_pixels,
+                    (s.edge, s.level),
                     s.growth_pixels,
                     s.band_pixels,
                     s.partner_turn_deg,
                 )
             });
             match fields {
-                Some((turn, texel, growth, band, partner)) => {
-                    log.push_str(&format!(",{turn:.1},{texel:.2},{growth:.2},{band:.2},"));
+                Some(((turn, ratio), texel, (edge, level), growth, band, partner)) => {
+                    log.push_str(&format!(
+                        ",{turn:.1},{ratio:.3},{texel:.2},{edge},{level},{growth:.2},{band:.2},"
+                    ));
                     if let Some(p) = partner {
                         log.push_str(&format!("{p:.1}"));
                     }
                 }
-                None => log.push_str(",,,,,"),
+                None => log.push_str(",,,,,,,,"),
             }
         }
         log.push('\n');
@@ -161,6 +170,9 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
     }
     bar.finish_and_clear();
     std::fs::write(out.join("psnr.csv"), log).context("writing psnr.csv")?;
+    for (name, picture) in worst_pictures {
+        worst::save(out, &column(name), &picture)?;
+    }
     Ok(judged)
 }
 

@@ -4,6 +4,7 @@
 
 mod judge;
 mod summary;
+mod worst;
 
 use std::ops::ControlFlow;
 use std::path::PathBuf;
@@ -38,7 +39,7 @@ pub struct DemoArgs {
     /// follows the clock, so a slow frame skips path frames rather than slowing it.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     frames: Option<u32>,
-    /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, worst_frame*.png.
+    /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, worst_frame*.png, worst_OBJECT.png.
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
     /// Workers to start (with --server, the server's own workers serve instead).
