@@ -42,7 +42,7 @@ impl Pyramid {
             if top.camera.width.min(top.camera.height) / 2 < min_size.max(1) {
                 break;
             }
-            let (next, next_coverage) = downsample(top, &coverage);
+            let (next, next_coverage) = downsample(&levels[levels.len() - 1], &coverage);
             coverage = next_coverage;
             levels.push(Impostor::new(next));
         }
@@ -70,17 +70,76 @@ impl Pyramid {
     }
 }
 
+/// Of a block's surface texels (index and depth), those on the front-most one's
+/// surface: joined to it through the block (`joined`, the fine level's connectivity:
+/// one surface however steep, as at a grazing rim, whose neighbours lie many texels
+/// apart in depth), or within `same_surface` of its depth.
+fn front_surface(
+    surface: &[(usize, f32)],
+    same_surface: f32,
+    joined: impl Fn(usize, usize) -> bool,
+) -> ([(usize, f32); 4], usize) {
+    let front = surface.iter().map(|&(_, d)| d).fold(f32::INFINITY, f32::min);
+    let mut reached = [false; 4];
+    for (i, &(_, d)) in surface.iter().enumerate() {
+        reached[i] = d <= front + same_surface;
+    }
+    // (Two passes reach every texel of a 2×2 block joined to one reached; most
+    // blocks, inside a surface, need none.)
+    let all = reached.iter().take(surface.len()).all(|&r| r);
+    for _ in 0..if all { 0 } else { 2 } {
+        for (i, &(p, _)) in surface.iter().enumerate() {
+            reached[i] |= surface.iter().zip(reached).any(|(&(q, _), r)| r && joined(p, q));
+        }
+    }
+    let mut kept = [(0, 0.0); 4];
+    let mut n = 0;
+    for (&texel, _) in surface.iter().zip(reached).filter(|&(_, r)| r) {
+        kept[n] = texel;
+        n += 1;
+    }
+    (kept, n)
+}
+
+/// The depth at a 2×2 block's centre from its texels `kept` (index and depth) on one
+/// surface, `corner` giving each texel's place in the block: the mean of a diagonal's
+/// two texels where one is kept whole (the plane through three texels, or the bilinear
+/// surface through four, passes there), else `None`. (Three texels' mean lies a sixth
+/// of the block's depth change off the centre: at a grazing rim, texels of depth far
+/// from where they stand, which a turned eye sees displaced.)
+fn centre_depth(kept: &[(usize, f32)], corner: impl Fn(usize) -> (usize, usize)) -> Option<f32> {
+    let mut at = [[None; 2]; 2];
+    for &(k, d) in kept {
+        let (x, y) = corner(k);
+        at[y][x] = Some(d);
+    }
+    let diagonal = |p: Option<f32>, q: Option<f32>| Some(0.5 * (p? + q?));
+    match (diagonal(at[0][0], at[1][1]), diagonal(at[0][1], at[1][0])) {
+        (Some(a), Some(b)) => Some(0.5 * (a + b)),
+        (a, b) => a.or(b),
+    }
+}
+
 /// Halves the resolution of `texture`, whose texels cover the fractions `coverage` of
 /// their area (1 or 0 for a baked texture: a texel holds what its centre's ray hit).
 /// Returns the coarse texture and its texels' coverage, the mean of their blocks'.
 ///
 /// A coarse texel holds a surface when its block's coverage exceeds [`HALF_COVERED`]:
-/// so a silhouette stays where it was, as a texel's centre decides it. (Keeping every block with any surface grew silhouettes outwards by a quarter of
-/// a coarse texel, more at each level: a coarse level scored 3 dB worse than a texture
-/// baked at its size.) It takes the average of the covered texels of its 2×2 block that
-/// lie within two of the block's texel sizes of the front-most one (so a silhouette
-/// keeps its front surface instead of blending with what is behind).
-pub fn downsample(texture: &ReliefTexture, coverage: &[f32]) -> (ReliefTexture, Vec<f32>) {
+/// so a silhouette stays where it was, as a texel's centre decides it. (Keeping every
+/// block with any surface grew silhouettes outwards by a quarter of a coarse texel, more
+/// at each level: a coarse level scored 3 dB worse than a texture baked at its size.)
+/// It takes the average of the covered texels of its 2×2 block on the front-most one's
+/// surface ([`front_surface`]: a silhouette keeps its front surface instead of blending
+/// with what is behind), at the depth the block's centre has ([`centre_depth`]).
+///
+/// Judged by a grazing rim: a level of a fine texture's `fine.right`/`fine.down`
+/// connectivity keeps the rim's steep texels, which a fixed depth window (two coarse
+/// texels) cut off, leaving the rim nearer the eye than it is. Turned 12° from its
+/// eye, the sphere's level 1 of a 360² texture then scored 1.4 dB above exact geometry
+/// where it scored 0.1 below (a 184² texture baked at that size: 1.5 above), the knot's
+/// 1.3 above where 0.2 below (1.0).
+pub fn downsample(fine: &Impostor, coverage: &[f32]) -> (ReliefTexture, Vec<f32>) {
+    let texture = &fine.texture;
     let c = texture.camera;
     let (w, h) = (c.width.div_ceil(2), c.height.div_ceil(2));
     let camera = SourceCamera {
@@ -131,22 +190,22 @@ pub fn downsample(texture: &ReliefTexture, coverage: &[f32]) -> (ReliefTexture, 
                     n_surface += 1;
                 }
             }
+            let corner_of = |k: usize| ((k % c.width as usize) & 1, (k / c.width as usize) & 1);
             let surface = &surface[..n_surface];
-            let Some(front) = surface.iter().map(|&(_, d)| d).reduce(f32::min) else {
+            if surface.is_empty() {
                 continue;
-            };
-            let mut kept = [(0usize, 0.0f32); 4];
-            let mut n_kept = 0;
-            for &(k, d) in surface {
-                if d <= front + same_surface {
-                    kept[n_kept] = (k, d);
-                    n_kept += 1;
-                }
             }
+            let (kept, n_kept) = front_surface(surface, same_surface, |p, q| {
+                let (p, q) = (p.min(q), p.max(q));
+                (q == p + 1 && fine.right[p]) || (q == p + c.width as usize && fine.down[p])
+            });
             let kept = &kept[..n_kept];
             let n = n_kept as f32;
             let mean = |f: &dyn Fn(usize, f32) -> f32| kept.iter().map(|&(k, d)| f(k, d)).sum::<f32>() / n;
-            out.depth[target] = camera.level_of_depth(mean(&|_, d| d), bits);
+            out.depth[target] = camera.level_of_depth(
+                centre_depth(kept, corner_of).unwrap_or_else(|| mean(&|_, d| d)),
+                bits,
+            );
             for ch in 0..3 {
                 out.albedo[target][ch] = (mean(&|k, _| texture.albedo[k][ch] as f32) + 0.5) as u8;
                 out.normal[target][ch] = (mean(&|k, _| texture.normal[k][ch] as f32) + 0.5) as u8;
@@ -229,7 +288,7 @@ mod tests {
         let coverage: Vec<f32> = (0..7)
             .flat_map(|j| (0..9).map(move |i| surface(i, j).is_some() as u8 as f32))
             .collect();
-        let (coarse, _) = downsample(&fine, &coverage);
+        let (coarse, _) = downsample(&Impostor::new(fine), &coverage);
         let cc = coarse.camera;
         assert_eq!((cc.width, cc.height), (5, 4));
         // The two surfaces are 0.72 or more apart, far beyond two coarse texels (0.4):
@@ -261,6 +320,50 @@ mod tests {
                 assert_eq!(coarse.albedo[k], [(red + 0.5) as u8, 0, 200], "({i}, {j})");
                 assert_eq!(coarse.normal[k], [128, 128, 255], "({i}, {j})");
             }
+        }
+    }
+
+    /// A steep ramp (a grazing rim: neighbours three coarse texels apart in depth,
+    /// their normals saying so) keeps every texel of each block, at the depth of the
+    /// block's centre; a fixed window of two coarse texels kept only the nearest.
+    #[test]
+    fn a_grazing_rim_keeps_its_depth_at_the_coarse_level() {
+        use relief_core::relief::encode_normal_rgb8;
+        let step = 1.0 / 32.0;
+        let slope = 6.0;
+        let depth = |i: u32| 0.1 + slope * step * (i as f32 + 0.5);
+        // Rows 0-3 of columns 0-3 hold the ramp (its normal tilted by the slope along
+        // the texture's `a`); the rest is empty.
+        let fine = texture(32, 32, |i, j| {
+            (i < 4 && j < 4).then(|| {
+                (
+                    depth(i),
+                    [9; 3],
+                    encode_normal_rgb8(Vec3::new(slope, 0.0, 1.0).normalize()),
+                )
+            })
+        });
+        let impostor = Impostor::new(fine);
+        assert!(impostor.right[0] && impostor.right[2], "the ramp is one surface");
+        let coverage: Vec<f32> = impostor
+            .texture
+            .depth
+            .iter()
+            .map(|&d| (d != DepthBits::Sixteen.empty()) as u8 as f32)
+            .collect();
+        let (coarse, _) = downsample(&impostor, &coverage);
+        let cc = coarse.camera;
+        assert!(
+            slope * step > 2.0 * cc.a.length().max(cc.b.length()),
+            "steeper than the window"
+        );
+        for i in 0..2 {
+            let got = cc.depth_of_level(coarse.depth[coarse.index(i, 0)], DepthBits::Sixteen);
+            let centre = 0.5 * (depth(2 * i) + depth(2 * i + 1));
+            assert!(
+                (got - centre).abs() < 1e-4,
+                "coarse texel {i}: {got} against {centre}"
+            );
         }
     }
 
