@@ -269,6 +269,31 @@ fn a_texture_magnified_past_a_pixel_is_replaced_while_shown() {
         finer.size,
         first.size
     );
+    // Made from the same eye, the finer texture replaces the coarse one: it is shown,
+    // and nothing more is asked for.
+    let texture = bake(
+        &ObjectTracer::new(&scene.objects[sphere]),
+        finer.eye,
+        finer.size,
+        finer.depth_bits,
+        finer.projection,
+    )
+    .unwrap();
+    arrive(
+        &arrivals,
+        finer.id,
+        ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
+    );
+    let (asked, show) = frame(&mut manager, width, 0.3);
+    let shown = manager
+        .describe(&scene, sphere, &show, &camera(width))
+        .expect("shown");
+    assert!(
+        shown.texel_pixels < REFINE_TEXEL,
+        "texel {} px",
+        shown.texel_pixels
+    );
+    assert!(asked.is_empty(), "{asked:?}");
 }
 
 #[test]

@@ -351,7 +351,8 @@ const LOSSY: Link = Link {
 /// `ONE_FLIGHT`.)
 const LOSSY_STALE_AT_MOST: f64 = 0.10;
 
-/// The tolerance the lossy flight asks for, pixels: the lifetime such a link affords.
+/// The tolerance the lossy flight asks for, pixels: the lifetime such a link affords
+/// (twice the default; the bands past the rim, which scale with it, twice too).
 /// Its textures come a p50 of 0.4 s after they are asked for (2 % loss holds a TCP
 /// stream to a few hundred kB/s); at the default tolerance, half as long-lived, 4.7–10.8
 /// % of the flight's frames were stale (3 runs).

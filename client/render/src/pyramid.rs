@@ -37,12 +37,12 @@ impl Pyramid {
         let empty = texture.depth_bits.empty();
         let mut coverage: Vec<f32> = texture.depth.iter().map(|&d| (d != empty) as u8 as f32).collect();
         let mut levels = vec![Impostor::new(texture)];
-        loop {
-            let top = &levels[levels.len() - 1].texture;
-            if top.camera.width.min(top.camera.height) / 2 < min_size.max(1) {
+        while let Some(top) = levels.last() {
+            let edges = (top.texture.camera.width, top.texture.camera.height);
+            if edges.0.min(edges.1) / 2 < min_size.max(1) {
                 break;
             }
-            let (next, next_coverage) = downsample(&levels[levels.len() - 1], &coverage);
+            let (next, next_coverage) = downsample(top, &coverage);
             coverage = next_coverage;
             levels.push(Impostor::new(next));
         }
@@ -84,12 +84,14 @@ fn front_surface(
     for (i, &(_, d)) in surface.iter().enumerate() {
         reached[i] = d <= front + same_surface;
     }
-    // (Two passes reach every texel of a 2×2 block joined to one reached; most
-    // blocks, inside a surface, need none.)
-    let all = reached.iter().take(surface.len()).all(|&r| r);
-    for _ in 0..if all { 0 } else { 2 } {
+    // (Most blocks, inside a surface, are reached whole by the window alone.)
+    loop {
+        let before = reached;
         for (i, &(p, _)) in surface.iter().enumerate() {
             reached[i] |= surface.iter().zip(reached).any(|(&(q, _), r)| r && joined(p, q));
+        }
+        if reached == before {
+            break;
         }
     }
     let mut kept = [(0, 0.0); 4];
@@ -129,8 +131,8 @@ fn centre_depth(kept: &[(usize, f32)], corner: impl Fn(usize) -> (usize, usize))
 /// block with any surface grew silhouettes outwards by a quarter of a coarse texel, more
 /// at each level: a coarse level scored 3 dB worse than a texture baked at its size.)
 /// It takes the average of the covered texels of its 2×2 block on the front-most one's
-/// surface ([`front_surface`]: a silhouette keeps its front surface instead of blending
-/// with what is behind), at the depth the block's centre has ([`centre_depth`]).
+/// surface (`front_surface`: a silhouette keeps its front surface instead of blending
+/// with what is behind), at the depth the block's centre has (`centre_depth`).
 ///
 /// Judged by a grazing rim: a level of a fine texture's `fine.right`/`fine.down`
 /// connectivity keeps the rim's steep texels, which a fixed depth window (two coarse
@@ -365,6 +367,27 @@ mod tests {
                 "coarse texel {i}: {got} against {centre}"
             );
         }
+    }
+
+    /// The front surface reaches every texel joined to it however the joins run, and
+    /// the block's centre lies on the plane through three texels.
+    #[test]
+    fn a_block_keeps_what_is_joined_to_its_front_at_its_centre() {
+        // Texels 0-3 of a 2×2 block (0, 1 above 2, 3), each a unit deeper than the window;
+        // the front one is 2, joined to 3, 3 to 1, 1 to 0 (a chain round the block).
+        let surface = [(0, 4.0), (1, 3.0), (2, 1.0), (3, 2.0)];
+        let chain = [(2, 3), (3, 1), (1, 0)];
+        let joined = |p: usize, q: usize| chain.iter().any(|&(a, b)| (a, b) == (p, q) || (b, a) == (p, q));
+        let (kept, n) = front_surface(&surface, 0.5, joined);
+        assert_eq!(n, 4, "{kept:?}");
+        let (kept, n) = front_surface(&surface, 0.5, |p, q| (p, q) == (2, 3) || (p, q) == (3, 2));
+        assert_eq!(&kept[..n], &[(2, 1.0), (3, 2.0)]);
+        // Three texels of the plane d = 1 + 2x + 4y (texel centres at 0 and 1): the
+        // centre's depth 1 + 1 + 2, where their mean is 3.
+        let corner = |k: usize| (k % 2, k / 2);
+        let three = [(0, 1.0), (1, 3.0), (2, 5.0)];
+        assert_eq!(centre_depth(&three, corner), Some(4.0));
+        assert_eq!(centre_depth(&[(0, 1.0), (1, 3.0)], corner), None);
     }
 
     #[test]

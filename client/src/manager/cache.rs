@@ -157,12 +157,23 @@ impl Manager {
                     // Its own eye: one the server made for a nearby eye serves too (see
                     // `SERVE_REACH`).
                     let eye = pyramid.levels[0].texture.eye;
-                    // Held already: the texture that served another request.
-                    if state.held.iter().any(|h| h.is_final && h.eye == eye) {
+                    let edge = |p: &Pyramid| p.levels[0].texture.camera.width;
+                    let new_edge = edge(&pyramid);
+                    // Held already, as fine: the texture that served another request.
+                    if (state.held.iter()).any(|h| h.is_final && h.eye == eye && edge(&h.pyramid) >= new_edge)
+                    {
                         continue;
                     }
-                    // A final texture replaces its own preview.
-                    state.held.retain(|h| h.is_final || h.eye != eye);
+                    // A final texture replaces its own preview, and a coarser one from its
+                    // eye (a finer one asked for as the texels grew: `REFINE_TEXEL`).
+                    let (replaced, kept): (Vec<Held>, Vec<Held>) =
+                        std::mem::take(&mut state.held).into_iter().partition(|h| {
+                            h.eye == eye && (!h.is_final || (is_final && edge(&h.pyramid) < new_edge))
+                        });
+                    state.held = kept;
+                    for h in &replaced {
+                        self.counters.retired.retire(h);
+                    }
                     let held = Held {
                         eye,
                         pyramid: Arc::new(pyramid),

@@ -152,7 +152,8 @@ pub(super) fn shown_texture(
 
 /// Whether one of an object's held textures (`held`: eye and grade at `future`)
 /// covers the eye `future` (all about `centre`), as prediction plans it: within the
-/// planning margin of `tolerance`, not too coarse with a finer one to be had, and
+/// planning margin of `tolerance`, not coarser than [`REFINE_TEXEL`] with a finer one
+/// to be had, and
 /// within the planning margin of what may be shown alone — or with a partner there
 /// ([`may_show`]), held (fine enough to be drawn there, as drawing
 /// requires) or asked for (`asked`).

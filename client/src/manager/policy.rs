@@ -124,7 +124,9 @@ pub const COARSEST_SHOWN: f32 = 2.0 * MAX_TEXEL_PIXELS;
 /// replaced by a finer one where one can be had: asked for while it is still shown (up
 /// to [`COARSEST_SHOWN`]), and planned for where the eye is going. Textures magnified
 /// past a pixel as the eye drew near were the default demo's worst frames (texels of
-/// 1.2–1.5 px: the knot, the rock and the sphere 5–6 dB below exact geometry).
+/// 1.2–1.5 px: the knot, the rock and the sphere 5–6 dB below exact geometry). A tenth
+/// past the pixel: a texture asked for at a pixel's texel ([`MAX_TEXEL_PIXELS`]) is not
+/// asked for again as soon as the eye steps nearer.
 pub const REFINE_TEXEL: f32 = 1.1 * MAX_TEXEL_PIXELS;
 
 /// A texture this many times over the tolerance is not shown: geometry is drawn until a

@@ -56,9 +56,10 @@ pub(super) struct Compared {
 }
 
 /// Compares each kept frame with the ray-traced references; writes `psnr.csv` (with,
-/// per object that may be an impostor, how it was drawn: the texture's turn from the
-/// eye in degrees, its texel in pixels, its partner's turn — empty for geometry) and
-/// the worst frame with its reference into `out`.
+/// per object that may be an impostor, how it was drawn — the texture's turn and
+/// distance, the level drawn, its predicted errors, its partner — empty for geometry),
+/// the worst frame with its reference, and each object's worst paired frame
+/// ([`worst::side_by_side`]) into `out`.
 pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<Judged> {
     let mut judged = Judged::default();
     if compared.is_empty() {
@@ -113,7 +114,8 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
                 && covered >= MIN_JUDGED_OBJECT_PIXELS
             {
                 let gaps = judged.gap_by_object.entry(name.to_string()).or_default();
-                if gaps.iter().all(|&g| g > a - b)
+                if (a - b).is_finite()
+                    && gaps.iter().all(|&g| g > a - b)
                     && let Some(picture) = worst::side_by_side([image, &antialiased, &geometry], k)
                 {
                     worst_pictures.insert(name, picture);

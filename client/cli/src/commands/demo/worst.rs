@@ -10,11 +10,13 @@ use relief_core::frame::Frame;
 
 /// Pixels of context kept round the object's box.
 const MARGIN: u32 = 6;
-/// The crop is enlarged by the largest whole factor, up to this, that keeps its longer
-/// side within [`PANEL_SIDE`] pixels: single pixels must be seen.
+/// A crop is enlarged by the largest whole factor up to this (single pixels must be
+/// seen) that keeps its longer side within [`PANEL_SIDE`] pixels; one already longer
+/// stays at one pixel a pixel.
 const MAX_SCALE: u32 = 4;
+/// Three panels this wide fit a screen side by side.
 const PANEL_SIDE: u32 = 360;
-/// White between the panels.
+/// White between the panels, so that the eye finds their edges.
 const GAP: u32 = 4;
 
 /// The box `(x0, y0, x1, y1)` (exclusive ends) holding every pixel of `object` in any
@@ -80,8 +82,8 @@ mod tests {
     #[test]
     fn the_crop_holds_the_object_in_every_panel() {
         let mut drawn = Frame::new(100, 50, [0; 3]);
-        let (reference, geometry) = (drawn.clone(), drawn.clone());
-        let mut reference = reference;
+        let mut reference = Frame::new(100, 50, [10; 3]);
+        let geometry = Frame::new(100, 50, [20; 3]);
         drawn.object[20 * 100 + 30] = 7;
         drawn.color[20 * 100 + 30] = [200, 0, 0];
         reference.object[24 * 100 + 40] = 7;
@@ -98,7 +100,9 @@ mod tests {
         assert_eq!(at(24, 24), [200, 0, 0]);
         assert_eq!(at(27, 27), [200, 0, 0]);
         assert_eq!(at(28, 24), [0; 3]);
-        assert_eq!(at(92 + 24 + GAP, 24), [0; 3]);
+        // Each panel from its own frame, white between them.
+        assert_eq!(at(92 + GAP + 24, 24), [10; 3]);
+        assert_eq!(at(2 * (92 + GAP) + 24, 24), [20; 3]);
         assert_eq!(at(92, 0), [255; 3]);
     }
 }
