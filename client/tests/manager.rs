@@ -225,20 +225,18 @@ fn a_texture_magnified_past_a_pixel_is_replaced_while_shown() {
         (asked, shows[sphere])
     };
     let (asked, _) = frame(&mut manager, 320, 0.0);
+    // A request answered with the texture it asked for.
+    let answer = |r: &relief_client::manager::TextureRequest| {
+        let tracer = ObjectTracer::new(&scene.objects[sphere]);
+        let texture = bake(&tracer, r.eye, r.size, r.depth_bits, r.projection).unwrap();
+        arrive(
+            &arrivals,
+            r.id,
+            ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
+        );
+    };
     let first = asked.first().expect("a request for now").clone();
-    let texture = bake(
-        &ObjectTracer::new(&scene.objects[sphere]),
-        first.eye,
-        first.size,
-        first.depth_bits,
-        first.projection,
-    )
-    .unwrap();
-    arrive(
-        &arrivals,
-        first.id,
-        ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
-    );
+    answer(&first);
     let (asked, show) = frame(&mut manager, 320, 0.1);
     assert!(
         matches!(show, Show::Impostor { .. }) && asked.is_empty(),
@@ -271,19 +269,7 @@ fn a_texture_magnified_past_a_pixel_is_replaced_while_shown() {
     );
     // Made from the same eye, the finer texture replaces the coarse one: it is shown,
     // and nothing more is asked for.
-    let texture = bake(
-        &ObjectTracer::new(&scene.objects[sphere]),
-        finer.eye,
-        finer.size,
-        finer.depth_bits,
-        finer.projection,
-    )
-    .unwrap();
-    arrive(
-        &arrivals,
-        finer.id,
-        ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
-    );
+    answer(finer);
     let (asked, show) = frame(&mut manager, width, 0.3);
     let shown = manager
         .describe(&scene, sphere, &show, &camera(width))

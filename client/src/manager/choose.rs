@@ -7,7 +7,7 @@ use glam::Vec3;
 
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
-use relief_render::validity::schaufler::{needs_finer_texture, texel_angle, volume_centre};
+use relief_render::validity::schaufler::{magnification, texel_angle, volume_centre};
 use relief_render::warp::params::WarpParams;
 
 use super::Manager;
@@ -221,12 +221,12 @@ impl Manager {
         };
         let grade = |h: &Held| {
             let texture = &h.pyramid.levels[0].texture.camera;
-            let coarse = needs_finer_texture(texture, &at_eye, REFINE_TEXEL);
+            let texel = magnification(texture, &at_eye);
             Grade {
                 growth: growth(h, eye, camera),
                 band: band(h, centre, eye, camera),
-                too_coarse: needs_finer_texture(texture, &at_eye, COARSEST_SHOWN),
-                finer_available: coarse && texture.width < wanted,
+                too_coarse: texel > COARSEST_SHOWN,
+                finer_available: texel > REFINE_TEXEL && texture.width < wanted,
             }
         };
         Some(self.objects[object].held.iter().map(grade).collect())

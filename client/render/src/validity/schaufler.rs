@@ -61,12 +61,19 @@ pub fn volume_centre(texture: &SourceCamera) -> Vec3 {
 
 /// The resolution test (eq. 4-1): the texture is too coarse when a texel subtends more
 /// than `k` pixels' angle (`k ≥ 1` tolerates slightly blurry impostors) where the
-/// texture's volume shows: for a solid [`Camera::pixel_angle_towards`] (at the side of
-/// a wide view it needs finer texels than at its centre), for leaves the centre's
-/// (see `pixel_angle` here). `camera` in the texture's frame.
+/// texture's volume shows ([`magnification`]). `camera` in the texture's frame.
 pub fn needs_finer_texture(texture: &SourceCamera, camera: &Camera, k: f32) -> bool {
+    magnification(texture, camera) > k
+}
+
+/// The pixels' angles one texel subtends where the texture's volume shows, as the
+/// resolution test ([`needs_finer_texture`]) holds it: against the pixel there for a
+/// solid ([`Camera::pixel_angle_towards`]: at the side of a wide view it needs finer
+/// texels than at its centre), for leaves the centre's (see `pixel_angle` here). One
+/// figure to test against several bounds. `camera` in the texture's frame.
+pub fn magnification(texture: &SourceCamera, camera: &Camera) -> f32 {
     let held_to = pixel_angle(camera, texture.projection(), volume_centre(texture));
-    texel_angle(texture, camera.eye_f32()) > k * held_to
+    texel_angle(texture, camera.eye_f32()) / held_to
 }
 
 /// The pixel angle a texture in `projection` is held to where `centre` shows: a
