@@ -19,7 +19,10 @@
 //!
 //! where `q` is the stored depth level: `0 ..= q_max`, `q_max = 254` for 8-bit depth and
 //! `65534` for 16-bit; the next value (255 or 65535) marks an empty texel. Levels are
-//! rounded to nearest, so a decoded depth is within half a quantum of the surface.
+//! rounded to nearest, so a decoded depth is within half a quantum of the surface. A
+//! texel on the object's outline holds the depth a little further out towards it, where
+//! its surface meets the outline, not its centre ray's (the bake's rim rays:
+//! `relief_trace::rim`).
 //!
 //! The surface point of `(u, v, t)` depends on the [`SourceProjection`]:
 //!
@@ -48,6 +51,12 @@ use crate::error::{Error, Result};
 
 /// Largest relief-texture edge, in texels, that any command accepts.
 pub const MAX_TEXTURE_SIZE: u32 = 4096;
+
+/// The steepest a surface is taken to run between neighbouring texels: this many texels
+/// of depth per texel across. A steeper step is a break between two surfaces, whatever
+/// the normals say (at a grazing rim they would allow any step). The impostor joins
+/// neighbours by it, and the bake's rim rays keep only hits within it of their texel.
+pub const MAX_SLOPE: f32 = 24.0;
 
 /// Precision of stored depth.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]

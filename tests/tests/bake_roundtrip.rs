@@ -1,15 +1,18 @@
 //! `relief bake` checked by an independent ray caster (`relief_tests::oracle`: every
 //! triangle, in f64, by signed volumes — no code shared with the tracer), reading only
-//! `texture.json` and the PNG planes the command wrote.
+//! `texture.json` and the PNG planes the command wrote: each texel's centre ray, and
+//! on the outline its rim rays, whose deepest hit on the texel's own surface gives its
+//! depth.
 
 use std::path::Path;
 
 use glam::Vec3;
 
-use relief_core::relief::{ReliefTexture, decode_normal_rgb8};
+use relief_core::relief::{MAX_SLOPE, ReliefTexture, decode_normal_rgb8};
 use relief_core::scene::Scene;
 use relief_tests::oracle::nearest_hit;
 use relief_tests::{relief, scratch, shared_models};
+use relief_trace::rim::{RIM_MAX_TURN_DEG, RIM_RAY_OFFSETS};
 
 /// Agreement between a baked texture and brute-force rays through its texel centres.
 #[derive(Debug, Default)]
@@ -19,6 +22,8 @@ struct Agreement {
     mask_mismatch: usize,
     depth_mismatch: usize,
     normal_mismatch: usize,
+    /// Rim texels whose depth is a rim ray's, deeper than their centre's.
+    rim_deepened: usize,
 }
 
 fn check(scene_spec: &str, object: &str, eye: &str, size: u32, bits: u32) -> Agreement {
@@ -67,33 +72,71 @@ fn check_in(scene_spec: &str, object: &str, eye: &str, size: u32, bits: u32, pro
         "{projection}"
     );
     let quantum = c.depth_quantum(texture.depth_bits);
+    let stored_covered = |i: i64, j: i64| {
+        (0..size as i64).contains(&i)
+            && (0..size as i64).contains(&j)
+            && texture.world_point(i as u32, j as u32).is_some()
+    };
+    // The nearest surface on the ray through plane point `(u, v)`, from depth `from` on
+    // when given: its depth along `f`, and its shading normal. Cast from far in front of
+    // the plane (the caster knows nothing of bounds), or from the eye.
+    let cast = |u: f32, v: f32, from: Option<f32>| {
+        let plane_point = c.point(u, v, 0.0);
+        let (start, direction) = match (from, c.centre) {
+            (Some(t), _) => (c.point(u, v, t), c.point(u, v, t + 1.0) - c.point(u, v, t)),
+            (None, None) => (plane_point - c.f * (c.depth_far * 4.0 + 1.0), c.f),
+            (None, Some(centre)) => (centre, plane_point - centre),
+        };
+        let hit = nearest_hit(mesh, start, direction)?;
+        let surface = start.as_dvec3() + direction.as_dvec3() * hit.t;
+        let depth = (surface - plane_point.as_dvec3()).dot(c.f.as_dvec3()) as f32;
+        Some((
+            depth,
+            mesh.shading_normal(hit.triangle, hit.u as f32, hit.v as f32),
+        ))
+    };
     let mut agreement = Agreement::default();
     for j in 0..size {
         for i in 0..size {
             agreement.texels += 1;
-            // Cast from far in front of the plane (the caster knows nothing of bounds),
-            // or from the eye; `direction` is scaled to 1 along `f`, so the quantum along
-            // `f` is `|direction|` quanta along the ray.
-            let plane_point = c.texel_origin(i, j);
-            let (start, direction) = match c.centre {
-                None => (plane_point - c.f * (c.depth_far * 4.0 + 1.0), c.f),
-                Some(centre) => (centre, (plane_point - centre) / (plane_point - centre).dot(c.f)),
-            };
-            let quantum = quantum * direction.length();
-            let hit = nearest_hit(mesh, start, direction);
-            let stored = texture.world_point(i, j);
-            match (hit, stored) {
+            let (u, v) = (i as f32 + 0.5, j as f32 + 0.5);
+            match (cast(u, v, None), texture.world_point(i, j)) {
                 (None, None) => {}
-                (Some(hit), Some(point)) => {
+                (Some((centre_depth, normal)), Some(point)) => {
                     agreement.covered += 1;
-                    let surface = start.as_dvec3() + direction.as_dvec3() * hit.t;
-                    if surface.distance(point.as_dvec3()) > (quantum * 1.01 + 1e-6) as f64 {
-                        agreement.depth_mismatch += 1;
-                    }
-                    let want = mesh.shading_normal(hit.triangle, hit.u as f32, hit.v as f32);
                     let got = decode_normal_rgb8(texture.normal[texture.index(i, j)]);
-                    if got.angle_between(want) > 2f32.to_radians() {
+                    if got.angle_between(normal) > 2f32.to_radians() {
                         agreement.normal_mismatch += 1;
+                    }
+                    // A rim texel takes the deepest of its rim rays' hits on its own
+                    // surface, each the nearest from a quantum short of the texel's
+                    // centre depth on, one side at a time (`relief_trace::rim`, restated
+                    // here).
+                    let mut want = centre_depth;
+                    for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+                        if stored_covered(i as i64 + di, j as i64 + dj) {
+                            continue;
+                        }
+                        // (Offsets in turn, until one finds the texel's surface.)
+                        for offset in RIM_RAY_OFFSETS {
+                            let from = Some(centre_depth - quantum);
+                            let own = cast(u + di as f32 * offset, v + dj as f32 * offset, from).filter(
+                                |&(depth, rim_normal)| {
+                                    let reach = MAX_SLOPE * offset * c.texel_size_at(depth.max(centre_depth));
+                                    let same_way = rim_normal.dot(got) >= RIM_MAX_TURN_DEG.to_radians().cos();
+                                    depth > centre_depth && depth - centre_depth <= reach && same_way
+                                },
+                            );
+                            if let Some((depth, _)) = own {
+                                want = want.max(depth);
+                                break;
+                            }
+                        }
+                    }
+                    agreement.rim_deepened += usize::from(want > centre_depth + quantum);
+                    let stored = (point - c.point(u, v, 0.0)).dot(c.f);
+                    if (stored - want).abs() > quantum * 1.01 + 1e-6 {
+                        agreement.depth_mismatch += 1;
                     }
                 }
                 _ => agreement.mask_mismatch += 1,
@@ -114,6 +157,8 @@ fn assert_agrees(a: &Agreement, what: &str) {
     assert!(a.mask_mismatch <= allowed, "{what}: mask {a:?}");
     assert!(a.depth_mismatch <= allowed, "{what}: depth {a:?}");
     assert!(a.normal_mismatch <= allowed, "{what}: normals {a:?}");
+    // (The rim rule is exercised: every object here has a curved outline.)
+    assert!(a.rim_deepened > 0, "{what}: no rim texel deepened {a:?}");
 }
 
 #[test]

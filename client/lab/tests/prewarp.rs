@@ -469,11 +469,11 @@ fn a_texture_drawn_behind_fills_what_the_first_leaves_empty() {
 /// sphere shown from its texture's own eye covers (more than half of each pixel, as the
 /// shaded frame counts its silhouette's fragments), pixel for pixel, what the sphere
 /// rasterized covers but for a thin band of its outline — on average within a fifth of
-/// a pixel of it (measured: 0.11 and 0.08), where giving each run's end sample its
+/// a pixel of it (measured: 0.07 and 0.12), where giving each run's end sample its
 /// whole pre-warped pixel grew it by 0.44 (the rim, which the pre-warp compresses).
 /// And over the sphere's own pixels, against the anti-aliased reference, it scores
-/// within 2 dB of exact geometry drawn with one sample a pixel (measured: −0.6 and
-/// −0.3 dB), where drawing each silhouette pixel whole, as its nearest texel, scored
+/// within 2 dB of exact geometry drawn with one sample a pixel (measured: +0.5 and
+/// −0.1 dB), where drawing each silhouette pixel whole, as its nearest texel, scored
 /// 6.1 dB below it.
 #[test]
 fn a_silhouette_lies_where_its_samples_put_it() {
@@ -513,6 +513,52 @@ fn a_silhouette_lies_where_its_samples_put_it() {
         assert!(
             impostor_db > geometry_db - 2.0,
             "{impostor_db:.2} dB against geometry's {geometry_db:.2}"
+        );
+    }
+}
+
+/// A texture seen turned keeps a smooth outline, whichever way it turns. At a grazing rim
+/// each texel's centre ray strikes the surface anywhere up to `√(2r)` texels in front of
+/// the outline, and turned, each texel moves by its depth: the outline became a row of
+/// teeth on the side the eye turned to. With the bake's rim rays (`relief_trace::rim`)
+/// the sphere's 128² texture, 17° round either way along its rows and its columns,
+/// scores within half a dB of exact geometry or above it over the sphere's own pixels
+/// (measured: +2.5, +2.7, +0.0, +1.0 dB), where from the centre rays alone it scored
+/// −0.9 dB along its columns (+1.5, +1.7, −0.9, +0.5).
+#[test]
+fn a_turned_outline_stays_smooth() {
+    use glam::{Quat, Vec3};
+    use relief_lab::image_error::object_psnr;
+    use relief_render::impostor::Faces;
+    use relief_trace::ANTIALIASED_SAMPLES;
+
+    let scene = Scene::load("default").expect("default scene");
+    let solo = Solo::new(&scene, "sphere", 2.2).expect("solo");
+    let centre = solo.scene.objects[0].local_bounds.center();
+    let eye = solo.eye(0.0);
+    let texture = solo.bake(eye, 128, DepthBits::Sixteen).expect("bake");
+    let impostor = Impostor::new(texture).with_faces(Faces::Front);
+    // Round the vertical axis (along the texture's rows), and round the horizontal one
+    // square to the view (along its columns).
+    let across = (eye - centre).cross(Vec3::Y).normalize();
+    let mut gaps = Vec::new();
+    for (axis, name) in [(Vec3::Y, "rows"), (across, "columns")] {
+        for degrees in [-17.0f32, 17.0] {
+            let turned = centre + Quat::from_axis_angle(axis, degrees.to_radians()) * (eye - centre);
+            // (A texel of 0.7 pixels, as a client shows it: `MAX_TEXEL_PIXELS`.)
+            let camera = solo.camera(turned, 140).expect("orbit camera");
+            let reference = solo.reference(&camera, ANTIALIASED_SAMPLES);
+            let (shown, exact) = impostor_and_geometry(&solo, &impostor, &camera);
+            let psnr = |frame| object_psnr(frame, &reference, 0).expect("the sphere shows");
+            let gap = psnr(&shown) - psnr(&exact);
+            eprintln!("along its {name}, {degrees}°: {gap:+.2} dB against geometry");
+            gaps.push((name, degrees, gap));
+        }
+    }
+    for (name, degrees, gap) in gaps {
+        assert!(
+            gap > -0.5,
+            "along its {name}, {degrees}°: {gap:+.2} dB against geometry"
         );
     }
 }
@@ -791,10 +837,10 @@ fn the_band_past_the_rim_is_what_the_warp_leaves_empty() {
             (right, left)
         };
         // The warp runs each row's surface on half a span past its last texel, which
-        // fills part of the band, unevenly from row to row (measured: 0, 1.4 and 4.9
-        // px of 0.9, 3.5 and 7.8): the band bounds what is lost, and is most of it.
+        // fills part of the band, unevenly from row to row (measured: 0.1, 1.1 and 4.3
+        // px of 0.9, 3.4 and 7.5): the band bounds what is lost, and is much of it.
         assert!(
-            lost <= predicted + 0.3 && lost >= 0.5 * predicted - 0.6,
+            lost <= predicted + 0.3 && lost >= 0.4 * predicted - 0.6,
             "{degrees}°: {lost:.2} px lost where {predicted:.2} were predicted"
         );
         assert!(

@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 
-use relief_core::relief::{ReliefTexture, decode_normal_rgb8};
+use relief_core::relief::{MAX_SLOPE, ReliefTexture, decode_normal_rgb8};
 
 use crate::warp::params::WarpLevels;
 use crate::warp::prewarp::pack_texel;
@@ -55,9 +55,6 @@ pub struct Impostor {
 
 /// Slack on the slope test: a surface may bend this much within one texel.
 const SLOPE_SLACK: f32 = 2.0;
-/// Slopes are capped (grazing normals say "any depth change"): steeper than this many
-/// texels of depth per texel is treated as a discontinuity all the same.
-const MAX_SLOPE: f32 = 24.0;
 
 impl Impostor {
     pub fn new(texture: ReliefTexture) -> Impostor {

@@ -1,6 +1,7 @@
 //! Baking a relief texture: cast one ray per texel (parallel, or from the eye — see
 //! [`SourceProjection`]) and record the first surface's albedo, shading normal and quantised
-//! depth. The rays are cast a block at a time as one beam ([`PlaneRays`]).
+//! depth. The rays are cast a block at a time as one beam ([`PlaneRays`]). Texels on the
+//! object's outline then take the depth where their surface meets it ([`crate::rim`]).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -15,6 +16,7 @@ use relief_core::shading::to_rgb8;
 
 use crate::bvh::{Bvh, Hit, PlaneRays};
 use crate::prefetch::prefetch_lines;
+use crate::rim::deepen_rims;
 use crate::tiles::{Block, TILE, band_blocks};
 use crate::tracer::ObjectTracer;
 
@@ -113,6 +115,13 @@ pub fn bake_unless_cancelled(
     if cancelled.load(Ordering::Relaxed) {
         return Ok(None);
     }
+    deepen_rims(
+        &mut texture,
+        mesh,
+        &target.bvh,
+        rays.t_range,
+        size > SEQUENTIAL_MAX_EDGE,
+    );
     Ok(Some(texture))
 }
 
@@ -197,6 +206,8 @@ const PLANE_MARGIN: f32 = 1e-4;
 struct TexelRays {
     camera: SourceCamera,
     beam: PlaneRays,
+    /// The displacements from the near depth that rays search.
+    t_range: (f32, f32),
 }
 
 impl TexelRays {
@@ -223,7 +234,11 @@ impl TexelRays {
             Some(centre) => PlaneRays::from_centre(centre, start, a, b, f, t_min, t_max),
         }
         .ok_or(error(FacingError::OutOfRange(eye)))?;
-        Ok(TexelRays { camera, beam })
+        Ok(TexelRays {
+            camera,
+            beam,
+            t_range: (t_min, t_max),
+        })
     }
 
     /// The nearest hit of each texel of `block`, in [`Block::pixels`] order, into `hits`.

@@ -40,6 +40,7 @@
 //!   pixels, nearest object first.
 //! - [`tiles`] — the one way images are split across threads.
 //! - [`bake`](mod@bake) — the relief texture of one object for an eye.
+//! - [`rim`] — its outline's texels, given the depth where their surface meets it.
 //! - [`reference`](mod@reference) — a full perspective frame of the whole scene, Phong-lit.
 
 pub mod bake;
@@ -47,6 +48,7 @@ pub mod bvh;
 pub mod placements;
 mod prefetch;
 pub mod reference;
+pub mod rim;
 pub mod tiles;
 pub mod tracer;
 

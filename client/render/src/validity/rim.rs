@@ -9,9 +9,10 @@
 //! texture shows a ragged outline there (the fringes of a sphere drawn 21° from its
 //! texture's eye: `r` is the sphere's radius, 60 pixels, and the band 4 pixels).
 //!
-//! `r` is measured on the texture: a rim texel (covered, with an empty neighbour) and
-//! the covered texel one step inwards, against its outward normal, give
-//! `r = |p₁ − p₂| / ∠(n₁, n₂)` — exact on a sphere. Rims are grouped by the direction
+//! `r` is measured on the texture: inwards of a rim texel (covered, with an empty
+//! neighbour), against its outward normal, the covered texels one and two steps in give
+//! `r = |p₁ − p₂| / ∠(n₁, n₂)` — exact on a sphere. (The rim texel's own depth is where
+//! its surface meets the outline, not its centre's: see `relief_trace::rim`.) Rims are grouped by the direction
 //! their normal points in the texture's plane ([`RIM_SECTORS`]), each sector keeping its
 //! median radius; an eye turned by `φ` in direction `d` turns a sector facing `o` by
 //! `φ·max(0, o·d)`.
@@ -71,15 +72,23 @@ impl Rim {
                     continue;
                 }
                 let outward = outward.normalize();
-                // The texel one step inwards, if covered: its point and normal.
-                let (ii, jj) = (i - outward.x.round() as i64, j - outward.y.round() as i64);
-                let inward = ((0..w).contains(&ii) && (0..h).contains(&jj))
-                    .then(|| texture.world_point(ii as u32, jj as u32))
-                    .flatten();
-                let (Some(p1), Some(p2)) = (texture.world_point(i as u32, j as u32), inward) else {
+                // The texels one and two steps inwards, if covered: their points and
+                // normals.
+                let step = (outward.x.round() as i64, outward.y.round() as i64);
+                let inward = |n: i64| {
+                    let (ii, jj) = (i - n * step.0, j - n * step.1);
+                    let inside = (0..w).contains(&ii) && (0..h).contains(&jj);
+                    let point = inside
+                        .then(|| texture.world_point(ii as u32, jj as u32))
+                        .flatten()?;
+                    Some((
+                        point,
+                        decode_normal_rgb8(texture.normal[texture.index(ii as u32, jj as u32)]),
+                    ))
+                };
+                let (Some((p1, n1)), Some((p2, n2))) = (inward(1), inward(2)) else {
                     continue;
                 };
-                let n2 = decode_normal_rgb8(texture.normal[texture.index(ii as u32, jj as u32)]);
                 let bend = n1.angle_between(n2);
                 let radius = if bend > 0.0 {
                     (p1.distance(p2) / bend).min(cap)
