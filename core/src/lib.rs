@@ -29,6 +29,7 @@
 //!   Wavefront OBJ and glTF 2.0, and the procedural meshes of the built-in scenes.
 //! - [`scene`] — scenes (objects placed in the world, lights, camera path), loaded from a
 //!   built-in name, a TOML scene file, or a bare `.obj` or glTF file ([`gltf`]).
+//! - [`joins`] — when two samples of a relief texture are one surface.
 //! - [`relief`] — the relief texture: its source camera, depth quantisation and on-disk
 //!   format (`texture.json` + PNG planes).
 //! - [`frame`] — a rendered RGB8 frame with per-pixel object ids.
@@ -48,6 +49,7 @@ pub mod frame;
 pub mod generators;
 pub mod gltf;
 pub mod hash;
+pub mod joins;
 pub mod mesh;
 pub mod obj;
 pub mod reach;

@@ -52,12 +52,6 @@ use crate::error::{Error, Result};
 /// Largest relief-texture edge, in texels, that any command accepts.
 pub const MAX_TEXTURE_SIZE: u32 = 4096;
 
-/// The steepest a surface is taken to run between neighbouring texels: this many texels
-/// of depth per texel across. A steeper step is a break between two surfaces, whatever
-/// the normals say (at a grazing rim they would allow any step). The impostor joins
-/// neighbours by it, and the bake's rim rays keep only hits within it of their texel.
-pub const MAX_SLOPE: f32 = 24.0;
-
 /// Precision of stored depth.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum DepthBits {

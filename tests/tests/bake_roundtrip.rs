@@ -8,7 +8,8 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use relief_core::relief::{MAX_SLOPE, ReliefTexture, decode_normal_rgb8};
+use relief_core::joins::{join_reach, slope_along};
+use relief_core::relief::{ReliefTexture, decode_normal_rgb8};
 use relief_core::scene::Scene;
 use relief_tests::oracle::nearest_hit;
 use relief_tests::{relief, scratch, shared_models};
@@ -108,23 +109,30 @@ fn check_in(scene_spec: &str, object: &str, eye: &str, size: u32, bits: u32, pro
                     if got.angle_between(normal) > 2f32.to_radians() {
                         agreement.normal_mismatch += 1;
                     }
-                    // A rim texel takes the deepest of its rim rays' hits on its own
-                    // surface, each the nearest from a quantum short of the texel's
-                    // centre depth on, one side at a time (`relief_trace::rim`, restated
-                    // here).
+                    // A rim texel takes the deepest of its rim rays' hits joined to it
+                    // (`relief_core::joins`, from its stored normal), each the nearest
+                    // from a quantum short of its depth on, one side at a time
+                    // (`relief_trace::rim`, restated here). Its depth is the bake's, as
+                    // stored before: the centre hit's, rounded to its level.
+                    let bits = texture.depth_bits;
+                    let rounded = c.depth_of_level(c.level_of_depth(centre_depth, bits), bits);
                     let mut want = centre_depth;
                     for (di, dj) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
                         if stored_covered(i as i64 + di, j as i64 + dj) {
                             continue;
                         }
+                        let across = if di != 0 { c.a.normalize() } else { c.b.normalize() };
+                        let slope = slope_along(got, across, c.f);
                         // (Offsets in turn, until one finds the texel's surface.)
                         for offset in RIM_RAY_OFFSETS {
-                            let from = Some(centre_depth - quantum);
+                            let from = Some(rounded - quantum);
                             let own = cast(u + di as f32 * offset, v + dj as f32 * offset, from).filter(
                                 |&(depth, rim_normal)| {
-                                    let reach = MAX_SLOPE * offset * c.texel_size_at(depth.max(centre_depth));
+                                    let step = offset * c.texel_size_at(depth.max(rounded));
                                     let same_way = rim_normal.dot(got) >= RIM_MAX_TURN_DEG.to_radians().cos();
-                                    depth > centre_depth && depth - centre_depth <= reach && same_way
+                                    depth > rounded
+                                        && depth - rounded <= join_reach(slope, step, quantum)
+                                        && same_way
                                 },
                             );
                             if let Some((depth, _)) = own {

@@ -545,7 +545,8 @@ fn a_turned_outline_stays_smooth() {
     for (axis, name) in [(Vec3::Y, "rows"), (across, "columns")] {
         for degrees in [-17.0f32, 17.0] {
             let turned = centre + Quat::from_axis_angle(axis, degrees.to_radians()) * (eye - centre);
-            // (A texel of 0.7 pixels, as a client shows it: `MAX_TEXEL_PIXELS`.)
+            // (A texel of 0.7 pixels, within the pixel a client asks for:
+            // `MAX_TEXEL_PIXELS`.)
             let camera = solo.camera(turned, 140).expect("orbit camera");
             let reference = solo.reference(&camera, ANTIALIASED_SAMPLES);
             let (shown, exact) = impostor_and_geometry(&solo, &impostor, &camera);

@@ -1,9 +1,8 @@
 //! A relief texture prepared for display: the texture plus what every warp of it needs
 //! and that does not depend on the eye — computed once when the texture arrives.
 
-use glam::Vec3;
-
-use relief_core::relief::{MAX_SLOPE, ReliefTexture, decode_normal_rgb8};
+use relief_core::joins::{join_reach, slope_along};
+use relief_core::relief::{ReliefTexture, decode_normal_rgb8};
 
 use crate::warp::params::WarpLevels;
 use crate::warp::prewarp::pack_texel;
@@ -53,9 +52,6 @@ pub struct Impostor {
     pub faces: Faces,
 }
 
-/// Slack on the slope test: a surface may bend this much within one texel.
-const SLOPE_SLACK: f32 = 2.0;
-
 impl Impostor {
     pub fn new(texture: ReliefTexture) -> Impostor {
         let c = texture.camera;
@@ -65,15 +61,6 @@ impl Impostor {
         let (a_len, b_len) = (c.a.length(), c.b.length());
         let (a_dir, b_dir) = (c.a / a_len, c.b / b_len);
         let depth = |k: usize| c.depth_of_level(texture.depth[k], texture.depth_bits);
-        // Depth change per unit move along `axis` that a plane with normal `n` has.
-        let slope = |n: Vec3, axis: Vec3| {
-            let facing = n.dot(c.f).abs();
-            if facing < 1e-6 {
-                MAX_SLOPE
-            } else {
-                (n.dot(axis).abs() / facing).min(MAX_SLOPE)
-            }
-        };
         // How much wider than at the plane a texel is at displacement `t`
         // (`SourceCamera::texel_size_at` over its value at the plane, worked out once).
         let inverse_h = c.centre_distance().map_or(0.0, |h| 1.0 / h);
@@ -97,8 +84,8 @@ impl Impostor {
                 let n = decode_normal_rgb8(texture.normal[k]);
                 Texel {
                     depth: depth(k),
-                    slope_a: slope(n, a_dir),
-                    slope_b: slope(n, b_dir),
+                    slope_a: slope_along(n, a_dir, c.f),
+                    slope_b: slope_along(n, b_dir, c.f),
                 }
             }));
         };
@@ -108,8 +95,7 @@ impl Impostor {
             // (A perspective texture's neighbouring rays part with depth: the texel's
             // side where the surface lies.)
             let step = step * spread(p.depth.max(q.depth));
-            let allowed = SLOPE_SLACK * step * sp.max(sq) + step + 2.0 * quantum;
-            (p.depth - q.depth).abs() <= allowed
+            (p.depth - q.depth).abs() <= join_reach(sp.max(sq), step, quantum)
         };
         let covered = |k: usize| texture.depth[k] != empty;
         let mut right = vec![false; w * h];

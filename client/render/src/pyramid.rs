@@ -123,7 +123,8 @@ fn centre_depth(kept: &[(usize, f32)], corner: impl Fn(usize) -> (usize, usize))
 }
 
 /// Halves the resolution of `texture`, whose texels cover the fractions `coverage` of
-/// their area (1 or 0 for a baked texture: a texel holds what its centre's ray hit).
+/// their area (1 or 0 for a baked texture: a texel holds what its centre's ray hit, at
+/// the outline a little further out: `relief_trace::rim`).
 /// Returns the coarse texture and its texels' coverage, the mean of their blocks'.
 ///
 /// A coarse texel holds a surface when its block's coverage exceeds [`HALF_COVERED`]:

@@ -13,21 +13,22 @@
 //! So a rim texel (covered, beside an uncovered texel or the texture's edge) casts one
 //! more ray towards each uncovered side ([`RIM_RAY_OFFSETS`]), each finding the nearest
 //! surface from the texel's own depth on, and takes the deepest that is still its own
-//! surface: within [`MAX_SLOPE`] of its centre's
-//! depth per texel across, its normal within [`RIM_MAX_TURN_DEG`] of the centre's. Near
-//! the outline a smooth rim's depth scatters far less. Its albedo and normal stay its
-//! centre's.
+//! surface: joined to it as the client's impostor joins neighbours (within the depth its
+//! normal's slope reaches: [`relief_core::joins`]), its normal within
+//! [`RIM_MAX_TURN_DEG`] of the texel's. Near the outline a smooth rim's depth scatters
+//! far less. Its albedo and normal stay its centre's.
 //!
 //! The cost: the rim lands nearer the texture's own outline, where centre rays' shallow
 //! depths had carried some of it out into the band a turned eye sees past it (the band
-//! `relief_render::validity::rim` predicts); turned 10° or less, the sphere scores up to
-//! 0.3 dB lower, and the knot up to 0.15 dB.
+//! `relief_render::validity::rim` predicts); turned 10°, the sphere scores up to
+//! 0.3 dB lower, and the knot within 0.1 dB.
 
 use glam::Vec3;
 use rayon::prelude::*;
 
+use relief_core::joins::{join_reach, slope_along};
 use relief_core::mesh::Mesh;
-use relief_core::relief::{MAX_SLOPE, ReliefTexture, SourceCamera, decode_normal_rgb8};
+use relief_core::relief::{ReliefTexture, SourceCamera, decode_normal_rgb8};
 
 use crate::bvh::{Bvh, Hit, Ray};
 
@@ -43,17 +44,19 @@ pub const RIM_RAY_OFFSETS: [f32; 2] = [0.4, 0.2];
 /// tube of 5. A surface behind the rim, seen through the gap, faces the eye: 90° off.)
 pub const RIM_MAX_TURN_DEG: f32 = 45.0;
 
-/// The deepest a rim ray `offset` texels from its texel's centre, whose depth is
-/// `centre`, may strike and still be on the texel's surface: [`MAX_SLOPE`] texels of depth
-/// per texel across, in texels as wide as they are that deep (a perspective texture's
-/// widen with depth, so the bound is where the two meet; unbounded where they never do).
-fn own_surface_limit(camera: &SourceCamera, centre: f32, offset: f32) -> f32 {
-    let rise = MAX_SLOPE * offset * camera.texel_size_at(0.0);
+/// The deepest a rim ray `offset` texels from its texel's centre may strike and still be
+/// joined to the texel, whose depth is `centre_depth` and whose surface rises `slope`
+/// along the ray's side ([`join_reach`], as the impostor joins neighbours). A
+/// perspective texture's texels widen with depth, and the reach with them: the bound is
+/// where the two meet, and unbounded where they never do.
+fn deepest_joined(camera: &SourceCamera, centre_depth: f32, slope: f32, offset: f32, quantum: f32) -> f32 {
+    // (join_reach(slope, step, q) = g·step + 2q, the step `offset·texel_size_at(depth)`.)
+    let g = join_reach(slope, 1.0, 0.0) * offset * camera.texel_size_at(0.0);
     match camera.centre_distance() {
-        // (depth − centre ≤ rise·(h + depth)/h.)
-        Some(h) if rise < h => (centre + rise) / (1.0 - rise / h),
+        // (depth − centre ≤ g·(h + depth)/h + 2q.)
+        Some(h) if g < h => (centre_depth + g + 2.0 * quantum) / (1.0 - g / h),
         Some(_) => f32::INFINITY,
-        None => centre + rise,
+        None => centre_depth + g + 2.0 * quantum,
     }
 }
 
@@ -95,13 +98,13 @@ fn open_sides(depth: &[u16], w: usize, h: usize, empty: u16) -> Vec<(usize, u8)>
 const RAYS_PER_TASK: usize = 512;
 
 /// One rim ray: its texel, the side it looks to (a [`SIDES`] index), the texel's depth
-/// and the deepest its surface can lie that far across ([`own_surface_limit`]).
+/// and the deepest a hit that far across joins it ([`deepest_joined`]).
 #[derive(Clone, Copy)]
 struct RimRay {
     texel: usize,
     side: usize,
-    centre: f32,
-    limit: f32,
+    centre_depth: f32,
+    deepest: f32,
 }
 
 /// Gives each rim texel of `texture` the deepest depth its rim rays find on its own
@@ -120,6 +123,7 @@ pub(crate) fn deepen_rims(
     let (w, h) = (camera.width as usize, camera.height as usize);
     let bits = texture.depth_bits;
     let quantum = camera.depth_quantum(bits);
+    let (a_dir, b_dir) = (camera.a.normalize_or_zero(), camera.b.normalize_or_zero());
     let min_cos = RIM_MAX_TURN_DEG.to_radians().cos();
     // Every open side of every rim texel, to be tried at the first offset.
     let mut pending: Vec<(usize, usize)> = open_sides(&texture.depth, w, h, bits.empty())
@@ -137,9 +141,11 @@ pub(crate) fn deepen_rims(
             Vec::with_capacity(pending.len()),
         );
         for &(k, side) in &pending {
-            let centre = camera.depth_of_level(texture.depth[k], bits);
-            let limit = own_surface_limit(&camera, centre, offset);
+            let centre_depth = camera.depth_of_level(texture.depth[k], bits);
             let (di, dj) = SIDES[side];
+            let across = if di != 0.0 { a_dir } else { b_dir };
+            let slope = slope_along(decode_normal_rgb8(texture.normal[k]), across, camera.f);
+            let deepest = deepest_joined(&camera, centre_depth, slope, offset, quantum);
             let (u, v) = (
                 (k % w) as f32 + 0.5 + di * offset,
                 (k / w) as f32 + 0.5 + dj * offset,
@@ -150,17 +156,17 @@ pub(crate) fn deepen_rims(
             wanted.push(RimRay {
                 texel: k,
                 side,
-                centre,
-                limit,
+                centre_depth,
+                deepest,
             });
-            // (Searched from a quantum short of the texel's depth to the deepest its
-            // surface can lie: a ray grazing the rim crosses many of the hierarchy's
-            // boxes, and a whole-depth search took twice as long.)
+            // (Searched from a quantum short of the texel's depth to the deepest a hit
+            // joins it: a ray grazing the rim crosses many of the hierarchy's boxes,
+            // and a whole-depth search took twice as long.)
             rays.push(Ray {
                 origin,
                 direction,
-                t_min: t_range.0.max(centre - camera.depth_near - quantum),
-                t_max: t_range.1.min(limit - camera.depth_near),
+                t_min: t_range.0.max(centre_depth - camera.depth_near - quantum),
+                t_max: t_range.1.min(deepest - camera.depth_near),
             });
         }
         let mut hits: Vec<Option<Hit>> = vec![None; rays.len()];
@@ -177,8 +183,8 @@ pub(crate) fn deepen_rims(
             let own = hit.filter(|hit| {
                 let depth = camera.depth_near + hit.t;
                 let normal = mesh.shading_normal(hit.triangle as usize, hit.u, hit.v);
-                depth > ray.centre
-                    && depth <= ray.limit
+                depth > ray.centre_depth
+                    && depth <= ray.deepest
                     && normal.dot(decode_normal_rgb8(texture.normal[ray.texel])) >= min_cos
             });
             match own {

@@ -11,8 +11,8 @@
 //!
 //! `r` is measured on the texture: inwards of a rim texel (covered, with an empty
 //! neighbour), against its outward normal, the covered texels one and two steps in give
-//! `r = |p₁ − p₂| / ∠(n₁, n₂)` — exact on a sphere. (The rim texel's own depth is where
-//! its surface meets the outline, not its centre's: see `relief_trace::rim`.) Rims are grouped by the direction
+//! `r = |p₁ − p₂| / ∠(n₁, n₂)` — exact on a sphere. (The rim texel's own depth lies
+//! nearer the outline than its centre's: see `relief_trace::rim`.) Rims are grouped by the direction
 //! their normal points in the texture's plane ([`RIM_SECTORS`]), each sector keeping its
 //! median radius; an eye turned by `φ` in direction `d` turns a sector facing `o` by
 //! `φ·max(0, o·d)`.
@@ -66,16 +66,18 @@ impl Rim {
                     continue;
                 }
                 let k = texture.index(i as u32, j as u32);
-                let n1 = decode_normal_rgb8(texture.normal[k]);
-                let outward = Vec2::new(n1.dot(a_dir), n1.dot(b_dir));
+                let normal = decode_normal_rgb8(texture.normal[k]);
+                let outward = Vec2::new(normal.dot(a_dir), normal.dot(b_dir));
                 if outward.length() < GRAZING {
                     continue;
                 }
                 let outward = outward.normalize();
                 // The texels one and two steps inwards, if covered: their points and
-                // normals.
+                // normals. (Where only one is, as across a thin part, the rim texel
+                // stands in for the first: its depth lies nearer the outline than its
+                // centre's, so the radius comes out larger, and the band wider.)
                 let step = (outward.x.round() as i64, outward.y.round() as i64);
-                let inward = |n: i64| {
+                let at = |n: i64| {
                     let (ii, jj) = (i - n * step.0, j - n * step.1);
                     let inside = (0..w).contains(&ii) && (0..h).contains(&jj);
                     let point = inside
@@ -86,8 +88,10 @@ impl Rim {
                         decode_normal_rgb8(texture.normal[texture.index(ii as u32, jj as u32)]),
                     ))
                 };
-                let (Some((p1, n1)), Some((p2, n2))) = (inward(1), inward(2)) else {
-                    continue;
+                let ((p1, n1), (p2, n2)) = match (at(0), at(1), at(2)) {
+                    (_, Some(first), Some(second)) => (first, second),
+                    (Some(rim), Some(first), None) => (rim, first),
+                    _ => continue,
                 };
                 let bend = n1.angle_between(n2);
                 let radius = if bend > 0.0 {
