@@ -94,7 +94,8 @@ fn open_sides(depth: &[u16], w: usize, h: usize, empty: u16) -> Vec<(usize, u8)>
 }
 
 /// Rim rays are cast in chunks of this many on the thread pool: a chunk is a few
-/// hundred microseconds of tracing, so a small texture's rim stays on one thread.
+/// hundred microseconds of tracing. Fewer stay on the calling thread (handed to the
+/// pool, a 128² texture's few hundred waited as long as they took).
 const RAYS_PER_TASK: usize = 512;
 
 /// One rim ray: its texel, the side it looks to (a [`SIDES`] index), the texel's depth
@@ -170,7 +171,7 @@ pub(crate) fn deepen_rims(
             });
         }
         let mut hits: Vec<Option<Hit>> = vec![None; rays.len()];
-        if parallel {
+        if parallel && rays.len() > RAYS_PER_TASK {
             (rays
                 .par_chunks(RAYS_PER_TASK)
                 .zip(hits.par_chunks_mut(RAYS_PER_TASK)))
