@@ -6,16 +6,20 @@
 //! moved along `axis` in the image plane ([`slope_along`]), capped at [`MAX_SLOPE`]. Two
 //! samples `step` apart are joined when their depths differ by no more than the steeper
 //! of their slopes allows, with [`SLOPE_SLACK`] for the bend between them, a step's
-//! worth more, and two depth quanta for rounding ([`join_reach`]).
+//! worth more, and two depth quanta for rounding ([`join_reach`]). (A rim ray's hit has
+//! no normal of the texture's: the rim texel's own slope stands for both.)
 
 use glam::Vec3;
 
-/// Slack on the slope test: a surface may bend this much within one texel.
+/// Slack on the slope test: a surface may bend this much within one texel. (Towards a
+/// rim its slope grows: on a sphere, the step to the outline from a texel's centre is
+/// twice what the centre's slope alone gives.)
 pub const SLOPE_SLACK: f32 = 2.0;
 
 /// The steepest a surface is taken to run between samples: this many units of depth per
-/// unit across. (A grazing normal says "any step"; past this the step is counted as
-/// steep as this, and joins only within [`join_reach`] of it.)
+/// unit across. A grazing normal says "any step"; past this the step is counted as steep
+/// as this, and joins only within [`join_reach`] of it: 49 texels of depth a texel
+/// across.
 pub const MAX_SLOPE: f32 = 24.0;
 
 /// Depth change per unit move along unit `axis` (in the image plane) of a surface with

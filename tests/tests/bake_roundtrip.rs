@@ -121,14 +121,17 @@ fn check_in(scene_spec: &str, object: &str, eye: &str, size: u32, bits: u32, pro
                         if stored_covered(i as i64 + di, j as i64 + dj) {
                             continue;
                         }
-                        let across = if di != 0 { c.a.normalize() } else { c.b.normalize() };
-                        let slope = slope_along(got, across, c.f);
+                        let across = if di != 0 { c.a } else { c.b };
+                        let slope = slope_along(got, across.normalize(), c.f);
                         // (Offsets in turn, until one finds the texel's surface.)
                         for offset in RIM_RAY_OFFSETS {
                             let from = Some(rounded - quantum);
                             let own = cast(u + di as f32 * offset, v + dj as f32 * offset, from).filter(
                                 |&(depth, rim_normal)| {
-                                    let step = offset * c.texel_size_at(depth.max(rounded));
+                                    // (The side's texel width, widening with depth
+                                    // in a perspective texture.)
+                                    let spread = c.centre_distance().map_or(1.0, |h| (h + depth) / h);
+                                    let step = offset * across.length() * spread;
                                     let same_way = rim_normal.dot(got) >= RIM_MAX_TURN_DEG.to_radians().cos();
                                     depth > rounded
                                         && depth - rounded <= join_reach(slope, step, quantum)

@@ -46,12 +46,20 @@ pub const RIM_MAX_TURN_DEG: f32 = 45.0;
 
 /// The deepest a rim ray `offset` texels from its texel's centre may strike and still be
 /// joined to the texel, whose depth is `centre_depth` and whose surface rises `slope`
-/// along the ray's side ([`join_reach`], as the impostor joins neighbours). A
-/// perspective texture's texels widen with depth, and the reach with them: the bound is
-/// where the two meet, and unbounded where they never do.
-fn deepest_joined(camera: &SourceCamera, centre_depth: f32, slope: f32, offset: f32, quantum: f32) -> f32 {
-    // (join_reach(slope, step, q) = g·step + 2q, the step `offset·texel_size_at(depth)`.)
-    let g = join_reach(slope, 1.0, 0.0) * offset * camera.texel_size_at(0.0);
+/// along the ray's side ([`join_reach`], as the impostor joins neighbours), texels being
+/// `width` wide that way at the image plane. A perspective texture's texels widen with
+/// depth, and the reach with them: the bound is where the two meet, and unbounded where
+/// they never do.
+fn deepest_joined(
+    camera: &SourceCamera,
+    centre_depth: f32,
+    slope: f32,
+    width: f32,
+    offset: f32,
+    quantum: f32,
+) -> f32 {
+    // (join_reach(slope, step, q) = g·step + 2q, the step `offset·width` at the plane.)
+    let g = join_reach(slope, 1.0, 0.0) * offset * width;
     match camera.centre_distance() {
         // (depth − centre ≤ g·(h + depth)/h + 2q.)
         Some(h) if g < h => (centre_depth + g + 2.0 * quantum) / (1.0 - g / h),
@@ -94,8 +102,8 @@ fn open_sides(depth: &[u16], w: usize, h: usize, empty: u16) -> Vec<(usize, u8)>
 }
 
 /// Rim rays are cast in chunks of this many on the thread pool: a chunk is a few
-/// hundred microseconds of tracing. Fewer stay on the calling thread (handed to the
-/// pool, a 128² texture's few hundred waited as long as they took).
+/// hundred microseconds of tracing. No more than one chunk's stay on the calling
+/// thread, where they need no hand-over.
 const RAYS_PER_TASK: usize = 512;
 
 /// One rim ray: its texel, the side it looks to (a [`SIDES`] index), the texel's depth
@@ -112,7 +120,8 @@ struct RimRay {
 /// surface (see the module docs). `bvh` is the object's; rays search displacements
 /// `t_range` from the texture's near depth, as the bake's own rays do; on the thread
 /// pool when `parallel` (as the bake itself: see
-/// [`SEQUENTIAL_MAX_EDGE`](crate::bake::SEQUENTIAL_MAX_EDGE)).
+/// [`SEQUENTIAL_MAX_EDGE`](crate::bake::SEQUENTIAL_MAX_EDGE)) and there are more than
+/// [`RAYS_PER_TASK`] of them.
 pub(crate) fn deepen_rims(
     texture: &mut ReliefTexture,
     mesh: &Mesh,
@@ -124,7 +133,6 @@ pub(crate) fn deepen_rims(
     let (w, h) = (camera.width as usize, camera.height as usize);
     let bits = texture.depth_bits;
     let quantum = camera.depth_quantum(bits);
-    let (a_dir, b_dir) = (camera.a.normalize_or_zero(), camera.b.normalize_or_zero());
     let min_cos = RIM_MAX_TURN_DEG.to_radians().cos();
     // Every open side of every rim texel, to be tried at the first offset.
     let mut pending: Vec<(usize, usize)> = open_sides(&texture.depth, w, h, bits.empty())
@@ -144,9 +152,15 @@ pub(crate) fn deepen_rims(
         for &(k, side) in &pending {
             let centre_depth = camera.depth_of_level(texture.depth[k], bits);
             let (di, dj) = SIDES[side];
-            let across = if di != 0.0 { a_dir } else { b_dir };
-            let slope = slope_along(decode_normal_rgb8(texture.normal[k]), across, camera.f);
-            let deepest = deepest_joined(&camera, centre_depth, slope, offset, quantum);
+            // (Along the side's own axis, as the impostor joins: a texture's texels
+            // need not be square.)
+            let (across, width) = if di != 0.0 {
+                (camera.a, camera.a.length())
+            } else {
+                (camera.b, camera.b.length())
+            };
+            let slope = slope_along(decode_normal_rgb8(texture.normal[k]), across / width, camera.f);
+            let deepest = deepest_joined(&camera, centre_depth, slope, width, offset, quantum);
             let (u, v) = (
                 (k % w) as f32 + 0.5 + di * offset,
                 (k / w) as f32 + 0.5 + dj * offset,
