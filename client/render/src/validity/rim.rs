@@ -185,6 +185,53 @@ mod tests {
         texture
     }
 
+    /// A thin part, two texels across, keeps a radius at its rim: with only one texel
+    /// inside each rim texel, the rim texel and that one measure it (a cylinder 0.9
+    /// texels round, along `b`: measured 0.95 of its radius).
+    #[test]
+    fn a_thin_part_keeps_its_rims_radius() {
+        let eye = Vec3::new(0.0, 0.0, 4.0);
+        let size = 64;
+        let bounds = Aabb::from_points([Vec3::new(-0.05, -1.0, -0.05), Vec3::new(0.05, 1.0, 0.05)]);
+        let camera = SourceCamera::facing(eye, &bounds, size, size, SourceProjection::Orthographic)
+            .expect("faces the cylinder");
+        let r = 0.9 * camera.a.length();
+        assert!(r < 0.05, "the cylinder lies within its bounds");
+        let bits = DepthBits::Sixteen;
+        let mut texture = ReliefTexture::empty(camera, bits, eye);
+        // Across the cylinder's axis (y): the ray q + f·t meets |q⊥ + f⊥·t| = r.
+        let across = |v: Vec3| v - Vec3::Y * v.y;
+        for j in 0..size {
+            for i in 0..size {
+                let (q, f) = (across(camera.texel_origin(i, j)), across(camera.f));
+                let (a, half_b, c) = (f.length_squared(), q.dot(f), q.length_squared() - r * r);
+                let discriminant = half_b * half_b - a * c;
+                if discriminant < 0.0 {
+                    continue;
+                }
+                let t = (-half_b - discriminant.sqrt()) / a;
+                let k = texture.index(i, j);
+                texture.depth[k] = camera.level_of_depth(t, bits);
+                texture.normal[k] = encode_normal_rgb8((q + f * t) / r);
+            }
+        }
+        let rows_covered = (0..size)
+            .filter(|&i| !texture.is_empty_texel(i, size / 2))
+            .count();
+        assert_eq!(rows_covered, 2, "two texels across");
+        let rim = Rim::find(&texture);
+        // The two sides face ±a, each on a boundary between two sectors (which one,
+        // the normals' rounding decides).
+        for outward in [Vec2::X, -Vec2::X] {
+            let sectors = [0.01f32, -0.01].map(|turn| sector_of(outward.rotate(Vec2::from_angle(turn))));
+            let measured = sectors.map(|s| rim.radius[s]).into_iter().fold(0.0, f32::max);
+            assert!(
+                measured > 0.5 * r && measured < 2.0 * r,
+                "facing {outward}: radius {measured} for {r}: {rim:?}"
+            );
+        }
+    }
+
     #[test]
     fn a_spheres_rim_has_its_radius_all_round() {
         let texture = sphere(0.5, Vec3::new(0.0, 0.0, 4.0), 128);
