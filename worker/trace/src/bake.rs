@@ -116,13 +116,7 @@ pub fn bake_unless_cancelled(
     if cancelled.load(Ordering::Relaxed) {
         return Ok(None);
     }
-    deepen_rims(
-        &mut texture,
-        mesh,
-        &target.bvh,
-        rays.t_range,
-        size > SEQUENTIAL_MAX_EDGE,
-    );
+    deepen_rims(&mut texture, target, rays.t_range, size > SEQUENTIAL_MAX_EDGE);
     Ok(Some(texture))
 }
 

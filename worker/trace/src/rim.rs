@@ -27,10 +27,10 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use relief_core::joins::{join_reach, slope_along};
-use relief_core::mesh::Mesh;
 use relief_core::relief::{ReliefTexture, SourceCamera, decode_normal_rgb8};
 
-use crate::bvh::{Bvh, Hit, Ray};
+use crate::bvh::{Hit, Ray};
+use crate::tracer::ObjectTracer;
 
 /// Where a rim texel's ray towards an uncovered neighbour crosses the image plane, in
 /// texels from its centre: first 0.4 (short of half a texel: what lies further is the
@@ -106,26 +106,26 @@ fn open_sides(depth: &[u16], w: usize, h: usize, empty: u16) -> Vec<(usize, u8)>
 /// thread, where they need no hand-over.
 const RAYS_PER_TASK: usize = 512;
 
-/// One rim ray: its texel, the side it looks to (a [`SIDES`] index), the texel's depth
-/// and the deepest a hit that far across joins it ([`deepest_joined`]).
+/// One open side of a rim texel, as its rays need it: the texel, the side (a [`SIDES`]
+/// index), the texel's depth, and its surface's slope and its texels' width that way.
 #[derive(Clone, Copy)]
-struct RimRay {
+struct RimSide {
     texel: usize,
     side: usize,
     centre_depth: f32,
-    deepest: f32,
+    slope: f32,
+    width: f32,
 }
 
 /// Gives each rim texel of `texture` the deepest depth its rim rays find on its own
-/// surface (see the module docs). `bvh` is the object's; rays search displacements
-/// `t_range` from the texture's near depth, as the bake's own rays do; on the thread
-/// pool when `parallel` (as the bake itself: see
+/// surface (see the module docs). `target` is the texture's object; rays search
+/// displacements `t_range` from the texture's near depth, as the bake's own rays do; on
+/// the thread pool when `parallel` (as the bake itself: see
 /// [`SEQUENTIAL_MAX_EDGE`](crate::bake::SEQUENTIAL_MAX_EDGE)) and there are more than
 /// [`RAYS_PER_TASK`] of them.
 pub(crate) fn deepen_rims(
     texture: &mut ReliefTexture,
-    mesh: &Mesh,
-    bvh: &Bvh,
+    target: &ObjectTracer,
     t_range: (f32, f32),
     parallel: bool,
 ) {
@@ -134,83 +134,84 @@ pub(crate) fn deepen_rims(
     let bits = texture.depth_bits;
     let quantum = camera.depth_quantum(bits);
     let min_cos = RIM_MAX_TURN_DEG.to_radians().cos();
+    let normal_of = |k: usize| decode_normal_rgb8(texture.normal[k]);
     // Every open side of every rim texel, to be tried at the first offset.
-    let mut pending: Vec<(usize, usize)> = open_sides(&texture.depth, w, h, bits.empty())
+    let mut pending: Vec<RimSide> = open_sides(&texture.depth, w, h, bits.empty())
         .into_iter()
         .flat_map(|(k, open)| {
             (0..SIDES.len())
                 .filter(move |s| open & (1 << s) != 0)
                 .map(move |s| (k, s))
         })
-        .collect();
-    let mut deepest: Vec<(usize, f32)> = Vec::new();
-    for offset in RIM_RAY_OFFSETS {
-        let (mut wanted, mut rays) = (
-            Vec::with_capacity(pending.len()),
-            Vec::with_capacity(pending.len()),
-        );
-        for &(k, side) in &pending {
-            let centre_depth = camera.depth_of_level(texture.depth[k], bits);
-            let (di, dj) = SIDES[side];
+        .map(|(texel, side)| {
             // (Along the side's own axis, as the impostor joins: a texture's texels
             // need not be square.)
-            let (across, width) = if di != 0.0 {
-                (camera.a, camera.a.length())
-            } else {
-                (camera.b, camera.b.length())
-            };
-            let slope = slope_along(decode_normal_rgb8(texture.normal[k]), across / width, camera.f);
-            let deepest = deepest_joined(&camera, centre_depth, slope, width, offset, quantum);
-            let (u, v) = (
-                (k % w) as f32 + 0.5 + di * offset,
-                (k / w) as f32 + 0.5 + dj * offset,
-            );
-            let origin = camera.point(u, v, camera.depth_near);
-            // (`point` is linear in depth: one unit of it along the texel's ray.)
-            let direction: Vec3 = camera.point(u, v, camera.depth_near + 1.0) - origin;
-            wanted.push(RimRay {
-                texel: k,
+            let across = if SIDES[side].0 != 0.0 { camera.a } else { camera.b };
+            let width = across.length();
+            RimSide {
+                texel,
                 side,
-                centre_depth,
-                deepest,
-            });
-            // (Searched from a quantum short of the texel's depth to the deepest a hit
-            // joins it: a ray grazing the rim crosses many of the hierarchy's boxes,
-            // and a whole-depth search took twice as long.)
-            rays.push(Ray {
-                origin,
-                direction,
-                t_min: t_range.0.max(centre_depth - camera.depth_near - quantum),
-                t_max: t_range.1.min(deepest - camera.depth_near),
-            });
-        }
+                centre_depth: camera.depth_of_level(texture.depth[texel], bits),
+                slope: slope_along(normal_of(texel), across / width, camera.f),
+                width,
+            }
+        })
+        .collect();
+    let mut found: Vec<(usize, f32)> = Vec::new();
+    for offset in RIM_RAY_OFFSETS {
+        let deepest: Vec<f32> = (pending.iter())
+            .map(|s| deepest_joined(&camera, s.centre_depth, s.slope, s.width, offset, quantum))
+            .collect();
+        let rays: Vec<Ray> = (pending.iter().zip(&deepest))
+            .map(|(s, &deepest)| {
+                let (di, dj) = SIDES[s.side];
+                let (u, v) = (
+                    (s.texel % w) as f32 + 0.5 + di * offset,
+                    (s.texel / w) as f32 + 0.5 + dj * offset,
+                );
+                let origin = camera.point(u, v, camera.depth_near);
+                // (`point` is linear in depth: one unit of it along the texel's ray.)
+                let direction: Vec3 = camera.point(u, v, camera.depth_near + 1.0) - origin;
+                // (Searched from a quantum short of the texel's depth to the deepest a
+                // hit joins it: a ray grazing the rim crosses many of the hierarchy's
+                // boxes, and a whole-depth search took twice as long.)
+                Ray {
+                    origin,
+                    direction,
+                    t_min: t_range.0.max(s.centre_depth - camera.depth_near - quantum),
+                    t_max: t_range.1.min(deepest - camera.depth_near),
+                }
+            })
+            .collect();
         let mut hits: Vec<Option<Hit>> = vec![None; rays.len()];
         if parallel && rays.len() > RAYS_PER_TASK {
             (rays
                 .par_chunks(RAYS_PER_TASK)
                 .zip(hits.par_chunks_mut(RAYS_PER_TASK)))
-            .for_each(|(rays, hits)| bvh.intersect_batch(rays, hits));
+            .for_each(|(rays, hits)| target.bvh.intersect_batch(rays, hits));
         } else {
-            bvh.intersect_batch(&rays, &mut hits);
+            target.bvh.intersect_batch(&rays, &mut hits);
         }
-        pending.clear();
-        for (ray, hit) in wanted.iter().zip(&hits) {
-            let own = hit.filter(|hit| {
-                let depth = camera.depth_near + hit.t;
-                let normal = mesh.shading_normal(hit.triangle as usize, hit.u, hit.v);
-                depth > ray.centre_depth
-                    && depth <= ray.deepest
-                    && normal.dot(decode_normal_rgb8(texture.normal[ray.texel])) >= min_cos
-            });
+        let mut missed = Vec::new();
+        for ((s, &deepest), hit) in pending.iter().zip(&deepest).zip(&hits) {
+            let own = hit
+                .map(|hit| (camera.depth_near + hit.t, hit))
+                .filter(|&(depth, hit)| {
+                    let normal = target
+                        .object
+                        .mesh
+                        .shading_normal(hit.triangle as usize, hit.u, hit.v);
+                    depth > s.centre_depth && depth <= deepest && normal.dot(normal_of(s.texel)) >= min_cos
+                });
             match own {
-                Some(hit) => deepest.push((ray.texel, camera.depth_near + hit.t)),
-                None => pending.push((ray.texel, ray.side)),
+                Some((depth, _)) => found.push((s.texel, depth)),
+                None => missed.push(*s),
             }
         }
+        pending = missed;
     }
-    // (Several sides of one texel: the deepest.)
-    deepest.sort_unstable_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)));
-    for (k, depth) in deepest {
-        texture.depth[k] = camera.level_of_depth(depth, bits);
+    // (Each depth found lies beyond the texel's own: several sides, the deepest.)
+    for (k, depth) in found {
+        texture.depth[k] = texture.depth[k].max(camera.level_of_depth(depth, bits));
     }
 }
