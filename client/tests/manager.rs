@@ -822,3 +822,80 @@ fn a_texture_for_a_nearby_eye_is_held_under_its_own_eye() {
         "held under the eye it was made for: {shown:?}"
     );
 }
+
+/// A texture the manager asked for is kept as it comes, though farther from the eye
+/// than those it holds: not let go unseen and asked for again the next frame. An eye
+/// orbiting the sphere keeps a texture asked for ahead of its turn
+/// ([`PAIR_SPACING`] valid angles on — the sphere's gaps do not grow, so far on), the
+/// farthest it holds; at a low tolerance the textures near the eye go stale within a
+/// few degrees, so the 3 kept are all nearer the eye. Every request is answered at
+/// once, and none may be for an eye within a degree of one answered before. (Kept by
+/// nearness to the eye alone, the one ahead was asked for again in 6 frames running.)
+///
+/// [`PAIR_SPACING`]: relief_client::manager::policy::PAIR_SPACING
+#[test]
+fn a_texture_asked_for_is_not_let_go_as_it_comes() {
+    use relief_core::relief::DepthBits;
+    use relief_trace::bake;
+    use relief_trace::tracer::ObjectTracer;
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let (commands_tx, mut commands) = unbounded_channel();
+    let (arrivals, arrivals_rx) = unbounded_channel();
+    let config = Config {
+        keep: 3,
+        tolerance: 2.0,
+        ..Config::default()
+    };
+    let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
+    let sphere = index(&scene, "sphere");
+    let object = &scene.objects[sphere];
+    let (centre, local_centre) = (object.world_bounds().center(), object.local_bounds.center());
+    let tracer = ObjectTracer::new(object);
+    let mut answered: Vec<Vec3> = Vec::new();
+    let mut asked_again = Vec::new();
+    // 10° a second, 30 frames a second, for 4 s.
+    for frame in 0..120 {
+        let t = frame as f64 / 30.0;
+        let camera = Camera::look_at(
+            around(centre, (10.0 * t as f32).to_radians()),
+            centre,
+            Vec3::Y,
+            60.0,
+            640,
+            360,
+        )
+        .unwrap();
+        manager.frame(&scene, &camera, t);
+        while let Ok(command) = commands.try_recv() {
+            let Command::Request(r) = command else {
+                continue;
+            };
+            let turn = |eye: &Vec3| {
+                (*eye - local_centre)
+                    .angle_between(r.eye - local_centre)
+                    .to_degrees()
+            };
+            if answered.iter().any(|eye| turn(eye) < 1.0) {
+                asked_again.push((frame, (r.eye - local_centre).normalize()));
+            }
+            answered.push(r.eye);
+            let texture = bake(&tracer, r.eye, r.size, DepthBits::Eight, r.projection).unwrap();
+            arrive(
+                &arrivals,
+                r.id,
+                ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
+            );
+        }
+    }
+    eprintln!(
+        "{} textures asked for, {} asked for again",
+        answered.len(),
+        asked_again.len()
+    );
+    assert!(answered.len() >= 3, "the orbit asks for textures: {answered:?}");
+    assert!(
+        asked_again.is_empty(),
+        "asked for again (frame, direction): {asked_again:?}"
+    );
+}

@@ -86,6 +86,11 @@ pub(super) struct Held {
     /// texture or a partner): its lifetime.
     pub(super) arrived: Instant,
     pub(super) last_shown: Option<Instant>,
+    /// When the manager last relied on it: took it in, showed it, or counted it as
+    /// covering where the eye is going (a prediction's future eye, or the texture
+    /// ahead of its turn). What the last frame relied on is kept first (see
+    /// [`Manager::hold`]).
+    pub(super) wanted: Instant,
     /// Asked for by another placement of the mesh, and shared with this one: counted
     /// in that placement's lifetimes, not here.
     pub(super) shared: bool,
@@ -184,6 +189,7 @@ impl Manager {
                         is_final,
                         arrived,
                         last_shown: None,
+                        wanted: Instant::now(),
                         shared: false,
                     };
                     let object = &scene.objects[p.object];
@@ -238,14 +244,22 @@ impl Manager {
 }
 
 impl Manager {
-    /// Holds `held` for object `k`, keeping the textures nearest its eye (`eye`, about
-    /// `centre`, in its frame).
+    /// Holds `held` for object `k`, keeping, of more than
+    /// [`TEXTURES_KEPT`](super::policy::TEXTURES_KEPT), those taken in or relied on
+    /// since the last frame was planned ([`Held::wanted`]), then those nearest its eye
+    /// (`eye`, about `centre`, in its frame). (Kept by nearness alone, a texture asked
+    /// for ahead of the eye's turn — the farthest held — went as it came, unseen, and
+    /// was asked for again the next frame: on the default path, one texture baked in
+    /// six.)
     fn hold(&mut self, k: usize, held: Held, centre: Vec3, eye: Vec3) {
+        let since = self.planned_at;
         let state = &mut self.objects[k];
         state.held.push(held);
         if state.held.len() > self.config.keep {
             state.held.sort_by(|a, b| {
-                angle_between(centre, a.eye, eye).total_cmp(&angle_between(centre, b.eye, eye))
+                let (a_old, b_old) = (a.wanted < since, b.wanted < since);
+                let away = |h: &Held| angle_between(centre, h.eye, eye);
+                a_old.cmp(&b_old).then(away(a).total_cmp(&away(b)))
             });
             for retired in state.held.split_off(self.config.keep) {
                 self.counters.retired.retire(&retired);
@@ -274,6 +288,7 @@ impl Manager {
             }
             let shared = Held {
                 shared: true,
+                wanted: Instant::now(),
                 ..held.clone()
             };
             self.hold(j, shared, centre, eye);

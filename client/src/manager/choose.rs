@@ -150,20 +150,20 @@ pub(super) fn shown_texture(
         })
 }
 
-/// Whether one of an object's held textures (`held`: eye and grade at `future`)
+/// Which of an object's held textures (`held`: eye and grade at `future`), if any,
 /// covers the eye `future` (all about `centre`), as prediction plans it: within the
 /// planning margin of `tolerance`, not coarser than [`REFINE_TEXEL`] with a finer one
 /// to be had, and
 /// within the planning margin of what may be shown alone — or with a partner there
 /// ([`may_show`]), held (fine enough to be drawn there, as drawing
 /// requires) or asked for (`asked`).
-pub(super) fn held_covers(
+pub(super) fn held_covering(
     centre: Vec3,
     future: Vec3,
     held: &[(Vec3, Grade)],
     asked: &[Vec3],
     tolerance: f32,
-) -> bool {
+) -> Option<usize> {
     let partners = held
         .iter()
         .filter(|(_, g)| !g.too_coarse)
@@ -174,7 +174,7 @@ pub(super) fn held_covers(
             .clone()
             .any(|other| can_partner(centre, shown, future, other))
     };
-    held.iter().any(|&(eye, g)| {
+    held.iter().position(|&(eye, g)| {
         let turn = angle_between(centre, eye, future);
         g.growth <= PLANNING_MARGIN * tolerance
             && !g.finer_available
@@ -347,14 +347,14 @@ mod tests {
                 (around(0.0), grade(false)),
                 (around(75.0), grade(partner_too_coarse)),
             ];
-            held_covers(Vec3::ZERO, future, &held, asked, 4.0)
+            held_covering(Vec3::ZERO, future, &held, asked, 4.0).is_some()
         };
         assert!(covers(false, &[]));
         assert!(!covers(true, &[]));
         assert!(covers(true, &[around(60.0)]));
         // Near a held texture's own eye no partner is needed.
         let near = [(around(35.0), grade(false))];
-        assert!(held_covers(Vec3::ZERO, future, &near, &[], 4.0));
+        assert!(held_covering(Vec3::ZERO, future, &near, &[], 4.0).is_some());
     }
 
     /// Alone, a texture may be shown while its rim's band stays under [`LONE_BAND`];

@@ -84,6 +84,9 @@ pub struct Manager {
     sprites: Vec<Option<Kept>>,
     /// The camera of the last frame drawn.
     last_camera: Option<Camera>,
+    /// When the last frame was planned: what it relied on is kept (see
+    /// [`Manager::hold`]).
+    planned_at: Instant,
     /// The factor the server's load puts on the tolerance (1: none; see
     /// [`policy::LOAD_HIGH_WAIT`]).
     load_scale: f32,
@@ -111,6 +114,7 @@ impl Manager {
             arrivals,
             sprites: Vec::new(),
             last_camera: None,
+            planned_at: Instant::now(),
             load_scale: 1.0,
             counters: Counters::default(),
         }
@@ -194,7 +198,9 @@ impl Manager {
         self.predictor.observe(t, camera.eye);
         let mut stale = false;
         // (When this frame shows its impostors: their textures' last use.)
-        let shown_at = Some(Instant::now());
+        let now = Instant::now();
+        self.planned_at = now;
+        let shown_at = Some(now);
         let mut shows = vec![Show::Geometry; scene.objects.len()];
         let world_camera = camera;
         // Every object assessed, and its prediction worked out, before any is decided
@@ -311,9 +317,9 @@ impl Manager {
             shows[k] = match best {
                 Some((i, g)) if g.growth <= SHOWN_STALE * tolerance => {
                     let held = &mut self.objects[k].held;
-                    held[i].last_shown = shown_at;
-                    if let Some((p, _)) = partner {
-                        held[p].last_shown = shown_at;
+                    for j in std::iter::once(i).chain(partner.map(|(p, _)| p)) {
+                        held[j].last_shown = shown_at;
+                        held[j].wanted = now;
                     }
                     let level = held[i]
                         .pyramid

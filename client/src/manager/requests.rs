@@ -17,7 +17,7 @@ use crate::predict::Motion;
 
 use super::Manager;
 use super::around::{angle_between, similar_distance, turned};
-use super::choose::{Grade, held_covers};
+use super::choose::{Grade, held_covering};
 use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
@@ -47,8 +47,8 @@ impl Pending {
 enum Ahead {
     /// The eye is not turning about the object: "ahead" means nothing.
     NotTurning,
-    /// One is held or asked for.
-    Covered,
+    /// One is held (this one) or asked for (`None`).
+    Covered(Option<usize>),
     /// None: ask for one at this eye.
     AskAt(Vec3),
 }
@@ -299,10 +299,10 @@ impl Manager {
                 && to.angle_between(e) <= AHEAD_SLACK * reach
                 && similar_distance(centre, future, eye)
         };
-        let held = self.objects[k].held.iter().any(|h| ahead(h.eye));
+        let held = self.objects[k].held.iter().position(|h| ahead(h.eye));
         let asked = self.pending.values().any(|p| p.object == k && ahead(p.eye));
-        if held || asked {
-            Ahead::Covered
+        if held.is_some() || asked {
+            Ahead::Covered(held)
         } else {
             Ahead::AskAt(turned(centre, to, axis, reach))
         }
@@ -364,9 +364,21 @@ impl Manager {
             .filter(|p| p.object == k)
             .map(|p| p.eye)
             .collect();
-        let covered = held_covers(centre, future, &held, &asked, self.tolerance())
-            || self.pending_covers(scene, k, centre, future);
+        let covering = held_covering(centre, future, &held, &asked, self.tolerance());
+        let covered = covering.is_some() || self.pending_covers(scene, k, centre, future);
         let ahead = self.ahead(k, centre, eye, future);
+        // (What the plan counts on is kept: see `Held::wanted`.)
+        let ahead_held = match ahead {
+            Ahead::Covered(held) => held,
+            _ => None,
+        };
+        let now = Instant::now();
+        // (`held` was graded this frame, after the last arrivals: the same order.)
+        for i in covering.into_iter().chain(ahead_held) {
+            if let Some(h) = self.objects[k].held.get_mut(i) {
+                h.wanted = now;
+            }
+        }
         let deadline = Some((horizon * 1e3) as u64);
         // (Quiet a while after the saturated server refused one: see `SHED_QUIET`.)
         let quiet = self.objects[k].quiet_until.is_some_and(|t| Instant::now() < t);
