@@ -460,8 +460,11 @@ fn a_lone_texture_goes_stale_when_its_rim_band_opens() {
     );
 }
 
-/// An object wholly off screen is not needed now: no stale frame, no request for now
-/// (only predicted ones); turned towards, it is needed and asked for.
+/// An object wholly off screen is not needed now: no stale frame, no request for now;
+/// a prediction only where a view turned by up to [`PREDICTED_VIEW_MARGIN`] would show
+/// it. Turned towards, it is needed and asked for.
+///
+/// [`PREDICTED_VIEW_MARGIN`]: relief_client::manager::policy::PREDICTED_VIEW_MARGIN
 #[test]
 fn an_object_off_screen_is_not_needed_now() {
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
@@ -478,10 +481,24 @@ fn an_object_off_screen_is_not_needed_now() {
     let now = requests_from_frame(&mut manager, &mut commands, &scene, away, "sphere", false);
     assert!(now.is_empty(), "{now:?}");
     assert_eq!((manager.counters.needs, manager.counters.stale_frames), (0, 0));
-    // With prediction on, the textures for where the eye is going are asked for all
-    // the same.
+    // With prediction on, nothing is asked for it either: the view would have to turn
+    // by far more than `PREDICTED_VIEW_MARGIN` to show it …
     let (mut predicting, mut predictions) = unanswered(&scene, Config::default());
     let ahead = requests_from_frame(&mut predicting, &mut predictions, &scene, away, "sphere", true);
+    assert!(ahead.is_empty(), "{ahead:?}");
+    // … but turned so that it lies just off the screen's side (65° off the view's
+    // axis, which reaches 46° across; the sphere is about 10° round), within a turn
+    // of that margin, the texture for where the eye is going is asked for all the same.
+    let beside = eye + glam::Quat::from_rotation_y(65f32.to_radians()) * (centre - eye);
+    let (mut predicting, mut predictions) = unanswered(&scene, Config::default());
+    let ahead = requests_from_frame(
+        &mut predicting,
+        &mut predictions,
+        &scene,
+        (eye, beside, 0.0),
+        "sphere",
+        true,
+    );
     assert!(!ahead.is_empty());
     assert_eq!(predicting.counters.needs, 0);
     // Turned towards it: needed, stale without a texture, asked for now.

@@ -6,6 +6,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 
+use relief_core::bounds::Aabb;
 use relief_core::camera::Camera;
 use relief_core::relief::SourceProjection;
 use relief_core::scene::{Scene, SceneObject};
@@ -22,8 +23,8 @@ use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
     LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK,
-    PENDING_REACH, REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH, asked_for,
-    largest_edge,
+    PENDING_REACH, PREDICTED_VIEW_MARGIN, REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH,
+    asked_for, largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -124,6 +125,21 @@ pub(super) fn lead(centre: Vec3, valid_angle: f32, now: Vec3, future: Vec3, beyo
         previous = (eye, turn);
     }
     previous.0
+}
+
+/// Whether `bounds` can be on screen from `eye`, the view turned as `camera`'s or by
+/// up to [`PREDICTED_VIEW_MARGIN`] further any way (its field of view widened by that
+/// on every side): an object out of that view where the eye is going has nothing to
+/// ask for there.
+fn may_see_from(camera: &Camera, eye: Vec3, bounds: &Aabb) -> bool {
+    // (Short of a half-turn: a widened view must stay a view.)
+    let half = (0.5 * camera.fov_y + PREDICTED_VIEW_MARGIN).min(89f32.to_radians());
+    let widened = Camera {
+        eye: eye.as_dvec3(),
+        fov_y: 2.0 * half,
+        ..*camera
+    };
+    widened.may_see(bounds)
 }
 
 /// The eye's path past the `horizon` ahead, as [`lead`] walks it: [`LEAD_PATH_STEPS`]
@@ -327,6 +343,9 @@ impl Manager {
             return None;
         }
         let future = object.to_local(future);
+        if !may_see_from(camera, future, &object.local_bounds) {
+            return None;
+        }
         // (Asked for as soon as a texture would pay: see `GEOMETRY_WHILE_WAITING`.)
         let grades = self.grades(scene, k, future, camera, 1.0)?;
         let held = (self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect();
