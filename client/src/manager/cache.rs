@@ -1,5 +1,6 @@
 //! The textures held for each object: arrivals taken in (never waiting), each final
-//! one's valid angle probed, the nearest the eye kept, and each shared with the other
+//! one's valid angle probed, those relied on and then the nearest the eye kept, and
+//! each shared with the other
 //! placements of its mesh that can show it.
 
 use std::sync::Arc;
@@ -90,7 +91,7 @@ pub(super) struct Held {
     /// covering where the eye is going (a prediction's future eye, or the texture
     /// ahead of its turn). What the last frame relied on is kept first (see
     /// [`Manager::hold`]).
-    pub(super) wanted: Instant,
+    pub(super) relied_on: Instant,
     /// Asked for by another placement of the mesh, and shared with this one: counted
     /// in that placement's lifetimes, not here.
     pub(super) shared: bool,
@@ -165,8 +166,9 @@ impl Manager {
                     let edge = |p: &Pyramid| p.levels[0].texture.camera.width;
                     let new_edge = edge(&pyramid);
                     // Held already, as fine: the texture that served another request.
-                    if (state.held.iter()).any(|h| h.is_final && h.eye == eye && edge(&h.pyramid) >= new_edge)
-                    {
+                    let answered = |h: &Held| h.is_final && h.eye == eye && edge(&h.pyramid) >= new_edge;
+                    if let Some(held) = state.held.iter_mut().find(|h| answered(h)) {
+                        held.relied_on = Instant::now();
                         continue;
                     }
                     // A final texture replaces its own preview, and a coarser one from its
@@ -189,7 +191,7 @@ impl Manager {
                         is_final,
                         arrived,
                         last_shown: None,
-                        wanted: Instant::now(),
+                        relied_on: Instant::now(),
                         shared: false,
                     };
                     let object = &scene.objects[p.object];
@@ -246,7 +248,7 @@ impl Manager {
 impl Manager {
     /// Holds `held` for object `k`, keeping, of more than
     /// [`TEXTURES_KEPT`](super::policy::TEXTURES_KEPT), those taken in or relied on
-    /// since the last frame was planned ([`Held::wanted`]), then those nearest its eye
+    /// since the last frame was planned ([`Held::relied_on`]), then those nearest its eye
     /// (`eye`, about `centre`, in its frame). (Kept by nearness alone, a texture asked
     /// for ahead of the eye's turn — the farthest held — went as it came, unseen, and
     /// was asked for again the next frame: on the default path, one texture baked in
@@ -257,9 +259,9 @@ impl Manager {
         state.held.push(held);
         if state.held.len() > self.config.keep {
             state.held.sort_by(|a, b| {
-                let (a_old, b_old) = (a.wanted < since, b.wanted < since);
+                let (a_old, b_old) = (a.relied_on < since, b.relied_on < since);
                 let away = |h: &Held| angle_between(centre, h.eye, eye);
-                a_old.cmp(&b_old).then(away(a).total_cmp(&away(b)))
+                a_old.cmp(&b_old).then_with(|| away(a).total_cmp(&away(b)))
             });
             for retired in state.held.split_off(self.config.keep) {
                 self.counters.retired.retire(&retired);
@@ -288,7 +290,6 @@ impl Manager {
             }
             let shared = Held {
                 shared: true,
-                wanted: Instant::now(),
                 ..held.clone()
             };
             self.hold(j, shared, centre, eye);

@@ -150,7 +150,7 @@ pub(super) fn shown_texture(
         })
 }
 
-/// Which of an object's held textures (`held`: eye and grade at `future`), if any,
+/// The first of an object's held textures (`held`: eye and grade at `future`) that
 /// covers the eye `future` (all about `centre`), as prediction plans it: within the
 /// planning margin of `tolerance`, not coarser than [`REFINE_TEXEL`] with a finer one
 /// to be had, and

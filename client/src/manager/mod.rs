@@ -236,9 +236,9 @@ impl Manager {
                 // Off screen (nothing shown, so nothing stale and nothing needed now:
                 // drawn as geometry, which the rasterizer leaves out at once), or drawn
                 // as geometry while its texture would cost more than it: the textures
-                // for where the eye is going are still asked for, if a view turned a
-                // little from there would show it (`PREDICTED_VIEW_MARGIN`). One drawn as geometry
-                // only while it waits for its first texture asks for that now.
+                // for where the eye is going are still asked for, if a view from there
+                // turned by up to `PREDICTED_VIEW_MARGIN` would show it. One drawn as
+                // geometry only while it waits for its first texture asks for that now.
                 if self.waits_as_geometry(scene, k, camera) {
                     self.request(scene, k, camera.eye_f32(), camera, None);
                 }
@@ -320,7 +320,7 @@ impl Manager {
                     let held = &mut self.objects[k].held;
                     for j in std::iter::once(i).chain(partner.map(|(p, _)| p)) {
                         held[j].last_shown = shown_at;
-                        held[j].wanted = now;
+                        held[j].relied_on = now;
                     }
                     let level = held[i]
                         .pyramid

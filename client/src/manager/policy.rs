@@ -63,7 +63,8 @@ pub const DEFAULT_TOLERANCE: f32 = 12.0;
 /// texture takes 15–21 ms, so this errs towards asking early.
 pub const INITIAL_LATENCY_S: f64 = 0.15;
 
-/// Textures kept per object (the nearest the eye): enough for the pair around the eye
+/// Textures kept per object (those the last frame relied on, then the nearest the eye:
+/// [`Manager::hold`](super::Manager)): enough for the pair around the eye
 /// and those the path returns to, at a few MB each.
 pub const TEXTURES_KEPT: usize = 8;
 
@@ -476,7 +477,7 @@ pub const HORIZON_MARGIN_S: f64 = 0.05;
 
 /// How far (radians) the view may turn, any way, by the time a predicted texture
 /// comes: an object the view would not show from the predicted eye, turned as now or
-/// by up to this, gets no predicted texture. (Predicted for wherever it lay, objects
+/// by up to this, gets no predicted texture, and what was asked for it is withdrawn. (Predicted for wherever it lay, objects
 /// behind the eye and far off to its sides were most of the forest's requests: with
 /// this, one run asked for 1,726 textures where 5,270 were, and 1,034 were never shown
 /// where 4,041 were.)

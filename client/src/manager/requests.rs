@@ -6,7 +6,6 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use relief_core::bounds::Aabb;
 use relief_core::camera::Camera;
 use relief_core::relief::SourceProjection;
 use relief_core::scene::{Scene, SceneObject};
@@ -127,21 +126,6 @@ pub(super) fn lead(centre: Vec3, valid_angle: f32, now: Vec3, future: Vec3, beyo
     previous.0
 }
 
-/// Whether `bounds` can be on screen from `eye`, the view turned as `camera`'s or by
-/// up to [`PREDICTED_VIEW_MARGIN`] further any way (its field of view widened by that
-/// on every side): an object out of that view where the eye is going has nothing to
-/// ask for there.
-fn may_see_from(camera: &Camera, eye: Vec3, bounds: &Aabb) -> bool {
-    // (Short of a half-turn: a widened view must stay a view.)
-    let half = (0.5 * camera.fov_y + PREDICTED_VIEW_MARGIN).min(89f32.to_radians());
-    let widened = Camera {
-        eye: eye.as_dvec3(),
-        fov_y: 2.0 * half,
-        ..*camera
-    };
-    widened.may_see(bounds)
-}
-
 /// The eye's path past the `horizon` ahead, as [`lead`] walks it: [`LEAD_PATH_STEPS`]
 /// eyes evenly spaced up to twice the horizon, in `object`'s frame (fewer: it stops
 /// before an eye drawn as geometry, too near). Worked out only when a prediction is
@@ -162,8 +146,10 @@ pub(super) struct Prediction {
     motion: Motion,
     /// The eye then, in the object's frame.
     future: Vec3,
-    /// Each held texture's eye and its grade from `future`.
-    held: Vec<(Vec3, Grade)>,
+    /// Each held texture's eye and its grade from `future`; `None` where a view from
+    /// there, turned as now or by up to [`PREDICTED_VIEW_MARGIN`] further, would not
+    /// show the object: nothing is asked for it, and what was is withdrawn.
+    held: Option<Vec<(Vec3, Grade)>>,
 }
 
 impl Manager {
@@ -325,7 +311,8 @@ impl Manager {
     }
 
     /// Where the eye will be once a request for object `k` made now comes back (in the
-    /// object's frame, as `camera` is), and how each held texture grades there: what
+    /// object's frame, as `camera` is), and how each held texture grades there (none
+    /// where the object will be out of view: see [`Prediction::held`]): what
     /// [`Manager::predict_for`] decides from. `None` where nothing is to be asked
     /// ahead: not predicting, no eye observed yet, or drawn as geometry from there. It
     /// only reads, so a frame works it out for every object at once.
@@ -343,12 +330,17 @@ impl Manager {
             return None;
         }
         let future = object.to_local(future);
-        if !may_see_from(camera, future, &object.local_bounds) {
-            return None;
-        }
-        // (Asked for as soon as a texture would pay: see `GEOMETRY_WHILE_WAITING`.)
-        let grades = self.grades(scene, k, future, camera, 1.0)?;
-        let held = (self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect();
+        let from_future = Camera {
+            eye: future.as_dvec3(),
+            ..*camera
+        };
+        let held = if from_future.may_see_turned(&object.local_bounds, PREDICTED_VIEW_MARGIN) {
+            // (Asked for as soon as a texture would pay: see `GEOMETRY_WHILE_WAITING`.)
+            let grades = self.grades(scene, k, future, camera, 1.0)?;
+            Some((self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect())
+        } else {
+            None
+        };
         Some(Prediction {
             horizon,
             motion,
@@ -379,6 +371,10 @@ impl Manager {
         };
         let centre = scene.objects[k].local_bounds.center();
         let eye = camera.eye_f32();
+        let Some(held) = held else {
+            self.withdraw_predictions(k, |_| true);
+            return;
+        };
         let asked: Vec<Vec3> = (self.pending.values())
             .filter(|p| p.object == k)
             .map(|p| p.eye)
@@ -386,7 +382,7 @@ impl Manager {
         let covering = held_covering(centre, future, &held, &asked, self.tolerance());
         let covered = covering.is_some() || self.pending_covers(scene, k, centre, future);
         let ahead = self.ahead(k, centre, eye, future);
-        // (What the plan counts on is kept: see `Held::wanted`.)
+        // (What the plan counts on is kept: see `Held::relied_on`.)
         let ahead_held = match ahead {
             Ahead::Covered(held) => held,
             _ => None,
@@ -395,7 +391,7 @@ impl Manager {
         // (`held` was graded this frame, after the last arrivals: the same order.)
         for i in covering.into_iter().chain(ahead_held) {
             if let Some(h) = self.objects[k].held.get_mut(i) {
-                h.wanted = now;
+                h.relied_on = now;
             }
         }
         let deadline = Some((horizon * 1e3) as u64);
@@ -415,13 +411,15 @@ impl Manager {
         }
         // Predictions neither the eye nor its future will meet any more.
         let reach = WITHDRAW_REACH * self.valid_angle(k);
-        let stale: Vec<u64> = self
-            .pending
-            .iter()
-            .filter(|(_, p)| p.object == k && p.predicted())
-            .filter(|(_, p)| {
-                angle_between(centre, p.eye, eye) > reach && angle_between(centre, p.eye, future) > reach
-            })
+        self.withdraw_predictions(k, |p| {
+            angle_between(centre, p.eye, eye) > reach && angle_between(centre, p.eye, future) > reach
+        });
+    }
+
+    /// Withdraws object `k`'s predicted requests that are `stale`.
+    fn withdraw_predictions(&mut self, k: usize, stale: impl Fn(&Pending) -> bool) {
+        let stale: Vec<u64> = (self.pending.iter())
+            .filter(|(_, p)| p.object == k && p.predicted() && stale(p))
             .map(|(&id, _)| id)
             .collect();
         if !stale.is_empty() {
