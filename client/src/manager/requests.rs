@@ -381,7 +381,7 @@ impl Manager {
         }
         let deadline = Some((horizon * 1e3) as u64);
         // (Quiet a while after the saturated server refused one: see `SHED_QUIET`.)
-        let quiet = self.objects[k].quiet_until.is_some_and(|t| Instant::now() < t);
+        let quiet = self.objects[k].quiet_until.is_some_and(|t| now < t);
         let ask = match (quiet, covered, ahead) {
             (true, _, _) => None,
             (false, false, _) => {

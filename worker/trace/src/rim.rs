@@ -107,12 +107,14 @@ fn open_sides(depth: &[u16], w: usize, h: usize, empty: u16) -> Vec<(usize, u8)>
 const RAYS_PER_TASK: usize = 512;
 
 /// One open side of a rim texel, as its rays need it: the texel, the side (a [`SIDES`]
-/// index), the texel's depth, and its surface's slope and its texels' width that way.
+/// index), the texel's depth and normal, and its surface's slope and its texels' width
+/// that way.
 #[derive(Clone, Copy)]
 struct RimSide {
     texel: usize,
     side: usize,
     centre_depth: f32,
+    normal: Vec3,
     slope: f32,
     width: f32,
 }
@@ -134,7 +136,6 @@ pub(crate) fn deepen_rims(
     let bits = texture.depth_bits;
     let quantum = camera.depth_quantum(bits);
     let min_cos = RIM_MAX_TURN_DEG.to_radians().cos();
-    let normal_of = |k: usize| decode_normal_rgb8(texture.normal[k]);
     // Every open side of every rim texel, to be tried at the first offset.
     let mut pending: Vec<RimSide> = open_sides(&texture.depth, w, h, bits.empty())
         .into_iter()
@@ -148,11 +149,13 @@ pub(crate) fn deepen_rims(
             // need not be square.)
             let across = if SIDES[side].0 != 0.0 { camera.a } else { camera.b };
             let width = across.length();
+            let normal = decode_normal_rgb8(texture.normal[texel]);
             RimSide {
                 texel,
                 side,
                 centre_depth: camera.depth_of_level(texture.depth[texel], bits),
-                slope: slope_along(normal_of(texel), across / width, camera.f),
+                normal,
+                slope: slope_along(normal, across / width, camera.f),
                 width,
             }
         })
@@ -201,7 +204,7 @@ pub(crate) fn deepen_rims(
                         .object
                         .mesh
                         .shading_normal(hit.triangle as usize, hit.u, hit.v);
-                    depth > s.centre_depth && depth <= deepest && normal.dot(normal_of(s.texel)) >= min_cos
+                    depth > s.centre_depth && depth <= deepest && normal.dot(s.normal) >= min_cos
                 });
             match own {
                 Some((depth, _)) => found.push((s.texel, depth)),
