@@ -298,6 +298,49 @@ fn one_request_for_now_is_in_flight_per_object() {
     assert_eq!(now_requests, 1);
 }
 
+/// A prediction not come by the time the eye is where it was made for is late: the
+/// object, stale, asks for its texture as needed now (on a server that request joins
+/// the prediction's job and moves it ahead of predicted work) instead of waiting on it
+/// — at 64 load-test clients, waiting made most of the stalled frames.
+#[test]
+fn a_stale_object_asks_now_though_a_late_prediction_covers_its_eye() {
+    use relief_client::manager::Failure;
+
+    let scene = Scene::load("default").unwrap();
+    let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
+    let (commands_tx, mut commands) = unbounded_channel();
+    let (arrivals, arrivals_rx) = unbounded_channel();
+    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    // Orbit the sphere at 30°/s until a prediction for it goes out; nothing answers.
+    let (mut now, mut predicted) = (Vec::new(), None);
+    let mut t = 0.0;
+    for frame in 0..30 {
+        t = frame as f32 / 30.0;
+        manager.frame(&scene, &camera_round(centre, 30.0 * t), t as f64);
+        for command in std::iter::from_fn(|| commands.try_recv().ok()) {
+            match command {
+                Command::Request(r) if r.object == "sphere" && r.needed_in_ms.is_none() => now.push(r.id),
+                Command::Request(r) if r.object == "sphere" => predicted = predicted.or(Some(r.eye)),
+                _ => {}
+            }
+        }
+        if predicted.is_some() {
+            break;
+        }
+    }
+    let predicted = predicted.expect("a prediction for the sphere");
+    // The request for now (nothing was held) fails: only the prediction is out.
+    assert_eq!(now.len(), 1);
+    let failure = Failure::Refused("no worker".into());
+    arrivals.send(Arrival::Failed { id: now[0], failure }).unwrap();
+    // The eye reaches the predicted one with the prediction still out.
+    let eye = scene.object("sphere").unwrap().to_world(predicted).as_vec3();
+    let drawn = (eye, centre, f64::from(t) + 0.5);
+    let asked = requests_from_frame(&mut manager, &mut commands, &scene, drawn, "sphere", false);
+    assert_eq!(asked.len(), 1, "the stale sphere waited on its late prediction");
+    assert!(asked[0].distance(eye) < 1e-3);
+}
+
 #[test]
 fn the_local_generator_serves_requests_for_now_in_the_order_asked() {
     use relief_client::manager::{Arrival, TextureRequest};

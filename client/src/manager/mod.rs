@@ -63,7 +63,7 @@ use cache::ObjectState;
 use choose::{Grade, may_show, shown_texture};
 use draw::Kept;
 use policy::{ASSESSMENTS_PER_TASK, GEOMETRY_WHILE_WAITING, SHOWN_STALE, WARM_UP_POLL, texel_pixels};
-use requests::Pending;
+use requests::{Asked, Pending};
 
 /// The manager of one client: what it holds and has asked for per object, where the eye
 /// is going, the channels to its texture source, and what it has counted.
@@ -268,7 +268,7 @@ impl Manager {
             let want_finer = best.is_some_and(|(_, g)| finer_wanted(&g))
                 || (!within(best) && grades.iter().any(finer_wanted));
             let asked_for = self.pending_covers(scene, k, centre, eye);
-            if valid || asked_for {
+            if valid || asked_for != Asked::Not {
                 self.counters.prediction_hits += 1;
             }
             if !valid {
@@ -308,9 +308,17 @@ impl Manager {
             }
             // One request for now in flight per object: when textures stay valid for
             // less than the eye takes to leave them, a request each frame would only
-            // queue textures that are stale on arrival.
+            // queue textures that are stale on arrival. A stale object asks now even when
+            // only a prediction out covers the eye: that prediction is late, and the
+            // request for now joins its job on the server and moves it ahead of the
+            // predicted work there (or, not near enough to join, is baked first itself).
             let asking_now = self.pending.values().any(|p| p.object == k && !p.predicted());
-            if (!valid || want_finer) && !asked_for && !asking_now {
+            let wanted = match asked_for {
+                Asked::Not => !valid || want_finer,
+                Asked::Predicted => !valid,
+                Asked::Now => false,
+            };
+            if wanted && !asking_now {
                 self.request(scene, k, eye, camera, None);
             }
             self.predict_for(scene, k, camera, prediction);

@@ -36,6 +36,15 @@ pub(super) struct Pending {
     pub(super) needed_at: Option<Instant>,
 }
 
+/// How urgently a texture serving some eye was asked for ([`Manager::pending_covers`]),
+/// least first.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub(super) enum Asked {
+    Not,
+    Predicted,
+    Now,
+}
+
 impl Pending {
     pub(super) fn predicted(&self) -> bool {
         self.needed_at.is_some()
@@ -205,16 +214,28 @@ impl Manager {
         percentile(recent, LATENCY_PERCENTILE)
     }
 
-    /// Whether a request already out for `object`, or for another placement of its
-    /// mesh (whose texture it will share: see [`Manager::share`]), will serve `eye`.
-    pub(super) fn pending_covers(&self, scene: &Scene, object: usize, centre: Vec3, eye: Vec3) -> bool {
+    /// How urgently a request already out for `object`, or for another placement of its
+    /// mesh (whose texture it will share: see [`Manager::share`]), was asked for that
+    /// will serve `eye`: the most urgent such one's, [`Asked::Not`] if none will.
+    pub(super) fn pending_covers(&self, scene: &Scene, object: usize, centre: Vec3, eye: Vec3) -> Asked {
         let reach = PENDING_REACH * self.valid_angle(object);
         let mesh = &scene.objects[object];
-        self.pending.values().any(|p| {
-            (p.object == object || scene.objects[p.object].shares_mesh(mesh))
-                && angle_between(centre, p.eye, eye) < reach
-                && ((p.eye - centre).length() / (eye - centre).length() - 1.0).abs() < PENDING_DISTANCE_SLACK
-        })
+        (self.pending.values())
+            .filter(|p| {
+                (p.object == object || scene.objects[p.object].shares_mesh(mesh))
+                    && angle_between(centre, p.eye, eye) < reach
+                    && ((p.eye - centre).length() / (eye - centre).length() - 1.0).abs()
+                        < PENDING_DISTANCE_SLACK
+            })
+            .map(|p| {
+                if p.predicted() {
+                    Asked::Predicted
+                } else {
+                    Asked::Now
+                }
+            })
+            .max()
+            .unwrap_or(Asked::Not)
     }
 
     /// The texture to ask for from `eye`: its edge — what the screen can show of the
@@ -365,7 +386,7 @@ impl Manager {
             .map(|p| p.eye)
             .collect();
         let covering = held_covering(centre, future, &held, &asked, self.tolerance());
-        let covered = covering.is_some() || self.pending_covers(scene, k, centre, future);
+        let covered = covering.is_some() || self.pending_covers(scene, k, centre, future) != Asked::Not;
         let ahead = self.ahead(k, centre, eye, future);
         // (What the plan counts on is kept: see `Held::relied_on`.)
         let ahead_held = match ahead {
