@@ -5,14 +5,14 @@
 use std::collections::BTreeMap;
 use std::ops::ControlFlow;
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
 use serde::Serialize;
 
-use relief_client::flight::Flight;
+use relief_client::flight::{Flight, WARM_UP_LIMIT};
 use relief_client::link::Link;
 use relief_client::manager::{Config, Counters, Manager, late_fraction};
 use relief_client::remote::Remote;
@@ -298,7 +298,7 @@ impl Setup<'_> {
                     .map_err(|e| anyhow!("simulated client {c}: {e}"))
             })
             .collect::<Result<Vec<_>>>()?;
-        let started = Instant::now();
+        let line = Arc::new(StartLine::new(clients));
         let mut stats_remote = remote.clone();
         let handles: Vec<_> = remotes
             .into_iter()
@@ -322,6 +322,7 @@ impl Setup<'_> {
                 let tracer = self.tracer.clone();
                 let (frames, fps, size, every) = (args.frames, args.fps, args.size, args.reference_every);
                 let start = c * path_frames / clients;
+                let line = line.clone();
                 std::thread::spawn(move || {
                     let flight = Flight {
                         scene: &scene,
@@ -331,7 +332,7 @@ impl Setup<'_> {
                         start,
                         wrap: true,
                     };
-                    fly(&flight, &tracer, &mut manager, c, every)
+                    fly(&flight, &tracer, &mut manager, &line, c, every)
                 })
             })
             .collect();
@@ -343,7 +344,7 @@ impl Setup<'_> {
                     .and_then(|r| r)
             })
             .collect::<Result<_>>()?;
-        let seconds = started.elapsed().as_secs_f64();
+        let seconds = line.started().elapsed().as_secs_f64();
         // (The clients' figures stand without the server's counters: a failed look
         // costs only `served_nearby_frac`.)
         let served = match self.runtime.block_on(stats_remote.stats()) {
@@ -362,6 +363,52 @@ impl Setup<'_> {
             seconds,
             served,
         })
+    }
+}
+
+/// Where the simulated clients wait for each other after their warm-ups, so that their
+/// flights, and the figures, start together: a client flying while others still warmed
+/// up met their cold starts' requests (every object in view at once, at full size) in
+/// the queue and counted those waits and stalls as the load's — with 8 clients, most of
+/// a run's stalled frames when the clients' first views held few objects.
+struct StartLine {
+    /// Clients arrived, and when the last did (or the line gave up waiting).
+    state: Mutex<(u32, Option<Instant>)>,
+    all_there: Condvar,
+    clients: u32,
+}
+
+/// How long the line waits for the last client (one that failed never comes): each
+/// warm-up gives up at [`WARM_UP_LIMIT`].
+const START_LINE_LIMIT: Duration = WARM_UP_LIMIT.saturating_add(Duration::from_secs(10));
+
+impl StartLine {
+    fn new(clients: u32) -> StartLine {
+        StartLine {
+            state: Mutex::new((0, None)),
+            all_there: Condvar::new(),
+            clients,
+        }
+    }
+
+    /// Waits until every client has arrived, or [`START_LINE_LIMIT`] has passed.
+    fn arrive(&self) {
+        let mut state = self.state.lock().unwrap_or_else(PoisonError::into_inner);
+        state.0 += 1;
+        if state.0 >= self.clients {
+            state.1.get_or_insert_with(Instant::now);
+            self.all_there.notify_all();
+        }
+        let (mut state, _) = (self.all_there)
+            .wait_timeout_while(state, START_LINE_LIMIT, |s| s.1.is_none())
+            .unwrap_or_else(PoisonError::into_inner);
+        state.1.get_or_insert_with(Instant::now);
+    }
+
+    /// When the flights started (now, if none has yet).
+    fn started(&self) -> Instant {
+        let state = self.state.lock().unwrap_or_else(PoisonError::into_inner);
+        state.1.unwrap_or_else(Instant::now)
     }
 }
 
@@ -446,20 +493,24 @@ fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
     }
 }
 
-/// One simulated client: flies `flight`; client 0 also draws every `every`-th frame
-/// and compares it with the ray-traced reference (a slow frame, which skips path frames
-/// as in the demo).
+/// One simulated client: warms up, waits at `line` for the others, and flies
+/// `flight`; client 0 also draws every `every`-th frame and compares it with the
+/// ray-traced reference (a slow frame, which skips path frames as in the demo).
 fn fly(
     flight: &Flight,
     tracer: &SceneTracer,
     manager: &mut Manager,
+    line: &StartLine,
     client: u32,
     every: u32,
 ) -> Result<ClientResult> {
-    if flight.camera_at(0.0).is_none() {
-        bail!("the scene has no camera path");
-    }
-    flight.warm_up(manager)?;
+    let warmed = match flight.camera_at(0.0) {
+        None => Err(anyhow!("the scene has no camera path")),
+        Some(_) => flight.warm_up(manager).map_err(anyhow::Error::from),
+    };
+    // (At the line even when the warm-up failed: the others wait for every client.)
+    line.arrive();
+    warmed?;
     let mut psnr = Vec::new();
     let log = flight.fly(
         manager,
