@@ -503,10 +503,15 @@ fn a_lone_texture_goes_stale_when_its_rim_band_opens() {
     );
 }
 
-/// An object wholly off screen is not needed now: no stale frame, no request for now
-/// (only predicted ones); turned towards, it is needed and asked for.
+/// An object wholly off screen is not needed now: no stale frame, no request for now;
+/// a prediction only where a view turned by up to [`PREDICTED_VIEW_MARGIN`] would show
+/// it, withdrawn once it would not. Turned towards, it is needed and asked for.
+///
+/// [`PREDICTED_VIEW_MARGIN`]: relief_client::manager::policy::PREDICTED_VIEW_MARGIN
 #[test]
 fn an_object_off_screen_is_not_needed_now() {
+    use relief_client::manager::policy::PREDICTED_VIEW_MARGIN;
+
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
     let sphere = index(&scene, "sphere");
     let centre = scene.objects[sphere].world_bounds().center();
@@ -521,12 +526,45 @@ fn an_object_off_screen_is_not_needed_now() {
     let now = requests_from_frame(&mut manager, &mut commands, &scene, away, "sphere", false);
     assert!(now.is_empty(), "{now:?}");
     assert_eq!((manager.counters.needs, manager.counters.stale_frames), (0, 0));
-    // With prediction on, the textures for where the eye is going are asked for all
-    // the same.
+    // With prediction on, nothing is asked for it either: the view would have to turn
+    // by far more than `PREDICTED_VIEW_MARGIN` to show it.
     let (mut predicting, mut predictions) = unanswered(&scene, Config::default());
     let ahead = requests_from_frame(&mut predicting, &mut predictions, &scene, away, "sphere", true);
-    assert!(!ahead.is_empty());
-    assert_eq!(predicting.counters.needs, 0);
+    assert!(ahead.is_empty(), "{ahead:?}");
+    // Turned so that it lies off the screen's side, its texture for where the eye is
+    // going is asked for while a turn of that margin would bring some of its box on
+    // screen, and not past it: the view reaches `half_x` across (320×180, 60° high),
+    // the box's corners lie within `radius` of its centre's direction across. (By a
+    // view widened only upwards and downwards, to the same shape, 72° across: not
+    // within the margin.)
+    let half_x = (30f32.to_radians().tan() * 16.0 / 9.0).atan();
+    let reach = half_x + PREDICTED_VIEW_MARGIN;
+    let bounds = scene.objects[sphere].world_bounds();
+    let extent = bounds.extent();
+    let radius = (0.5 * extent.x.hypot(extent.z) / eye.distance(centre)).asin();
+    let off_by = |angle: f32| eye + glam::Quat::from_rotation_y(angle) * (centre - eye);
+    let asked_off_by = |angle: f32| {
+        let (mut predicting, mut predictions) = unanswered(&scene, Config::default());
+        let view = (eye, off_by(angle), 0.0);
+        let asked = requests_from_frame(&mut predicting, &mut predictions, &scene, view, "sphere", true);
+        assert_eq!(predicting.counters.needs, 0);
+        !asked.is_empty()
+    };
+    let degree = 1f32.to_radians();
+    assert!(asked_off_by(half_x + radius + degree), "just off the screen");
+    assert!(asked_off_by(reach + radius - 3.0 * degree), "within the margin");
+    assert!(!asked_off_by(reach + radius + 3.0 * degree), "past the margin");
+    // A prediction asked for is withdrawn once the view turns away for good.
+    let (mut predicting, mut predictions) = unanswered(&scene, Config::default());
+    let beside = (eye, off_by(reach + radius - 3.0 * degree), 0.0);
+    assert!(
+        !requests_from_frame(&mut predicting, &mut predictions, &scene, beside, "sphere", true).is_empty()
+    );
+    let away = Camera::look_at(eye, eye + (eye - centre), Vec3::Y, 60.0, 320, 180).unwrap();
+    predicting.frame(&scene, &away, 0.1);
+    let withdrawn = std::iter::from_fn(|| predictions.try_recv().ok())
+        .any(|c| matches!(c, Command::Withdraw(ids) if !ids.is_empty()));
+    assert!(withdrawn && predicting.requests_open() == 0);
     // Turned towards it: needed, stale without a texture, asked for now.
     let towards = (eye, centre, 0.2);
     let now = requests_from_frame(&mut manager, &mut commands, &scene, towards, "sphere", false);

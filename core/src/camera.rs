@@ -28,6 +28,21 @@ pub struct Camera {
     pub height: u32,
 }
 
+/// The widest half-angle [`Camera::may_see_turned`] opens a side of the frustum to,
+/// radians: short of a right angle, where the side's tangent is unbounded.
+const MAX_WIDENED_HALF_ANGLE: f64 = 89.0 * std::f64::consts::PI / 180.0;
+
+/// [`Camera::frustum_margins`] for a frustum of half-angle tangents `(tan_x, tan_y)`.
+fn frustum_margins_of((tan_x, tan_y): (f64, f64), v: DVec3) -> [f64; 5] {
+    [
+        v.z * tan_x + v.x,
+        v.z * tan_x - v.x,
+        v.z * tan_y + v.y,
+        v.z * tan_y - v.y,
+        v.z,
+    ]
+}
+
 /// A camera's projection from view space to pixels (see [`Camera::projection`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Projection {
@@ -191,11 +206,37 @@ impl Camera {
     /// one of the frustum's side planes) — a box may pass and still show nothing, next
     /// to a corner of the frustum. Non-finite bounds pass.
     pub fn may_see(&self, bounds: &crate::bounds::Aabb) -> bool {
+        self.may_see_within(bounds, self.half_tangents())
+    }
+
+    /// Whether any of `bounds` could be on screen were the view turned by up to
+    /// `margin` radians any way: [`Camera::may_see`] with each side of the frustum
+    /// opened by `margin` (short of a right angle; never narrower than the view).
+    pub fn may_see_turned(&self, bounds: &crate::bounds::Aabb, margin: f32) -> bool {
+        let (tan_x, tan_y) = self.half_tangents();
+        let widen = |tan: f64| {
+            let half = tan.atan();
+            (half + f64::from(margin))
+                .min(MAX_WIDENED_HALF_ANGLE)
+                .max(half)
+                .tan()
+        };
+        self.may_see_within(bounds, (widen(tan_x), widen(tan_y)))
+    }
+
+    /// [`Camera::may_see`] for a frustum of half-angle tangents `(tan_x, tan_y)`.
+    fn may_see_within(&self, bounds: &crate::bounds::Aabb, tans: (f64, f64)) -> bool {
         let corners = bounds
             .corners()
-            .map(|p| self.frustum_margins(self.to_view(p).as_dvec3()));
+            .map(|p| frustum_margins_of(tans, self.to_view(p).as_dvec3()));
         // (False for NaN: such a box passes.)
         !(0..5).any(|plane| corners.iter().all(|m| m[plane] < 0.0))
+    }
+
+    /// The tangents of the view's horizontal and vertical half-angles.
+    fn half_tangents(&self) -> (f64, f64) {
+        let tan_y = self.tan_half_fov() as f64;
+        (tan_y * self.width as f64 / self.height as f64, tan_y)
     }
 
     /// How far the view-space point `v` lies inside each of the frustum's planes that
@@ -203,15 +244,7 @@ impl Camera {
     /// z·tan_x`, `|y| ≤ z·tan_y`, the screen's edges), then the plane facing forwards
     /// (`z ≥ 0`). In f64 for callers that need the bits.
     pub fn frustum_margins(&self, v: DVec3) -> [f64; 5] {
-        let tan_y = self.tan_half_fov() as f64;
-        let tan_x = tan_y * self.width as f64 / self.height as f64;
-        [
-            v.z * tan_x + v.x,
-            v.z * tan_x - v.x,
-            v.z * tan_y + v.y,
-            v.z * tan_y - v.y,
-            v.z,
-        ]
+        frustum_margins_of(self.half_tangents(), v)
     }
 
     /// A copy of this camera with its eye measured from `origin`: the same view, in
@@ -602,6 +635,45 @@ mod tests {
         let c = camera(far, far - DVec3::new(1e-3, 0.0, 0.0)).unwrap();
         assert_eq!(c.forward, -Vec3::X);
         assert!(camera(DVec3::new(0.0, 0.0, 5.0), DVec3::ZERO).is_ok());
+    }
+
+    /// Turned by up to a margin, the view sees a small box off each of its sides
+    /// exactly when the box lies within that margin of the side (each side opened by
+    /// the margin, whatever the screen's shape); a box behind the eye stays unseen, and
+    /// a margin past a right angle opens no side past it.
+    #[test]
+    fn a_view_turned_by_a_margin_sees_what_lies_within_it_of_each_side() {
+        use crate::bounds::Aabb;
+        let camera = Camera::look_at(Vec3::ZERO, Vec3::Z, Vec3::Y, 60.0, 160, 90).unwrap();
+        let half_y = 30f32.to_radians();
+        let half_x = (half_y.tan() * 16.0 / 9.0).atan();
+        // A box of about 0.1° at 10 m, `degrees` past a side, in the direction `side`
+        // (±x or ±y) from the view's axis.
+        let past = |side: Vec3, half: f32, degrees: f32| {
+            let angle = half + degrees.to_radians();
+            let centre = (Vec3::Z * angle.cos() + side * angle.sin()) * 10.0;
+            Aabb {
+                min: centre - Vec3::splat(0.01),
+                max: centre + Vec3::splat(0.01),
+            }
+        };
+        let margin = 20f32.to_radians();
+        for (side, half) in [
+            (Vec3::X, half_x),
+            (-Vec3::X, half_x),
+            (Vec3::Y, half_y),
+            (-Vec3::Y, half_y),
+        ] {
+            assert!(!camera.may_see(&past(side, half, 1.0)), "{side}");
+            assert!(camera.may_see_turned(&past(side, half, 19.0), margin), "{side}");
+            assert!(!camera.may_see_turned(&past(side, half, 21.0), margin), "{side}");
+        }
+        let behind = Aabb {
+            min: Vec3::new(-0.1, -0.1, -5.1),
+            max: Vec3::new(0.1, 0.1, -4.9),
+        };
+        assert!(!camera.may_see_turned(&behind, margin));
+        assert!(!camera.may_see_turned(&behind, 3.0));
     }
 
     /// A box is seen when one of its points projects onto the screen in front of the

@@ -236,8 +236,9 @@ impl Manager {
                 // Off screen (nothing shown, so nothing stale and nothing needed now:
                 // drawn as geometry, which the rasterizer leaves out at once), or drawn
                 // as geometry while its texture would cost more than it: the textures
-                // for where the eye is going are still asked for. One drawn as geometry
-                // only while it waits for its first texture asks for that now.
+                // for where the eye is going are still asked for, if a view from there
+                // turned by up to `PREDICTED_VIEW_MARGIN` would show it. One drawn as
+                // geometry only while it waits for its first texture asks for that now.
                 if self.waits_as_geometry(scene, k, camera) {
                     self.request(scene, k, camera.eye_f32(), camera, None);
                 }

@@ -22,8 +22,8 @@ use super::messages::{Command, TextureRequest};
 use super::policy::{
     AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
     LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK,
-    PENDING_REACH, REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH, asked_for,
-    largest_edge,
+    PENDING_REACH, PREDICTED_VIEW_MARGIN, REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH,
+    asked_for, largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -155,8 +155,10 @@ pub(super) struct Prediction {
     motion: Motion,
     /// The eye then, in the object's frame.
     future: Vec3,
-    /// Each held texture's eye and its grade from `future`.
-    held: Vec<(Vec3, Grade)>,
+    /// Each held texture's eye and its grade from `future`; `None` where a view from
+    /// there, turned as now or by up to [`PREDICTED_VIEW_MARGIN`] further, would not
+    /// show the object: nothing is asked for it, and what was is withdrawn.
+    held: Option<Vec<(Vec3, Grade)>>,
 }
 
 impl Manager {
@@ -330,7 +332,8 @@ impl Manager {
     }
 
     /// Where the eye will be once a request for object `k` made now comes back (in the
-    /// object's frame, as `camera` is), and how each held texture grades there: what
+    /// object's frame, as `camera` is), and how each held texture grades there (none
+    /// where the object will be out of view: see [`Prediction::held`]): what
     /// [`Manager::predict_for`] decides from. `None` where nothing is to be asked
     /// ahead: not predicting, no eye observed yet, or drawn as geometry from there. It
     /// only reads, so a frame works it out for every object at once.
@@ -348,9 +351,17 @@ impl Manager {
             return None;
         }
         let future = object.to_local(future);
-        // (Asked for as soon as a texture would pay: see `GEOMETRY_WHILE_WAITING`.)
-        let grades = self.grades(scene, k, future, camera, 1.0)?;
-        let held = (self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect();
+        let from_future = Camera {
+            eye: future.as_dvec3(),
+            ..*camera
+        };
+        let held = if from_future.may_see_turned(&object.local_bounds, PREDICTED_VIEW_MARGIN) {
+            // (Asked for as soon as a texture would pay: see `GEOMETRY_WHILE_WAITING`.)
+            let grades = self.grades(scene, k, future, camera, 1.0)?;
+            Some((self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect())
+        } else {
+            None
+        };
         Some(Prediction {
             horizon,
             motion,
@@ -381,6 +392,10 @@ impl Manager {
         };
         let centre = scene.objects[k].local_bounds.center();
         let eye = camera.eye_f32();
+        let Some(held) = held else {
+            self.withdraw_predictions(k, |_| true);
+            return;
+        };
         let asked: Vec<Vec3> = (self.pending.values())
             .filter(|p| p.object == k)
             .map(|p| p.eye)
@@ -417,13 +432,15 @@ impl Manager {
         }
         // Predictions neither the eye nor its future will meet any more.
         let reach = WITHDRAW_REACH * self.valid_angle(k);
-        let stale: Vec<u64> = self
-            .pending
-            .iter()
-            .filter(|(_, p)| p.object == k && p.predicted())
-            .filter(|(_, p)| {
-                angle_between(centre, p.eye, eye) > reach && angle_between(centre, p.eye, future) > reach
-            })
+        self.withdraw_predictions(k, |p| {
+            angle_between(centre, p.eye, eye) > reach && angle_between(centre, p.eye, future) > reach
+        });
+    }
+
+    /// Withdraws object `k`'s predicted requests that are `stale`.
+    fn withdraw_predictions(&mut self, k: usize, stale: impl Fn(&Pending) -> bool) {
+        let stale: Vec<u64> = (self.pending.iter())
+            .filter(|(_, p)| p.object == k && p.predicted() && stale(p))
             .map(|(&id, _)| id)
             .collect();
         if !stale.is_empty() {
