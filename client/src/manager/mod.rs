@@ -140,9 +140,9 @@ impl Manager {
     /// refusal's) raises the tolerance a step when long, lowers it a step when short.
     fn feel_load(&mut self, wait: Duration) {
         self.load_scale = if wait > policy::LOAD_HIGH_WAIT {
-            (self.load_scale * policy::LOAD_STEP).min(policy::MAX_LOAD_SCALE)
+            (self.load_scale * policy::LOAD_STEP_UP).min(policy::MAX_LOAD_SCALE)
         } else if wait < policy::LOAD_LOW_WAIT {
-            (self.load_scale / policy::LOAD_STEP).max(1.0)
+            (self.load_scale / policy::LOAD_STEP_DOWN).max(1.0)
         } else {
             self.load_scale
         };

@@ -431,17 +431,24 @@ pub const ASSESSMENTS_PER_TASK: usize = 16;
 /// A server foreseeing that a new job would wait longer than this behind the others
 /// (its `queue_wait_ms`), or refusing a prediction, is saturated: textures asked for
 /// now come late, so the client lets the ones it holds live longer — its tolerance
-/// times [`LOAD_STEP`] at each of the server's reports (every
+/// times [`LOAD_STEP_UP`] at each of the server's reports (every
 /// [`HEALTH_POLL`](crate::link::HEALTH_POLL)) — and asks for fewer. (Unloaded, a job
 /// waits behind none: 0.)
 pub const LOAD_HIGH_WAIT: Duration = Duration::from_millis(250);
 
-/// … and below this it has room again: the factor falls back by [`LOAD_STEP`] at each
-/// report, to 1.
+/// … and below this it has room again: the factor falls back by [`LOAD_STEP_DOWN`] at
+/// each report, to 1.
 pub const LOAD_LOW_WAIT: Duration = Duration::from_millis(100);
 
-/// The factor's step per report: from 1 to [`MAX_LOAD_SCALE`] in about 3 s.
-pub const LOAD_STEP: f32 = 1.5;
+/// The factor's step up per report: from 1 to [`MAX_LOAD_SCALE`] in about 3 s.
+pub const LOAD_STEP_UP: f32 = 1.5;
+
+/// The factor's step down per report: from [`MAX_LOAD_SCALE`] to 1 in about 11 s. Every
+/// client hears the same server: stepping down as fast as up, 64 clients brought their
+/// tolerances from 8 to 1.6 times the user's within 2 s of the queue's emptying, all at
+/// once, and their textures went stale together (9–18 % of a 20 s flight's frames
+/// stalled, nearly all in the 6 s the factor took to climb back).
+pub const LOAD_STEP_DOWN: f32 = 1.1;
 
 /// The most the server's load may multiply the tolerance by: textures live at most
 /// this much longer (in gap growth) than the user asked; past it, frames go stale.
