@@ -694,7 +694,7 @@ fn failed_requests_are_counted_by_how_they_ended() {
 /// A server that reports a long wait for new jobs makes the client's textures live
 /// longer — its tolerance raised a step per report, up to `MAX_LOAD_SCALE` times the
 /// user's — and one with room again brings it back, a smaller step per report, to the
-/// user's.
+/// user's. Reports taken in by one frame are one report.
 #[test]
 fn a_saturated_server_lengthens_the_textures_lives() {
     use relief_client::manager::policy::{
@@ -731,6 +731,11 @@ fn a_saturated_server_lengthens_the_textures_lives() {
         report(&mut manager, Duration::ZERO);
     }
     assert_eq!(manager.tolerance(), asked);
+    // Reports that queued up between two frames count as one, the latest.
+    for wait in [busy, busy, busy, Duration::ZERO, busy] {
+        arrivals.send(Arrival::ServerLoad { wait }).unwrap();
+    }
+    assert_eq!(report(&mut manager, busy), LOAD_STEP_UP);
 }
 
 /// A prediction's texture is counted by its arrival against the time it was predicted

@@ -209,9 +209,10 @@ impl Camera {
         self.may_see_within(bounds, self.half_tangents())
     }
 
-    /// Whether any of `bounds` could be on screen were the view turned by up to
-    /// `margin` radians any way: [`Camera::may_see`] with each side of the frustum
-    /// opened by `margin` (short of a right angle; never narrower than the view).
+    /// Whether any of `bounds` could be on screen with each side of the frustum opened
+    /// by `margin` radians (short of a right angle; never narrower than the view):
+    /// about whether a view turned by up to `margin` would show it — exactly so for a
+    /// turn straight across a side, a little short of it past the corners.
     pub fn may_see_turned(&self, bounds: &crate::bounds::Aabb, margin: f32) -> bool {
         let (tan_x, tan_y) = self.half_tangents();
         let widen = |tan: f64| {
@@ -674,6 +675,11 @@ mod tests {
         };
         assert!(!camera.may_see_turned(&behind, margin));
         assert!(!camera.may_see_turned(&behind, 3.0));
+        // … and each side opened to just short of a right angle: 80° off the axis is seen.
+        for (side, half) in [(Vec3::X, half_x), (Vec3::Y, half_y)] {
+            let off_axis = past(side, half, 80.0 - half.to_degrees());
+            assert!(camera.may_see_turned(&off_axis, 3.0), "{side}");
+        }
     }
 
     /// A box is seen when one of its points projects onto the screen in front of the

@@ -134,6 +134,10 @@ pub(super) fn probe_valid_angle(held: &Held, centre: Vec3, camera: &Camera, tole
 impl Manager {
     /// Takes in what has arrived (never waits).
     pub(super) fn drain(&mut self, camera: &Camera, scene: &Scene) {
+        // The server's load reports that queued up while no frame ran (a slow frame, a
+        // load-test client waiting for the others) count as one, the latest: each steps
+        // the tolerance's factor, and a backlog taken in at once stepped it to its bound.
+        let mut load = None;
         while let Ok(arrival) = self.arrivals.try_recv() {
             match arrival {
                 Arrival::Texture {
@@ -207,7 +211,7 @@ impl Manager {
                     }
                     self.hold(p.object, held, centre, local.eye_f32());
                 }
-                Arrival::ServerLoad { wait } => self.feel_load(wait),
+                Arrival::ServerLoad { wait } => load = Some(wait),
                 Arrival::Failed { id, failure } => {
                     // (A withdrawn request's end is no news.)
                     let Some(pending) = self.pending.remove(&id) else {
@@ -240,6 +244,9 @@ impl Manager {
                     }
                 }
             }
+        }
+        if let Some(wait) = load {
+            self.feel_load(wait);
         }
     }
 }

@@ -446,7 +446,7 @@ pub const LOAD_STEP_UP: f32 = 1.5;
 /// The factor's step down per report: from [`MAX_LOAD_SCALE`] to 1 in about 11 s. Every
 /// client hears the same server: stepping down as fast as up, 64 clients brought their
 /// tolerances from 8 to 1.6 times the user's within 2 s of the queue's emptying, all at
-/// once, and their textures went stale together (9–18 % of a 20 s flight's frames
+/// once, and their textures went stale together (5.8–18.1 % of a 20 s flight's frames
 /// stalled, nearly all in the 6 s the factor took to climb back).
 pub const LOAD_STEP_DOWN: f32 = 1.1;
 

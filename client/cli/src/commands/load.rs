@@ -376,10 +376,12 @@ struct StartLine {
     state: Mutex<(u32, Option<Instant>)>,
     all_there: Condvar,
     clients: u32,
+    /// When the line gives up waiting: [`START_LINE_LIMIT`] after it was drawn.
+    deadline: Instant,
 }
 
-/// How long the line waits for the last client (one that failed never comes): each
-/// warm-up gives up at [`WARM_UP_LIMIT`].
+/// How long the line waits for the last client (one that panicked never comes; one
+/// whose warm-up failed does): each warm-up gives up at [`WARM_UP_LIMIT`].
 const START_LINE_LIMIT: Duration = WARM_UP_LIMIT.saturating_add(Duration::from_secs(10));
 
 impl StartLine {
@@ -388,21 +390,24 @@ impl StartLine {
             state: Mutex::new((0, None)),
             all_there: Condvar::new(),
             clients,
+            deadline: Instant::now() + START_LINE_LIMIT,
         }
     }
 
-    /// Waits until every client has arrived, or [`START_LINE_LIMIT`] has passed.
+    /// Waits until every client has arrived, or the line's deadline has passed; then
+    /// every client waiting goes at once.
     fn arrive(&self) {
         let mut state = self.state.lock().unwrap_or_else(PoisonError::into_inner);
         state.0 += 1;
         if state.0 >= self.clients {
             state.1.get_or_insert_with(Instant::now);
-            self.all_there.notify_all();
         }
+        let left = self.deadline.saturating_duration_since(Instant::now());
         let (mut state, _) = (self.all_there)
-            .wait_timeout_while(state, START_LINE_LIMIT, |s| s.1.is_none())
+            .wait_timeout_while(state, left, |s| s.1.is_none())
             .unwrap_or_else(PoisonError::into_inner);
         state.1.get_or_insert_with(Instant::now);
+        self.all_there.notify_all();
     }
 
     /// When the flights started (now, if none has yet).
@@ -530,4 +535,31 @@ fn fly(
         lifetimes_s: manager.texture_lifetimes().seconds,
         psnr,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Clients arriving at the line one after another all leave once the last has
+    /// arrived, not before, and the flights' start is then.
+    #[test]
+    fn the_clients_leave_the_start_line_together_once_all_are_there() {
+        let line = Arc::new(StartLine::new(4));
+        let arrivals: Vec<_> = (0..4u64)
+            .map(|c| {
+                let line = line.clone();
+                std::thread::spawn(move || {
+                    std::thread::sleep(Duration::from_millis(40 * c));
+                    let arrived = Instant::now();
+                    line.arrive();
+                    (arrived, Instant::now())
+                })
+            })
+            .collect();
+        let times: Vec<(Instant, Instant)> = arrivals.into_iter().map(|h| h.join().unwrap()).collect();
+        let last = times.iter().map(|t| t.0).max().unwrap();
+        assert!(times.iter().all(|&(_, left)| left >= last));
+        assert!(line.started() >= last && line.started() <= times.iter().map(|t| t.1).min().unwrap());
+    }
 }
