@@ -95,9 +95,10 @@ pub const MAX_TURN: f32 = 60.0 * PI / 180.0;
 
 /// … nor beyond this change of distance from the object (either way), for the same
 /// reason. (At 1.6 the sphere's worst demo frames were its near pass, the eye 1.45–1.54×
-/// its texture's distance, the outline ragged: 10 runs, rtt 0 and 100, scored −2.5 to
-/// −5.7 dB against geometry, 2 of them within 3 dB; at 1.5, −2.4 to −3.0 in 9 of 10,
-/// for about 6 % more requests.)
+/// as far as its texture's eye about the object's centre (this bound is taken about the
+/// texture volume's), the outline ragged: 10 runs, rtt 0 and 100, scored −2.5 to −5.7 dB
+/// against geometry, 2 of them within 3 dB; at 1.5, −2.4 to −3.0 in 9 of 10 (the tenth
+/// −5.0, another frame), for about 6 % more requests.)
 pub const MAX_DISTANCE_RATIO: f32 = 1.5;
 
 /// Beyond this turn a texture drawn without a partner counts as stale (and one for now
@@ -449,7 +450,7 @@ pub const LOAD_STEP_UP: f32 = 1.5;
 /// The factor's step down per report: from [`MAX_LOAD_SCALE`] to 1 in about 11 s. Every
 /// client hears the same server: stepping down as fast as up, 64 clients brought their
 /// tolerances from 8 to 1.6 times the user's within 2 s of the queue's emptying, all at
-/// once, and their textures went stale together (5.8–18.1 % of a 20 s flight's frames
+/// once, and their textures went stale together (up to 18.1 % of a 20 s flight's frames
 /// stalled, nearly all in the 6 s the factor took to climb back).
 pub const LOAD_STEP_DOWN: f32 = 1.1;
 
