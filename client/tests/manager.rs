@@ -77,11 +77,22 @@ fn index(scene: &Scene, name: &str) -> usize {
     scene.objects.iter().position(|o| o.name == name).unwrap()
 }
 
+/// A manager wired to the test: the channel its requests go out on, and the one the
+/// test answers them on.
+fn wired(scene: &Scene, config: Config) -> (Manager, UnboundedReceiver<Command>, UnboundedSender<Arrival>) {
+    let (commands_tx, commands_rx) = unbounded_channel();
+    let (arrivals_tx, arrivals_rx) = unbounded_channel();
+    (
+        Manager::new(scene, config, commands_tx, arrivals_rx),
+        commands_rx,
+        arrivals_tx,
+    )
+}
+
 /// A manager whose requests nobody answers, and the channel they go out on.
 fn unanswered(scene: &Scene, config: Config) -> (Manager, UnboundedReceiver<Command>) {
-    let (commands_tx, commands_rx) = unbounded_channel();
-    let (_arrivals_tx, arrivals_rx) = unbounded_channel();
-    (Manager::new(scene, config, commands_tx, arrivals_rx), commands_rx)
+    let (manager, commands, _) = wired(scene, config);
+    (manager, commands)
 }
 
 /// The final texture `ready` arrives for request `id`.
@@ -202,13 +213,11 @@ fn a_texture_magnified_past_a_pixel_is_replaced_while_shown() {
 
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
     let sphere = index(&scene, "sphere");
-    let (commands_tx, mut commands) = unbounded_channel();
-    let (arrivals, arrivals_rx) = unbounded_channel();
     let config = Config {
         predict: false,
         ..Config::default()
     };
-    let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
+    let (mut manager, mut commands, arrivals) = wired(&scene, config);
     let centre = scene.objects[sphere].world_bounds().center();
     let eye = centre + Vec3::new(0.0, 1.0, 6.0);
     let camera = |width: u32| Camera::look_at(eye, centre, Vec3::Y, 60.0, width, width * 9 / 16).unwrap();
@@ -308,9 +317,7 @@ fn a_stale_object_asks_now_though_a_late_prediction_covers_its_eye() {
 
     let scene = Scene::load("default").unwrap();
     let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
-    let (commands_tx, mut commands) = unbounded_channel();
-    let (arrivals, arrivals_rx) = unbounded_channel();
-    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let (mut manager, mut commands, arrivals) = wired(&scene, Config::default());
     // Orbit the sphere at 30°/s until a prediction for it goes out; nothing answers.
     let (mut now, mut predicted) = (Vec::new(), None);
     let mut t = 0.0;
@@ -583,9 +590,7 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
     use relief_trace::tracer::ObjectTracer;
 
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
-    let (commands_tx, mut commands) = unbounded_channel();
-    let (arrivals, arrivals_rx) = unbounded_channel();
-    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let (mut manager, mut commands, arrivals) = wired(&scene, Config::default());
     let sphere = index(&scene, "sphere");
     let centre = scene.objects[sphere].world_bounds().center();
     let eye = centre + Vec3::new(0.0, 1.0, 4.5);
@@ -657,9 +662,7 @@ fn failed_requests_are_counted_by_how_they_ended() {
     use relief_client::manager::{Arrival, Failure};
 
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
-    let (commands_tx, mut commands) = unbounded_channel();
-    let (arrivals, arrivals_rx) = unbounded_channel();
-    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let (mut manager, mut commands, arrivals) = wired(&scene, Config::default());
     let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
     let mut asked_now = |manager: &mut Manager, t: f64| {
         let drawn = (centre + Vec3::new(0.0, 1.0, 4.5), centre, t);
@@ -702,11 +705,9 @@ fn a_saturated_server_lengthens_the_textures_lives() {
     };
 
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
-    let (commands_tx, _commands) = unbounded_channel();
-    let (arrivals, arrivals_rx) = unbounded_channel();
     let config = Config::default();
     let asked = config.tolerance;
-    let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
+    let (mut manager, _commands, arrivals) = wired(&scene, config);
     let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
     let report = |manager: &mut Manager, wait: Duration| {
         arrivals.send(Arrival::ServerLoad { wait }).unwrap();
@@ -753,9 +754,7 @@ fn a_prediction_is_counted_late_or_early_against_its_need() {
     // Orbits the sphere until a prediction is asked for; answers it `after` its need
     // (before, when negative); returns the lateness counted, ms.
     let lateness = |after_ms: i64| -> f64 {
-        let (commands_tx, mut commands) = unbounded_channel();
-        let (arrivals, arrivals_rx) = unbounded_channel();
-        let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+        let (mut manager, mut commands, arrivals) = wired(&scene, Config::default());
         let request = (0..30)
             .find_map(|frame| {
                 let t = frame as f32 / 30.0;
@@ -857,9 +856,7 @@ fn a_texture_for_a_nearby_eye_is_held_under_its_own_eye() {
     use relief_trace::tracer::ObjectTracer;
 
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
-    let (commands_tx, mut commands) = unbounded_channel();
-    let (arrivals, arrivals_rx) = unbounded_channel();
-    let mut manager = Manager::new(&scene, Config::default(), commands_tx, arrivals_rx);
+    let (mut manager, mut commands, arrivals) = wired(&scene, Config::default());
     let sphere = index(&scene, "sphere");
     let object = &scene.objects[sphere];
     let centre = object.world_bounds().center();
@@ -930,14 +927,12 @@ fn a_texture_asked_for_is_not_let_go_as_it_comes() {
     use relief_trace::tracer::ObjectTracer;
 
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
-    let (commands_tx, mut commands) = unbounded_channel();
-    let (arrivals, arrivals_rx) = unbounded_channel();
     let config = Config {
         keep: 3,
         tolerance: 2.0,
         ..Config::default()
     };
-    let mut manager = Manager::new(&scene, config, commands_tx, arrivals_rx);
+    let (mut manager, mut commands, arrivals) = wired(&scene, config);
     let sphere = index(&scene, "sphere");
     let object = &scene.objects[sphere];
     let (centre, local_centre) = (object.world_bounds().center(), object.local_bounds.center());
