@@ -474,6 +474,62 @@ fn stale_object_frames_are_counted_by_cause() {
     assert_eq!(manager.counters.stale_frames, 1);
 }
 
+/// An object without a valid texture is drawn exactly as geometry where that costs no
+/// more than [`GEOMETRY_STAND_IN`] times its impostor: near a tree, whose texture would
+/// be large, a frame turned past its texture's valid angle draws it as geometry and is
+/// not stale; farther off, where its texture is small, the same turn is stale.
+///
+/// [`GEOMETRY_STAND_IN`]: relief_client::manager::policy::GEOMETRY_STAND_IN
+#[test]
+fn a_stale_object_stands_in_as_geometry_where_that_costs_little() {
+    use relief_client::manager::policy::{GEOMETRY_STAND_IN, asked_for, cheaper_as_geometry};
+
+    let text = r#"
+        [[objects]]
+        name = "tree"
+        generator = { kind = "tree", seed = 7, depth = 5, leaves = 10 }
+        "#;
+    let scene = Arc::new(Scene::parse(text).unwrap());
+    let tree = &scene.objects[0];
+    let centre = tree.world_bounds().center();
+    let camera_at = |distance: f32, degrees: f32| {
+        let angle = degrees.to_radians();
+        let eye = centre + distance * Vec3::new(angle.cos(), 0.2, angle.sin());
+        Camera::look_at(eye, centre, Vec3::Y, 60.0, 640, 360).unwrap()
+    };
+    let edge = |camera: &Camera| texture_ladder(asked_for(tree, &tree.local_camera(camera)).1.unwrap());
+    let config = Config {
+        predict: false,
+        ..Config::default()
+    };
+    for (distance, stands_in) in [(7.0, true), (16.0, false)] {
+        let (from, to) = (camera_at(distance, 0.0), camera_at(distance, 15.0));
+        // (The premise: near, geometry costs more than the texture but not twice;
+        // far, more than twice.)
+        let wanted = edge(&to);
+        assert!(
+            !cheaper_as_geometry(tree, wanted, 1.0),
+            "{distance} m: {wanted} texels"
+        );
+        assert_eq!(
+            cheaper_as_geometry(tree, wanted, GEOMETRY_STAND_IN),
+            stands_in,
+            "{distance} m: {wanted} texels"
+        );
+        let mut manager = served_locally(&scene, config.clone());
+        assert!(manager.warm_up(&scene, &from, Duration::from_secs(60)));
+        let shows = manager.frame(&scene, &to, 0.0);
+        let counters = &manager.counters;
+        let counted = (counters.stand_ins, counters.stale_frames);
+        if stands_in {
+            assert!(matches!(shows[0], Show::Geometry), "{distance} m: {:?}", shows[0]);
+            assert_eq!(counted, (1, 0), "{distance} m");
+        } else {
+            assert_eq!(counted, (0, 1), "{distance} m");
+        }
+    }
+}
+
 /// A texture shown alone goes stale once the band past its rim that it cannot show
 /// ([`LONE_BAND`] pixels, predicted from the rim's curvature) would open: for a sphere
 /// of radius `R` pixels, at `acos(1 − LONE_BAND/R)` round it — well before

@@ -199,19 +199,17 @@ impl Manager {
     /// own eye, in screen pixels (`INFINITY` when it cannot be warped there), whether it
     /// is too coarse to be shown, and whether a finer one can be had (eq. 4-1) — of the
     /// edge an eye there asks for ([`Manager::size_for`]). `None` where the object costs
-    /// no more drawn as geometry than `factor` times that texture warped
-    /// ([`cheaper_as_geometry`]).
+    /// no more drawn as geometry than that texture warped ([`cheaper_as_geometry`]).
     pub(super) fn grades(
         &self,
         scene: &Scene,
         object: usize,
         eye: Vec3,
         camera: &Camera,
-        factor: f32,
     ) -> Option<Vec<Grade>> {
         let o = &scene.objects[object];
         let (wanted, _) = Self::size_for(o, eye, camera);
-        if cheaper_as_geometry(o, wanted, factor) {
+        if cheaper_as_geometry(o, wanted, 1.0) {
             return None;
         }
         let centre = o.local_bounds.center();

@@ -51,8 +51,13 @@ pub struct Counters {
     /// Frames where some impostor was shown above tolerance, alone too far from its
     /// eye, or missing.
     pub stale_frames: u64,
-    /// Why: the object-frames without a valid texture, by cause.
+    /// Why: the object-frames without a valid texture, by cause (those drawn as
+    /// geometry instead, `stand_ins`, left out).
     pub stale_causes: StaleCauses,
+    /// Object-frames without a valid texture drawn exactly as geometry, where that
+    /// cost little more than the impostor (see
+    /// [`GEOMETRY_STAND_IN`](super::policy::GEOMETRY_STAND_IN)): not stale.
+    pub stand_ins: u64,
     /// Where each [`Manager::render`](super::Manager::render) spent its time.
     pub render_stages: Vec<RenderStages>,
 }

@@ -62,7 +62,9 @@ use around::angle_between;
 use cache::ObjectState;
 use choose::{Grade, may_show, shown_texture};
 use draw::Kept;
-use policy::{ASSESSMENTS_PER_TASK, GEOMETRY_WHILE_WAITING, SHOWN_STALE, WARM_UP_POLL, texel_pixels};
+use policy::{
+    ASSESSMENTS_PER_TASK, GEOMETRY_STAND_IN, SHOWN_STALE, WARM_UP_POLL, cheaper_as_geometry, texel_pixels,
+};
 use requests::{Asked, Pending};
 
 /// The manager of one client: what it holds and has asked for per object, where the eye
@@ -237,11 +239,7 @@ impl Manager {
                 // drawn as geometry, which the rasterizer leaves out at once), or drawn
                 // as geometry while its texture would cost more than it: the textures
                 // for where the eye is going are still asked for, if a view from there
-                // turned by up to `PREDICTED_VIEW_MARGIN` would show it. One drawn as
-                // geometry only while it waits for its first texture asks for that now.
-                if self.waits_as_geometry(scene, k, camera) {
-                    self.request(scene, k, camera.eye_f32(), camera, None);
-                }
+                // turned by up to `PREDICTED_VIEW_MARGIN` would show it.
                 self.predict_for(scene, k, camera, prediction);
                 continue;
             };
@@ -262,6 +260,10 @@ impl Manager {
                 .is_some_and(|((_, g), turn)| !may_show(&g, turn, partner.is_some(), 1.0, tolerance));
             let within_any = grades.iter().any(|g| g.growth <= tolerance);
             let valid = within_any && !too_far;
+            // Without a valid texture, drawn exactly as geometry where that costs little
+            // more than its impostor would (see `GEOMETRY_STAND_IN`): not stale.
+            let stands_in = !valid
+                && cheaper_as_geometry(object, Self::size_for(object, eye, camera).0, GEOMETRY_STAND_IN);
             // A finer texture is asked for while the shown one is still shown, once its
             // texels grow past `REFINE_TEXEL` (the eye drawing near), as when the only
             // one within tolerance is too coarse to be shown at all.
@@ -272,7 +274,9 @@ impl Manager {
             if valid || asked_for != Asked::Not {
                 self.counters.prediction_hits += 1;
             }
-            if !valid {
+            if stands_in {
+                self.counters.stand_ins += 1;
+            } else if !valid {
                 let causes = &mut self.counters.stale_causes;
                 if grades.iter().all(|g| g.growth == f32::INFINITY) {
                     causes.missing += 1;
@@ -324,7 +328,7 @@ impl Manager {
             }
             self.predict_for(scene, k, camera, prediction);
             shows[k] = match best {
-                Some((i, g)) if g.growth <= SHOWN_STALE * tolerance => {
+                Some((i, g)) if !stands_in && g.growth <= SHOWN_STALE * tolerance => {
                     let held = &mut self.objects[k].held;
                     for j in std::iter::once(i).chain(partner.map(|(p, _)| p)) {
                         held[j].last_shown = shown_at;
@@ -358,35 +362,19 @@ struct Assessment {
     reason: Option<GeometryReason>,
     /// Each held texture's grade at the eye (in the order held: the frame adds and
     /// drops none before it decides), where it may be shown: on screen, and its
-    /// texture no dearer to warp than its triangles to draw — by
-    /// [`GEOMETRY_WHILE_WAITING`] when it holds none ([`Manager::grades`]); `None`
-    /// elsewhere.
+    /// texture no dearer to warp than its triangles to draw ([`Manager::grades`]);
+    /// `None` elsewhere.
     grades: Option<Vec<Grade>>,
 }
 
 impl Manager {
-    /// Whether object `k`, drawn as geometry from `camera` (in its frame), is so only
-    /// while it waits for its first texture ([`GEOMETRY_WHILE_WAITING`]): on screen,
-    /// holding and asking for nothing, though a texture would pay.
-    fn waits_as_geometry(&self, scene: &Scene, k: usize, camera: &Camera) -> bool {
-        self.objects[k].held.is_empty()
-            && !self.pending.values().any(|p| p.object == k)
-            && camera.may_see(&scene.objects[k].local_bounds)
-            && self.grades(scene, k, camera.eye_f32(), camera, 1.0).is_some()
-    }
-
     /// Object `k` seen from `world_camera`: its camera, and how its textures grade.
     fn assess(&self, scene: &Scene, k: usize, world_camera: &Camera) -> Assessment {
         let object = &scene.objects[k];
         let camera = object.local_camera(world_camera);
         let reason = geometry_reason(object, world_camera.eye);
-        let factor = if self.objects[k].held.is_empty() {
-            GEOMETRY_WHILE_WAITING
-        } else {
-            1.0
-        };
         let grades = (reason.is_none() && camera.may_see(&object.local_bounds))
-            .then(|| self.grades(scene, k, camera.eye_f32(), &camera, factor))
+            .then(|| self.grades(scene, k, camera.eye_f32(), &camera))
             .flatten();
         Assessment {
             camera,

@@ -293,19 +293,22 @@ pub const WARP_NS_PER_TEXEL: f32 = 12.0;
 /// 6.63–6.73, and 84–119 textures were asked for where 125–143 were.
 ///
 /// With `factor` over 1, whether geometry costs no more than `factor` times the
-/// impostor (see [`GEOMETRY_WHILE_WAITING`]).
+/// impostor (see [`GEOMETRY_STAND_IN`]).
 pub fn cheaper_as_geometry(object: &SceneObject, edge: u32, factor: f32) -> bool {
     let geometry = object.mesh.triangle_count() as f32 * GEOMETRY_NS_PER_TRIANGLE;
     geometry <= factor * (edge as f32).powi(2) * WARP_NS_PER_TEXEL
 }
 
-/// An object holding no texture is drawn as geometry — exact, and so not stale — while
-/// that costs no more than this many times its impostor would; its first texture is
-/// asked for as soon as it would pay ([`cheaper_as_geometry`] at 1). Without it, the
-/// tree stepping back from the 360-texel edge that is drawn as geometry to the 256 one
-/// that is not went stale until its texture came: 7–19 of the 300 frames of a flight
-/// over 100 ms links with 2 % loss, each drawing it exactly at about the same cost.
-pub const GEOMETRY_WHILE_WAITING: f32 = 2.0;
+/// An object without a valid texture — none held yet, or none within tolerance of the
+/// eye — is drawn as geometry, exact and so not stale, while that costs no more than
+/// this many times its impostor would; a texture is asked for as soon as it would pay
+/// ([`cheaper_as_geometry`] at 1). Without it, the tree stepping back from the
+/// 360-texel edge that is drawn as geometry to the 256 one that is not went stale until
+/// its texture came: 7–19 of the 300 frames of a flight over 100 ms links with 2 %
+/// loss, each drawing it exactly at about the same cost. In the forest's low flight,
+/// trees passing a metre or two from the eye turn faster than any round trip can
+/// follow; drawn as geometry then, they are what it costs (a default tree, ~1.5 ms).
+pub const GEOMETRY_STAND_IN: f32 = 2.0;
 
 /// The texel, in pixels' angles, a texture of `object` is asked for and shown at from
 /// `camera`: [`SHEET_TEXEL_PIXELS`] for leaves and sheets; for solids
@@ -585,8 +588,8 @@ mod tests {
         assert!(cheaper_as_geometry(tree, SHEET_MAX_EDGE, 1.0) && cheaper_as_geometry(tree, 360, 1.0));
         assert!(!cheaper_as_geometry(tree, 256, 1.0));
         // With nothing to show, the tree waits as geometry at 256 texels, not at 184.
-        assert!(cheaper_as_geometry(tree, 256, GEOMETRY_WHILE_WAITING));
-        assert!(!cheaper_as_geometry(tree, 184, GEOMETRY_WHILE_WAITING));
+        assert!(cheaper_as_geometry(tree, 256, GEOMETRY_STAND_IN));
+        assert!(!cheaper_as_geometry(tree, 184, GEOMETRY_STAND_IN));
         for solid in [knot, rock] {
             assert!(!cheaper_as_geometry(solid, SOLID_MAX_EDGE, 1.0), "{}", solid.name);
         }

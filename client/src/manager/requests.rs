@@ -356,8 +356,8 @@ impl Manager {
             ..*camera
         };
         let held = if from_future.may_see_turned(&object.local_bounds, PREDICTED_VIEW_MARGIN) {
-            // (Asked for as soon as a texture would pay: see `GEOMETRY_WHILE_WAITING`.)
-            let grades = self.grades(scene, k, future, camera, 1.0)?;
+            // (Asked for as soon as a texture would pay: see `GEOMETRY_STAND_IN`.)
+            let grades = self.grades(scene, k, future, camera)?;
             Some((self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect())
         } else {
             None

@@ -271,6 +271,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         needs: counters.needs,
         stale_frames: counters.stale_frames,
         stale_causes: counters.stale_causes,
+        stand_ins: counters.stand_ins,
         sprites: counters.sprites,
         warps: counters.warps,
         partners: counters.partners,

@@ -88,8 +88,10 @@ pub(super) struct Summary {
     pub(super) prediction_hits: u64,
     pub(super) needs: u64,
     pub(super) stale_frames: u64,
-    /// Object-frames without a valid texture, by cause.
+    /// Object-frames without a valid texture, by cause …
     pub(super) stale_causes: StaleCauses,
+    /// … and those drawn as geometry instead, not stale.
+    pub(super) stand_ins: u64,
     /// Impostors redrawn unchanged while Schaufler's sprite test held, and warped.
     pub(super) sprites: u64,
     pub(super) warps: u64,
