@@ -520,14 +520,29 @@ fn a_stale_object_stands_in_as_geometry_where_that_costs_little() {
         assert!(manager.warm_up(&scene, &from, Duration::from_secs(60)));
         let shows = manager.frame(&scene, &to, 0.0);
         let counters = &manager.counters;
-        let counted = (counters.stand_ins, counters.stale_frames);
+        // Either way a texture for the eye is asked for now.
+        let counted = (counters.stand_ins, counters.stale_frames, counters.requests_now);
         if stands_in {
             assert!(matches!(shows[0], Show::Geometry), "{distance} m: {:?}", shows[0]);
-            assert_eq!(counted, (1, 0), "{distance} m");
+            assert_eq!(counted, (1, 0, 1), "{distance} m");
         } else {
-            assert_eq!(counted, (0, 1), "{distance} m");
+            assert_eq!(counted, (0, 1, 1), "{distance} m");
         }
     }
+
+    // Holding nothing yet, near: it stands in, and its first texture is asked for once.
+    let (mut waiting, mut commands) = unanswered(&scene, config);
+    let near = camera_at(7.0, 0.0);
+    for _ in 0..3 {
+        let shows = waiting.frame(&scene, &near, 0.0);
+        assert!(matches!(shows[0], Show::Geometry), "{:?}", shows[0]);
+    }
+    let counters = &waiting.counters;
+    assert_eq!((counters.stand_ins, counters.stale_frames), (3, 0));
+    let asked = std::iter::from_fn(|| commands.try_recv().ok())
+        .filter(|c| matches!(c, Command::Request(_)))
+        .count();
+    assert_eq!(asked, 1, "one request for the first texture");
 }
 
 /// A texture shown alone goes stale once the band past its rim that it cannot show

@@ -44,7 +44,7 @@ pub struct Counters {
     /// [`Manager::texture_lifetimes`](super::Manager::texture_lifetimes)).
     pub retired: TextureLifetimes,
     /// Frames × objects where a valid texture was needed (impostors that may be on
-    /// screen).
+    /// screen, and objects standing in for one).
     pub needs: u64,
     /// … and one was there or already asked for.
     pub prediction_hits: u64,
@@ -55,8 +55,10 @@ pub struct Counters {
     /// geometry instead, `stand_ins`, left out).
     pub stale_causes: StaleCauses,
     /// Object-frames without a valid texture drawn exactly as geometry, where that
-    /// cost little more than the impostor (see
-    /// [`GEOMETRY_STAND_IN`](super::policy::GEOMETRY_STAND_IN)): not stale.
+    /// cost more than the impostor but little more (see
+    /// [`GEOMETRY_STAND_IN`](super::policy::GEOMETRY_STAND_IN)): not stale, and among
+    /// the `needs`. (Objects no dearer as geometry than as impostors are drawn so
+    /// whatever they hold, and are in neither.)
     pub stand_ins: u64,
     /// Where each [`Manager::render`](super::Manager::render) spent its time.
     pub render_stages: Vec<RenderStages>,

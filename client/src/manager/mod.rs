@@ -317,10 +317,12 @@ impl Manager {
             // only a prediction out covers the eye: that prediction is late, and the
             // request for now joins its job on the server and moves it ahead of the
             // predicted work there (or, not near enough to join, is baked first itself).
+            // One standing in as geometry is exact meanwhile: its prediction may take its
+            // turn.
             let asking_now = self.pending.values().any(|p| p.object == k && !p.predicted());
             let wanted = match asked_for {
                 Asked::Not => !valid || want_finer,
-                Asked::Predicted => !valid,
+                Asked::Predicted => !valid && !stands_in,
                 Asked::Now => false,
             };
             if wanted && !asking_now {

@@ -587,7 +587,8 @@ mod tests {
         let (tree, knot, sphere, rock) = (object("tree"), object("knot"), object("sphere"), object("rock"));
         assert!(cheaper_as_geometry(tree, SHEET_MAX_EDGE, 1.0) && cheaper_as_geometry(tree, 360, 1.0));
         assert!(!cheaper_as_geometry(tree, 256, 1.0));
-        // With nothing to show, the tree waits as geometry at 256 texels, not at 184.
+        // With no valid texture to show, the tree stands in as geometry at 256 texels,
+        // not at 184.
         assert!(cheaper_as_geometry(tree, 256, GEOMETRY_STAND_IN));
         assert!(!cheaper_as_geometry(tree, 184, GEOMETRY_STAND_IN));
         for solid in [knot, rock] {

@@ -237,16 +237,16 @@ pub fn run(args: DemoArgs) -> Result<()> {
         },
     )?;
     bar.finish_and_clear();
-    let geometry_ms = time_geometry(&scene, &geometry_cameras, (w, h));
     let judged = judge(&scene, &compared, &args.out)?;
     let counters = &manager.counters;
     let lifetimes = manager.texture_lifetimes();
-    let summary = Summary {
+    let mut summary = Summary {
         frames: log.frames,
         path_frames: flight.frames,
         frame_ms_p50: median(log.frame_ms.clone()),
         frame_ms_p95: percentile(&log.frame_ms, 0.95),
-        geometry_frame_ms_p50: median(geometry_ms),
+        // (Timed below, once the service has stopped.)
+        geometry_frame_ms_p50: f64::NAN,
         frame_stages_ms_p50: FrameStages::median(&log.plan_ms, &counters.render_stages),
         requests_now: counters.requests_now,
         requests_predicted: counters.requests_predicted,
@@ -296,6 +296,13 @@ pub fn run(args: DemoArgs) -> Result<()> {
         workers: started_workers,
         source,
     };
+    // The service stopped (the workers' processes, or the in-process generator once
+    // its bake in hand is done), so that nothing but the geometry frames runs while
+    // they are timed.
+    let textures_held = manager.textures_held();
+    drop(manager);
+    drop(service);
+    summary.geometry_frame_ms_p50 = median(time_geometry(&scene, &geometry_cameras, (w, h)));
     let json = serde_json::to_string_pretty(&summary)?;
     std::fs::write(args.out.join("summary.json"), &json).context("writing summary.json")?;
     if args.json {
@@ -303,7 +310,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
     } else {
         println!("{}", summary.line(args.size, &args.out));
     }
-    drop(service);
     let stale_frac = summary.stale_frames as f64 / summary.frames.max(1) as f64;
     if stale_frac > args.max_stale_frac {
         bail!(
@@ -317,7 +323,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         );
     }
     // Every frame drawn as geometry is not a run of the service: say so, and fail.
-    if manager.textures_held() == 0 && summary.needs > 0 {
+    if textures_held == 0 && summary.needs > 0 {
         bail!(
             "no relief texture arrived from {} in the whole run: is a worker connected to \
              the server? Every frame was drawn as geometry",
@@ -331,8 +337,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
 /// Timed after the flight, not in it: a large scene's geometry frame takes longer than
 /// several of the flight's frames, and in the flight each would stall the clock the eye
 /// follows, and jump the eye as a user's client never does. (So the demo's own workers
-/// are idle by then while the flight's frames shared the cores with them: the ratio of
-/// the two errs against the impostors.)
+/// have stopped by then while the flight's frames shared the cores with them: the ratio
+/// of the two errs against the impostors.)
 fn time_geometry(scene: &Scene, cameras: &[Camera], (w, h): (u32, u32)) -> Vec<f64> {
     let bar = progress::bar(cameras.len() as u64, "timing the frames as geometry");
     let mut gbuffer = GBuffer::new(w, h);
