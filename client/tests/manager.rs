@@ -981,16 +981,17 @@ fn a_texture_for_a_nearby_eye_is_held_under_its_own_eye() {
     );
 }
 
-/// A texture the manager asked for is kept as it comes, though farther from the eye
-/// than those it holds: not let go unseen and asked for again the next frame. An eye
-/// orbiting the sphere keeps a texture asked for ahead of its turn
-/// ([`PAIR_SPACING`] valid angles on — the sphere's gaps do not grow, so far on), the
-/// farthest it holds; at a low tolerance the textures near the eye go stale within a
-/// few degrees, so the 3 kept are all nearer the eye. Every request is answered at
-/// once, and none may be for an eye within a degree of one answered before. (Kept by
-/// nearness to the eye alone, the one ahead was asked for again in 6 frames running.)
+/// A texture the manager asked for is kept as it comes: not let go unseen and asked
+/// for again. An eye orbiting the sphere at 30° a second asks for textures ahead of it
+/// ([`LEAD`] of a valid angle past where it will be once answered); every request is
+/// answered half a second on, and none may be for an eye within a degree of one
+/// answered before. (When a texture was also asked for a pair of valid angles beyond,
+/// to be a partner, that one — the farthest held — went as it came when textures were
+/// kept by nearness to the eye alone, and was asked for again in 6 frames running.
+/// Those are no longer asked for, and here the predicted ones land no farther than
+/// those held: the order `Held::relied_on` keeps is not what this turns on now.)
 ///
-/// [`PAIR_SPACING`]: relief_client::manager::policy::PAIR_SPACING
+/// [`LEAD`]: relief_client::manager::policy::LEAD
 #[test]
 fn a_texture_asked_for_is_not_let_go_as_it_comes() {
     use relief_core::relief::DepthBits;
@@ -1010,11 +1011,15 @@ fn a_texture_asked_for_is_not_let_go_as_it_comes() {
     let tracer = ObjectTracer::new(object);
     let mut answered: Vec<Vec3> = Vec::new();
     let mut asked_again = Vec::new();
-    // 10° a second, 30 frames a second, for 4 s.
+    // Each answered half a second after it was asked: the prediction's horizon, and so
+    // how far ahead of the eye its texture is, grows to match.
+    const ROUND_TRIP_FRAMES: usize = 15;
+    let mut in_flight = std::collections::VecDeque::new();
+    // 30° a second, 30 frames a second, for 4 s.
     for frame in 0..120 {
         let t = frame as f64 / 30.0;
         let camera = Camera::look_at(
-            around(centre, (10.0 * t as f32).to_radians()),
+            around(centre, (30.0 * t as f32).to_radians()),
             centre,
             Vec3::Y,
             60.0,
@@ -1035,6 +1040,10 @@ fn a_texture_asked_for_is_not_let_go_as_it_comes() {
             if answered.iter().any(|eye| turn(eye) < 1.0) {
                 asked_again.push((frame, (r.eye - local_centre).normalize()));
             }
+            in_flight.push_back((frame + ROUND_TRIP_FRAMES, r));
+        }
+        while in_flight.front().is_some_and(|(due, _)| *due <= frame) {
+            let (_, r) = in_flight.pop_front().unwrap();
             answered.push(r.eye);
             let texture = bake(&tracer, r.eye, r.size, DepthBits::Eight, r.projection).unwrap();
             arrive(

@@ -1,6 +1,5 @@
 //! Eyes around an object: the angle between two, whether two are at a similar
-//! distance, an eye turned further about the object. The geometry every decision of
-//! the manager is made in.
+//! distance. The geometry every decision of the manager is made in.
 
 use glam::Vec3;
 
@@ -15,9 +14,4 @@ pub(super) fn angle_between(centre: Vec3, a: Vec3, b: Vec3) -> f32 {
 pub(super) fn similar_distance(centre: Vec3, a: Vec3, b: Vec3) -> bool {
     let ratio = (a - centre).length() / (b - centre).length();
     (1.0 / MAX_DISTANCE_RATIO..=MAX_DISTANCE_RATIO).contains(&ratio)
-}
-
-/// `offset` from `centre` turned by `angle` about `axis` (not zero), as a point.
-pub(super) fn turned(centre: Vec3, offset: Vec3, axis: Vec3, angle: f32) -> Vec3 {
-    centre + glam::Quat::from_axis_angle(axis.normalize(), angle) * offset
 }

@@ -16,14 +16,13 @@ use relief_render::geometry::{GeometryReason, geometry_reason};
 use crate::predict::Motion;
 
 use super::Manager;
-use super::around::{angle_between, similar_distance, turned};
+use super::around::angle_between;
 use super::choose::{Grade, held_covering};
 use super::messages::{Command, TextureRequest};
 use super::policy::{
-    AHEAD_MIN_TURN, AHEAD_SLACK, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
-    LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PAIR_SPACING, PENDING_DISTANCE_SLACK,
-    PENDING_REACH, PREDICTED_VIEW_MARGIN, REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH,
-    asked_for, largest_edge,
+    HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD, LEAD_PATH_STEPS,
+    MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PENDING_DISTANCE_SLACK, PENDING_REACH, PREDICTED_VIEW_MARGIN,
+    REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -49,17 +48,6 @@ impl Pending {
     pub(super) fn predicted(&self) -> bool {
         self.needed_at.is_some()
     }
-}
-
-/// Whether an object has a texture ahead of the eye's turn about it (see
-/// [`Manager::ahead`]).
-enum Ahead {
-    /// The eye is not turning about the object: "ahead" means nothing.
-    NotTurning,
-    /// One is held (this one) or asked for (`None`).
-    Covered(Option<usize>),
-    /// None: ask for one at this eye.
-    AskAt(Vec3),
 }
 
 /// The smallest edge of the [`TEXTURE_LADDER`] that holds `need` texels, the largest
@@ -301,36 +289,6 @@ impl Manager {
         }
     }
 
-    /// Whether object `k` has a texture held or asked for on the far side of `future`
-    /// (the way the eye turns from `now`), to partner the one shown there — and if not,
-    /// the eye to ask for one at: [`PAIR_SPACING`] valid angles past `future`. (This
-    /// keeps partners coming along the motion;
-    /// [`can_partner`](super::choose::can_partner) is the test of one pair of textures
-    /// at one eye, by which side of the eye each is on, whatever the motion.)
-    fn ahead(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3) -> Ahead {
-        let (from, to) = (now - centre, future - centre);
-        let axis = from.cross(to);
-        if axis.length() <= AHEAD_MIN_TURN * from.length() * to.length() {
-            return Ahead::NotTurning;
-        }
-        let reach = PAIR_SPACING * self.valid_angle(k);
-        // (Held or asked for within [`AHEAD_SLACK`] of `reach`, and at a distance
-        // [`Self::partner`] accepts.)
-        let ahead = |eye: Vec3| {
-            let e = eye - centre;
-            axis.dot(to.cross(e)) > 0.0
-                && to.angle_between(e) <= AHEAD_SLACK * reach
-                && similar_distance(centre, future, eye)
-        };
-        let held = self.objects[k].held.iter().position(|h| ahead(h.eye));
-        let asked = self.pending.values().any(|p| p.object == k && ahead(p.eye));
-        if held.is_some() || asked {
-            Ahead::Covered(held)
-        } else {
-            Ahead::AskAt(turned(centre, to, axis, reach))
-        }
-    }
-
     /// Where the eye will be once a request for object `k` made now comes back (in the
     /// object's frame, as `camera` is), and how each held texture grades there (none
     /// where the object will be out of view: see [`Prediction::held`]): what
@@ -402,33 +360,18 @@ impl Manager {
             .collect();
         let covering = held_covering(centre, future, &held, &asked, self.tolerance());
         let covered = covering.is_some() || self.pending_covers(scene, k, centre, future) != Asked::Not;
-        let ahead = self.ahead(k, centre, eye, future);
-        // (What the plan counts on is kept: see `Held::relied_on`.)
-        let ahead_held = match ahead {
-            Ahead::Covered(held) => held,
-            _ => None,
-        };
         let now = Instant::now();
-        // (`held` was graded this frame, after the last arrivals: the same order.)
-        for i in covering.into_iter().chain(ahead_held) {
-            if let Some(h) = self.objects[k].held.get_mut(i) {
-                h.relied_on = now;
-            }
+        // (What the plan counts on is kept: see `Held::relied_on`. `held` was graded
+        // this frame, after the last arrivals: the same order.)
+        if let Some(h) = covering.and_then(|i| self.objects[k].held.get_mut(i)) {
+            h.relied_on = now;
         }
-        let deadline = Some((horizon * 1e3) as u64);
         // (Quiet a while after the saturated server refused one: see `SHED_QUIET`.)
         let quiet = self.objects[k].quiet_until.is_some_and(|t| now < t);
-        let ask = match (quiet, covered, ahead) {
-            (true, _, _) => None,
-            (false, false, _) => {
-                let beyond = path_beyond(&scene.objects[k], &motion, horizon);
-                Some(lead(centre, self.valid_angle(k), eye, future, &beyond))
-            }
-            (false, true, Ahead::AskAt(eye)) => Some(eye),
-            (false, true, _) => None,
-        };
-        if let Some(eye) = ask {
-            self.request(scene, k, eye, camera, deadline);
+        if !covered && !quiet {
+            let beyond = path_beyond(&scene.objects[k], &motion, horizon);
+            let ask = lead(centre, self.valid_angle(k), eye, future, &beyond);
+            self.request(scene, k, ask, camera, Some((horizon * 1e3) as u64));
         }
         // Predictions neither the eye nor its future will meet any more.
         let reach = WITHDRAW_REACH * self.valid_angle(k);
@@ -497,8 +440,8 @@ mod tests {
         assert!((turn - LEAD * valid).abs() < 1e-3, "{turn}");
         // (Turned on about the centre instead, in the plane of the pass, it would sink
         // below the line.)
-        let axis = (now - centre).cross(future - centre);
-        let about_centre = turned(centre, future - centre, axis, LEAD * valid);
+        let axis = (now - centre).cross(future - centre).normalize();
+        let about_centre = centre + glam::Quat::from_axis_angle(axis, LEAD * valid) * (future - centre);
         assert!(about_centre.y < 0.9, "{about_centre}");
 
         // A path receding fast: the lead stops within the pending slack.
