@@ -86,9 +86,9 @@ pub(super) struct Held {
     /// texture or a partner): its lifetime.
     pub(super) arrived: Instant,
     pub(super) last_shown: Option<Instant>,
-    /// When the manager last relied on it: took it in, showed it, or counted it as
-    /// covering where the eye is going (a prediction's future eye, or the texture
-    /// ahead of its turn). What the last frame relied on is kept first (see
+    /// When the manager last relied on it: took it in, showed it, or counted it (or a
+    /// partner it needs) as covering where the eye is going (a prediction's future
+    /// eye). What the last frame relied on is kept first (see
     /// [`Manager::hold`]).
     pub(super) relied_on: Instant,
     /// Asked for by another placement of the mesh, and shared with this one: counted
@@ -255,9 +255,10 @@ impl Manager {
     /// Holds `held` for object `k`, keeping, of more than
     /// [`TEXTURES_KEPT`](super::policy::TEXTURES_KEPT), those taken in or relied on
     /// since the last frame was planned ([`Held::relied_on`]), then those nearest its eye
-    /// (`eye`, about `centre`, in its frame). (Kept by nearness alone, a texture asked
-    /// for ahead of the eye's turn — the farthest held — went as it came, unseen, and
-    /// was asked for again the next frame: in one default run, the sphere's 20 times
+    /// (`eye`, about `centre`, in its frame). (Kept by nearness alone, when a texture
+    /// was also asked for to partner the shown one a pair of valid angles beyond the
+    /// eye's future, that one — the farthest held — went as it came, unseen, and was
+    /// asked for again the next frame: in one default run, the sphere's 20 times
     /// running on its near pass.)
     fn hold(&mut self, k: usize, held: Held, centre: Vec3, eye: Vec3) {
         let since = self.planned_at;

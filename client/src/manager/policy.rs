@@ -362,11 +362,12 @@ pub const PLANNING_MARGIN: f32 = 0.75;
 /// How far past the predicted eye, as a fraction of the object's valid angle, predicted
 /// textures are made for: a texture then serves (1 + `LEAD`) valid angles of the
 /// motion instead of one. Once the eye has passed the shown texture's, the next one is
-/// its partner; none is asked for to be a partner alone. (One kept a pair of valid
-/// angles beyond the eye at all times cost a third more requests for no fidelity
-/// measured: forest, rtt 100, 7 runs against 5, 1,819–2,276 predictions against
-/// 1,385–1,628, 14–25 % stale frames against 15–24 %, objects within 1 dB of geometry
-/// 84–92 against 89–106; 64 clients, p99 latency 1.6–1.8 s against 0.5–1.4 s.)
+/// its partner; none is asked for to be a partner alone. (Keeping one texture asked for
+/// two valid angles past the eye's future, as a partner, cost a third more requests and
+/// bought no fidelity measured. Without it against with it: forest, rtt 100, 5 runs
+/// against 7, 1,385–1,628 predictions against 1,819–2,276, stale frames 15–24 %
+/// against 14–25 %, objects within 1 dB of geometry 89–106 against 84–92; 64 clients,
+/// four alternating pairs, p99 latency 0.37–1.24 s against 1.64–2.21 s.)
 pub const LEAD: f32 = 0.5;
 
 /// The predicted path past the eye's future that [`LEAD`] is measured along: this many

@@ -17,7 +17,7 @@ use crate::predict::Motion;
 
 use super::Manager;
 use super::around::angle_between;
-use super::choose::{Grade, held_covering};
+use super::choose::{Grade, can_partner, held_covering};
 use super::messages::{Command, TextureRequest};
 use super::policy::{
     HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD, LEAD_PATH_STEPS,
@@ -361,10 +361,20 @@ impl Manager {
         let covering = held_covering(centre, future, &held, &asked, self.tolerance());
         let covered = covering.is_some() || self.pending_covers(scene, k, centre, future) != Asked::Not;
         let now = Instant::now();
-        // (What the plan counts on is kept: see `Held::relied_on`. `held` was graded
-        // this frame, after the last arrivals: the same order.)
-        if let Some(h) = covering.and_then(|i| self.objects[k].held.get_mut(i)) {
-            h.relied_on = now;
+        // What the plan counts on is kept (see `Held::relied_on`): the texture covering
+        // the future, and any held that could partner it there. (`held` was graded this
+        // frame, after the last arrivals: the same order.)
+        if let Some(i) = covering {
+            let shown = held[i].0;
+            let relied = |j: usize| {
+                let (other, grade) = held[j];
+                j == i || (!grade.too_coarse && can_partner(centre, shown, future, other))
+            };
+            for j in (0..held.len()).filter(|&j| relied(j)) {
+                if let Some(h) = self.objects[k].held.get_mut(j) {
+                    h.relied_on = now;
+                }
+            }
         }
         // (Quiet a while after the saturated server refused one: see `SHED_QUIET`.)
         let quiet = self.objects[k].quiet_until.is_some_and(|t| now < t);
