@@ -164,15 +164,11 @@ pub(super) fn held_covering(
     asked: &[Vec3],
     tolerance: f32,
 ) -> Option<usize> {
-    let partners = held
-        .iter()
-        .filter(|(_, g)| !g.too_coarse)
-        .map(|(eye, _)| *eye)
-        .chain(asked.iter().copied());
     let partnered = |shown: Vec3| {
-        partners
-            .clone()
-            .any(|other| can_partner(centre, shown, future, other))
+        held_partners(centre, shown, future, held).next().is_some()
+            || asked
+                .iter()
+                .any(|&other| can_partner(centre, shown, future, other))
     };
     held.iter().position(|&(eye, g)| {
         let turn = angle_between(centre, eye, future);
@@ -181,6 +177,20 @@ pub(super) fn held_covering(
             && (may_show(&g, turn, false, PLANNING_MARGIN, tolerance)
                 || (may_show(&g, turn, true, PLANNING_MARGIN, tolerance) && partnered(eye)))
     })
+}
+
+/// Which of the held textures (`held`: eye and grade at `eye`) can partner one made
+/// from `shown` at `eye`, all about `centre`: fine enough to be drawn there, and
+/// [`can_partner`].
+pub(super) fn held_partners(
+    centre: Vec3,
+    shown: Vec3,
+    eye: Vec3,
+    held: &[(Vec3, Grade)],
+) -> impl Iterator<Item = usize> {
+    (held.iter().enumerate())
+        .filter(move |(_, (other, g))| !g.too_coarse && can_partner(centre, shown, eye, *other))
+        .map(|(j, _)| j)
 }
 
 /// Whether a texture made from `other` can partner one made from `shown` at `eye`

@@ -17,7 +17,7 @@ use crate::predict::Motion;
 
 use super::Manager;
 use super::around::angle_between;
-use super::choose::{Grade, can_partner, held_covering};
+use super::choose::{Grade, held_covering, held_partners};
 use super::messages::{Command, TextureRequest};
 use super::policy::{
     HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD, LEAD_PATH_STEPS,
@@ -365,12 +365,7 @@ impl Manager {
         // the future, and any held that could partner it there. (`held` was graded this
         // frame, after the last arrivals: the same order.)
         if let Some(i) = covering {
-            let shown = held[i].0;
-            let relied = |j: usize| {
-                let (other, grade) = held[j];
-                j == i || (!grade.too_coarse && can_partner(centre, shown, future, other))
-            };
-            for j in (0..held.len()).filter(|&j| relied(j)) {
+            for j in std::iter::once(i).chain(held_partners(centre, held[i].0, future, &held)) {
                 if let Some(h) = self.objects[k].held.get_mut(j) {
                     h.relied_on = now;
                 }
