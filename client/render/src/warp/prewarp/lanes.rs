@@ -17,10 +17,10 @@
 //! in the same order (Rust never fuses a multiply and an add on its own), so the image
 //! is bit for bit the one the scalar pass makes: the tests compare the two.
 
-use wide::f32x8;
+use wide::bytemuck::cast;
+use wide::{f32x8, i16x8, u8x16, u16x16, u32x8};
 
-use super::{Attributes, Cell, Column, Output};
-use crate::warp::round_small;
+use super::{Attributes, Cell, Column, Output, PTexel};
 
 /// Lanes per block.
 pub(super) const LANES: usize = 8;
@@ -101,6 +101,70 @@ fn load(values: &[f32], at: usize) -> f32x8 {
     }
 }
 
+#[inline(always)]
+fn load_u32(values: &[u32], at: usize) -> u32x8 {
+    match values[at..].first_chunk::<8>() {
+        Some(lanes) => u32x8::from(*lanes),
+        None => u32x8::ZERO,
+    }
+}
+
+/// The eight values from `at`, or zeros past the end.
+#[inline(always)]
+fn eight<T: Copy + Default>(values: &[T], at: usize) -> [T; LANES] {
+    values
+        .get(at..)
+        .and_then(|rest| rest.first_chunk::<LANES>())
+        .copied()
+        .unwrap_or_default()
+}
+
+/// Writes lanes `taken` of `new` over `values` from `at` (the others kept).
+#[inline(always)]
+fn store_taken<T: Copy>(values: &mut [T], at: usize, taken: u32, new: &[T; LANES]) {
+    if let Some(lanes) = values
+        .get_mut(at..)
+        .and_then(|rest| rest.first_chunk_mut::<LANES>())
+    {
+        for (l, (value, new)) in lanes.iter_mut().zip(new).enumerate() {
+            if taken & (1 << l) != 0 {
+                *value = *new;
+            }
+        }
+    }
+}
+
+/// All ones in the lanes whose bit is set in `bits`.
+#[inline(always)]
+fn lane_mask(bits: u32) -> u32x8 {
+    let each = u32x8::from([1, 2, 4, 8, 16, 32, 64, 128]);
+    (u32x8::splat(bits) & each).simd_eq(each)
+}
+
+/// [`Attributes::lerp`] of eight pairs at once, `a[l]` towards `b[l]` by `t[l] ∈ [0,
+/// 1]` (each weight rounded as there): two texels' bytes to a vector of sixteen
+/// 16-bit lanes, the same arithmetic, the same bytes.
+#[inline(always)]
+fn lerp_attributes(a: &[u64; LANES], b: &[u64; LANES], t: f32x8) -> [u64; LANES] {
+    // (`round_small(t·256).min(256)`, eight at once: the sum's low mantissa bits are
+    // the rounded integer; NaN's bits give 256, as there.)
+    let rounded = cast::<f32x8, u32x8>(t * f32x8::splat(256.0) + f32x8::splat(8_388_608.0));
+    let weight = (rounded & u32x8::splat(0x7f_ffff)).min(u32x8::splat(256));
+    // Each weight in both 16-bit halves of its lane.
+    let weight = weight | (weight << 16u32);
+    let mut mixed = [0u64; LANES];
+    for pair in 0..LANES / 2 {
+        let (l, m) = (2 * pair as u32, 2 * pair as u32 + 1);
+        let t = cast::<u32x8, u16x16>(weight.shuffle(u32x8::from([l, l, l, l, m, m, m, m])));
+        let bytes = |x: &[u64; LANES]| u16x16::from(cast::<[u64; 2], u8x16>([x[2 * pair], x[2 * pair + 1]]));
+        let blended = (bytes(a) * (u16x16::splat(256) - t) + bytes(b) * t + u16x16::splat(128)) >> 8;
+        let [low, high] = cast::<u16x16, [i16x8; 2]>(blended);
+        let [first, second] = cast::<u8x16, [u64; 2]>(u8x16::narrow_i16x8(low, high));
+        (mixed[2 * pair], mixed[2 * pair + 1]) = (first, second);
+    }
+    mixed
+}
+
 /// Lanes `0..n` set.
 #[inline(always)]
 pub(super) fn first(n: u32) -> u32 {
@@ -171,52 +235,101 @@ pub(super) fn row_block<const RIGHT: bool>(
         let t = ((below_b + half - a) * (f32x8::ONE / (b - a))).fast_clamp(f32x8::ZERO, f32x8::ONE);
         let (va, vb) = (load(&samples.v, k - 1), load(&samples.v, k));
         let (da, db) = (load(&samples.depth, k - 1), load(&samples.depth, k));
-        let v = (va + (vb - va) * t).to_array();
-        let depth = (da + (db - da) * t).to_array();
-        let (t, below_b) = (t.to_array(), below_b.to_array());
+        let v = va + (vb - va) * t;
+        let depth = da + (db - da) * t;
+        let attributes = lerp_attributes(
+            &eight(&samples.attributes, k - 1),
+            &eight(&samples.attributes, k),
+            t,
+        );
         let down = samples.mask(k - 1, DOWN_LINK) & samples.mask(k, DOWN_LINK);
         // The visit's first column, and the image's: leftwards, signed `x` is `−x − 1`.
-        let visit_first = below_b[emits.trailing_zeros() as usize] as i64;
+        let visit_first = below_b.to_array()[emits.trailing_zeros() as usize] as i64;
         emitted.first = if RIGHT {
             visit_first
         } else {
             -visit_first - count as i64
         };
-        let mut lanes = emits;
-        for j in 0..count {
-            let l = lanes.trailing_zeros() as usize;
-            lanes &= lanes - 1;
-            let column = if RIGHT { j } else { count - 1 - j };
-            emitted.v[column] = v[l];
-            emitted.depth[column] = depth[l];
-            emitted.attributes[column] = Attributes(samples.attributes[k - 1 + l])
-                .lerp(
-                    Attributes(samples.attributes[k + l]),
-                    round_small(t[l] * 256.0).min(256) as u64,
-                )
-                .0;
-            emitted.down |= ((down >> l) & 1) << column;
+        // Column `c` (from the image's first) takes lane `order[c]`.
+        let order = compaction::<RIGHT>(emits, count);
+        let by_column = |x: f32x8| cast::<u32x8, f32x8>(cast::<f32x8, u32x8>(x).shuffle(order));
+        (emitted.v, emitted.depth) = (by_column(v).to_array(), by_column(depth).to_array());
+        let order = order.to_array();
+        for (column, &l) in emitted.attributes.iter_mut().zip(&order) {
+            *column = attributes[l as usize & (LANES - 1)];
         }
+        let down = cast::<u32x8, f32x8>(lane_mask(down).shuffle(u32x8::from(order)));
+        emitted.down = down.to_bitmask() & first(count as u32);
     }
     #[cfg(test)]
     tests::TAKEN_IN_ROWS.with(|n| n[usize::from(RIGHT)].set(n[usize::from(RIGHT)].get() + taken as usize));
     taken as usize
 }
 
-/// Every pre-warped column's state in the column pass ([`Column`]), with a block's
-/// width to spare at the end, so that eight columns from any one can be read at once.
-/// (Field by field, the scalar column step read six arrays where it reads one column
-/// here, and ran 1.6× slower.)
+/// For each set of lanes (bit `l` for lane `l`), the set lanes in order, then
+/// zeros: where each of a block's emitted samples comes from.
+const IN_ORDER: [[u8; LANES]; 1 << LANES] = {
+    let mut table = [[0; LANES]; 1 << LANES];
+    let mut set = 0;
+    while set < 1 << LANES {
+        let (mut l, mut n) = (0, 0);
+        while l < LANES {
+            if set & (1 << l) != 0 {
+                table[set][n] = l as u8;
+                n += 1;
+            }
+            l += 1;
+        }
+        set += 1;
+    }
+    table
+};
+
+/// The lane each of the `count` pre-warped columns of a block takes, among the lanes
+/// `emits`: in order rightwards; leftwards, the last emitted lane is the first column.
+#[inline(always)]
+fn compaction<const RIGHT: bool>(emits: u32, count: usize) -> u32x8 {
+    let order = u32x8::from(IN_ORDER[emits as usize & 0xff].map(u32::from));
+    if RIGHT {
+        order
+    } else {
+        let reversed =
+            (u32x8::splat(count as u32 - 1) - u32x8::from([0, 1, 2, 3, 4, 5, 6, 7])) & u32x8::splat(7);
+        order.shuffle(reversed)
+    }
+}
+
+/// Every pre-warped column's state in the column pass ([`Column`]), field by field so
+/// that eight columns from any one load as vectors, with a block's width to spare at
+/// the end.
 pub(super) struct Columns {
     len: usize,
-    columns: Vec<Column>,
+    v: Vec<f32>,
+    depth: Vec<f32>,
+    attributes: Vec<u64>,
+    /// [`LAST_DOWN`], [`LAST_FILLER`].
+    links: Vec<u32>,
+    next_row: Vec<u32>,
+    last_gap: Vec<f32>,
 }
+
+/// [`Columns::links`]: the column's last sample links downwards ([`Cell::down`]).
+const LAST_DOWN: u32 = 1;
+/// The column's last sample filled a crack ([`Cell::filler`]).
+const LAST_FILLER: u32 = 2;
 
 impl Columns {
     pub fn new(len: usize) -> Columns {
+        let n = len + LANES;
+        let start = Column::START;
         Columns {
             len,
-            columns: vec![Column::START; len + LANES],
+            v: vec![start.last.v; n],
+            depth: vec![start.last.depth; n],
+            attributes: vec![start.last.attributes.0; n],
+            links: vec![0; n],
+            next_row: vec![start.next_row; n],
+            last_gap: vec![start.last_gap; n],
         }
     }
 
@@ -226,12 +339,29 @@ impl Columns {
 
     #[inline(always)]
     pub fn get(&self, i: usize) -> Column {
-        self.columns[i]
+        let links = self.links[i];
+        Column {
+            last: Cell {
+                v: self.v[i],
+                depth: self.depth[i],
+                attributes: Attributes(self.attributes[i]),
+                down: links & LAST_DOWN != 0,
+                filler: links & LAST_FILLER != 0,
+            },
+            next_row: self.next_row[i],
+            last_gap: self.last_gap[i],
+        }
     }
 
     #[inline(always)]
     pub fn set(&mut self, i: usize, column: Column) {
-        self.columns[i] = column;
+        let last = column.last;
+        self.v[i] = last.v;
+        self.depth[i] = last.depth;
+        self.attributes[i] = last.attributes.0;
+        self.links[i] = u32::from(last.down) * LAST_DOWN + u32::from(last.filler) * LAST_FILLER;
+        self.next_row[i] = column.next_row;
+        self.last_gap[i] = column.last_gap;
     }
 
     /// Feeds `emitted`, made by row number `seq`, into its columns (image columns from
@@ -247,28 +377,35 @@ impl Columns {
         out: &mut Output,
     ) -> u32 {
         let n = emitted.count;
-        let cell_down = emitted.down;
-        let (mut adjacent, mut last_down, mut filler) = (0u32, 0u32, 0u32);
-        let Some(block) = self.columns[base..].first_chunk::<LANES>() else {
+        if base + LANES > self.v.len() {
             return first(n as u32);
-        };
-        let (mut last_v, mut last_depth, mut last_gap) = ([0f32; LANES], [0f32; LANES], [0f32; LANES]);
-        for (l, column) in block.iter().enumerate() {
-            (last_v[l], last_depth[l], last_gap[l]) = (column.last.v, column.last.depth, column.last_gap);
-            adjacent |= u32::from(seq != 0 && column.next_row == seq) << l;
-            last_down |= u32::from(column.last.down) << l;
-            filler |= u32::from(column.last.filler) << l;
         }
+        let (last_v, last_depth) = (load(&self.v, base), load(&self.depth, base));
+        let links = load_u32(&self.links, base);
+        let adjacent = if seq == 0 {
+            0
+        } else {
+            cast::<u32x8, f32x8>(load_u32(&self.next_row, base).simd_eq(u32x8::splat(seq))).to_bitmask()
+        };
+        let has = |flag: u32| {
+            let flag = u32x8::splat(flag);
+            cast::<u32x8, f32x8>((links & flag).simd_eq(flag)).to_bitmask()
+        };
         // Downwards the previous row's sample carries the link; upwards this one.
-        let linked = adjacent & if DOWN_ROWS { last_down } else { cell_down & !filler };
+        let linked = adjacent
+            & if DOWN_ROWS {
+                has(LAST_DOWN)
+            } else {
+                emitted.down & !has(LAST_FILLER)
+            };
         let sign = f32x8::splat(if DOWN_ROWS { 1.0 } else { -1.0 });
-        let (last_v, cell_v) = (f32x8::from(last_v), f32x8::from(emitted.v));
+        let cell_v = f32x8::from(emitted.v);
         let (a, b) = (last_v * sign, cell_v * sign);
         let half = f32x8::splat(0.5);
         let (below_a, below_b) = ((a - half).floor(), (b - half).floor());
         let centres = below_b - below_a;
         let exact = a.abs().simd_lt(f32x8::splat(EXACT)) & b.abs().simd_lt(f32x8::splat(EXACT));
-        let gap_known = !f32x8::from(last_gap).is_nan();
+        let gap_known = !load(&self.last_gap, base).is_nan();
         let simple = exact & b.simd_ge(a) & centres.simd_le(f32x8::ONE) & gap_known;
         let taken = linked & simple.to_bitmask() & first(n as u32);
         #[cfg(test)]
@@ -279,41 +416,41 @@ impl Columns {
         let end = super::signed_end::<DOWN_ROWS>(out.v0..out.v1);
         let puts =
             taken & (centres.simd_eq(f32x8::ONE) & below_b.simd_le(f32x8::splat(end as f32))).to_bitmask();
+        let last_attributes = eight(&self.attributes, base);
         if puts != 0 {
             let t = ((below_b + half - a) * (f32x8::ONE / (b - a))).fast_clamp(f32x8::ZERO, f32x8::ONE);
-            let last_depth = f32x8::from(last_depth);
             let depth = (last_depth + (f32x8::from(emitted.depth) - last_depth) * t).to_array();
-            let (t, below_b) = (t.to_array(), below_b.to_array());
+            let attributes = lerp_attributes(&last_attributes, &emitted.attributes, t);
+            let below_b = below_b.to_array();
             let mut lanes = puts;
             while lanes != 0 {
                 let l = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
-                let attributes = block[l].last.attributes.lerp(
-                    Attributes(emitted.attributes[l]),
-                    round_small(t[l] * 256.0).min(256) as u64,
-                );
                 let y = below_b[l] as i64;
                 out.put_texel(
                     base + l,
                     if DOWN_ROWS { y } else { -y - 1 },
-                    attributes.texel(depth[l]),
+                    PTexel {
+                        depth: depth[l],
+                        attributes: Attributes(attributes[l]),
+                    },
                 );
             }
         }
-        let gaps = (cell_v - last_v).to_array();
-        let mut lanes = taken;
-        while lanes != 0 {
-            let l = lanes.trailing_zeros() as usize;
-            lanes &= lanes - 1;
-            self.set(
-                base + l,
-                Column {
-                    last: emitted.cell(l),
-                    next_row: seq + 1,
-                    last_gap: gaps[l],
-                },
-            );
-        }
+        // The taken lanes' samples become their columns' last.
+        let mask = lane_mask(taken);
+        let keep = |new: f32x8, old: f32x8| cast::<u32x8, f32x8>(mask).select(new, old).to_array();
+        let at = base..base + LANES;
+        self.v[at.clone()].copy_from_slice(&keep(cell_v, last_v));
+        let depth = keep(f32x8::from(emitted.depth), last_depth);
+        self.depth[at.clone()].copy_from_slice(&depth);
+        let gap = keep(cell_v - last_v, load(&self.last_gap, base));
+        self.last_gap[at.clone()].copy_from_slice(&gap);
+        let cell_links = lane_mask(emitted.down) & u32x8::splat(LAST_DOWN);
+        self.links[at.clone()].copy_from_slice(&mask.select(cell_links, links).to_array());
+        let next = mask.select(u32x8::splat(seq + 1), load_u32(&self.next_row, base));
+        self.next_row[at].copy_from_slice(&next.to_array());
+        store_taken(&mut self.attributes, base, taken, &emitted.attributes);
         first(n as u32) & !taken
     }
 }
