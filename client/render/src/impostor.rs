@@ -48,6 +48,10 @@ pub struct Impostor {
     /// ([`WarpLevels::entry`]) packed in one word: all the pre-warp reads of a texel, in
     /// one load (measured: 8 % of its time).
     pub packed: Vec<u64>,
+    /// Each row's texels from its first surface texel to one past its last (empty for
+    /// a row without one): the pre-warp visits no more of the row. (A compact object's
+    /// texture is empty around it: the knot's 256² texture, 30 % of its texels.)
+    pub occupied: Vec<std::ops::Range<usize>>,
     /// Which sides of the surfaces can show.
     pub faces: Faces,
 }
@@ -121,6 +125,18 @@ impl Impostor {
             }
             std::mem::swap(&mut row, &mut below);
         }
+        let occupied = (0..h)
+            .map(|j| {
+                let row = &texture.depth[j * w..(j + 1) * w];
+                match (
+                    row.iter().position(|&q| q != empty),
+                    row.iter().rposition(|&q| q != empty),
+                ) {
+                    (Some(first), Some(last)) => first..last + 1,
+                    _ => 0..0,
+                }
+            })
+            .collect();
         let levels = WarpLevels::new(texture.depth_bits);
         let packed = (texture.albedo.iter().zip(&texture.normal).zip(&texture.depth))
             .map(|((&albedo, &normal), &level)| pack_texel(albedo, normal, levels.entry(level)))
@@ -130,6 +146,7 @@ impl Impostor {
             right,
             down,
             packed,
+            occupied,
             faces: Faces::Both,
         }
     }

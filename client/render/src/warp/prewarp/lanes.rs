@@ -494,7 +494,8 @@ pub(super) mod tests {
         placement.into_iter().chain(texels).collect()
     }
 
-    /// Eight lanes at a time make the very image the scalar pass makes, bit for bit:
+    /// Eight lanes at a time make the very image the scalar pass makes, bit for bit,
+    /// and so does visiting each row whole rather than its occupied texels only:
     /// a self-occluding knot and a tree of leaves (cracks, runs of one texel), baked
     /// orthographic and perspective, 8- and 16-bit, all faces or the front ones, seen
     /// from eyes turned every way, nearer and farther than the texture's (so visited
@@ -520,6 +521,11 @@ pub(super) mod tests {
                     let texture = bake(&tracer, eye, 96, depth_bits, projection).expect("baked");
                     for faces in [Faces::Both, Faces::Front] {
                         let impostor = Impostor::new(texture.clone()).with_faces(faces);
+                        // The same, visiting every texel of each row.
+                        let whole_rows = Impostor {
+                            occupied: vec![0..texture.camera.width as usize; texture.camera.height as usize],
+                            ..impostor.clone()
+                        };
                         for (yaw, pitch) in [(-40.0f32, 0.0f32), (-5.0, 3.0), (4.0, -20.0), (25.0, 12.0)] {
                             for distance in [0.6, 1.0, 2.0] {
                                 let turn = Quat::from_rotation_y(yaw.to_radians())
@@ -535,9 +541,9 @@ pub(super) mod tests {
                                     v1: 60.0,
                                 };
                                 for seen in [None, Some(&window)] {
-                                    let warp = |lanes| {
+                                    let warp = |impostor: &Impostor, lanes| {
                                         prewarp_with(
-                                            &impostor,
+                                            impostor,
                                             &params,
                                             Variant::Interleaved,
                                             seen,
@@ -545,9 +551,16 @@ pub(super) mod tests {
                                             lanes,
                                         )
                                     };
-                                    let lanes = warp(true);
+                                    let lanes = warp(&impostor, true);
+                                    let scalar = bits(&warp(&impostor, false));
                                     assert!(
-                                        bits(&lanes) == bits(&warp(false)),
+                                        scalar == bits(&warp(&whole_rows, false)),
+                                        "occupied texels only: {name} {projection:?} {depth_bits:?} {faces:?} \
+                                         yaw {yaw} pitch {pitch} ×{distance} window {}",
+                                        seen.is_some()
+                                    );
+                                    assert!(
+                                        bits(&lanes) == scalar,
                                         "{name} {projection:?} {depth_bits:?} {faces:?} yaw {yaw} pitch {pitch} \
                                          ×{distance} window {}",
                                         seen.is_some()

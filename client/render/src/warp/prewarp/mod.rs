@@ -570,13 +570,19 @@ impl Job<'_> {
         sink: &mut impl RowSink,
         samples: &mut RowSamples,
     ) {
-        let [before, after] = &self.row_halves;
+        // (Only the row's occupied texels: the empty ones around them make no pixel.)
+        let occupied = self.impostor.occupied.get(j).cloned().unwrap_or(0..0);
+        let within = |half: &std::ops::Range<usize>| {
+            let start = half.start.max(occupied.start);
+            start..half.end.min(occupied.end).max(start)
+        };
+        let (before, after) = (within(&self.row_halves[0]), within(&self.row_halves[1]));
         if self.params.outward {
-            self.row_half::<false>(j, before.clone(), interpolate, sink, samples);
-            self.row_half::<true>(j, after.clone(), interpolate, sink, samples);
+            self.row_half::<false>(j, before, interpolate, sink, samples);
+            self.row_half::<true>(j, after, interpolate, sink, samples);
         } else {
-            self.row_half::<true>(j, before.clone(), interpolate, sink, samples);
-            self.row_half::<false>(j, after.clone(), interpolate, sink, samples);
+            self.row_half::<true>(j, before, interpolate, sink, samples);
+            self.row_half::<false>(j, after, interpolate, sink, samples);
         }
     }
 
