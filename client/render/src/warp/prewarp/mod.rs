@@ -100,8 +100,8 @@ pub struct PrewarpImage {
     pub width: u32,
     pub height: u32,
     pub texels: Vec<PTexel>,
-    /// Source texels visited: all of the texture's, or those that can reach a
-    /// [`PlaneWindow`].
+    /// Source texels visited: each row's occupied ones ([`Impostor::occupied`]), or
+    /// those of them that can reach a [`PlaneWindow`].
     pub visited: usize,
 }
 
@@ -551,7 +551,8 @@ struct Job<'a> {
     u0: i64,
     columns: usize,
     /// The texels of each row visited: those before the epipole, and those after it —
-    /// all, or those that can land where the screen sees.
+    /// all, or those that can land where the screen sees (and of these, each row's
+    /// occupied ones: [`Job::row_texels`]).
     row_halves: [std::ops::Range<usize>; 2],
     /// Whether the interleaved variant takes texels eight at a time where it can
     /// ([`lanes`]); off only to test that it makes the same image.
@@ -570,13 +571,7 @@ impl Job<'_> {
         sink: &mut impl RowSink,
         samples: &mut RowSamples,
     ) {
-        // (Only the row's occupied texels: the empty ones around them make no pixel.)
-        let occupied = self.impostor.occupied.get(j).cloned().unwrap_or(0..0);
-        let within = |half: &std::ops::Range<usize>| {
-            let start = half.start.max(occupied.start);
-            start..half.end.min(occupied.end).max(start)
-        };
-        let (before, after) = (within(&self.row_halves[0]), within(&self.row_halves[1]));
+        let [before, after] = self.row_texels(j);
         if self.params.outward {
             self.row_half::<false>(j, before, interpolate, sink, samples);
             self.row_half::<true>(j, after, interpolate, sink, samples);
@@ -584,6 +579,18 @@ impl Job<'_> {
             self.row_half::<true>(j, before, interpolate, sink, samples);
             self.row_half::<false>(j, after, interpolate, sink, samples);
         }
+    }
+
+    /// The texels of source row `j` the row pass visits, before the epipole and after
+    /// it: those of [`Job::row_halves`] within the row's occupied texels
+    /// ([`Impostor::occupied`]; the empty ones around them make no pixel).
+    fn row_texels(&self, j: usize) -> [std::ops::Range<usize>; 2] {
+        let width = self.impostor.texture.camera.width as usize;
+        let occupied = self.impostor.occupied.get(j).cloned().unwrap_or(0..width);
+        self.row_halves.clone().map(|half| {
+            let start = half.start.max(occupied.start);
+            start..half.end.min(occupied.end).max(start)
+        })
     }
 
     /// The texels `texels` of source row `j` into `samples`, in visiting order
@@ -726,7 +733,7 @@ impl Job<'_> {
                     in_run = false;
                 }
                 previous_linked = false;
-                // (And the empty texels after it: a third of a compact object's.)
+                // (And the empty texels after it: the gaps within a row.)
                 k += 1;
                 while k < n && samples.flags[k] & VALID == 0 {
                     k += 1;
@@ -1106,7 +1113,9 @@ fn prewarp_with(
         width,
     };
     let [above, below] = rows;
-    let visited = (job.row_halves[0].len() + job.row_halves[1].len()) * (above.len() + below.len());
+    let visited = (above.clone().chain(below.clone()))
+        .map(|j| job.row_texels(j).iter().map(|texels| texels.len()).sum::<usize>())
+        .sum::<usize>();
     // Each half towards the epipole, or away from it (`outward`).
     let upper_half = |out: &mut Output| match params.outward {
         false => job.half::<true>(above.clone(), out),
