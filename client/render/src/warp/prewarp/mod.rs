@@ -147,23 +147,43 @@ fn extent(params: &WarpParams, w: f32, h: f32) -> ((i32, i32), (i32, i32)) {
 /// A texel's albedo and encoded normal: six bytes in the low bytes of a `u64`, so one
 /// interpolation blends all six at once (two multiplies on a vector of 16-bit lanes;
 /// see [`Attributes::lerp`]). The top two
-/// bytes are not read; a source texel keeps its depth's table entry there (see
-/// [`pack_texel`]).
+/// bytes are not read; a source texel keeps its depth's table entry and links there
+/// (see [`pack_texel`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Attributes(u64);
 
+/// Where a packed texel's table entry starts ([`pack_texel`]).
+const ENTRY_SHIFT: u32 = 48;
+/// The bits a table entry may take: entries reach
+/// [`WarpLevels::empty`](super::params::WarpLevels::empty), at most 4,096.
+const ENTRY_MASK: u64 = (1 << 13) - 1;
+/// A packed texel's links sit at its row-pass flags ([`RIGHT_LINK`], [`DOWN_LINK`])
+/// shifted up by this, above its table entry.
+const LINKS_SHIFT: u32 = 60;
+
 /// A texel as the pre-warp reads it ([`Impostor::packed`]): albedo and encoded normal in
-/// the low six bytes, as [`Attributes`], and the table entry of its depth level
-/// ([`WarpLevels::entry`](super::params::WarpLevels::entry)) in the top two.
-pub(crate) fn pack_texel(albedo: [u8; 3], normal: [u8; 3], entry: u16) -> u64 {
-    let ([r, g, b], [x, y, z], [q0, q1]) = (albedo, normal, entry.to_le_bytes());
-    u64::from_le_bytes([r, g, b, x, y, z, q0, q1])
+/// the low six bytes, as [`Attributes`]; above them the table entry of its depth level
+/// ([`WarpLevels::entry`](super::params::WarpLevels::entry)), and its links to the
+/// right and downwards — all the row pass reads of a texel, in one load.
+pub(crate) fn pack_texel(albedo: [u8; 3], normal: [u8; 3], entry: u16, right: bool, down: bool) -> u64 {
+    let ([r, g, b], [x, y, z]) = (albedo, normal);
+    let links = u8::from(right) * RIGHT_LINK + u8::from(down) * DOWN_LINK;
+    debug_assert!(u64::from(entry) <= ENTRY_MASK, "table entry {entry}");
+    u64::from_le_bytes([r, g, b, x, y, z, 0, 0])
+        | (u64::from(entry) & ENTRY_MASK) << ENTRY_SHIFT
+        | u64::from(links) << LINKS_SHIFT
 }
 
 /// The depth's table entry of a [`pack_texel`] texel.
 #[inline(always)]
 fn entry_of(texel: u64) -> u16 {
-    (texel >> 48) as u16
+    ((texel >> ENTRY_SHIFT) & ENTRY_MASK) as u16
+}
+
+/// The row pass's link flags of a [`pack_texel`] texel.
+#[inline(always)]
+fn links_of(texel: u64) -> u8 {
+    (texel >> LINKS_SHIFT) as u8 & (RIGHT_LINK | DOWN_LINK)
 }
 
 /// The eight bytes of `x`, each in a 16-bit lane.
@@ -607,9 +627,7 @@ impl Job<'_> {
         let texture = &impostor.texture;
         let w = texture.camera.width as usize;
         let row = j * w..(j + 1) * w;
-        let packed = &impostor.packed[row.clone()];
-        let (right, down) = (&impostor.right[row.clone()], &impostor.down[row]);
-        let empty = p.levels.empty();
+        let packed = &impostor.packed[row];
         let v = j as f32 + 0.5;
         // With the back faces hidden, the eye seen from this row's texels (before their
         // column and depth): a texel is turned away when its normal points away from it.
@@ -623,10 +641,10 @@ impl Job<'_> {
             };
             (p.eye - c.origin - c.b * v, c.a, ray, ray_step)
         });
-        let turned_away = |i: usize, texel: u64, q: u16| {
+        let turned_away = |i: usize, texel: u64, q: usize| {
             facing.is_some_and(|(row_eye, a, ray, ray_step)| {
                 let u = i as f32 + 0.5;
-                let to_eye = row_eye - a * u - (ray + ray_step * u) * p.depth[q as usize];
+                let to_eye = row_eye - a * u - (ray + ray_step * u) * p.depth[q];
                 let [_, _, _, x, y, z, ..] = texel.to_le_bytes();
                 // (The encoded normal, `n·127.5 + 127.5`: its direction is enough.)
                 let n = Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5);
@@ -636,17 +654,28 @@ impl Job<'_> {
         let n = texels.len();
         // (The tables' slices in locals: reached through `self` inside the loop, they
         // were loaded again for every texel, the stores below possibly aliasing them.)
-        let (scales, add_us, add_vs, table_depths) = (&p.scale[..], &p.add_u[..], &p.add_v[..], &p.depth[..]);
+        // (Sliced to one length, the empty entry just past it: one comparison tells a
+        // surface texel and bounds every read below.)
+        let entries = usize::from(p.levels.empty())
+            .min(p.scale.len())
+            .min(p.add_u.len())
+            .min(p.add_v.len())
+            .min(p.depth.len());
+        let (scales, add_us, add_vs, table_depths) = (
+            &p.scale[..entries],
+            &p.add_u[..entries],
+            &p.add_v[..entries],
+            &p.depth[..entries],
+        );
         samples.resize(n);
         let (us, vs, depths) = (&mut samples.u[..n], &mut samples.v[..n], &mut samples.depth[..n]);
         let (attributes, flags) = (&mut samples.attributes[..n], &mut samples.flags[..n]);
         for step in 0..n {
             let i = visited::<RIGHT>(&texels, step);
             let texel = packed[i];
-            let q = entry_of(texel);
-            let valid = q != empty && !turned_away(i, texel, q);
+            let q = entry_of(texel) as usize;
+            let valid = q < entries && !turned_away(i, texel, q);
             let (u, v, depth) = if valid {
-                let q = q as usize;
                 let scale = scales[q];
                 (
                     (i as f32 + 0.5 + add_us[q]) * scale,
@@ -659,8 +688,7 @@ impl Job<'_> {
             (us[step], vs[step], depths[step]) = (u, v, depth);
             // (The depth's table entry in the top lanes blends along unread.)
             attributes[step] = texel;
-            flags[step] =
-                u8::from(valid) * VALID + u8::from(right[i]) * RIGHT_LINK + u8::from(down[i]) * DOWN_LINK;
+            flags[step] = u8::from(valid) * VALID + links_of(texel);
         }
     }
 
@@ -1257,7 +1285,15 @@ mod tests {
     #[test]
     fn attribute_lerp_rounds_each_byte() {
         let (a, b) = ([0u8, 10, 255, 100, 3, 254], [255u8, 11, 0, 100, 4, 1]);
-        let pack = |v: [u8; 6]| Attributes(pack_texel([v[0], v[1], v[2]], [v[3], v[4], v[5]], 0));
+        let pack = |v: [u8; 6]| {
+            Attributes(pack_texel(
+                [v[0], v[1], v[2]],
+                [v[3], v[4], v[5]],
+                0,
+                false,
+                false,
+            ))
+        };
         for t in [0u64, 1, 77, 128, 200, 255, 256] {
             let got = pack(a).lerp(pack(b), t);
             let bytes: Vec<u8> = got.albedo().into_iter().chain(got.normal()).collect();
