@@ -18,7 +18,7 @@
 //! is bit for bit the one the scalar pass makes: the tests compare the two.
 
 use wide::bytemuck::cast;
-use wide::{f32x8, i16x8, u8x16, u16x16, u32x8};
+use wide::{f32x8, i16x8, u8x16, u16x16, u32x8, u64x4};
 
 use super::{Attributes, Cell, Column, Output, PTexel};
 
@@ -118,19 +118,11 @@ fn load_u32(values: &[u32], at: usize) -> u32x8 {
     u32x8::from(eight(values, at))
 }
 
-/// Writes lanes `taken` of `new` over `values` from `at` (the others kept).
+/// All ones in the four 64-bit lanes whose bit is set in `bits`'s low four.
 #[inline(always)]
-fn store_taken<T: Copy>(values: &mut [T], at: usize, taken: u32, new: &[T; LANES]) {
-    if let Some(lanes) = values
-        .get_mut(at..)
-        .and_then(|rest| rest.first_chunk_mut::<LANES>())
-    {
-        for (l, (value, new)) in lanes.iter_mut().zip(new).enumerate() {
-            if taken & (1 << l) != 0 {
-                *value = *new;
-            }
-        }
-    }
+fn wide_mask(bits: u32) -> u64x4 {
+    let each = u64x4::from([1, 2, 4, 8]);
+    (u64x4::splat(u64::from(bits)) & each).simd_eq(each)
 }
 
 /// All ones in the lanes whose bit is set in `bits`.
@@ -420,12 +412,14 @@ impl Columns {
             let t = ((below_b + half - a) * (f32x8::ONE / (b - a))).fast_clamp(f32x8::ZERO, f32x8::ONE);
             let depth = (last_depth + (f32x8::from(emitted.depth) - last_depth) * t).to_array();
             let attributes = lerp_attributes(&last_attributes, &emitted.attributes, t);
-            let below_b = below_b.to_array();
+            // (Whole numbers below `EXACT`: they convert exactly, as vectors; one by one
+            // to `i64`, each saturating conversion cost a tenth of the column step.)
+            let rows = below_b.fast_trunc_int().to_array();
             let mut lanes = puts;
             while lanes != 0 {
                 let l = lanes.trailing_zeros() as usize;
                 lanes &= lanes - 1;
-                let y = below_b[l] as i64;
+                let y = i64::from(rows[l]);
                 out.put_texel(
                     base + l,
                     if DOWN_ROWS { y } else { -y - 1 },
@@ -452,7 +446,15 @@ impl Columns {
         self.links[at.clone()].copy_from_slice(&mask.select(cell_links, links).to_array());
         let next = mask.select(u32x8::splat(seq + 1), load_u32(&self.next_row, base));
         self.next_row[at].copy_from_slice(&next.to_array());
-        store_taken(&mut self.attributes, base, taken, &emitted.attributes);
+        if let Some(columns) = self.attributes.get_mut(base..base + LANES) {
+            let [low, high] = cast::<[u64; LANES], [u64x4; 2]>(emitted.attributes);
+            let [old_low, old_high] = cast::<[u64; LANES], [u64x4; 2]>(eight(columns, 0));
+            let kept = [
+                wide_mask(taken).select(low, old_low),
+                wide_mask(taken >> 4).select(high, old_high),
+            ];
+            columns.copy_from_slice(&cast::<[u64x4; 2], [u64; LANES]>(kept));
+        }
         first(n as u32) & !taken
     }
 }
