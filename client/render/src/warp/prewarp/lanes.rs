@@ -20,7 +20,7 @@
 use wide::bytemuck::cast;
 use wide::{f32x8, i16x8, u8x16, u16x16, u32x8, u64x4};
 
-use super::{Attributes, Cell, Column, Output, PTexel};
+use super::{Attributes, Cell, Column, Facing, Output, PTexel, Tables};
 
 /// Lanes per block.
 pub(super) const LANES: usize = 8;
@@ -83,6 +83,112 @@ impl RowSamples {
     fn mask(&self, k: usize, flag: u8) -> u32 {
         lane_bits(&self.flags[k..k + LANES], flag)
     }
+}
+
+/// `values[index[l]]` for each lane; an index past the end reads the last value, or
+/// zero from an empty table.
+#[inline(always)]
+fn gather(values: &[f32], index: u32x8) -> f32x8 {
+    let Some(last) = values.len().checked_sub(1) else {
+        return f32x8::ZERO;
+    };
+    let index = index.min(u32x8::splat(last as u32));
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        use std::arch::x86_64::{__m256i, _mm256_i32gather_ps};
+        let index: __m256i = cast(index);
+        // SAFETY: every lane reads `values[index]`, each index clamped within `values`
+        // (not empty); the gather only reads.
+        cast(unsafe { _mm256_i32gather_ps::<4>(values.as_ptr(), index) })
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    f32x8::from(index.to_array().map(|i| values[i as usize]))
+}
+
+/// Bits `shift..shift + width` of each of eight words, one per lane.
+#[inline(always)]
+fn field(words: &[u64; LANES], shift: u32, width: u32) -> u32x8 {
+    let [low, high] = cast::<[u64; LANES], [u64x4; 2]>(*words);
+    let mask = u64x4::splat((1 << width) - 1);
+    // `low`'s in the even 32-bit lanes, `high`'s in the odd; then in order.
+    let paired = cast::<u64x4, u32x8>(((low >> shift) & mask) | (((high >> shift) & mask) << 32));
+    paired.shuffle(u32x8::from([0, 2, 4, 6, 1, 3, 5, 7]))
+}
+
+/// The row pass's samples of texels `lowest..lowest + 8` of a row (`packed`, its
+/// centre at `v`), written to `samples` from `step` in visiting order (rightwards when
+/// `RIGHT`): what the scalar pass's loop writes for them, by the same operations in
+/// the same order, eight at once.
+#[inline(always)]
+pub(super) fn sample_eight<const RIGHT: bool>(
+    packed: &[u64],
+    lowest: usize,
+    v: f32,
+    tables: &Tables,
+    facing: Option<&Facing>,
+    samples: &mut RowSamples,
+    step: usize,
+) {
+    let texels = eight(packed, lowest);
+    let entries = field(&texels, super::ENTRY_SHIFT, super::ENTRY_MASK.count_ones());
+    let surface = entries.simd_lt(u32x8::splat(tables.scale.len() as u32));
+    let (scale, add_u, add_v, depth) = (
+        gather(tables.scale, entries),
+        gather(tables.add_u, entries),
+        gather(tables.add_v, entries),
+        gather(tables.depth, entries),
+    );
+    // Each texel's centre along the row (whole numbers and halves: exact).
+    let u = f32x8::splat(lowest as f32)
+        + f32x8::from([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0])
+        + f32x8::splat(0.5);
+    let mut valid = surface.to_bitmask();
+    if let Some(f) = facing {
+        let towards = |eye: f32, a: f32, ray: f32, ray_step: f32| {
+            f32x8::splat(eye) - f32x8::splat(a) * u - (f32x8::splat(ray) + f32x8::splat(ray_step) * u) * depth
+        };
+        let (e, a, r, s) = (f.row_eye, f.a, f.ray, f.ray_step);
+        let to_eye = [
+            towards(e.x, a.x, r.x, s.x),
+            towards(e.y, a.y, r.y, s.y),
+            towards(e.z, a.z, r.z, s.z),
+        ];
+        let normal =
+            [24, 32, 40].map(|shift| f32x8::from_i32x8(cast(field(&texels, shift, 8))) - f32x8::splat(127.5));
+        let dot = normal[0] * to_eye[0] + normal[1] * to_eye[1] + normal[2] * to_eye[2];
+        valid &= !dot.simd_lt(f32x8::ZERO).to_bitmask();
+    }
+    let kept = cast::<u32x8, f32x8>(lane_mask(valid));
+    let or_zero = |x: f32x8| kept.select(x, f32x8::ZERO);
+    let lands = [
+        or_zero((u + add_u) * scale),
+        or_zero((f32x8::splat(v) + add_v) * scale),
+        or_zero(depth),
+    ];
+    let in_visit = |x: f32x8| {
+        if RIGHT {
+            x.to_array()
+        } else {
+            cast::<u32x8, f32x8>(cast::<f32x8, u32x8>(x).shuffle(u32x8::from([7, 6, 5, 4, 3, 2, 1, 0])))
+                .to_array()
+        }
+    };
+    let at = step..step + LANES;
+    for (field, lands) in [&mut samples.u, &mut samples.v, &mut samples.depth]
+        .into_iter()
+        .zip(lands)
+    {
+        field[at.clone()].copy_from_slice(&in_visit(lands));
+    }
+    let mut texels = texels;
+    if !RIGHT {
+        texels.reverse();
+        valid = valid.reverse_bits() >> (32 - LANES);
+    }
+    for (l, (flags, texel)) in samples.flags[at.clone()].iter_mut().zip(&texels).enumerate() {
+        *flags = ((valid >> l) & 1) as u8 * VALID + super::links_of(*texel);
+    }
+    samples.attributes[at].copy_from_slice(&texels);
 }
 
 /// Bit `l` of the result is whether `bytes[l]` has `flag`: the eight bytes as one word,

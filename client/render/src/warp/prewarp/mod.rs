@@ -563,6 +563,26 @@ impl RowSink for IntoRow<'_> {
     }
 }
 
+/// Where a row's texels face, to leave out back faces ([`Faces::Front`]): the eye seen
+/// from the row's plane origin, how a texel's plane point moves along the row (`a`),
+/// and its ray (scaled to 1 along `f`) and how that moves.
+#[derive(Clone, Copy)]
+struct Facing {
+    row_eye: Vec3,
+    a: Vec3,
+    ray: Vec3,
+    ray_step: Vec3,
+}
+
+/// The warp's tables ([`WarpParams`]), sliced to the surface entries: an entry past
+/// them is the empty texel's.
+struct Tables<'a> {
+    scale: &'a [f32],
+    add_u: &'a [f32],
+    add_v: &'a [f32],
+    depth: &'a [f32],
+}
+
 /// What both halves of a pre-warp read.
 struct Job<'a> {
     impostor: &'a Impostor,
@@ -615,7 +635,9 @@ impl Job<'_> {
 
     /// The texels `texels` of source row `j` into `samples`, in visiting order
     /// (rightwards when `RIGHT`): where each lands and what it carries; a texel that is
-    /// empty, or a back face turned away from the eye, is not [`VALID`].
+    /// empty, or a back face turned away from the eye, is not [`VALID`]. The
+    /// interleaved variant takes eight texels at once ([`lanes::sample_eight`]): the
+    /// same samples.
     #[inline(always)]
     fn sample_row<const RIGHT: bool>(
         &self,
@@ -639,17 +661,29 @@ impl Job<'_> {
                 (Some(centre), Some(h_s)) => ((c.origin + c.b * v - centre) / h_s, c.a / h_s),
                 _ => (c.f, Vec3::ZERO),
             };
-            (p.eye - c.origin - c.b * v, c.a, ray, ray_step)
+            Facing {
+                row_eye: p.eye - c.origin - c.b * v,
+                a: c.a,
+                ray,
+                ray_step,
+            }
         });
         let turned_away = |i: usize, texel: u64, q: usize| {
-            facing.is_some_and(|(row_eye, a, ray, ray_step)| {
-                let u = i as f32 + 0.5;
-                let to_eye = row_eye - a * u - (ray + ray_step * u) * p.depth[q];
-                let [_, _, _, x, y, z, ..] = texel.to_le_bytes();
-                // (The encoded normal, `n·127.5 + 127.5`: its direction is enough.)
-                let n = Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5);
-                n.dot(to_eye) < 0.0
-            })
+            facing.is_some_and(
+                |Facing {
+                     row_eye,
+                     a,
+                     ray,
+                     ray_step,
+                 }| {
+                    let u = i as f32 + 0.5;
+                    let to_eye = row_eye - a * u - (ray + ray_step * u) * p.depth[q];
+                    let [_, _, _, x, y, z, ..] = texel.to_le_bytes();
+                    // (The encoded normal, `n·127.5 + 127.5`: its direction is enough.)
+                    let n = Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5);
+                    n.dot(to_eye) < 0.0
+                },
+            )
         };
         let n = texels.len();
         // (The tables' slices in locals: reached through `self` inside the loop, they
@@ -668,9 +702,28 @@ impl Job<'_> {
             &p.depth[..entries],
         );
         samples.resize(n);
+        let mut start = 0;
+        if self.lanes {
+            let tables = Tables {
+                scale: scales,
+                add_u: add_us,
+                add_v: add_vs,
+                depth: table_depths,
+            };
+            while start + LANES <= n {
+                // The eight texels' lowest index, whichever way the row is visited.
+                let lowest = if RIGHT {
+                    texels.start + start
+                } else {
+                    texels.end - start - LANES
+                };
+                lanes::sample_eight::<RIGHT>(packed, lowest, v, &tables, facing.as_ref(), samples, start);
+                start += LANES;
+            }
+        }
         let (us, vs, depths) = (&mut samples.u[..n], &mut samples.v[..n], &mut samples.depth[..n]);
         let (attributes, flags) = (&mut samples.attributes[..n], &mut samples.flags[..n]);
-        for step in 0..n {
+        for step in start..n {
             let i = visited::<RIGHT>(&texels, step);
             let texel = packed[i];
             let q = entry_of(texel) as usize;
