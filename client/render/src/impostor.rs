@@ -50,7 +50,7 @@ pub struct Impostor {
     pub packed: Vec<u64>,
     /// Each row's texels from its first surface texel to one past its last (empty for
     /// a row without one): the pre-warp visits no more of the row. (A compact object's
-    /// texture is empty around it: the knot's 256² texture, 30 % of its texels.)
+    /// texture is empty around it: the knot's 256² texture, 32 % of its texels.)
     pub occupied: Vec<std::ops::Range<usize>>,
     /// Which sides of the surfaces can show.
     pub faces: Faces,
