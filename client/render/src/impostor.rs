@@ -40,9 +40,11 @@ impl Faces {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Impostor {
     pub texture: ReliefTexture,
-    /// Texel `k` is connected to its right neighbour.
+    /// Texel `k` is connected to its right neighbour. (Also packed into
+    /// [`Impostor::packed`], which the pre-warp reads: set both, or make the impostor
+    /// anew.)
     pub right: Vec<bool>,
-    /// Texel `k` is connected to the neighbour below.
+    /// Texel `k` is connected to the neighbour below (packed too, as `right`).
     pub down: Vec<bool>,
     /// Texel `k`'s albedo, encoded normal, its depth's table entry
     /// ([`WarpLevels::entry`]) and its links packed in one word: all the pre-warp reads

@@ -37,7 +37,8 @@ pub(super) const RIGHT_LINK: u8 = 2;
 pub(super) const DOWN_LINK: u8 = 4;
 
 /// One half-row's texels in visiting order, as the row pass reads them: where each
-/// lands and what it carries, laid out by field so eight load as one vector.
+/// lands and what it carries, laid out by field so eight load as one vector. (Kept
+/// from row to row: only the first `n` of a half-row of `n` texels are its own.)
 #[derive(Default)]
 pub(super) struct RowSamples {
     /// u′, v′ and displacement (zero for a texel that is not [`VALID`]).
@@ -153,8 +154,9 @@ pub(super) fn sample_eight<const RIGHT: bool>(
             towards(e.y, a.y, r.y, s.y),
             towards(e.z, a.z, r.z, s.z),
         ];
-        let normal =
-            [24, 32, 40].map(|shift| f32x8::from_i32x8(cast(field(&texels, shift, 8))) - f32x8::splat(127.5));
+        let normal = [0, 8, 16].map(|byte| {
+            f32x8::from_i32x8(cast(field(&texels, super::NORMAL_SHIFT + byte, 8))) - f32x8::splat(127.5)
+        });
         let dot = normal[0] * to_eye[0] + normal[1] * to_eye[1] + normal[2] * to_eye[2];
         valid &= !dot.simd_lt(f32x8::ZERO).to_bitmask();
     }
@@ -552,15 +554,13 @@ impl Columns {
         self.links[at.clone()].copy_from_slice(&mask.select(cell_links, links).to_array());
         let next = mask.select(u32x8::splat(seq + 1), load_u32(&self.next_row, base));
         self.next_row[at].copy_from_slice(&next.to_array());
-        if let Some(columns) = self.attributes.get_mut(base..base + LANES) {
-            let [low, high] = cast::<[u64; LANES], [u64x4; 2]>(emitted.attributes);
-            let [old_low, old_high] = cast::<[u64; LANES], [u64x4; 2]>(eight(columns, 0));
-            let kept = [
-                wide_mask(taken).select(low, old_low),
-                wide_mask(taken >> 4).select(high, old_high),
-            ];
-            columns.copy_from_slice(&cast::<[u64x4; 2], [u64; LANES]>(kept));
-        }
+        let [low, high] = cast::<[u64; LANES], [u64x4; 2]>(emitted.attributes);
+        let [old_low, old_high] = cast::<[u64; LANES], [u64x4; 2]>(last_attributes);
+        let kept = [
+            wide_mask(taken).select(low, old_low),
+            wide_mask(taken >> 4).select(high, old_high),
+        ];
+        self.attributes[base..base + LANES].copy_from_slice(&cast::<[u64x4; 2], [u64; LANES]>(kept));
         first(n as u32) & !taken
     }
 }

@@ -152,6 +152,9 @@ fn extent(params: &WarpParams, w: f32, h: f32) -> ((i32, i32), (i32, i32)) {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct Attributes(u64);
 
+/// Where a packed texel's encoded normal starts ([`pack_texel`]): its three bytes follow
+/// the albedo's.
+const NORMAL_SHIFT: u32 = 24;
 /// Where a packed texel's table entry starts ([`pack_texel`]).
 const ENTRY_SHIFT: u32 = 48;
 /// The bits a table entry may take: entries reach
@@ -160,6 +163,12 @@ const ENTRY_MASK: u64 = (1 << 13) - 1;
 /// A packed texel's links sit at its row-pass flags ([`RIGHT_LINK`], [`DOWN_LINK`])
 /// shifted up by this, above its table entry.
 const LINKS_SHIFT: u32 = 60;
+
+// The packed layout holds: the largest table entry fits its bits, which end where the
+// links begin, and the links fit the word.
+const _: () = assert!(1 << super::params::WARP_LEVEL_BITS <= ENTRY_MASK);
+const _: () = assert!(ENTRY_SHIFT + ENTRY_MASK.count_ones() <= LINKS_SHIFT + RIGHT_LINK.trailing_zeros());
+const _: () = assert!(LINKS_SHIFT + DOWN_LINK.ilog2() < 64);
 
 /// A texel as the pre-warp reads it ([`Impostor::packed`]): albedo and encoded normal in
 /// the low six bytes, as [`Attributes`]; above them the table entry of its depth level
@@ -635,9 +644,9 @@ impl Job<'_> {
 
     /// The texels `texels` of source row `j` into `samples`, in visiting order
     /// (rightwards when `RIGHT`): where each lands and what it carries; a texel that is
-    /// empty, or a back face turned away from the eye, is not [`VALID`]. The
-    /// interleaved variant takes eight texels at once ([`lanes::sample_eight`]): the
-    /// same samples.
+    /// empty, or a back face turned away from the eye, is not [`VALID`]. With
+    /// [`Job::lanes`], eight texels at once ([`lanes::sample_eight`]): the same
+    /// samples, whatever the variant.
     #[inline(always)]
     fn sample_row<const RIGHT: bool>(
         &self,
@@ -669,47 +678,39 @@ impl Job<'_> {
             }
         });
         let turned_away = |i: usize, texel: u64, q: usize| {
-            facing.is_some_and(
-                |Facing {
-                     row_eye,
-                     a,
-                     ray,
-                     ray_step,
-                 }| {
-                    let u = i as f32 + 0.5;
-                    let to_eye = row_eye - a * u - (ray + ray_step * u) * p.depth[q];
-                    let [_, _, _, x, y, z, ..] = texel.to_le_bytes();
-                    // (The encoded normal, `n·127.5 + 127.5`: its direction is enough.)
-                    let n = Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5);
-                    n.dot(to_eye) < 0.0
-                },
-            )
+            facing.is_some_and(|f| {
+                let u = i as f32 + 0.5;
+                let to_eye = f.row_eye - f.a * u - (f.ray + f.ray_step * u) * p.depth[q];
+                let [_, _, _, x, y, z, ..] = texel.to_le_bytes();
+                // (The encoded normal, `n·127.5 + 127.5`: its direction is enough.)
+                let n = Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5);
+                n.dot(to_eye) < 0.0
+            })
         };
         let n = texels.len();
         // (The tables' slices in locals: reached through `self` inside the loop, they
         // were loaded again for every texel, the stores below possibly aliasing them.)
         // (Sliced to one length, the empty entry just past it: one comparison tells a
         // surface texel and bounds every read below.)
-        let entries = usize::from(p.levels.empty())
-            .min(p.scale.len())
-            .min(p.add_u.len())
-            .min(p.add_v.len())
-            .min(p.depth.len());
-        let (scales, add_us, add_vs, table_depths) = (
-            &p.scale[..entries],
-            &p.add_u[..entries],
-            &p.add_v[..entries],
-            &p.depth[..entries],
+        let entries = usize::from(p.levels.empty());
+        debug_assert!(
+            [&p.scale, &p.add_u, &p.add_v, &p.depth]
+                .iter()
+                .all(|table| table.len() == entries),
+            "pre-warp tables of {entries} entries (not params without tables)"
         );
+        let entries = [&p.scale, &p.add_u, &p.add_v, &p.depth]
+            .iter()
+            .fold(entries, |n, table| n.min(table.len()));
+        let tables = Tables {
+            scale: &p.scale[..entries],
+            add_u: &p.add_u[..entries],
+            add_v: &p.add_v[..entries],
+            depth: &p.depth[..entries],
+        };
         samples.resize(n);
         let mut start = 0;
         if self.lanes {
-            let tables = Tables {
-                scale: scales,
-                add_u: add_us,
-                add_v: add_vs,
-                depth: table_depths,
-            };
             while start + LANES <= n {
                 // The eight texels' lowest index, whichever way the row is visited.
                 let lowest = if RIGHT {
@@ -721,6 +722,12 @@ impl Job<'_> {
                 start += LANES;
             }
         }
+        let Tables {
+            scale: scales,
+            add_u: add_us,
+            add_v: add_vs,
+            depth: table_depths,
+        } = tables;
         let (us, vs, depths) = (&mut samples.u[..n], &mut samples.v[..n], &mut samples.depth[..n]);
         let (attributes, flags) = (&mut samples.attributes[..n], &mut samples.flags[..n]);
         for step in start..n {
@@ -739,7 +746,8 @@ impl Job<'_> {
                 (0.0, 0.0, 0.0)
             };
             (us[step], vs[step], depths[step]) = (u, v, depth);
-            // (The depth's table entry in the top lanes blends along unread.)
+            // (The depth's table entry and the links in the top lanes blend along
+            // unread.)
             attributes[step] = texel;
             flags[step] = u8::from(valid) * VALID + links_of(texel);
         }
@@ -1332,6 +1340,39 @@ mod tests {
             (0, 0),
             "holes, square texels outside the square"
         );
+    }
+
+    /// A packed texel gives back its table entry, its links and its attribute bytes,
+    /// for the entries' extremes (the 16-bit empty entry the largest); and a baked
+    /// impostor's packed words hold its texels' links.
+    #[test]
+    fn packed_texels_unpack_whole() {
+        for entry in [0u16, 1, 254, 255, 4095, 4096] {
+            for (right, down) in [(false, false), (true, false), (false, true), (true, true)] {
+                let (albedo, normal) = ([255, 1, 128], [0, 254, 77]);
+                let texel = pack_texel(albedo, normal, entry, right, down);
+                let links = u8::from(right) * RIGHT_LINK + u8::from(down) * DOWN_LINK;
+                assert_eq!(
+                    (entry_of(texel), links_of(texel)),
+                    (entry, links),
+                    "{entry} {right} {down}"
+                );
+                let attributes = Attributes(texel);
+                assert_eq!((attributes.albedo(), attributes.normal()), (albedo, normal));
+            }
+        }
+        let impostor = Impostor::new(crate::fixtures::square_over_plane(16, 4..9, ([0, 255, 0], 40)));
+        let levels = crate::warp::params::WarpLevels::new(impostor.texture.depth_bits);
+        for (k, &texel) in impostor.packed.iter().enumerate() {
+            let links = u8::from(impostor.right[k]) * RIGHT_LINK + u8::from(impostor.down[k]) * DOWN_LINK;
+            assert_eq!(links_of(texel), links, "texel {k}");
+            assert_eq!(
+                entry_of(texel),
+                levels.entry(impostor.texture.depth[k]),
+                "texel {k}"
+            );
+        }
+        assert!(impostor.right.iter().any(|&r| r) && impostor.right.iter().any(|&r| !r));
     }
 
     /// The packed lerp rounds each byte to nearest, ends exact, on all six lanes.
