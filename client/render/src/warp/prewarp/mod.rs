@@ -584,7 +584,9 @@ struct Facing {
 }
 
 /// The warp's tables ([`WarpParams`]), sliced to the surface entries: an entry past
-/// them is the empty texel's.
+/// them is the empty texel's, so one comparison tells a surface texel and bounds every
+/// read.
+#[derive(Clone, Copy)]
 struct Tables<'a> {
     scale: &'a [f32],
     add_u: &'a [f32],
@@ -592,10 +594,30 @@ struct Tables<'a> {
     depth: &'a [f32],
 }
 
+impl<'a> Tables<'a> {
+    fn of(p: &'a WarpParams) -> Tables<'a> {
+        let entries = usize::from(p.levels.empty());
+        let tables = [&p.scale, &p.add_u, &p.add_v, &p.depth];
+        debug_assert!(
+            tables.iter().all(|table| table.len() == entries),
+            "pre-warp tables of {entries} entries (not params without tables)"
+        );
+        let entries = tables.iter().fold(entries, |n, table| n.min(table.len()));
+        Tables {
+            scale: &p.scale[..entries],
+            add_u: &p.add_u[..entries],
+            add_v: &p.add_v[..entries],
+            depth: &p.depth[..entries],
+        }
+    }
+}
+
 /// What both halves of a pre-warp read.
 struct Job<'a> {
     impostor: &'a Impostor,
     params: &'a WarpParams,
+    /// `params`' tables, for the row pass.
+    tables: Tables<'a>,
     variant: Variant,
     u0: i64,
     columns: usize,
@@ -690,24 +712,7 @@ impl Job<'_> {
         let n = texels.len();
         // (The tables' slices in locals: reached through `self` inside the loop, they
         // were loaded again for every texel, the stores below possibly aliasing them.)
-        // (Sliced to one length, the empty entry just past it: one comparison tells a
-        // surface texel and bounds every read below.)
-        let entries = usize::from(p.levels.empty());
-        debug_assert!(
-            [&p.scale, &p.add_u, &p.add_v, &p.depth]
-                .iter()
-                .all(|table| table.len() == entries),
-            "pre-warp tables of {entries} entries (not params without tables)"
-        );
-        let entries = [&p.scale, &p.add_u, &p.add_v, &p.depth]
-            .iter()
-            .fold(entries, |n, table| n.min(table.len()));
-        let tables = Tables {
-            scale: &p.scale[..entries],
-            add_u: &p.add_u[..entries],
-            add_v: &p.add_v[..entries],
-            depth: &p.depth[..entries],
-        };
+        let tables = self.tables;
         samples.resize(n);
         let mut start = 0;
         if self.lanes {
@@ -728,6 +733,7 @@ impl Job<'_> {
             add_v: add_vs,
             depth: table_depths,
         } = tables;
+        let entries = scales.len();
         let (us, vs, depths) = (&mut samples.u[..n], &mut samples.v[..n], &mut samples.depth[..n]);
         let (attributes, flags) = (&mut samples.attributes[..n], &mut samples.flags[..n]);
         for step in start..n {
@@ -1180,6 +1186,7 @@ fn prewarp_with(
     let job = Job {
         impostor,
         params,
+        tables: Tables::of(params),
         variant,
         u0: u0 as i64,
         columns: width,

@@ -3,7 +3,7 @@
 use wide::bytemuck::cast;
 use wide::{f32x8, u32x8};
 
-use super::vectors::{eight, field, gather, lane_bits, lane_mask, lerp_attributes, load};
+use super::vectors::{eight, field, gather, lane_bits, lane_mask, lerp_attributes, load, permute};
 use super::{DOWN_LINK, EXACT, LANES, RIGHT_LINK, VALID, first};
 use crate::warp::prewarp::{
     Attributes, Cell, ENTRY_MASK, ENTRY_SHIFT, Facing, NORMAL_SHIFT, Tables, links_of,
@@ -114,8 +114,7 @@ pub(in crate::warp::prewarp) fn sample_eight<const RIGHT: bool>(
         if RIGHT {
             x.to_array()
         } else {
-            cast::<u32x8, f32x8>(cast::<f32x8, u32x8>(x).shuffle(u32x8::from([7, 6, 5, 4, 3, 2, 1, 0])))
-                .to_array()
+            permute(x, u32x8::from([7, 6, 5, 4, 3, 2, 1, 0])).to_array()
         }
     };
     let at = step..step + LANES;
@@ -217,8 +216,7 @@ pub(in crate::warp::prewarp) fn row_block<const RIGHT: bool>(
         };
         // Column `c` (from the image's first) takes lane `order[c]`.
         let order = compaction::<RIGHT>(emits, count);
-        let by_column = |x: f32x8| cast::<u32x8, f32x8>(cast::<f32x8, u32x8>(x).shuffle(order));
-        (emitted.v, emitted.depth) = (by_column(v).to_array(), by_column(depth).to_array());
+        (emitted.v, emitted.depth) = (permute(v, order).to_array(), permute(depth, order).to_array());
         for (column, &l) in emitted.attributes.iter_mut().zip(&order.to_array()) {
             *column = attributes[l as usize & (LANES - 1)];
         }

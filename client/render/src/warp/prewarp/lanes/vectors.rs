@@ -39,6 +39,12 @@ pub(super) fn load_u32(values: &[u32], at: usize) -> u32x8 {
     u32x8::from(eight(values, at))
 }
 
+/// Lane `l` of the result is lane `order[l]` of `x` (each index below eight).
+#[inline(always)]
+pub(super) fn permute(x: f32x8, order: u32x8) -> f32x8 {
+    cast::<u32x8, f32x8>(cast::<f32x8, u32x8>(x).shuffle(order))
+}
+
 /// All ones in the four 64-bit lanes whose bit is set in `bits`'s low four.
 #[inline(always)]
 pub(super) fn wide_mask(bits: u32) -> u64x4 {
