@@ -153,7 +153,7 @@ fn the_demo_flies_and_summarises() {
                 row[edge].parse::<u32>().unwrap(),
                 row[level].parse::<u32>().unwrap(),
             );
-            assert!((16..=720).contains(&edge) && level < 6, "{line}");
+            assert!((16..=1024).contains(&edge) && level < 7, "{line}");
         }
     }
     assert!(drawn > 0, "the knot was never drawn as an impostor: {csv}");
