@@ -65,7 +65,8 @@ pub const INITIAL_LATENCY_S: f64 = 0.15;
 
 /// Textures kept per object (those the last frame relied on, then the nearest the eye:
 /// [`Manager::hold`](super::Manager)): enough for the pair around the eye
-/// and those the path returns to, at a few MB each.
+/// and those the path returns to, at a few MB each (about 25 MB at 1024², with its
+/// pyramid).
 pub const TEXTURES_KEPT: usize = 8;
 
 // ---- Which texture is shown ---------------------------------------------------------
@@ -108,7 +109,8 @@ pub const MAX_DISTANCE_RATIO: f32 = 1.5;
 /// rays, which a turned eye sees stretched.) At 40°, the scanned bunny flown at a 100 ms
 /// round trip was shown 29° from its only texture early in the flight, its turned side
 /// stepped, 3.10–3.16 dB below geometry's worst frame in 4 runs of 5; at 30°, 1.05–1.08
-/// in 3, the sphere's orbit asking 20 textures where it asked 18–19.
+/// in 3, the sphere's orbit (`orbit-sphere`) asking 20 textures where two runs at 40°
+/// asked 18 and 19.
 pub const LONE_MAX_TURN: f32 = 30.0 * PI / 180.0;
 
 /// A texture drawn without a partner counts as stale once the band past its rim it
@@ -180,10 +182,12 @@ pub const TEXTURE_LADDER: [u32; 11] = [32, 48, 64, 88, 128, 184, 256, 360, 512, 
 /// near passes showed the sphere and the rock at texels of 1.4–1.6 pixels, 4–7 dB below
 /// exact geometry; at 720 the rock's texel stayed under a pixel, but the knot, passing
 /// the eye, was shown at 1.04-pixel texels, its silhouette stepped and short of the
-/// rim, 5.5–6.7 dB below geometry in 3 runs of 4. At 1024 an object whose texture
-/// would need more than 720 a side is drawn as geometry where its triangles cost less
-/// ([`cheaper_as_geometry`]: the sphere, and the knot there), and the rock gets the
-/// texels it needs.
+/// rim, its worst frame 4.2–6.7 dB below geometry's in 4 runs of 5. At 1024 an object
+/// whose texture would need more than 720 a side is drawn as geometry where its
+/// triangles cost less ([`cheaper_as_geometry`]: the knot there), and the rock gets the
+/// texels it needs: one 1024² pre-warp costs about four 512² ones (2.1 ms on one
+/// core), on the few frames of its near pass (in the demo, one run of four asked for
+/// one; the frame's median speed was unchanged, 2.8–3.1× geometry's against 2.4–3.3×).
 pub const SOLID_MAX_EDGE: u32 = 1024;
 
 /// The largest texture edge asked for in `projection`: [`SHEET_MAX_EDGE`] for the
@@ -292,9 +296,9 @@ pub const WARP_NS_PER_TEXEL: f32 = 12.0;
 /// Whether `object` costs no more drawn as geometry than as an impostor whose texture
 /// has `edge` texels a side (then it is drawn as geometry, which is exact). With the
 /// costs above, the default scene's tree is drawn as geometry once its texture would
-/// pass 351 texels a side, the sphere (20 k triangles) past 522 and the knot (46 k) past
-/// 784 (only as near as their textures would be a solid's largest, from the ladder's
-/// 720 to 1024), and the rock (a million) never. In the demo (whole
+/// pass 351 texels a side, the sphere (20 k triangles) past 522 (its textures of 720),
+/// the knot (46 k) past 784 (only at a solid's largest, 1024), and the rock (a
+/// million) never. In the demo (whole
 /// path, rtt 0 and 100, against the same before) the tree then matched geometry where
 /// its impostor was 2.9–3.3 dB below, the frame took 6.45–6.64 ms where it took
 /// 6.63–6.73, and 84–119 textures were asked for where 125–143 were.
@@ -576,8 +580,8 @@ mod tests {
         assert_eq!((knot, sphere), (1.0, 1.0));
     }
 
-    /// Leaves are drawn as geometry where their texture would be large, the sphere and
-    /// the knot only where theirs would be a solid's largest; the rock never is.
+    /// Leaves are drawn as geometry where their texture would be large, the sphere from
+    /// its 720² textures, the knot only at a solid's largest (1024); the rock never is.
     #[test]
     fn geometry_where_it_costs_no_more() {
         let scene = Scene::load("default").expect("default scene");
@@ -590,7 +594,7 @@ mod tests {
         assert!(cheaper_as_geometry(tree, 256, GEOMETRY_STAND_IN));
         assert!(!cheaper_as_geometry(tree, 184, GEOMETRY_STAND_IN));
         assert!(!cheaper_as_geometry(rock, SOLID_MAX_EDGE, 1.0));
-        assert!(cheaper_as_geometry(sphere, SOLID_MAX_EDGE, 1.0) && !cheaper_as_geometry(sphere, 512, 1.0));
+        assert!(cheaper_as_geometry(sphere, 720, 1.0) && !cheaper_as_geometry(sphere, 512, 1.0));
         assert!(cheaper_as_geometry(knot, SOLID_MAX_EDGE, 1.0) && !cheaper_as_geometry(knot, 720, 1.0));
     }
 
