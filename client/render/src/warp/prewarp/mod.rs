@@ -272,6 +272,19 @@ impl Cell {
         filler: false,
     };
 
+    /// A sample the row pass made from a texel (never a crack's filler): where it lands
+    /// in its row, `v`, its displacement, its attribute bytes and its link downwards.
+    #[inline(always)]
+    fn sample(v: f32, depth: f32, attributes: u64, down: bool) -> Cell {
+        Cell {
+            v,
+            depth,
+            attributes: Attributes(attributes),
+            down,
+            filler: false,
+        }
+    }
+
     /// Of two samples of different surfaces, the one farther from the texture's eye.
     #[inline(always)]
     fn deeper(self, other: Cell) -> Cell {

@@ -5,9 +5,7 @@ use wide::{f32x8, u32x8};
 
 use super::vectors::{eight, field, gather, lane_bits, lane_mask, lerp_attributes, load, permute};
 use super::{DOWN_LINK, EXACT, LANES, RIGHT_LINK, VALID, first};
-use crate::warp::prewarp::{
-    Attributes, Cell, ENTRY_MASK, ENTRY_SHIFT, Facing, NORMAL_SHIFT, Tables, links_of,
-};
+use crate::warp::prewarp::{Cell, ENTRY_MASK, ENTRY_SHIFT, Facing, NORMAL_SHIFT, Tables, links_of};
 
 /// One half-row's texels in visiting order, as the row pass reads them: where each
 /// lands and what it carries, laid out by field so eight load as one vector. (Kept
@@ -43,13 +41,12 @@ impl RowSamples {
     /// The sample at `k`, as the scalar pass takes it.
     #[inline(always)]
     pub fn cell(&self, k: usize) -> Cell {
-        Cell {
-            v: self.v[k],
-            depth: self.depth[k],
-            attributes: Attributes(self.attributes[k]),
-            down: self.flags[k] & DOWN_LINK != 0,
-            filler: false,
-        }
+        Cell::sample(
+            self.v[k],
+            self.depth[k],
+            self.attributes[k],
+            self.flags[k] & DOWN_LINK != 0,
+        )
     }
 
     /// Bit `l` set where the `l`-th of the eight flags from `k` has `flag`.
@@ -153,13 +150,12 @@ impl Emitted {
     /// Lane `l`'s sample.
     #[inline(always)]
     pub fn cell(&self, l: usize) -> Cell {
-        Cell {
-            v: self.v[l],
-            depth: self.depth[l],
-            attributes: Attributes(self.attributes[l]),
-            down: self.down & (1 << l) != 0,
-            filler: false,
-        }
+        Cell::sample(
+            self.v[l],
+            self.depth[l],
+            self.attributes[l],
+            self.down & (1 << l) != 0,
+        )
     }
 }
 
