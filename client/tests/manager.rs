@@ -1056,3 +1056,52 @@ fn an_orbit_asks_for_no_eye_twice() {
         "asked for again (frame, direction): {asked_again:?}"
     );
 }
+
+/// Orbiting the sphere, answered at once: each predicted texture is made as far past
+/// the eye's future as the band past its rim lets it be seen from alone, so one
+/// texture serves that turn behind its eye and as much ahead — an orbit takes fewer
+/// than 16 (made just past the future eye, the band's turn apart, it took 20).
+#[test]
+fn an_orbit_spaces_its_textures_a_lone_reach_apart() {
+    use relief_core::relief::DepthBits;
+    use relief_trace::bake;
+    use relief_trace::tracer::ObjectTracer;
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let (mut manager, mut commands, arrivals) = wired(&scene, Config::default());
+    let sphere = index(&scene, "sphere");
+    let object = &scene.objects[sphere];
+    let centre = object.world_bounds().center();
+    let tracer = ObjectTracer::new(object);
+    let mut asked = 0;
+    // 45° a second, 30 frames a second: one orbit in 8 s, after 1 s to settle.
+    for frame in 0..270 {
+        let t = frame as f64 / 30.0;
+        let camera = Camera::look_at(
+            around(centre, (45.0 * t as f32).to_radians()),
+            centre,
+            Vec3::Y,
+            60.0,
+            640,
+            360,
+        )
+        .unwrap();
+        manager.frame(&scene, &camera, t);
+        while let Ok(command) = commands.try_recv() {
+            let Command::Request(r) = command else {
+                continue;
+            };
+            if frame >= 30 {
+                asked += 1;
+            }
+            let texture = bake(&tracer, r.eye, r.size, DepthBits::Eight, r.projection).unwrap();
+            arrive(
+                &arrivals,
+                r.id,
+                ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
+            );
+        }
+    }
+    eprintln!("{asked} textures asked for over one orbit");
+    assert!((8..16).contains(&asked), "{asked} textures over one orbit");
+}

@@ -18,11 +18,9 @@ use relief_render::validity::rim::Rim;
 use relief_render::warp::params::WarpParams;
 
 use super::around::{angle_between, similar_distance};
-use super::choose::growth;
+use super::choose::{growth, widest_within};
 use super::messages::{Arrival, Failure};
-use super::policy::{
-    CRITICAL_REGIONS, MIN_LEVEL_EDGE, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, SHED_QUIET, growth_weight,
-};
+use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, SHED_QUIET, growth_weight};
 use super::{Manager, TextureLifetimes};
 
 /// A texture made ready for the frame loop: its pyramid (with texel connectivity),
@@ -110,25 +108,14 @@ pub(super) struct ObjectState {
 }
 
 /// How far (radians) around `centre`, turning the texture's eye about the vertical,
-/// `held` stays within `tolerance`: probed at doubling angles, then halved back.
+/// `held` stays within `tolerance` ([`widest_within`]).
 pub(super) fn probe_valid_angle(held: &Held, centre: Vec3, camera: &Camera, tolerance: f32) -> f32 {
-    let within = |angle: f32| {
+    widest_within(|angle: f32| {
         [angle, -angle].iter().all(|&a| {
             let eye = centre + glam::Quat::from_rotation_y(a) * (held.eye - centre);
             growth(held, eye, camera) <= tolerance
         })
-    };
-    let mut angle = PROBE_START;
-    while angle < PROBE_LIMIT && within(angle * 2.0) {
-        angle *= 2.0;
-    }
-    // Refine between `angle` (within) and twice it (not).
-    let (mut lo, mut hi) = (angle, angle * 2.0);
-    for _ in 0..PROBE_REFINEMENTS {
-        let mid = 0.5 * (lo + hi);
-        if within(mid) { lo = mid } else { hi = mid }
-    }
-    lo
+    })
 }
 
 impl Manager {

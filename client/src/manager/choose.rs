@@ -3,7 +3,7 @@
 //! within tolerance shown, and a texture from the far side of the eye drawn behind it
 //! once the shown one leaves a band past its rim or has turned far.
 
-use glam::Vec3;
+use glam::{Quat, Vec3};
 
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
@@ -14,9 +14,9 @@ use super::Manager;
 use super::around::{angle_between, similar_distance};
 use super::cache::Held;
 use super::policy::{
-    COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LONE_BAND, LONE_MAX_TURN, MAX_TEXEL_PIXELS,
+    COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_MAX_TURN, MAX_TEXEL_PIXELS,
     MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
-    REFINE_TEXEL, cheaper_as_geometry,
+    PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, cheaper_as_geometry,
 };
 
 /// How an object is drawn this frame.
@@ -101,6 +101,50 @@ pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32
     let focal = camera.focal_pixels();
     let texture = &held.pyramid.levels[0].texture;
     held.rim.band(texture, centre, eye) * focal / centre.distance(eye).max(f32::MIN_POSITIVE)
+}
+
+/// How far round from `held`'s eye an eye may turn about `axis` through the object's
+/// `centre`, at `distance` from it, with `held` still planned to be shown there alone:
+/// the band past its rim and the turn within the planning margin of theirs
+/// ([`may_show`]), its gaps' growth within [`LEAD`] of the tolerance — either way, as
+/// a texture made ahead of the eye is first seen behind its own eye
+/// ([`widest_within`]). (The band is the rim's geometry; the growth, measured on
+/// another texture than the one to be made, is where the margin is kept.)
+pub(super) fn probe_lone_reach(
+    held: &Held,
+    centre: Vec3,
+    axis: Vec3,
+    distance: f32,
+    camera: &Camera,
+    tolerance: f32,
+) -> f32 {
+    let from = (held.eye - centre).normalize_or_zero() * distance;
+    let within = |angle: f32| {
+        angle <= PLANNING_MARGIN * LONE_MAX_TURN
+            && [angle, -angle].iter().all(|&a| {
+                let eye = centre + Quat::from_axis_angle(axis, a) * from;
+                growth(held, eye, camera) <= LEAD * tolerance
+                    && band(held, centre, eye, camera) <= PLANNING_MARGIN * band_limit(false, tolerance)
+            })
+    };
+    widest_within(within)
+}
+
+/// The widest angle (radians) `within` holds for, probed from [`PROBE_START`] at doubling
+/// angles up to [`PROBE_LIMIT`], then halved back [`PROBE_REFINEMENTS`] times (at
+/// least [`PROBE_START`]).
+pub(super) fn widest_within(within: impl Fn(f32) -> bool) -> f32 {
+    let mut angle = PROBE_START;
+    while angle < PROBE_LIMIT && within(angle * 2.0) {
+        angle *= 2.0;
+    }
+    // Refine between `angle` (within) and twice it (not).
+    let (mut lo, mut hi) = (angle, angle * 2.0);
+    for _ in 0..PROBE_REFINEMENTS {
+        let mid = 0.5 * (lo + hi);
+        if within(mid) { lo = mid } else { hi = mid }
+    }
+    lo
 }
 
 /// Whether a texture graded `grade` at an eye `turn` radians round from its own may be

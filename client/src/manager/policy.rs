@@ -370,21 +370,33 @@ fn fine_edge(object: &SceneObject, camera: &Camera, projection: SourceProjection
 /// within the tolerance itself.
 pub const PLANNING_MARGIN: f32 = 0.75;
 
-/// How far past the predicted eye, as a fraction of the object's valid angle, predicted
-/// textures are made for: a texture then serves (1 + `LEAD`) valid angles of the
-/// motion instead of one. Once the eye has passed the shown texture's, the next one is
-/// its partner; none is asked for to be a partner alone. (Keeping one texture asked for
-/// two valid angles past the eye's future, as a partner, cost a third more requests and
-/// bought no fidelity measured. Without it against with it: forest, rtt 100, 5 runs
+/// How far past the predicted eye predicted textures are made: as far as a held
+/// texture, seen from that far behind its own eye, keeps its gaps' growth within this
+/// share of the tolerance (and its rim's band and turn within the planning margin:
+/// [`Manager::lead_angle`](super::Manager)). A texture then serves that turn twice,
+/// behind its eye and ahead. Once the eye has passed the shown texture's, the next one
+/// is its partner; none is asked for to be a partner alone. (Keeping one texture asked
+/// for two valid angles past the eye's future, as a partner, cost a third more requests
+/// and bought no fidelity measured. Without it against with it: forest, rtt 100, 5 runs
 /// against 7, 1,385–1,628 predictions against 1,819–2,276, stale frames 15–24 %
 /// against 14–25 %, objects within 1 dB of geometry 89–106 against 84–92; 64 clients,
-/// four alternating pairs, p99 latency 0.37–1.24 s against 1.64–2.21 s.)
+/// four alternating pairs, p99 latency 0.37–1.24 s against 1.64–2.21 s.) At the
+/// planning margin's share (0.75) the bunny at rtt 100 went stale in 3 frames of 120 in
+/// each of 3 runs, seen 8–12° from textures whose gaps grew 13–14 px; at 0.5, in none.
 pub const LEAD: f32 = 0.5;
 
 /// The predicted path past the eye's future that [`LEAD`] is measured along: this many
-/// eyes, evenly spaced up to twice the horizon (at a steady turn, the lead's takes at
-/// most as long as the turn to the future; if the eye slows, the lead ends at the last).
+/// eyes, evenly spaced over the time the eye, turning as it has, takes to turn the lead
+/// (at least the horizon again, at most [`MAX_HORIZON_S`]; if the eye slows, the lead
+/// ends at the last).
 pub const LEAD_PATH_STEPS: usize = 4;
+
+/// The lead stops where the path's distance from the object leaves this fraction of the
+/// future eye's: a texture first seen from farther or nearer than its own eye as well as
+/// turned from it shows a ragged outline (the sphere, 10° round with its eye 1.39× as far
+/// as the texture's, 4–5 dB below geometry where 0.2 let the lead go), and a request
+/// made past [`PENDING_DISTANCE_SLACK`] would not count as covering the future.
+pub const LEAD_DISTANCE_SLACK: f32 = 0.1;
 
 /// A lead (radians) below this is none: the texture is made for the future eye itself.
 pub const MIN_LEAD: f32 = 1e-4;

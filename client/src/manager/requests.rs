@@ -17,12 +17,13 @@ use crate::predict::Motion;
 
 use super::Manager;
 use super::around::angle_between;
-use super::choose::{Grade, held_covering, held_partners};
+use super::choose::{Grade, held_covering, held_partners, probe_lone_reach};
 use super::messages::{Command, TextureRequest};
 use super::policy::{
-    HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD, LEAD_PATH_STEPS,
-    MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PENDING_DISTANCE_SLACK, PENDING_REACH, PREDICTED_VIEW_MARGIN,
-    REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
+    HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD, LEAD_DISTANCE_SLACK,
+    LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PENDING_DISTANCE_SLACK, PENDING_REACH,
+    PREDICTED_VIEW_MARGIN, REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH, asked_for,
+    largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -83,15 +84,15 @@ pub(super) fn serve_within(
     }
 }
 
-/// The eye to make a predicted texture for, of an object centred on `centre` with
-/// `valid_angle`: the eye further along its predicted path (`beyond`, after `future`)
-/// where it has turned about `centre` by [`LEAD`] of the valid angle past `future` (at
-/// most the turn from `now` to `future` again; the path's last eye if it turns less).
-/// The texture is then first used [`LEAD`]·valid behind its own eye and stays in use as
-/// far ahead: it serves (1 + [`LEAD`]) valid angles of the motion instead of one. It
-/// stops short where the path's distance from the centre leaves
-/// [`PENDING_DISTANCE_SLACK`] of `future`'s: a request made farther would not count as
-/// covering `future` ([`Manager::pending_covers`]).
+/// The eye to make a predicted texture for, of an object centred on `centre`: the eye
+/// further along its predicted path (`beyond`, after `future`) where it has turned
+/// about `centre` by `lead` past `future` (the path's last eye if it turns less; `future`
+/// itself where the eye does not turn from `now`). The texture is then first used `lead`
+/// behind its own eye and stays in use as far ahead: it serves twice the lead of the
+/// motion, where one made for the future eye would serve the lead alone
+/// ([`Manager::lead_angle`] says how far a texture may be seen from). It stops short
+/// where the path's distance from the centre leaves [`LEAD_DISTANCE_SLACK`] of
+/// `future`'s.
 ///
 /// Along the path, not turned on about the centre: an eye passing close by an object
 /// turns about it in a plane tilted by the pass, and turned on in that plane it can
@@ -99,10 +100,9 @@ pub(super) fn serve_within(
 /// which as a pending request would still hold the next prediction back. (Between two
 /// path eyes the lead is on the chord: on a path curving by tens of degrees between
 /// them it could dip under the distance slack, which the path's spacing keeps far off.)
-pub(super) fn lead(centre: Vec3, valid_angle: f32, now: Vec3, future: Vec3, beyond: &[Vec3]) -> Vec3 {
+pub(super) fn lead(centre: Vec3, lead: f32, now: Vec3, future: Vec3, beyond: &[Vec3]) -> Vec3 {
     let turn = angle_between(centre, now, future);
-    let lead = (LEAD * valid_angle).min(turn);
-    if turn.is_nan() || lead <= MIN_LEAD {
+    if turn.is_nan() || turn <= MIN_LEAD || lead <= MIN_LEAD {
         return future;
     }
     let mut previous = (future, 0.0);
@@ -110,7 +110,7 @@ pub(super) fn lead(centre: Vec3, valid_angle: f32, now: Vec3, future: Vec3, beyo
     for &eye in beyond {
         let turn = angle_between(centre, future, eye);
         let ratio = (eye - centre).length() / distance;
-        if turn.is_nan() || (ratio - 1.0).abs() >= PENDING_DISTANCE_SLACK {
+        if turn.is_nan() || (ratio - 1.0).abs() >= LEAD_DISTANCE_SLACK {
             break;
         }
         if turn >= lead {
@@ -124,12 +124,12 @@ pub(super) fn lead(centre: Vec3, valid_angle: f32, now: Vec3, future: Vec3, beyo
 }
 
 /// The eye's path past the `horizon` ahead, as [`lead`] walks it: [`LEAD_PATH_STEPS`]
-/// eyes evenly spaced up to twice the horizon, in `object`'s frame (fewer: it stops
-/// before an eye drawn as geometry, too near). Worked out only when a prediction is
-/// asked for, not every frame.
-fn path_beyond(object: &SceneObject, motion: &Motion, horizon: f64) -> Vec<Vec3> {
+/// eyes evenly spaced over the `span` seconds after it, in `object`'s frame (fewer: it
+/// stops before an eye drawn as geometry, too near). Worked out only when a prediction
+/// is asked for, not every frame.
+fn path_beyond(object: &SceneObject, motion: &Motion, horizon: f64, span: f64) -> Vec<Vec3> {
     (1..=LEAD_PATH_STEPS)
-        .map(|step| motion.at(horizon * (1.0 + step as f64 / LEAD_PATH_STEPS as f64)))
+        .map(|step| motion.at(horizon + span * step as f64 / LEAD_PATH_STEPS as f64))
         .take_while(|&eye| geometry_reason(object, eye) != Some(GeometryReason::TooNear))
         .map(|eye| object.to_local(eye))
         .collect()
@@ -374,8 +374,12 @@ impl Manager {
         // (Quiet a while after the saturated server refused one: see `SHED_QUIET`.)
         let quiet = self.objects[k].quiet_until.is_some_and(|t| now < t);
         if !covered && !quiet {
-            let beyond = path_beyond(&scene.objects[k], &motion, horizon);
-            let ask = lead(centre, self.valid_angle(k), eye, future, &beyond);
+            let lead_angle = self.lead_angle(k, centre, eye, future, camera);
+            // Time for the eye, turning as it has been, to turn the lead past the future.
+            let turn = angle_between(centre, eye, future);
+            let span = (horizon * f64::from(lead_angle / turn).max(1.0)).min(MAX_HORIZON_S);
+            let beyond = path_beyond(&scene.objects[k], &motion, horizon, span);
+            let ask = lead(centre, lead_angle, eye, future, &beyond);
             self.request(scene, k, ask, camera, Some((horizon * 1e3) as u64));
         }
         // Predictions neither the eye nor its future will meet any more.
@@ -383,6 +387,27 @@ impl Manager {
         self.withdraw_predictions(k, |p| {
             angle_between(centre, p.eye, eye) > reach && angle_between(centre, p.eye, future) > reach
         });
+    }
+
+    /// How far past the eye's `future` a predicted texture for object `k` is made
+    /// ([`lead`]), the eye turning from `now` to `future` about `centre`: as far as the
+    /// held texture nearest the future could be seen from behind its own eye and still
+    /// be planned to be shown alone there, its gaps grown [`LEAD`] of the tolerance at
+    /// most ([`probe_lone_reach`], at the future's distance), so that the texture, first
+    /// seen that far behind its eye, covers the future on its own. With none held,
+    /// [`LEAD`] of the valid angle assumed. All in the object's frame.
+    fn lead_angle(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3, camera: &Camera) -> f32 {
+        let axis = (now - centre).cross(future - centre).normalize_or_zero();
+        let nearest = (self.objects[k].held.iter()).min_by(|a, b| {
+            angle_between(centre, a.eye, future).total_cmp(&angle_between(centre, b.eye, future))
+        });
+        match nearest {
+            Some(held) if axis != Vec3::ZERO => {
+                let distance = centre.distance(future);
+                probe_lone_reach(held, centre, axis, distance, camera, self.tolerance())
+            }
+            _ => LEAD * self.valid_angle(k),
+        }
     }
 
     /// Withdraws object `k`'s predicted requests that are `stale`.
@@ -429,35 +454,43 @@ mod tests {
     }
 
     /// An eye flying a straight line past an object, 1 above its centre: the lead
-    /// stays on the line, turned by the lead's share of the valid angle; it
-    /// stops where the line recedes past the distance a pending request covers from,
-    /// and is the future itself where the eye does not turn.
+    /// stays on the line, turned by the lead angle; it stops where the line recedes
+    /// past the lead's distance slack, and is the future itself where the eye does not
+    /// turn.
     #[test]
     fn a_lead_follows_the_eyes_path() {
         let centre = Vec3::ZERO;
         let on_line = |x: f32| Vec3::new(x, 1.0, 2.0);
         let (now, future) = (on_line(-2.0), on_line(0.0));
         let beyond: Vec<Vec3> = (1..=8).map(|k| on_line(k as f32 * 0.2)).collect();
-        let valid = 1.0;
-        let eye = lead(centre, valid, now, future, &beyond);
+        // (The line leaves the distance slack about 0.43 round.)
+        let angle = 0.3;
+        let eye = lead(centre, angle, now, future, &beyond);
         assert!((eye.y - 1.0).abs() < 1e-6 && (eye.z - 2.0).abs() < 1e-6, "{eye}");
         let turn = angle_between(centre, future, eye);
-        assert!((turn - LEAD * valid).abs() < 1e-3, "{turn}");
+        assert!((turn - angle).abs() < 1e-3, "{turn}");
         // (Turned on about the centre instead, in the plane of the pass, it would sink
         // below the line.)
         let axis = (now - centre).cross(future - centre).normalize();
-        let about_centre = centre + glam::Quat::from_axis_angle(axis, LEAD * valid) * (future - centre);
-        assert!(about_centre.y < 0.9, "{about_centre}");
+        let about_centre = centre + glam::Quat::from_axis_angle(axis, angle) * (future - centre);
+        assert!(about_centre.y < 0.97, "{about_centre}");
+        // Asked for more than the line turns within the slack: it stops inside it.
+        let short = lead(centre, 0.6, now, future, &beyond);
+        let ratio = short.length() / future.length();
+        assert!(
+            ratio < 1.0 + LEAD_DISTANCE_SLACK && angle_between(centre, future, short) < 0.45,
+            "{short}"
+        );
 
         // A path receding fast: the lead stops within the pending slack.
         let receding: Vec<Vec3> = (1..=4)
             .map(|k| future * (1.0 + 0.15 * k as f32) + Vec3::X * 0.01 * k as f32)
             .collect();
-        let eye = lead(centre, valid, now, future, &receding);
+        let eye = lead(centre, angle, now, future, &receding);
         let ratio = eye.length() / future.length();
-        assert!((ratio - 1.0).abs() < PENDING_DISTANCE_SLACK, "{ratio}");
+        assert!((ratio - 1.0).abs() < LEAD_DISTANCE_SLACK, "{ratio}");
 
         // No turn: the future.
-        assert_eq!(lead(centre, valid, future, future, &beyond), future);
+        assert_eq!(lead(centre, angle, future, future, &beyond), future);
     }
 }
