@@ -1,13 +1,16 @@
-//! The viewpoint predictor: where will the eye be `dt` from now?
+//! The viewpoint predictor: where will the eye be `dt` from now, and where will it look?
 //!
 //! A least-squares quadratic fit (position, velocity, acceleration) to the last few eye
 //! samples, each axis on its own, extrapolated. Constant-velocity and
 //! constant-acceleration paths are predicted exactly; an orbit's curvature is captured
-//! by the acceleration term over short horizons.
+//! by the acceleration term over short horizons. The view turns on at the mean rate
+//! it turned over the same samples.
 
 use std::collections::VecDeque;
 
-use glam::DVec3;
+use glam::{DVec3, Quat, Vec3};
+
+use relief_core::camera::Camera;
 
 /// How many recent samples the fit uses.
 const WINDOW: usize = 8;
@@ -17,26 +20,37 @@ const WINDOW: usize = 8;
 const CUT_SPEED_RATIO: f64 = 4.0;
 const CUT_MIN_STEP: f64 = 0.5;
 
-/// Recent eye positions in the world (as [`Camera::eye`](relief_core::camera::Camera::eye))
-/// with their times (seconds).
+/// The farthest the view is foreseen to turn, radians: a turn kept up much longer
+/// than the samples it was measured over means little.
+const MAX_VIEW_TURN: f32 = std::f32::consts::FRAC_PI_2;
+
+/// Recent eye positions in the world (as [`Camera::eye`]) and the view's orientation
+/// (the rotation taking x, y, −z to the camera's right, up and forward), with their
+/// times (seconds).
 #[derive(Debug, Clone, Default)]
 pub struct Predictor {
-    samples: VecDeque<(f64, DVec3)>,
+    samples: VecDeque<(f64, DVec3, Quat)>,
+}
+
+/// The orientation of `camera`'s view: the rotation taking x, y and −z to its right,
+/// up and forward.
+pub fn view_of(camera: &Camera) -> Quat {
+    Quat::from_mat3(&glam::Mat3::from_cols(camera.right, camera.up, -camera.forward)).normalize()
 }
 
 impl Predictor {
-    /// Records the eye at time `t` (seconds, increasing). A jump far faster than the
-    /// eye has been moving (a camera cut) starts the history afresh: a fit across it
-    /// would extrapolate the jump.
-    pub fn observe(&mut self, t: f64, eye: DVec3) {
-        let Some(&(last_t, last)) = self.samples.back() else {
-            self.samples.push_back((t, eye));
+    /// Records the eye and its `view` ([`view_of`]) at time `t` (seconds, increasing).
+    /// A jump far faster than the eye has been moving (a camera cut) starts the history
+    /// afresh: a fit across it would extrapolate the jump.
+    pub fn observe(&mut self, t: f64, eye: DVec3, view: Quat) {
+        let Some(&(last_t, last, _)) = self.samples.back() else {
+            self.samples.push_back((t, eye, view));
             return;
         };
         if t <= last_t {
             return;
         }
-        if let Some(&(before_t, before)) = self.samples.iter().rev().nth(1) {
+        if let Some(&(before_t, before, _)) = self.samples.iter().rev().nth(1) {
             let speed = last.distance(before) / (last_t - before_t);
             let step = eye.distance(last);
             if step > CUT_SPEED_RATIO * speed * (t - last_t) + CUT_MIN_STEP {
@@ -46,7 +60,7 @@ impl Predictor {
         if self.samples.len() == WINDOW {
             self.samples.pop_front();
         }
-        self.samples.push_back((t, eye));
+        self.samples.push_back((t, eye, view));
     }
 
     /// The eye expected `dt` seconds after the last sample.
@@ -57,12 +71,27 @@ impl Predictor {
     /// The motion fitted to the recent eyes, to be asked where the eye will be at any
     /// number of times (the fit is made once).
     pub fn motion(&self) -> Option<Motion> {
-        let &(t_last, last) = self.samples.back()?;
+        let &(t_last, last, view_last) = self.samples.back()?;
         let n = self.samples.len();
+        // The view's mean rate of turn over the samples (radians a second, about the
+        // vector's axis).
+        let &(t_first, _, view_first) = self.samples.front()?;
+        let turn = if t_last > t_first {
+            let (axis, angle) = (view_last * view_first.inverse()).to_axis_angle();
+            let angle = if angle > std::f32::consts::PI {
+                angle - std::f32::consts::TAU
+            } else {
+                angle
+            };
+            axis * (angle / (t_last - t_first) as f32)
+        } else {
+            Vec3::ZERO
+        };
         if n < 2 {
             return Some(Motion {
                 last,
                 coefficients: [[0.0; 3]; 3],
+                turn,
             });
         }
         // Fit x(τ) = c0 + c1·τ + c2·τ² (τ relative to the last sample, x to its
@@ -71,7 +100,7 @@ impl Predictor {
         let degree = if n >= 3 { 2 } else { 1 };
         let mut ata = [[0f64; 3]; 3];
         let mut atb = [[0f64; 3]; 3];
-        for &(t, p) in &self.samples {
+        for &(t, p, _) in &self.samples {
             let tau = t - t_last;
             let basis = [1.0, tau, tau * tau];
             for r in 0..=degree {
@@ -87,16 +116,22 @@ impl Predictor {
         for axis in 0..3 {
             coefficients[axis] = solve(&ata, &atb[axis], degree + 1)?;
         }
-        Some(Motion { last, coefficients })
+        Some(Motion {
+            last,
+            coefficients,
+            turn,
+        })
     }
 }
 
 /// The eye's motion as [`Predictor::motion`] fitted it: per axis, the offset from the
-/// last eye as a quadratic in the time since.
+/// last eye as a quadratic in the time since; and the view's rate of turn.
 #[derive(Debug, Clone, Copy)]
 pub struct Motion {
     last: DVec3,
     coefficients: [[f64; 3]; 3],
+    /// Radians a second about the vector's direction, in the world.
+    turn: Vec3,
 }
 
 impl Motion {
@@ -111,6 +146,31 @@ impl Motion {
             }
         }
         self.last + DVec3::from_array(out)
+    }
+
+    /// How far (radians) the view will have turned `dt` seconds after the last sample,
+    /// as [`Motion::camera_at`] turns it.
+    pub fn view_turn(&self, dt: f64) -> f32 {
+        (self.turn.length() * dt as f32).min(MAX_VIEW_TURN)
+    }
+
+    /// `camera` (in the world) as it will look `dt` seconds after the last sample: from
+    /// the eye then ([`Motion::at`]), its view turned on at the rate it has been turning
+    /// (by [`MAX_VIEW_TURN`] at most).
+    pub fn camera_at(&self, dt: f64, camera: &Camera) -> Camera {
+        let turn = (self.turn * dt as f32).clamp_length_max(MAX_VIEW_TURN);
+        let rotation = if turn.is_finite() {
+            Quat::from_scaled_axis(turn)
+        } else {
+            Quat::IDENTITY
+        };
+        Camera {
+            eye: self.at(dt),
+            forward: (rotation * camera.forward).normalize(),
+            right: (rotation * camera.right).normalize(),
+            up: (rotation * camera.up).normalize(),
+            ..*camera
+        }
     }
 }
 
@@ -154,7 +214,7 @@ mod tests {
         let mut p = Predictor::default();
         for k in 0..6 {
             let t = k as f64 * 0.1;
-            p.observe(t, DVec3::new(1.0 + 2.0 * t, 3.0, -(t * t)));
+            p.observe(t, DVec3::new(1.0 + 2.0 * t, 3.0, -(t * t)), Quat::IDENTITY);
         }
         let ahead = p.predict(0.5).unwrap();
         let t = 1.0f64;
@@ -169,7 +229,7 @@ mod tests {
         let mut p = Predictor::default();
         let at = |t: f64| DVec3::new(t.cos() * 5.0, 1.0, t.sin() * 5.0);
         for k in 0..8 {
-            p.observe(k as f64 * 0.05, at(k as f64 * 0.05));
+            p.observe(k as f64 * 0.05, at(k as f64 * 0.05), Quat::IDENTITY);
         }
         let dt = 0.2;
         let error = p.predict(dt).unwrap().distance(at(7.0 * 0.05 + dt));
@@ -182,19 +242,50 @@ mod tests {
     fn a_camera_cut_starts_the_fit_afresh() {
         let mut p = Predictor::default();
         for k in 0..8 {
-            p.observe(k as f64 * 0.03, DVec3::new(k as f64 * 0.1, 0.0, 0.0));
+            p.observe(
+                k as f64 * 0.03,
+                DVec3::new(k as f64 * 0.1, 0.0, 0.0),
+                Quat::IDENTITY,
+            );
         }
         // A cut 9 m away, then the eye still there a frame later.
-        p.observe(0.24, DVec3::new(0.0, 0.0, 9.0));
-        p.observe(0.27, DVec3::new(0.0, 0.0, 9.0));
+        p.observe(0.24, DVec3::new(0.0, 0.0, 9.0), Quat::IDENTITY);
+        p.observe(0.27, DVec3::new(0.0, 0.0, 9.0), Quat::IDENTITY);
         let ahead = p.predict(0.3).unwrap();
         assert!(ahead.distance(DVec3::new(0.0, 0.0, 9.0)) < 1e-3, "{ahead}");
         // Speeding up smoothly, by up to 2.3 m a frame, is not a cut.
         let mut p = Predictor::default();
         for k in 0..8 {
             let t = k as f64 * 0.03;
-            p.observe(t, DVec3::new(200.0 * t * t, 0.0, 0.0));
+            p.observe(t, DVec3::new(200.0 * t * t, 0.0, 0.0), Quat::IDENTITY);
         }
         assert_eq!(p.samples.len(), WINDOW);
+    }
+
+    /// A view turning steadily about the vertical is foreseen turned on at its rate,
+    /// up to [`MAX_VIEW_TURN`]; the eye's prediction is not changed by it.
+    #[test]
+    fn a_turning_view_is_foreseen_turned_on() {
+        let camera_at = |t: f64| {
+            let yaw = t as f32; // One radian a second.
+            let target = Vec3::new(yaw.sin(), 0.0, -yaw.cos());
+            Camera::look_at(Vec3::ZERO, target, Vec3::Y, 60.0, 320, 180).unwrap()
+        };
+        let mut p = Predictor::default();
+        for k in 0..8 {
+            let t = k as f64 / 30.0;
+            p.observe(t, DVec3::ZERO, view_of(&camera_at(t)));
+        }
+        let motion = p.motion().unwrap();
+        let last = 7.0 / 30.0;
+        let ahead = motion.camera_at(0.5, &camera_at(last));
+        let expected = camera_at(last + 0.5);
+        assert!(ahead.forward.angle_between(expected.forward) < 1e-3, "{ahead:?}");
+        assert!(ahead.up.angle_between(Vec3::Y) < 1e-3);
+        assert!((motion.view_turn(0.5) - 0.5).abs() < 1e-3);
+        assert_eq!(motion.view_turn(10.0), MAX_VIEW_TURN);
+        let far = motion.camera_at(10.0, &camera_at(last));
+        assert!((far.forward.angle_between(camera_at(last).forward) - MAX_VIEW_TURN).abs() < 1e-3);
+        assert_eq!(ahead.eye, DVec3::ZERO);
     }
 }

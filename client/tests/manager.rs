@@ -1105,3 +1105,47 @@ fn an_orbit_spaces_its_textures_a_lone_reach_apart() {
     eprintln!("{asked} textures asked for over one orbit");
     assert!((8..16).contains(&asked), "{asked} textures over one orbit");
 }
+
+/// The view turning fast towards an object beyond what the predicted-view margin opens
+/// (a corner of the path): its texture is asked for ahead; turning away, it is not.
+#[test]
+fn a_view_turning_towards_an_object_asks_for_it_ahead() {
+    let scene = Scene::load("default").unwrap();
+    let rock = scene.objects[index(&scene, "rock")].world_bounds().center();
+    // The eye 8 m along +x of the rock, still; the rock 120° round from where it
+    // looks, the view turning 90° a second towards it or away; half a second's round
+    // trip, so the view is foreseen 60° further round.
+    let eye = rock + Vec3::new(8.0, 0.5, 0.0);
+    let asked = |towards: f32| {
+        let config = Config {
+            initial_latency: 0.5,
+            ..Config::default()
+        };
+        let (mut manager, mut commands) = unanswered(&scene, config);
+        let mut eyes = Vec::new();
+        for frame in 0..4 {
+            let t = frame as f32 / 30.0;
+            // Round from −x (the rock) by 120° less the turn so far.
+            let off = (120.0 - towards * 90.0 * t).to_radians();
+            let target = eye + Vec3::new(-off.cos(), 0.0, off.sin());
+            let sent = (eye, target, t as f64);
+            eyes.extend(requests_from_frame(
+                &mut manager,
+                &mut commands,
+                &scene,
+                sent,
+                "rock",
+                true,
+            ));
+        }
+        eyes
+    };
+    assert!(
+        !asked(1.0).is_empty(),
+        "turning towards the rock, nothing asked for it"
+    );
+    assert!(
+        asked(-1.0).is_empty(),
+        "turning away from the rock, its texture asked for"
+    );
+}

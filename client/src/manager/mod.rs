@@ -49,7 +49,7 @@ use relief_core::camera::Camera;
 use relief_core::scene::Scene;
 use relief_render::geometry::{GeometryReason, geometry_reason};
 
-use crate::predict::Predictor;
+use crate::predict::{Predictor, view_of};
 
 pub use cache::ReadyTexture;
 pub use choose::{Show, ShownTexture};
@@ -197,7 +197,7 @@ impl Manager {
     pub fn frame(&mut self, scene: &Scene, camera: &Camera, t: f64) -> Vec<Show> {
         self.drain(camera, scene);
         let tolerance = self.tolerance();
-        self.predictor.observe(t, camera.eye);
+        self.predictor.observe(t, camera.eye, view_of(camera));
         let mut stale = false;
         // (When this frame shows its impostors: their textures' last use.)
         let now = Instant::now();
@@ -212,7 +212,7 @@ impl Manager {
         let assess_and_predict = |&k: &usize| {
             let assessment = self.assess(scene, k, world_camera);
             let prediction = (assessment.reason != Some(GeometryReason::Cheap))
-                .then(|| self.prediction(scene, k, &assessment.camera))
+                .then(|| self.prediction(scene, k, &assessment.camera, world_camera))
                 .flatten();
             (k, assessment, prediction)
         };
@@ -239,7 +239,7 @@ impl Manager {
                 // drawn as geometry, which the rasterizer leaves out at once), or drawn
                 // as geometry while its texture would cost more than it: the textures
                 // for where the eye is going are still asked for, if a view from there
-                // turned by up to `PREDICTED_VIEW_MARGIN` would show it.
+                // would show it (see `Manager::prediction`).
                 self.predict_for(scene, k, camera, prediction);
                 continue;
             };

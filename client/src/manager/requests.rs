@@ -290,12 +290,19 @@ impl Manager {
     }
 
     /// Where the eye will be once a request for object `k` made now comes back (in the
-    /// object's frame, as `camera` is), and how each held texture grades there (none
-    /// where the object will be out of view: see [`Prediction::held`]): what
-    /// [`Manager::predict_for`] decides from. `None` where nothing is to be asked
-    /// ahead: not predicting, no eye observed yet, or drawn as geometry from there. It
-    /// only reads, so a frame works it out for every object at once.
-    pub(super) fn prediction(&self, scene: &Scene, k: usize, camera: &Camera) -> Option<Prediction> {
+    /// object's frame, as `camera` is; `world_camera` is the same in the world), and how
+    /// each held texture grades there (none where the object will be out of view: see
+    /// [`Prediction::held`]): what [`Manager::predict_for`] decides from. `None` where
+    /// nothing is to be asked ahead: not predicting, no eye observed yet, or drawn as
+    /// geometry from there. It only reads, so a frame works it out for every object at
+    /// once.
+    pub(super) fn prediction(
+        &self,
+        scene: &Scene,
+        k: usize,
+        camera: &Camera,
+        world_camera: &Camera,
+    ) -> Option<Prediction> {
         if !self.config.predict {
             return None;
         }
@@ -313,7 +320,17 @@ impl Manager {
             eye: future.as_dvec3(),
             ..*camera
         };
-        let held = if from_future.may_see_turned(&object.local_bounds, PREDICTED_VIEW_MARGIN) {
+        // Seen from there looking as now (turned by up to the margin), or — where the
+        // view is turning faster than the margin allows for (a corner of the path) — as
+        // it will look then. (Every turn taken into account, the forest's wandering
+        // flight asked a fifth more predictions and went stale more.)
+        let bounds = &object.local_bounds;
+        let in_view = from_future.may_see_turned(bounds, PREDICTED_VIEW_MARGIN)
+            || (motion.view_turn(horizon) > PREDICTED_VIEW_MARGIN
+                && object
+                    .local_camera(&motion.camera_at(horizon, world_camera))
+                    .may_see_turned(bounds, PREDICTED_VIEW_MARGIN));
+        let held = if in_view {
             // (Asked for as soon as a texture would pay: see `GEOMETRY_STAND_IN`.)
             let grades = self.grades(scene, k, future, camera)?;
             Some((self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect())
