@@ -22,7 +22,7 @@ const CUT_MIN_STEP: f64 = 0.5;
 
 /// The farthest the view is foreseen to turn, radians: a turn kept up much longer
 /// than the samples it was measured over means little.
-const MAX_VIEW_TURN: f32 = std::f32::consts::FRAC_PI_2;
+pub const MAX_VIEW_TURN: f32 = std::f32::consts::FRAC_PI_2;
 
 /// Recent eye positions in the world (as [`Camera::eye`]) and the view's orientation
 /// (the rotation taking x, y, −z to the camera's right, up and forward), with their
@@ -76,7 +76,7 @@ impl Predictor {
         // The view's mean rate of turn over the samples (radians a second, about the
         // vector's axis).
         let &(t_first, _, view_first) = self.samples.front()?;
-        let turn = if t_last > t_first {
+        let view_rate = if t_last > t_first {
             let (axis, angle) = (view_last * view_first.inverse()).to_axis_angle();
             let angle = if angle > std::f32::consts::PI {
                 angle - std::f32::consts::TAU
@@ -91,7 +91,7 @@ impl Predictor {
             return Some(Motion {
                 last,
                 coefficients: [[0.0; 3]; 3],
-                turn,
+                view_rate,
             });
         }
         // Fit x(τ) = c0 + c1·τ + c2·τ² (τ relative to the last sample, x to its
@@ -119,7 +119,7 @@ impl Predictor {
         Some(Motion {
             last,
             coefficients,
-            turn,
+            view_rate,
         })
     }
 }
@@ -130,8 +130,9 @@ impl Predictor {
 pub struct Motion {
     last: DVec3,
     coefficients: [[f64; 3]; 3],
-    /// Radians a second about the vector's direction, in the world.
-    turn: Vec3,
+    /// The view's rate of turn: radians a second about the vector's direction, in the
+    /// world.
+    view_rate: Vec3,
 }
 
 impl Motion {
@@ -151,14 +152,14 @@ impl Motion {
     /// How far (radians) the view will have turned `dt` seconds after the last sample,
     /// as [`Motion::camera_at`] turns it.
     pub fn view_turn(&self, dt: f64) -> f32 {
-        (self.turn.length() * dt as f32).min(MAX_VIEW_TURN)
+        (self.view_rate.length() * dt as f32).min(MAX_VIEW_TURN)
     }
 
     /// `camera` (in the world) as it will look `dt` seconds after the last sample: from
     /// the eye then ([`Motion::at`]), its view turned on at the rate it has been turning
     /// (by [`MAX_VIEW_TURN`] at most).
     pub fn camera_at(&self, dt: f64, camera: &Camera) -> Camera {
-        let turn = (self.turn * dt as f32).clamp_length_max(MAX_VIEW_TURN);
+        let turn = (self.view_rate * dt as f32).clamp_length_max(MAX_VIEW_TURN);
         let rotation = if turn.is_finite() {
             Quat::from_scaled_axis(turn)
         } else {

@@ -1073,9 +1073,12 @@ fn an_orbit_spaces_its_textures_a_lone_reach_apart() {
     let object = &scene.objects[sphere];
     let centre = object.world_bounds().center();
     let tracer = ObjectTracer::new(object);
-    let mut asked = 0;
+    let (mut asked, mut stale_before) = (0, 0);
     // 45° a second, 30 frames a second: one orbit in 8 s, after 1 s to settle.
     for frame in 0..270 {
+        if frame == 30 {
+            stale_before = manager.counters.stale_frames;
+        }
         let t = frame as f64 / 30.0;
         let camera = Camera::look_at(
             around(centre, (45.0 * t as f32).to_radians()),
@@ -1104,6 +1107,9 @@ fn an_orbit_spaces_its_textures_a_lone_reach_apart() {
     }
     eprintln!("{asked} textures asked for over one orbit");
     assert!((8..16).contains(&asked), "{asked} textures over one orbit");
+    // … each in time and valid where it is shown.
+    let stale = manager.counters.stale_frames - stale_before;
+    assert_eq!(stale, 0, "{stale} stale frames over the orbit");
 }
 
 /// The view turning fast towards an object beyond what the predicted-view margin opens
@@ -1114,7 +1120,8 @@ fn a_view_turning_towards_an_object_asks_for_it_ahead() {
     let rock = scene.objects[index(&scene, "rock")].world_bounds().center();
     // The eye 8 m along +x of the rock, still; the rock 120° round from where it
     // looks, the view turning 90° a second towards it or away; half a second's round
-    // trip, so the view is foreseen 60° further round.
+    // trip, so the view is foreseen about 60° further round (over the 0.675 s
+    // horizon planned for it).
     let eye = rock + Vec3::new(8.0, 0.5, 0.0);
     let asked = |towards: f32| {
         let config = Config {

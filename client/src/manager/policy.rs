@@ -373,8 +373,8 @@ pub const PLANNING_MARGIN: f32 = 0.75;
 /// How far past the predicted eye predicted textures are made: as far as a held
 /// texture, seen from that far behind its own eye, keeps its gaps' growth within this
 /// share of the tolerance (and its rim's band and turn within the planning margin:
-/// [`Manager::lead_angle`](super::Manager)). A texture then serves that turn twice,
-/// behind its eye and ahead. Once the eye has passed the shown texture's, the next one
+/// `Manager::lead_angle`; with no texture held yet, this share of the valid angle). A
+/// texture then serves that turn twice, behind its eye and ahead. Once the eye has passed the shown texture's, the next one
 /// is its partner; none is asked for to be a partner alone. (Keeping one texture asked
 /// for two valid angles past the eye's future, as a partner, cost a third more requests
 /// and bought no fidelity measured. Without it against with it: forest, rtt 100, 5 runs
@@ -410,8 +410,8 @@ pub const PENDING_DISTANCE_SLACK: f32 = 0.2;
 
 /// A texture made for another eye within this fraction of the object's valid angle of
 /// the one asked for serves a request: one the server holds or is making for another
-/// client, or another placement. Such a texture still covers (1 + [`LEAD`] −
-/// `SERVE_REACH`) valid angles of the motion, and clients flying through one scene
+/// client, or another placement. Such a texture still covers its lead twice over, less
+/// `SERVE_REACH` of a valid angle, and clients flying through one scene
 /// share their textures rather than each waiting for its own (see
 /// docs/load-test.md). At 0.5, 64 clients of `relief load` stalled 17–20 % of their
 /// frames where at 0.25 they stall 23–26 %, but a lone client over a 250 ms round

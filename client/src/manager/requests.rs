@@ -86,8 +86,8 @@ pub(super) fn serve_within(
 
 /// The eye to make a predicted texture for, of an object centred on `centre`: the eye
 /// further along its predicted path (`beyond`, after `future`) where it has turned
-/// about `centre` by `lead` past `future` (the path's last eye if it turns less; `future`
-/// itself where the eye does not turn from `now`). The texture is then first used `lead`
+/// about `centre` by `angle` past `future` (the path's last eye if it turns less; `future`
+/// itself where the eye does not turn from `now`). The texture is then first used `angle`
 /// behind its own eye and stays in use as far ahead: it serves twice the lead of the
 /// motion, where one made for the future eye would serve the lead alone
 /// ([`Manager::lead_angle`] says how far a texture may be seen from). It stops short
@@ -100,9 +100,9 @@ pub(super) fn serve_within(
 /// which as a pending request would still hold the next prediction back. (Between two
 /// path eyes the lead is on the chord: on a path curving by tens of degrees between
 /// them it could dip under the distance slack, which the path's spacing keeps far off.)
-pub(super) fn lead(centre: Vec3, lead: f32, now: Vec3, future: Vec3, beyond: &[Vec3]) -> Vec3 {
+pub(super) fn lead(centre: Vec3, angle: f32, now: Vec3, future: Vec3, beyond: &[Vec3]) -> Vec3 {
     let turn = angle_between(centre, now, future);
-    if turn.is_nan() || turn <= MIN_LEAD || lead <= MIN_LEAD {
+    if turn.is_nan() || turn <= MIN_LEAD || angle <= MIN_LEAD {
         return future;
     }
     let mut previous = (future, 0.0);
@@ -113,10 +113,10 @@ pub(super) fn lead(centre: Vec3, lead: f32, now: Vec3, future: Vec3, beyond: &[V
         if turn.is_nan() || (ratio - 1.0).abs() >= LEAD_DISTANCE_SLACK {
             break;
         }
-        if turn >= lead {
+        if turn >= angle {
             // (Between two path eyes, in proportion to the turn.)
             let (p, p_turn) = previous;
-            return p + (eye - p) * ((lead - p_turn) / (turn - p_turn)).clamp(0.0, 1.0);
+            return p + (eye - p) * ((angle - p_turn) / (turn - p_turn)).clamp(0.0, 1.0);
         }
         previous = (eye, turn);
     }
@@ -144,8 +144,9 @@ pub(super) struct Prediction {
     /// The eye then, in the object's frame.
     future: Vec3,
     /// Each held texture's eye and its grade from `future`; `None` where a view from
-    /// there, turned as now or by up to [`PREDICTED_VIEW_MARGIN`] further, would not
-    /// show the object: nothing is asked for it, and what was is withdrawn.
+    /// there, turned as now or by up to [`PREDICTED_VIEW_MARGIN`] further (or as the
+    /// view is foreseen to turn, past that margin), would not show the object: nothing
+    /// is asked for it, and what was is withdrawn.
     held: Option<Vec<(Vec3, Grade)>>,
 }
 
@@ -392,9 +393,11 @@ impl Manager {
         let quiet = self.objects[k].quiet_until.is_some_and(|t| now < t);
         if !covered && !quiet {
             let lead_angle = self.lead_angle(k, centre, eye, future, camera);
-            // Time for the eye, turning as it has been, to turn the lead past the future.
+            // Time for the eye, turning as it has been, to turn the lead past the future
+            // (the path known no further than `MAX_HORIZON_S` ahead).
             let turn = angle_between(centre, eye, future);
-            let span = (horizon * f64::from(lead_angle / turn).max(1.0)).min(MAX_HORIZON_S);
+            let span =
+                (horizon * f64::from(lead_angle / turn).max(1.0)).min((MAX_HORIZON_S - horizon).max(0.0));
             let beyond = path_beyond(&scene.objects[k], &motion, horizon, span);
             let ask = lead(centre, lead_angle, eye, future, &beyond);
             self.request(scene, k, ask, camera, Some((horizon * 1e3) as u64));
@@ -410,21 +413,25 @@ impl Manager {
     /// ([`lead`]), the eye turning from `now` to `future` about `centre`: as far as the
     /// held texture nearest the future could be seen from behind its own eye and still
     /// be planned to be shown alone there, its gaps grown [`LEAD`] of the tolerance at
-    /// most ([`probe_lone_reach`], at the future's distance), so that the texture, first
-    /// seen that far behind its eye, covers the future on its own. With none held,
-    /// [`LEAD`] of the valid angle assumed. All in the object's frame.
+    /// most ([`probe_lone_reach`]: turned the way the eye moves, at the future's
+    /// distance), so that the texture, first seen that far behind its eye, covers the
+    /// future on its own. With none held, [`LEAD`] of the valid angle assumed. Never
+    /// past [`PENDING_REACH`] of the valid angle: a request made farther would not count
+    /// as covering the future, and the next frame would ask again. All in the object's
+    /// frame.
     fn lead_angle(&self, k: usize, centre: Vec3, now: Vec3, future: Vec3, camera: &Camera) -> f32 {
-        let axis = (now - centre).cross(future - centre).normalize_or_zero();
+        let valid = self.valid_angle(k);
         let nearest = (self.objects[k].held.iter()).min_by(|a, b| {
             angle_between(centre, a.eye, future).total_cmp(&angle_between(centre, b.eye, future))
         });
-        match nearest {
-            Some(held) if axis != Vec3::ZERO => {
-                let distance = centre.distance(future);
-                probe_lone_reach(held, centre, axis, distance, camera, self.tolerance())
-            }
-            _ => LEAD * self.valid_angle(k),
-        }
+        // (About the axis that turns the held texture's eye the way the eye moves.)
+        let probed = nearest.and_then(|held| {
+            let axis = (held.eye - centre).cross(future - now).normalize_or_zero();
+            let distance = centre.distance(future);
+            (axis != Vec3::ZERO)
+                .then(|| probe_lone_reach(held, centre, axis, distance, camera, self.tolerance()))
+        });
+        probed.unwrap_or(LEAD * valid).min(PENDING_REACH * valid)
     }
 
     /// Withdraws object `k`'s predicted requests that are `stale`.
