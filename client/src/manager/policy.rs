@@ -374,10 +374,10 @@ pub const PLANNING_MARGIN: f32 = 0.75;
 /// texture, seen from that far behind its own eye, keeps its gaps' growth within this
 /// share of the tolerance (and its rim's band and turn within the planning margin:
 /// `Manager::lead_angle`; with no texture held yet, this share of the valid angle). A
-/// texture then serves that turn twice, behind its eye and ahead. Once the eye has passed the shown texture's, the next one
-/// is its partner; none is asked for to be a partner alone. (Keeping one texture asked
-/// for two valid angles past the eye's future, as a partner, cost a third more requests
-/// and bought no fidelity measured. Without it against with it: forest, rtt 100, 5 runs
+/// texture then serves that turn twice, behind its eye and ahead. Once the eye has
+/// passed the shown texture's, the next one is its partner; none is asked for to be a
+/// partner alone. (Keeping one texture asked for two valid angles past the eye's
+/// future, as a partner, cost a third more requests and bought no fidelity measured. Without it against with it: forest, rtt 100, 5 runs
 /// against 7, 1,385–1,628 predictions against 1,819–2,276, stale frames 15–24 %
 /// against 14–25 %, objects within 1 dB of geometry 89–106 against 84–92; 64 clients,
 /// four alternating pairs, p99 latency 0.37–1.24 s against 1.64–2.21 s.) At the
@@ -387,8 +387,8 @@ pub const LEAD: f32 = 0.5;
 
 /// The predicted path past the eye's future that [`LEAD`] is measured along: this many
 /// eyes, evenly spaced over the time the eye, turning as it has, takes to turn the lead
-/// (at least the horizon again, at most [`MAX_HORIZON_S`]; if the eye slows, the lead
-/// ends at the last).
+/// (at least the horizon again, the whole path within [`MAX_HORIZON_S`]; if the eye
+/// slows, the lead ends at the last).
 pub const LEAD_PATH_STEPS: usize = 4;
 
 /// The lead stops where the path's distance from the object leaves this fraction of the
