@@ -1118,10 +1118,10 @@ fn an_orbit_spaces_its_textures_a_lone_reach_apart() {
 fn a_view_turning_towards_an_object_asks_for_it_ahead() {
     let scene = Scene::load("default").unwrap();
     let rock = scene.objects[index(&scene, "rock")].world_bounds().center();
-    // The eye 8 m along +x of the rock, still; the rock 120° round from where it
-    // looks, the view turning 90° a second towards it or away; half a second's round
-    // trip, so the view is foreseen about 60° further round (over the 0.675 s
-    // horizon planned for it).
+    // The eye 8 m along +x of the rock, still; the rock 150° round from where it
+    // looks, the view turning 150° a second towards it or away; half a second's round
+    // trip, so after 8 frames (115° round, past the margin of the view as it is) the
+    // view is foreseen 70° further round (for twice the 7/30 s the frames span).
     let eye = rock + Vec3::new(8.0, 0.5, 0.0);
     let asked = |towards: f32| {
         let config = Config {
@@ -1130,10 +1130,10 @@ fn a_view_turning_towards_an_object_asks_for_it_ahead() {
         };
         let (mut manager, mut commands) = unanswered(&scene, config);
         let mut eyes = Vec::new();
-        for frame in 0..4 {
+        for frame in 0..8 {
             let t = frame as f32 / 30.0;
-            // Round from −x (the rock) by 120° less the turn so far.
-            let off = (120.0 - towards * 90.0 * t).to_radians();
+            // Round from −x (the rock) by 150° less the turn so far.
+            let off = (150.0 - towards * 150.0 * t).to_radians();
             let target = eye + Vec3::new(-off.cos(), 0.0, off.sin());
             let sent = (eye, target, t as f64);
             eyes.extend(requests_from_frame(

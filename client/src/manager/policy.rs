@@ -506,10 +506,10 @@ pub const HORIZON_MARGIN_S: f64 = 0.05;
 /// How far (radians) the view may turn, any way, by the time a predicted texture
 /// comes: an object the view would not show from the predicted eye, turned as now or
 /// by up to this, gets no predicted texture, and what was asked for it is withdrawn —
-/// unless the view is turning faster than this allows for, and would show it as it
-/// will look then, turned on at its rate (`Manager::prediction`: at a corner of the
-/// default demo's path the rock came into view at rtt 100 with a texture made 28–31°
-/// round, 8–11 dB below geometry; with the turn foreseen, 0.3 below to 1.5 above).
+/// unless the view is turning faster than this allows for, and as it will then look,
+/// turned on at its rate, it shows the object (`Manager::prediction`: at a corner of
+/// the default demo's path the rock came into view at rtt 100 with a texture made
+/// 28–31° round, 8–11 dB below geometry; with the turn foreseen, 2.6–3.7 dB above).
 /// (Predicted for wherever it lay, objects behind the eye and far off to its sides
 /// were most of the forest's requests: with this, two runs at a 100 ms round trip
 /// asked for 2,199–2,203 textures where 4,548–5,093 were, and 1,046–1,184 were never

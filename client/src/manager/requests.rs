@@ -322,15 +322,16 @@ impl Manager {
             ..*camera
         };
         // Seen from there looking as now (turned by up to the margin), or — where the
-        // view is turning faster than the margin allows for (a corner of the path) — as
-        // it will look then. (Every turn taken into account, the forest's wandering
-        // flight asked a fifth more predictions and went stale more.)
+        // view is turning faster than the margin allows for (a corner of the path) — in
+        // the view as it will then look. (With the margin round that view too, or every
+        // turn taken into account, the forest's wandering flight asked a fifth more
+        // predictions and went stale more.)
         let bounds = &object.local_bounds;
         let in_view = from_future.may_see_turned(bounds, PREDICTED_VIEW_MARGIN)
             || (motion.view_turn(horizon) > PREDICTED_VIEW_MARGIN
                 && object
                     .local_camera(&motion.camera_at(horizon, world_camera))
-                    .may_see_turned(bounds, PREDICTED_VIEW_MARGIN));
+                    .may_see(bounds));
         let held = if in_view {
             // (Asked for as soon as a texture would pay: see `GEOMETRY_STAND_IN`.)
             let grades = self.grades(scene, k, future, camera)?;
