@@ -9,7 +9,9 @@ use std::time::Duration;
 use glam::Vec3;
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
 
-use relief_client::manager::{Arrival, Command, Config, Manager, ReadyTexture, Show, texture_ladder};
+use relief_client::manager::{
+    Arrival, Command, Config, Manager, ReadyTexture, Show, TextureRequest, texture_ladder,
+};
 use relief_client::source::spawn_local;
 use relief_core::camera::Camera;
 use relief_core::scene::Scene;
@@ -987,6 +989,44 @@ fn a_texture_for_a_nearby_eye_is_held_under_its_own_eye() {
 
 /// An eye orbiting the sphere asks for no eye within a degree of one answered before:
 /// each texture asked for is kept as it comes and covers the eyes it was asked for.
+/// Flies `frames` (30 a second, 640×360) round the sphere of `orbit-sphere` at
+/// `degrees_per_s`, looking at it; every request is baked and answered at once, and
+/// `seen(frame, request)` sees each as it goes out.
+fn orbit_the_sphere_answered(
+    scene: &Arc<Scene>,
+    manager: &mut Manager,
+    (commands, arrivals): (&mut UnboundedReceiver<Command>, &UnboundedSender<Arrival>),
+    degrees_per_s: f32,
+    frames: std::ops::Range<u32>,
+    mut seen: impl FnMut(u32, &TextureRequest),
+) {
+    use relief_core::relief::DepthBits;
+    use relief_trace::bake;
+    use relief_trace::tracer::ObjectTracer;
+
+    let object = &scene.objects[index(scene, "sphere")];
+    let centre = object.world_bounds().center();
+    let tracer = ObjectTracer::new(object);
+    for frame in frames {
+        let t = frame as f64 / 30.0;
+        let eye = around(centre, (degrees_per_s * t as f32).to_radians());
+        let camera = Camera::look_at(eye, centre, Vec3::Y, 60.0, 640, 360).unwrap();
+        manager.frame(scene, &camera, t);
+        while let Ok(command) = commands.try_recv() {
+            let Command::Request(r) = command else {
+                continue;
+            };
+            seen(frame, &r);
+            let texture = bake(&tracer, r.eye, r.size, DepthBits::Eight, r.projection).unwrap();
+            arrive(
+                arrivals,
+                r.id,
+                ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
+            );
+        }
+    }
+}
+
 /// Every request is answered at once. (When a texture was also asked for to partner the
 /// shown one, a pair of valid angles beyond the eye's future, that one — the farthest
 /// held — went as it came when textures were kept by nearness to the eye alone, and was
@@ -994,10 +1034,6 @@ fn a_texture_for_a_nearby_eye_is_held_under_its_own_eye() {
 /// longer turns on the order `Held::relied_on` keeps.)
 #[test]
 fn an_orbit_asks_for_no_eye_twice() {
-    use relief_core::relief::DepthBits;
-    use relief_trace::bake;
-    use relief_trace::tracer::ObjectTracer;
-
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
     let config = Config {
         keep: 3,
@@ -1005,46 +1041,22 @@ fn an_orbit_asks_for_no_eye_twice() {
         ..Config::default()
     };
     let (mut manager, mut commands, arrivals) = wired(&scene, config);
-    let sphere = index(&scene, "sphere");
-    let object = &scene.objects[sphere];
-    let (centre, local_centre) = (object.world_bounds().center(), object.local_bounds.center());
-    let tracer = ObjectTracer::new(object);
+    let local_centre = scene.objects[index(&scene, "sphere")].local_bounds.center();
     let mut answered: Vec<Vec3> = Vec::new();
     let mut asked_again = Vec::new();
-    // 10° a second, 30 frames a second, for 4 s.
-    for frame in 0..120 {
-        let t = frame as f64 / 30.0;
-        let camera = Camera::look_at(
-            around(centre, (10.0 * t as f32).to_radians()),
-            centre,
-            Vec3::Y,
-            60.0,
-            640,
-            360,
-        )
-        .unwrap();
-        manager.frame(&scene, &camera, t);
-        while let Ok(command) = commands.try_recv() {
-            let Command::Request(r) = command else {
-                continue;
-            };
-            let turn = |eye: &Vec3| {
-                (*eye - local_centre)
-                    .angle_between(r.eye - local_centre)
-                    .to_degrees()
-            };
-            if answered.iter().any(|eye| turn(eye) < 1.0) {
-                asked_again.push((frame, (r.eye - local_centre).normalize()));
-            }
-            answered.push(r.eye);
-            let texture = bake(&tracer, r.eye, r.size, DepthBits::Eight, r.projection).unwrap();
-            arrive(
-                &arrivals,
-                r.id,
-                ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
-            );
+    // 10° a second for 4 s.
+    let wires = (&mut commands, &arrivals);
+    orbit_the_sphere_answered(&scene, &mut manager, wires, 10.0, 0..120, |frame, r| {
+        let turn = |eye: &Vec3| {
+            (*eye - local_centre)
+                .angle_between(r.eye - local_centre)
+                .to_degrees()
+        };
+        if answered.iter().any(|eye| turn(eye) < 1.0) {
+            asked_again.push((frame, (r.eye - local_centre).normalize()));
         }
-    }
+        answered.push(r.eye);
+    });
     eprintln!(
         "{} textures asked for, {} asked for again",
         answered.len(),
@@ -1063,48 +1075,15 @@ fn an_orbit_asks_for_no_eye_twice() {
 /// than 16 (made just past the future eye, the band's turn apart, it took 20).
 #[test]
 fn an_orbit_spaces_its_textures_a_lone_reach_apart() {
-    use relief_core::relief::DepthBits;
-    use relief_trace::bake;
-    use relief_trace::tracer::ObjectTracer;
-
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
     let (mut manager, mut commands, arrivals) = wired(&scene, Config::default());
-    let sphere = index(&scene, "sphere");
-    let object = &scene.objects[sphere];
-    let centre = object.world_bounds().center();
-    let tracer = ObjectTracer::new(object);
-    let (mut asked, mut stale_before) = (0, 0);
-    // 45° a second, 30 frames a second: one orbit in 8 s, after 1 s to settle.
-    for frame in 0..270 {
-        if frame == 30 {
-            stale_before = manager.counters.stale_frames;
-        }
-        let t = frame as f64 / 30.0;
-        let camera = Camera::look_at(
-            around(centre, (45.0 * t as f32).to_radians()),
-            centre,
-            Vec3::Y,
-            60.0,
-            640,
-            360,
-        )
-        .unwrap();
-        manager.frame(&scene, &camera, t);
-        while let Ok(command) = commands.try_recv() {
-            let Command::Request(r) = command else {
-                continue;
-            };
-            if frame >= 30 {
-                asked += 1;
-            }
-            let texture = bake(&tracer, r.eye, r.size, DepthBits::Eight, r.projection).unwrap();
-            arrive(
-                &arrivals,
-                r.id,
-                ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
-            );
-        }
-    }
+    // 45° a second: one orbit in 8 s, after 1 s to settle.
+    let wires = (&mut commands, &arrivals);
+    orbit_the_sphere_answered(&scene, &mut manager, wires, 45.0, 0..30, |_, _| {});
+    let stale_before = manager.counters.stale_frames;
+    let mut asked = 0;
+    let wires = (&mut commands, &arrivals);
+    orbit_the_sphere_answered(&scene, &mut manager, wires, 45.0, 30..270, |_, _| asked += 1);
     eprintln!("{asked} textures asked for over one orbit");
     assert!((8..16).contains(&asked), "{asked} textures over one orbit");
     // … each in time and valid where it is shown.

@@ -120,12 +120,13 @@ pub(super) fn probe_lone_reach(
 ) -> f32 {
     let from = (held.eye - centre).normalize_or_zero() * distance;
     let within = |angle: f32| {
-        angle <= PLANNING_MARGIN * LONE_MAX_TURN
-            && [angle, -angle].iter().all(|&a| {
-                let eye = centre + Quat::from_axis_angle(axis, a) * from;
-                growth(held, eye, camera) <= LEAD * tolerance
-                    && band(held, centre, eye, camera) <= PLANNING_MARGIN * band_limit(false, tolerance)
-            })
+        [angle, -angle].iter().all(|&a| {
+            let eye = centre + Quat::from_axis_angle(axis, a) * from;
+            let band = band(held, centre, eye, camera);
+            // (The growth, dearer, only where the rim and the turn allow.)
+            may_show(band, angle, false, PLANNING_MARGIN, tolerance)
+                && growth(held, eye, camera) <= LEAD * tolerance
+        })
     };
     widest_within(within)
 }
@@ -147,20 +148,21 @@ pub(super) fn widest_within(within: impl Fn(f32) -> bool) -> f32 {
     lo
 }
 
-/// Whether a texture graded `grade` at an eye `turn` radians round from its own may be
-/// shown there, `partnered` or not: alone, its rim's band under [`LONE_BAND`] and the
-/// turn under [`LONE_MAX_TURN`]; with a partner filling the band, the band under
-/// [`PARTNERED_BAND`] (the texels inside the rim stretch as the band widens) and the turn
-/// under [`MAX_TURN`] — all times `margin` (1 to draw; the planning margin to plan).
+/// Whether a texture leaving a `band` past its rim (pixels: [`band`]) at an eye `turn`
+/// radians round from its own may be shown there, `partnered` or not: alone, the band
+/// under [`LONE_BAND`] and the turn under [`LONE_MAX_TURN`]; with a partner filling the
+/// band, the band under [`PARTNERED_BAND`] (the texels inside the rim stretch as the
+/// band widens) and the turn under [`MAX_TURN`] — all times `margin` (1 to draw; the
+/// planning margin to plan).
 ///
 /// The bands are the default's: they scale with `tolerance` over [`DEFAULT_TOLERANCE`],
 /// so the one knob — and the server's load, which raises it — trades both predicted
 /// errors for lifetime. (With the band alone fixed, four times the tolerance left the
 /// requests as many: the band, not the gaps, retired the textures.) The turns are where
 /// the warp stops being the object's near side, whatever the tolerance.
-pub(super) fn may_show(grade: &Grade, turn: f32, partnered: bool, margin: f32, tolerance: f32) -> bool {
+pub(super) fn may_show(band: f32, turn: f32, partnered: bool, margin: f32, tolerance: f32) -> bool {
     let turn_limit = if partnered { MAX_TURN } else { LONE_MAX_TURN };
-    grade.band <= margin * band_limit(partnered, tolerance) && turn <= margin * turn_limit
+    band <= margin * band_limit(partnered, tolerance) && turn <= margin * turn_limit
 }
 
 /// The widest band past its rim a texture may leave open, alone or `partnered`, at
@@ -218,8 +220,8 @@ pub(super) fn held_covering(
         let turn = angle_between(centre, eye, future);
         g.growth <= PLANNING_MARGIN * tolerance
             && !g.finer_available
-            && (may_show(&g, turn, false, PLANNING_MARGIN, tolerance)
-                || (may_show(&g, turn, true, PLANNING_MARGIN, tolerance) && partnered(eye)))
+            && (may_show(g.band, turn, false, PLANNING_MARGIN, tolerance)
+                || (may_show(g.band, turn, true, PLANNING_MARGIN, tolerance) && partnered(eye)))
     })
 }
 
@@ -413,17 +415,9 @@ mod tests {
     /// partnered, under [`PARTNERED_BAND`]; and planning asks the same within its margin.
     #[test]
     fn the_rim_band_decides_what_may_be_shown_alone_or_partnered() {
-        let with_band = |band| Grade {
-            growth: 0.0,
-            band,
-            too_coarse: false,
-            finer_available: false,
-        };
         let turn = 10f32.to_radians();
         let between = 0.5 * (LONE_BAND + PARTNERED_BAND);
-        let may = |band, turn, partnered, margin| {
-            may_show(&with_band(band), turn, partnered, margin, DEFAULT_TOLERANCE)
-        };
+        let may = |band, turn, partnered, margin| may_show(band, turn, partnered, margin, DEFAULT_TOLERANCE);
         assert!(may(0.9 * LONE_BAND, turn, false, 1.0));
         assert!(!may(between, turn, false, 1.0));
         assert!(may(between, turn, true, 1.0));
@@ -433,8 +427,7 @@ mod tests {
         assert!(!may(0.0, 1.1 * LONE_MAX_TURN, false, 1.0));
         assert!(!may(0.0, 1.1 * MAX_TURN, true, 1.0));
         // Twice the tolerance lets the band open twice as far, and no turn further.
-        let twice =
-            |band, turn, partnered| may_show(&with_band(band), turn, partnered, 1.0, 2.0 * DEFAULT_TOLERANCE);
+        let twice = |band, turn, partnered| may_show(band, turn, partnered, 1.0, 2.0 * DEFAULT_TOLERANCE);
         assert!(twice(1.9 * LONE_BAND, turn, false));
         assert!(!twice(2.1 * LONE_BAND, turn, false));
         assert!(twice(1.9 * PARTNERED_BAND, turn, true));

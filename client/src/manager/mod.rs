@@ -257,7 +257,7 @@ impl Manager {
             let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
             let too_far = best
                 .zip(shown_turn)
-                .is_some_and(|((_, g), turn)| !may_show(&g, turn, partner.is_some(), 1.0, tolerance));
+                .is_some_and(|((_, g), turn)| !may_show(g.band, turn, partner.is_some(), 1.0, tolerance));
             let within_any = grades.iter().any(|g| g.growth <= tolerance);
             let valid = within_any && !too_far;
             // Without a valid texture, drawn exactly as geometry where that costs little

@@ -87,7 +87,7 @@ pub(super) fn serve_within(
 /// The eye to make a predicted texture for, of an object centred on `centre`: the eye
 /// further along its predicted path (`beyond`, after `future`) where it has turned
 /// about `centre` by `angle` past `future` (the path's last eye if it turns less; `future`
-/// itself where the eye does not turn from `now`). The texture is then first used `angle`
+/// itself where the eye does not turn: `turn`, radians from now to `future`). The texture is then first used `angle`
 /// behind its own eye and stays in use as far ahead: it serves twice the lead of the
 /// motion, where one made for the future eye would serve the lead alone
 /// ([`Manager::lead_angle`] says how far a texture may be seen from). It stops short
@@ -100,8 +100,7 @@ pub(super) fn serve_within(
 /// which as a pending request would still hold the next prediction back. (Between two
 /// path eyes the lead is on the chord: on a path curving by tens of degrees between
 /// them it could dip under the distance slack, which the path's spacing keeps far off.)
-pub(super) fn lead(centre: Vec3, angle: f32, now: Vec3, future: Vec3, beyond: &[Vec3]) -> Vec3 {
-    let turn = angle_between(centre, now, future);
+pub(super) fn lead(centre: Vec3, angle: f32, turn: f32, future: Vec3, beyond: &[Vec3]) -> Vec3 {
     if turn.is_nan() || turn <= MIN_LEAD || angle <= MIN_LEAD {
         return future;
     }
@@ -400,7 +399,7 @@ impl Manager {
             let span =
                 (horizon * f64::from(lead_angle / turn).max(1.0)).min((MAX_HORIZON_S - horizon).max(0.0));
             let beyond = path_beyond(&scene.objects[k], &motion, horizon, span);
-            let ask = lead(centre, lead_angle, eye, future, &beyond);
+            let ask = lead(centre, lead_angle, turn, future, &beyond);
             self.request(scene, k, ask, camera, Some((horizon * 1e3) as u64));
         }
         // Predictions neither the eye nor its future will meet any more.
@@ -490,7 +489,8 @@ mod tests {
         let beyond: Vec<Vec3> = (1..=8).map(|k| on_line(k as f32 * 0.2)).collect();
         // (The line leaves the distance slack about 0.43 round.)
         let angle = 0.3;
-        let eye = lead(centre, angle, now, future, &beyond);
+        let turn = angle_between(centre, now, future);
+        let eye = lead(centre, angle, turn, future, &beyond);
         assert!((eye.y - 1.0).abs() < 1e-6 && (eye.z - 2.0).abs() < 1e-6, "{eye}");
         let turn = angle_between(centre, future, eye);
         assert!((turn - angle).abs() < 1e-3, "{turn}");
@@ -500,7 +500,7 @@ mod tests {
         let about_centre = centre + glam::Quat::from_axis_angle(axis, angle) * (future - centre);
         assert!(about_centre.y < 0.97, "{about_centre}");
         // Asked for more than the line turns within the slack: it stops inside it.
-        let short = lead(centre, 0.6, now, future, &beyond);
+        let short = lead(centre, 0.6, turn, future, &beyond);
         let ratio = short.length() / future.length();
         assert!(
             ratio < 1.0 + LEAD_DISTANCE_SLACK && angle_between(centre, future, short) < 0.45,
@@ -511,11 +511,11 @@ mod tests {
         let receding: Vec<Vec3> = (1..=4)
             .map(|k| future * (1.0 + 0.15 * k as f32) + Vec3::X * 0.01 * k as f32)
             .collect();
-        let eye = lead(centre, angle, now, future, &receding);
+        let eye = lead(centre, angle, turn, future, &receding);
         let ratio = eye.length() / future.length();
         assert!((ratio - 1.0).abs() < LEAD_DISTANCE_SLACK, "{ratio}");
 
         // No turn: the future.
-        assert_eq!(lead(centre, angle, future, future, &beyond), future);
+        assert_eq!(lead(centre, angle, 0.0, future, &beyond), future);
     }
 }
