@@ -122,6 +122,13 @@ pub struct FlightLog {
     pub frames: u32,
     /// Per frame flown: the manager's decisions and requests, milliseconds.
     pub plan_ms: Vec<f64>,
+    /// Per frame flown: when, seconds since the flight started.
+    pub at_s: Vec<f64>,
+    /// Per frame flown: whether it was stale (see `Counters::stale_frames`).
+    pub stale: Vec<bool>,
+    /// Per frame flown: the factor the server's load put on the tolerance
+    /// ([`Manager::load_scale`]).
+    pub load_scale: Vec<f32>,
     /// Per frame drawn: decisions and drawing together, milliseconds.
     pub frame_ms: Vec<f64>,
     /// The path's orbits around an object that may be an impostor, and the textures of
@@ -216,8 +223,12 @@ impl Flight<'_> {
                 }
             }
             let began = Instant::now();
+            let stale_before = manager.counters.stale_frames;
             let shows = manager.frame(scene, &camera, t);
             log.plan_ms.push(began.elapsed().as_secs_f64() * 1e3);
+            log.at_s.push(t);
+            log.stale.push(manager.counters.stale_frames > stale_before);
+            log.load_scale.push(manager.load_scale());
             let image = draw(log.frames).then(|| {
                 let image = manager.render(scene, &shows, &camera, &mut gbuffer);
                 log.frame_ms.push(began.elapsed().as_secs_f64() * 1e3);

@@ -138,6 +138,12 @@ impl Manager {
         self.config.tolerance * self.load_scale
     }
 
+    /// The factor the server's load puts on the user's tolerance now (see
+    /// [`policy::LOAD_HIGH_WAIT`]); 1 on an unloaded server.
+    pub fn load_scale(&self) -> f32 {
+        self.load_scale
+    }
+
     /// Takes the server's load in: the wait it foresees for a new job's slot (or a
     /// refusal's) raises the tolerance a step when long, lowers it a step when short.
     fn feel_load(&mut self, wait: Duration) {
@@ -297,6 +303,15 @@ impl Manager {
                         })
                         .collect();
                     let shown_deg = shown_turn.map(f32::to_degrees);
+                    // What is held: (age ms, degrees from this eye, gap growth px; a
+                    // texture seen from too far round, or too far off its distance, grows
+                    // without bound).
+                    let held_now: Vec<(u128, f32, f32)> = (self.objects[k].held.iter().zip(&grades))
+                        .map(|(h, g)| {
+                            let degrees = angle_between(centre, h.eye, eye).to_degrees();
+                            (h.arrived.elapsed().as_millis(), degrees, g.growth)
+                        })
+                        .collect();
                     tracing::debug!(
                         object = %object.name,
                         growth = best.map(|b| b.1.growth),
@@ -306,6 +321,7 @@ impl Manager {
                         valid_deg = self.valid_angle(k).to_degrees(),
                         planned_latency_s = self.latency(k),
                         ?asked,
+                        ?held_now,
                         "stale"
                     );
                 }

@@ -111,6 +111,18 @@ struct Row {
     /// The mean factor the server's load put on the tolerance, over the frames: how
     /// much longer the textures were let live than asked.
     load_scale_mean: f64,
+    /// Second by second of the flights (all clients, all runs): the fraction of frames
+    /// stalled, and the mean factor on the tolerance — whether a stall is a transient or
+    /// the load's steady state. In `--json` only.
+    by_second: Vec<SecondOfLoad>,
+}
+
+/// One second of a load run's flights, pooled over clients and runs.
+#[derive(Debug, Clone, Copy, Serialize)]
+struct SecondOfLoad {
+    frames: u64,
+    stall_frac: f64,
+    load_scale_mean: f64,
 }
 
 const HEADER: &str = "tolerance_px,clients,repeats,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,latency_ms_p99_lo,latency_ms_p99_hi,latency_now_ms_p99,predictions_late_frac,prediction_lateness_ms_p99,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min,requests_shed,served_nearby_frac,load_scale_mean";
@@ -155,6 +167,8 @@ struct ClientResult {
     /// Its final textures' lifetimes, seconds.
     lifetimes_s: Vec<f64>,
     psnr: Vec<f64>,
+    /// Per frame flown: seconds into the flight, stalled, the tolerance's load factor.
+    timeline: Vec<(f64, bool, f32)>,
 }
 
 pub fn run(args: LoadArgs) -> Result<()> {
@@ -495,7 +509,30 @@ fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
             }
         },
         load_scale_mean: results().map(|r| r.counters.load_scale_sum).sum::<f64>() / frames.max(1) as f64,
+        by_second: by_second(results().flat_map(|r| &r.timeline)),
     }
+}
+
+/// Frames `(seconds into the flight, stalled, load factor)` pooled second by second.
+fn by_second<'a>(timeline: impl Iterator<Item = &'a (f64, bool, f32)>) -> Vec<SecondOfLoad> {
+    let mut seconds: Vec<(u64, u64, f64)> = Vec::new();
+    for &(t, stalled, scale) in timeline {
+        let second = t.max(0.0) as usize;
+        if seconds.len() <= second {
+            seconds.resize(second + 1, (0, 0, 0.0));
+        }
+        let (frames, stalls, scales) = &mut seconds[second];
+        *frames += 1;
+        *stalls += u64::from(stalled);
+        *scales += f64::from(scale);
+    }
+    (seconds.into_iter())
+        .map(|(frames, stalls, scales)| SecondOfLoad {
+            frames,
+            stall_frac: stalls as f64 / frames.max(1) as f64,
+            load_scale_mean: scales / frames.max(1) as f64,
+        })
+        .collect()
 }
 
 /// One simulated client: warms up, waits at `line` for the others, and flies
@@ -528,7 +565,11 @@ fn fly(
         },
     )?;
     let received = (0..flight.scene.objects.len()).map(|k| manager.received(k)).sum();
+    let timeline = (log.at_s.iter().zip(&log.stale).zip(&log.load_scale))
+        .map(|((&t, &stale), &scale)| (t, stale, scale))
+        .collect();
     Ok(ClientResult {
+        timeline,
         frames: log.frames,
         counters: manager.counters.clone(),
         received,
@@ -561,5 +602,28 @@ mod tests {
         let last = times.iter().map(|t| t.0).max().unwrap();
         assert!(times.iter().all(|&(_, left)| left >= last));
         assert!(line.started() >= last && line.started() <= times.iter().map(|t| t.1).min().unwrap());
+    }
+
+    /// Frames land in the second they were flown in, whichever client flew them: each
+    /// second's stalled share and mean load factor are its own frames', and a second
+    /// none flew in is empty.
+    #[test]
+    fn a_flight_is_told_second_by_second() {
+        let timeline = [
+            (0.1, false, 1.0),
+            (0.9, true, 2.0),
+            (1.5, true, 4.0),
+            (3.2, false, 1.0),
+            (0.5, false, 3.0),
+        ];
+        let seconds = by_second(timeline.iter());
+        assert_eq!(seconds.len(), 4);
+        let told: Vec<(u64, f64, f64)> = (seconds.iter())
+            .map(|s| (s.frames, s.stall_frac, s.load_scale_mean))
+            .collect();
+        assert_eq!(
+            told,
+            [(3, 1.0 / 3.0, 2.0), (1, 1.0, 4.0), (0, 0.0, 0.0), (1, 0.0, 1.0)]
+        );
     }
 }
