@@ -92,6 +92,9 @@ pub struct Manager {
     /// The factor the server's load puts on the tolerance (1: none; see
     /// [`policy::LOAD_HIGH_WAIT`]).
     load_scale: f32,
+    /// While warming up ([`Manager::warm_up`]), the latest it ends: the flight starts
+    /// no sooner than what was asked for is in, so nothing is needed before then.
+    warm_up_until: Option<Instant>,
     /// What this run counted.
     pub counters: Counters,
 }
@@ -118,6 +121,7 @@ impl Manager {
             last_camera: None,
             planned_at: Instant::now(),
             load_scale: 1.0,
+            warm_up_until: None,
             counters: Counters::default(),
         }
     }
@@ -172,6 +176,7 @@ impl Manager {
     /// Returns whether they all arrived. Counters start afresh afterwards.
     pub fn warm_up(&mut self, scene: &Scene, camera: &Camera, limit: std::time::Duration) -> bool {
         let start = Instant::now();
+        self.warm_up_until = Some(start + limit);
         let ready = loop {
             let before = self.counters.stale_frames;
             self.frame(scene, camera, 0.0);
@@ -186,6 +191,7 @@ impl Manager {
             }
             std::thread::sleep(WARM_UP_POLL);
         };
+        self.warm_up_until = None;
         self.predictor = Predictor::default();
         self.counters = Counters::default();
         // The cold start's round trips (scene upload, every object at once) say

@@ -400,7 +400,15 @@ impl Manager {
                 (horizon * f64::from(lead_angle / turn).max(1.0)).min((MAX_HORIZON_S - horizon).max(0.0));
             let beyond = path_beyond(&scene.objects[k], &motion, horizon, span);
             let ask = lead(centre, lead_angle, turn, future, &beyond);
-            self.request(scene, k, ask, camera, Some((horizon * 1e3) as u64));
+            // While warming up, needed no sooner than the flight starts: taken for
+            // needed a round trip from now, the predictions of the forest's first
+            // view (40 of them, the objects round its edges) were refused by a server
+            // busy with the cold start, and were missing as the flight set off.
+            let needed_in = match self.warm_up_until {
+                Some(until) => until.saturating_duration_since(now).as_secs_f64().max(horizon),
+                None => horizon,
+            };
+            self.request(scene, k, ask, camera, Some((needed_in * 1e3) as u64));
         }
         // Predictions neither the eye nor its future will meet any more.
         let reach = WITHDRAW_REACH * self.valid_angle(k);
