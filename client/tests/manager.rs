@@ -656,6 +656,38 @@ fn an_object_off_screen_is_not_needed_now() {
     assert_eq!((manager.counters.needs, manager.counters.stale_frames), (1, 1));
 }
 
+/// While warming up, an object just off the screen's side is asked for ahead, needed no
+/// sooner than the warm-up may last: a server busy with the cold start does not refuse
+/// it as late, and the flight does not set off without it.
+#[test]
+fn warm_up_predictions_are_needed_when_the_flight_starts() {
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let sphere = index(&scene, "sphere");
+    let bounds = scene.objects[sphere].world_bounds();
+    let centre = bounds.center();
+    let eye = around(centre, 0.0);
+    let half_x = (30f32.to_radians().tan() * 16.0 / 9.0).atan();
+    let extent = bounds.extent();
+    let radius = (0.5 * extent.x.hypot(extent.z) / eye.distance(centre)).asin();
+    let aside = eye + glam::Quat::from_rotation_y(half_x + radius + 5f32.to_radians()) * (centre - eye);
+    let camera = Camera::look_at(eye, aside, Vec3::Y, 60.0, 320, 180).unwrap();
+    let (mut manager, mut commands) = unanswered(&scene, Config::default());
+    let limit = Duration::from_millis(600);
+    // (Nobody answers: it waits out the limit.)
+    assert!(!manager.warm_up(&scene, &camera, limit));
+    let needed: Vec<u64> = std::iter::from_fn(|| commands.try_recv().ok())
+        .filter_map(|c| match c {
+            Command::Request(r) if r.object == "sphere" => r.needed_in_ms,
+            _ => None,
+        })
+        .collect();
+    // (A round trip ahead, as in flight, it would be needed in about 240 ms.)
+    assert!(
+        !needed.is_empty() && needed.iter().all(|&ms| ms >= 500),
+        "{needed:?}"
+    );
+}
+
 /// Latency is counted to a texture's arrival, and the pick-up from there to the frame
 /// that takes it in; a texture's lifetime runs from its arrival to the last frame that
 /// shows it. Known sleeps between request, arrival, take-in and the frames that show it
