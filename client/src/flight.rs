@@ -115,6 +115,23 @@ pub struct Flown<'a> {
     pub shown: Vec<Option<ShownTexture>>,
 }
 
+/// What the manager did and heard in one frame flown: told second by second, whether a
+/// flight's stale frames were a passing episode or its steady state, and what the
+/// server's load was meanwhile.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct FrameRecord {
+    /// Seconds since the flight started.
+    pub at_s: f64,
+    /// Whether the frame was stale (see `Counters::stale_frames`).
+    pub stale: bool,
+    /// The factor the server's load put on the tolerance ([`Manager::load_scale`]).
+    pub load_scale: f32,
+    /// The wait for a new job the server last foresaw ([`Manager::server_wait`]), ms.
+    pub server_wait_ms: f64,
+    /// Textures asked for in the frame, for now and ahead.
+    pub requests: u64,
+}
+
 /// What a flight measured.
 #[derive(Debug, Clone, Default)]
 pub struct FlightLog {
@@ -122,13 +139,8 @@ pub struct FlightLog {
     pub frames: u32,
     /// Per frame flown: the manager's decisions and requests, milliseconds.
     pub plan_ms: Vec<f64>,
-    /// Per frame flown: when, seconds since the flight started.
-    pub at_s: Vec<f64>,
-    /// Per frame flown: whether it was stale (see `Counters::stale_frames`).
-    pub stale: Vec<bool>,
-    /// Per frame flown: the factor the server's load put on the tolerance
-    /// ([`Manager::load_scale`]).
-    pub load_scale: Vec<f32>,
+    /// Per frame flown: what the manager did and heard.
+    pub records: Vec<FrameRecord>,
     /// Per frame drawn: decisions and drawing together, milliseconds.
     pub frame_ms: Vec<f64>,
     /// The path's orbits around an object that may be an impostor, and the textures of
@@ -223,12 +235,17 @@ impl Flight<'_> {
                 }
             }
             let began = Instant::now();
-            let stale_before = manager.counters.stale_frames;
+            let asked = |m: &Manager| m.counters.requests_now + m.counters.requests_predicted;
+            let (stale_before, asked_before) = (manager.counters.stale_frames, asked(manager));
             let shows = manager.frame(scene, &camera, t);
             log.plan_ms.push(began.elapsed().as_secs_f64() * 1e3);
-            log.at_s.push(t);
-            log.stale.push(manager.counters.stale_frames > stale_before);
-            log.load_scale.push(manager.load_scale());
+            log.records.push(FrameRecord {
+                at_s: t,
+                stale: manager.counters.stale_frames > stale_before,
+                load_scale: manager.load_scale(),
+                server_wait_ms: manager.server_wait().as_secs_f64() * 1e3,
+                requests: asked(manager) - asked_before,
+            });
             let image = draw(log.frames).then(|| {
                 let image = manager.render(scene, &shows, &camera, &mut gbuffer);
                 log.frame_ms.push(began.elapsed().as_secs_f64() * 1e3);

@@ -92,6 +92,8 @@ pub struct Manager {
     /// The factor the server's load puts on the tolerance (1: none; see
     /// [`policy::LOAD_HIGH_WAIT`]).
     load_scale: f32,
+    /// The wait the server last foresaw for a new job (see [`Manager::server_wait`]).
+    server_wait: Duration,
     /// While warming up ([`Manager::warm_up`]), the latest it ends: the flight starts
     /// no sooner than what was asked for is in, so nothing is needed before then.
     warm_up_until: Option<Instant>,
@@ -121,6 +123,7 @@ impl Manager {
             last_camera: None,
             planned_at: Instant::now(),
             load_scale: 1.0,
+            server_wait: Duration::ZERO,
             warm_up_until: None,
             counters: Counters::default(),
         }
@@ -148,9 +151,16 @@ impl Manager {
         self.load_scale
     }
 
+    /// The wait for a new job's slot the server last foresaw (or refused a prediction
+    /// for): zero until it says.
+    pub fn server_wait(&self) -> Duration {
+        self.server_wait
+    }
+
     /// Takes the server's load in: the wait it foresees for a new job's slot (or a
     /// refusal's) raises the tolerance a step when long, lowers it a step when short.
     fn feel_load(&mut self, wait: Duration) {
+        self.server_wait = wait;
         self.load_scale = if wait > policy::LOAD_HIGH_WAIT {
             (self.load_scale * policy::LOAD_STEP_UP).min(policy::MAX_LOAD_SCALE)
         } else if wait < policy::LOAD_LOW_WAIT {

@@ -12,7 +12,7 @@ use anyhow::{Context, Result, anyhow, bail};
 use clap::Args;
 use serde::Serialize;
 
-use relief_client::flight::{Flight, WARM_UP_LIMIT};
+use relief_client::flight::{Flight, FrameRecord, WARM_UP_LIMIT};
 use relief_client::link::Link;
 use relief_client::manager::{Config, Counters, Manager, late_fraction};
 use relief_client::remote::Remote;
@@ -118,11 +118,15 @@ struct Row {
 }
 
 /// One second of a load run's flights, pooled over clients and runs.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize)]
 struct SecondOfLoad {
     frames: u64,
     stall_frac: f64,
     load_scale_mean: f64,
+    /// The mean of the waits the clients last heard the server foresee, ms.
+    server_wait_ms_mean: f64,
+    /// Textures asked for in the second, by all clients.
+    requests: u64,
 }
 
 const HEADER: &str = "tolerance_px,clients,repeats,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,latency_ms_p99_lo,latency_ms_p99_hi,latency_now_ms_p99,predictions_late_frac,prediction_lateness_ms_p99,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min,requests_shed,served_nearby_frac,load_scale_mean";
@@ -167,8 +171,8 @@ struct ClientResult {
     /// Its final textures' lifetimes, seconds.
     lifetimes_s: Vec<f64>,
     psnr: Vec<f64>,
-    /// Per frame flown: seconds into the flight, stalled, the tolerance's load factor.
-    timeline: Vec<(f64, bool, f32)>,
+    /// Per frame flown: what its manager did and heard.
+    timeline: Vec<FrameRecord>,
 }
 
 pub fn run(args: LoadArgs) -> Result<()> {
@@ -513,26 +517,29 @@ fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
     }
 }
 
-/// Frames `(seconds into the flight, stalled, load factor)` pooled second by second.
-fn by_second<'a>(timeline: impl Iterator<Item = &'a (f64, bool, f32)>) -> Vec<SecondOfLoad> {
-    let mut seconds: Vec<(u64, u64, f64)> = Vec::new();
-    for &(t, stalled, scale) in timeline {
-        let second = t.max(0.0) as usize;
+/// Frames' records pooled second by second of the flights.
+fn by_second<'a>(timeline: impl Iterator<Item = &'a FrameRecord>) -> Vec<SecondOfLoad> {
+    let mut seconds: Vec<SecondOfLoad> = Vec::new();
+    for record in timeline {
+        let second = record.at_s.max(0.0) as usize;
         if seconds.len() <= second {
-            seconds.resize(second + 1, (0, 0, 0.0));
+            seconds.resize(second + 1, SecondOfLoad::default());
         }
-        let (frames, stalls, scales) = &mut seconds[second];
-        *frames += 1;
-        *stalls += u64::from(stalled);
-        *scales += f64::from(scale);
+        // (Sums here; shares and means below.)
+        let s = &mut seconds[second];
+        s.frames += 1;
+        s.stall_frac += f64::from(u8::from(record.stale));
+        s.load_scale_mean += f64::from(record.load_scale);
+        s.server_wait_ms_mean += record.server_wait_ms;
+        s.requests += record.requests;
     }
-    (seconds.into_iter())
-        .map(|(frames, stalls, scales)| SecondOfLoad {
-            frames,
-            stall_frac: stalls as f64 / frames.max(1) as f64,
-            load_scale_mean: scales / frames.max(1) as f64,
-        })
-        .collect()
+    for s in &mut seconds {
+        let frames = s.frames.max(1) as f64;
+        s.stall_frac /= frames;
+        s.load_scale_mean /= frames;
+        s.server_wait_ms_mean /= frames;
+    }
+    seconds
 }
 
 /// One simulated client: warms up, waits at `line` for the others, and flies
@@ -565,11 +572,8 @@ fn fly(
         },
     )?;
     let received = (0..flight.scene.objects.len()).map(|k| manager.received(k)).sum();
-    let timeline = (log.at_s.iter().zip(&log.stale).zip(&log.load_scale))
-        .map(|((&t, &stale), &scale)| (t, stale, scale))
-        .collect();
     Ok(ClientResult {
-        timeline,
+        timeline: log.records,
         frames: log.frames,
         counters: manager.counters.clone(),
         received,
@@ -609,21 +613,41 @@ mod tests {
     /// none flew in is empty.
     #[test]
     fn a_flight_is_told_second_by_second() {
+        let frame = |at_s, stale, load_scale, server_wait_ms, requests| FrameRecord {
+            at_s,
+            stale,
+            load_scale,
+            server_wait_ms,
+            requests,
+        };
         let timeline = [
-            (0.1, false, 1.0),
-            (0.9, true, 2.0),
-            (1.5, true, 4.0),
-            (3.2, false, 1.0),
-            (0.5, false, 3.0),
+            frame(0.1, false, 1.0, 0.0, 2),
+            frame(0.9, true, 2.0, 300.0, 0),
+            frame(1.5, true, 4.0, 500.0, 1),
+            frame(3.2, false, 1.0, 0.0, 0),
+            frame(0.5, false, 3.0, 600.0, 1),
         ];
         let seconds = by_second(timeline.iter());
         assert_eq!(seconds.len(), 4);
-        let told: Vec<(u64, f64, f64)> = (seconds.iter())
-            .map(|s| (s.frames, s.stall_frac, s.load_scale_mean))
+        let told: Vec<(u64, f64, f64, f64, u64)> = (seconds.iter())
+            .map(|s| {
+                (
+                    s.frames,
+                    s.stall_frac,
+                    s.load_scale_mean,
+                    s.server_wait_ms_mean,
+                    s.requests,
+                )
+            })
             .collect();
         assert_eq!(
             told,
-            [(3, 1.0 / 3.0, 2.0), (1, 1.0, 4.0), (0, 0.0, 0.0), (1, 0.0, 1.0)]
+            [
+                (3, 1.0 / 3.0, 2.0, 300.0, 3),
+                (1, 1.0, 4.0, 500.0, 1),
+                (0, 0.0, 0.0, 0.0, 0),
+                (1, 0.0, 1.0, 0.0, 0)
+            ]
         );
     }
 }
