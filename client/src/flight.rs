@@ -126,7 +126,7 @@ pub struct FrameRecord {
     pub stale: bool,
     /// The factor the server's load put on the tolerance ([`Manager::load_scale`]).
     pub load_scale: f32,
-    /// The wait for a new job the server last foresaw ([`Manager::server_wait`]), ms.
+    /// The server's load as last heard ([`Manager::server_wait`]), ms.
     pub server_wait_ms: f64,
     /// Textures asked for in the frame, for now and ahead.
     pub requests: u64,

@@ -1,10 +1,10 @@
 //! The viewpoint predictor: where will the eye be `dt` from now, and where will it look?
 //!
 //! A least-squares quadratic fit (position, velocity, acceleration) to the last few eye
-//! samples, each axis on its own, extrapolated. Constant-velocity and
-//! constant-acceleration paths are predicted exactly; an orbit's curvature is captured
-//! by the acceleration term over short horizons. The view turns on at the mean rate
-//! it turned over the same samples.
+//! samples since the last corner the eye turned, each axis on its own, extrapolated.
+//! Constant-velocity and constant-acceleration paths are predicted exactly; an orbit's
+//! curvature is captured by the acceleration term over short horizons. The view turns
+//! on at the mean rate it turned over the same samples.
 
 use std::collections::VecDeque;
 
@@ -20,13 +20,22 @@ const WINDOW: usize = 8;
 const CUT_SPEED_RATIO: f64 = 4.0;
 const CUT_MIN_STEP: f64 = 0.5;
 
-/// A step whose direction turns by more than this (radians) from the step before is a
-/// corner: the eye's motion before it says nothing of its motion after, and a fit across
-/// it extrapolates the turn. The history starts again from the corner's last step. (The
-/// forest's flight turns 90–140° at its corners: fitted across them, the eye 0.5 s
-/// ahead was off by 3.4 m or more one time in ten, and by up to 16 m; from the corner
-/// on, 1.9 m and 7 m. An orbit of 240 frames turns 1.5° a frame.)
+/// A step whose direction turns by more than this (radians) from the step before, at
+/// more than [`CORNER_TURN_RATE`], is a corner: the eye's motion before it says nothing
+/// of its motion after, and a fit across it extrapolates the turn. The history starts
+/// again from the sample before the turning step. (The forest's flight turns 90–140° at
+/// its corners: fitted across them, the eye 0.5 s ahead was off by 3.4 m or more one
+/// time in ten, and by up to 16 m; from the corner on, 1.9 m and 7.2 m. The view's
+/// history goes too, so that for a few frames its turn is hardly foreseen: kept whole,
+/// it asked the forest at rtt 100 for more textures ahead, 1,542–1,636 against
+/// 1,523–1,568, and went stale in 20–53 frames of about 515 against 17–30, six runs
+/// each, alternately.)
 const CORNER_TURN: f64 = 20.0 * std::f64::consts::PI / 180.0;
+
+/// … radians a second: a curve the eye follows smoothly turns each step by its rate
+/// times the step's time, which a slow frame (the eye follows the clock) makes long —
+/// an orbit of 240 frames turns 45° a second, 20° in a frame of 0.44 s.
+const CORNER_TURN_RATE: f64 = std::f64::consts::PI;
 
 /// The farthest the view is foreseen to turn, radians: a turn kept up much longer
 /// than the samples it was measured over means little.
@@ -56,7 +65,8 @@ pub fn view_of(camera: &Camera) -> Quat {
 impl Predictor {
     /// Records the eye and its `view` ([`view_of`]) at time `t` (seconds, increasing).
     /// A jump far faster than the eye has been moving (a camera cut) starts the history
-    /// afresh: a fit across it would extrapolate the jump.
+    /// afresh: a fit across it would extrapolate the jump. A corner ([`CORNER_TURN`])
+    /// starts it afresh from the sample before the turning step.
     pub fn observe(&mut self, t: f64, eye: DVec3, view: Quat) {
         let Some(&(last_t, last, _)) = self.samples.back() else {
             self.samples.push_back((t, eye, view));
@@ -70,8 +80,7 @@ impl Predictor {
             let step = eye.distance(last);
             if step > CUT_SPEED_RATIO * speed * (t - last_t) + CUT_MIN_STEP {
                 self.samples.clear();
-            } else if (last - before).angle_between(eye - last) > CORNER_TURN {
-                // (`angle_between` of a zero step is NaN: never a corner.)
+            } else if is_corner(last - before, eye - last, t - last_t) {
                 self.samples.drain(..self.samples.len() - 1);
             }
         }
@@ -205,6 +214,16 @@ impl Motion {
     }
 }
 
+/// Whether a step of the eye along `next`, taking `dt` seconds, after one along
+/// `before` turns a corner ([`CORNER_TURN`], [`CORNER_TURN_RATE`]). A still eye turns
+/// none.
+fn is_corner(before: DVec3, next: DVec3, dt: f64) -> bool {
+    let lengths = before.length() * next.length();
+    // (A zero step has no direction: no corner.)
+    let turn = (before.dot(next) / lengths).clamp(-1.0, 1.0).acos();
+    lengths > 0.0 && turn > CORNER_TURN && turn > CORNER_TURN_RATE * dt
+}
+
 /// Solves the `n × n` leading block of `a·x = b` by Gaussian elimination with partial
 /// pivoting; `None` when singular.
 fn solve(a: &[[f64; 3]; 3], b: &[f64; 3], n: usize) -> Option<[f64; 3]> {
@@ -310,16 +329,18 @@ mod tests {
         assert!(ahead.distance(leg(24)) < 1e-3, "{ahead} against {}", leg(24));
         // (Fitted across the corner, it was off by metres.)
         assert_eq!(p.samples.len(), 3);
-        let mut orbit = Predictor::default();
-        for k in 0..8 {
-            let angle = k as f64 * std::f64::consts::TAU / 240.0;
-            orbit.observe(
-                k as f64 / 30.0,
-                DVec3::new(angle.cos(), 0.0, angle.sin()) * 4.5,
-                Quat::IDENTITY,
-            );
+        // An orbit of 240 frames is no corner, even in frames of half a second.
+        for frame_s in [1.0 / 30.0, 0.5] {
+            let mut orbit = Predictor::default();
+            for k in 0..8 {
+                let t = k as f64 * frame_s;
+                let angle = t * 30.0 * std::f64::consts::TAU / 240.0;
+                orbit.observe(t, DVec3::new(angle.cos(), 0.0, angle.sin()) * 4.5, Quat::IDENTITY);
+            }
+            assert_eq!(orbit.samples.len(), WINDOW, "frames of {frame_s} s");
         }
-        assert_eq!(orbit.samples.len(), WINDOW);
+        // Nor is an eye that stops, or starts again.
+        assert!(!is_corner(DVec3::X, DVec3::ZERO, 0.1) && !is_corner(DVec3::ZERO, DVec3::X, 0.1));
     }
 
     /// A view turning steadily about the vertical is foreseen turned on at its rate, for

@@ -92,7 +92,7 @@ pub struct Manager {
     /// The factor the server's load puts on the tolerance (1: none; see
     /// [`policy::LOAD_HIGH_WAIT`]).
     load_scale: f32,
-    /// The wait the server last foresaw for a new job (see [`Manager::server_wait`]).
+    /// The server's load as last heard (see [`Manager::server_wait`]).
     server_wait: Duration,
     /// While warming up ([`Manager::warm_up`]), the latest it ends: the flight starts
     /// no sooner than what was asked for is in, so nothing is needed before then.
@@ -151,14 +151,17 @@ impl Manager {
         self.load_scale
     }
 
-    /// The wait for a new job's slot the server last foresaw (or refused a prediction
-    /// for): zero until it says.
+    /// The server's load as the last look at it heard ([`Link::look`](crate::link::Link::look),
+    /// every [`HEALTH_POLL`](crate::link::HEALTH_POLL)): the wait it foresaw for a new
+    /// job behind the others (its `queue_wait_ms`), or, a look it was too busy to answer,
+    /// [`HEALTH_POLL_TIMEOUT`](crate::link::HEALTH_POLL_TIMEOUT). Zero until heard.
     pub fn server_wait(&self) -> Duration {
         self.server_wait
     }
 
-    /// Takes the server's load in: the wait it foresees for a new job's slot (or a
-    /// refusal's) raises the tolerance a step when long, lowers it a step when short.
+    /// Takes the server's load in, as a look heard it ([`Manager::server_wait`]): a
+    /// long wait for a new job's slot raises the tolerance a step, a short one lowers it
+    /// a step.
     fn feel_load(&mut self, wait: Duration) {
         self.server_wait = wait;
         self.load_scale = if wait > policy::LOAD_HIGH_WAIT {
@@ -197,6 +200,12 @@ impl Manager {
                 break true;
             }
             if start.elapsed() > limit {
+                // What it asked for ahead is needed no sooner than the warm-up may last
+                // (see `Manager::predict_for`): come during the flight, its round trips
+                // of seconds would be planned for. The flight asks afresh.
+                for k in 0..self.objects.len() {
+                    self.withdraw_predictions(k, |_| true);
+                }
                 break false;
             }
             std::thread::sleep(WARM_UP_POLL);
@@ -322,7 +331,7 @@ impl Manager {
                     // What is held: (age ms, degrees from this eye, gap growth px; a
                     // texture seen from too far round, or too far off its distance, grows
                     // without bound).
-                    let held_now: Vec<(u128, f32, f32)> = (self.objects[k].held.iter().zip(&grades))
+                    let held: Vec<(u128, f32, f32)> = (self.objects[k].held.iter().zip(&grades))
                         .map(|(h, g)| {
                             let degrees = angle_between(centre, h.eye, eye).to_degrees();
                             (h.arrived.elapsed().as_millis(), degrees, g.growth)
@@ -333,11 +342,10 @@ impl Manager {
                         growth = best.map(|b| b.1.growth),
                         shown_deg,
                         too_far,
-                        held = self.objects[k].held.len(),
                         valid_deg = self.valid_angle(k).to_degrees(),
                         planned_latency_s = self.latency(k),
                         ?asked,
-                        ?held_now,
+                        ?held,
                         "stale"
                     );
                 }

@@ -443,7 +443,7 @@ impl Manager {
     }
 
     /// Withdraws object `k`'s predicted requests that are `stale`.
-    fn withdraw_predictions(&mut self, k: usize, stale: impl Fn(&Pending) -> bool) {
+    pub(super) fn withdraw_predictions(&mut self, k: usize, stale: impl Fn(&Pending) -> bool) {
         let stale: Vec<u64> = (self.pending.iter())
             .filter(|(_, p)| p.object == k && p.predicted() && stale(p))
             .map(|(&id, _)| id)

@@ -111,21 +111,27 @@ struct Row {
     /// The mean factor the server's load put on the tolerance, over the frames: how
     /// much longer the textures were let live than asked.
     load_scale_mean: f64,
-    /// Second by second of the flights (all clients, all runs): the fraction of frames
-    /// stalled, and the mean factor on the tolerance — whether a stall is a transient or
-    /// the load's steady state. In `--json` only.
+    /// Second by second of the flights (all clients, all runs): the frames, the share
+    /// stalled, the load's factor on the tolerance, the server's load as heard, the
+    /// textures asked for — whether a stall is a transient or the load's steady state.
+    /// In `--json` only.
     by_second: Vec<SecondOfLoad>,
 }
 
-/// One second of a load run's flights, pooled over clients and runs.
+/// One second of a load run's flights, pooled over clients and runs (a second none flew
+/// in is empty: its shares and means NaN, `null` in JSON).
 #[derive(Debug, Clone, Copy, Default, Serialize)]
 struct SecondOfLoad {
+    /// Frames flown in the second, by all clients of all runs.
     frames: u64,
+    /// The share of them stalled.
     stall_frac: f64,
+    /// Their mean factor of the server's load on the tolerance.
     load_scale_mean: f64,
-    /// The mean of the waits the clients last heard the server foresee, ms.
+    /// Their mean of the server's load as last heard
+    /// ([`Manager::server_wait`](relief_client::manager::Manager::server_wait)), ms.
     server_wait_ms_mean: f64,
-    /// Textures asked for in the second, by all clients.
+    /// Textures asked for in the second, by all clients of all runs.
     requests: u64,
 }
 
@@ -172,7 +178,7 @@ struct ClientResult {
     lifetimes_s: Vec<f64>,
     psnr: Vec<f64>,
     /// Per frame flown: what its manager did and heard.
-    timeline: Vec<FrameRecord>,
+    records: Vec<FrameRecord>,
 }
 
 pub fn run(args: LoadArgs) -> Result<()> {
@@ -513,14 +519,14 @@ fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
             }
         },
         load_scale_mean: results().map(|r| r.counters.load_scale_sum).sum::<f64>() / frames.max(1) as f64,
-        by_second: by_second(results().flat_map(|r| &r.timeline)),
+        by_second: by_second(results().flat_map(|r| &r.records)),
     }
 }
 
 /// Frames' records pooled second by second of the flights.
-fn by_second<'a>(timeline: impl Iterator<Item = &'a FrameRecord>) -> Vec<SecondOfLoad> {
+fn by_second<'a>(records: impl Iterator<Item = &'a FrameRecord>) -> Vec<SecondOfLoad> {
     let mut seconds: Vec<SecondOfLoad> = Vec::new();
-    for record in timeline {
+    for record in records {
         let second = record.at_s.max(0.0) as usize;
         if seconds.len() <= second {
             seconds.resize(second + 1, SecondOfLoad::default());
@@ -534,7 +540,7 @@ fn by_second<'a>(timeline: impl Iterator<Item = &'a FrameRecord>) -> Vec<SecondO
         s.requests += record.requests;
     }
     for s in &mut seconds {
-        let frames = s.frames.max(1) as f64;
+        let frames = s.frames as f64;
         s.stall_frac /= frames;
         s.load_scale_mean /= frames;
         s.server_wait_ms_mean /= frames;
@@ -573,7 +579,7 @@ fn fly(
     )?;
     let received = (0..flight.scene.objects.len()).map(|k| manager.received(k)).sum();
     Ok(ClientResult {
-        timeline: log.records,
+        records: log.records,
         frames: log.frames,
         counters: manager.counters.clone(),
         received,
@@ -609,8 +615,8 @@ mod tests {
     }
 
     /// Frames land in the second they were flown in, whichever client flew them: each
-    /// second's stalled share and mean load factor are its own frames', and a second
-    /// none flew in is empty.
+    /// second's shares and means are its own frames', its counts their sums, and a
+    /// second none flew in is empty (its shares and means NaN).
     #[test]
     fn a_flight_is_told_second_by_second() {
         let frame = |at_s, stale, load_scale, server_wait_ms, requests| FrameRecord {
@@ -620,34 +626,33 @@ mod tests {
             server_wait_ms,
             requests,
         };
-        let timeline = [
+        let records = [
             frame(0.1, false, 1.0, 0.0, 2),
             frame(0.9, true, 2.0, 300.0, 0),
             frame(1.5, true, 4.0, 500.0, 1),
             frame(3.2, false, 1.0, 0.0, 0),
             frame(0.5, false, 3.0, 600.0, 1),
         ];
-        let seconds = by_second(timeline.iter());
+        let seconds = by_second(records.iter());
         assert_eq!(seconds.len(), 4);
-        let told: Vec<(u64, f64, f64, f64, u64)> = (seconds.iter())
-            .map(|s| {
-                (
-                    s.frames,
-                    s.stall_frac,
-                    s.load_scale_mean,
-                    s.server_wait_ms_mean,
-                    s.requests,
-                )
-            })
-            .collect();
-        assert_eq!(
-            told,
-            [
-                (3, 1.0 / 3.0, 2.0, 300.0, 3),
-                (1, 1.0, 4.0, 500.0, 1),
-                (0, 0.0, 0.0, 0.0, 0),
-                (1, 0.0, 1.0, 0.0, 0)
-            ]
+        let told = |s: &SecondOfLoad| {
+            (
+                s.frames,
+                s.stall_frac,
+                s.load_scale_mean,
+                s.server_wait_ms_mean,
+                s.requests,
+            )
+        };
+        assert_eq!(told(&seconds[0]), (3, 1.0 / 3.0, 2.0, 300.0, 3));
+        assert_eq!(told(&seconds[1]), (1, 1.0, 4.0, 500.0, 1));
+        assert_eq!(told(&seconds[3]), (1, 0.0, 1.0, 0.0, 0));
+        let empty = seconds[2];
+        assert_eq!((empty.frames, empty.requests), (0, 0));
+        assert!(
+            empty.stall_frac.is_nan() && empty.load_scale_mean.is_nan() && empty.server_wait_ms_mean.is_nan()
         );
+        let json = serde_json::to_string(&empty).expect("json");
+        assert!(json.contains(r#""load_scale_mean":null"#), "{json}");
     }
 }
