@@ -65,7 +65,7 @@ pub fn view_of(camera: &Camera) -> Quat {
 impl Predictor {
     /// Records the eye and its `view` ([`view_of`]) at time `t` (seconds, increasing).
     /// A jump far faster than the eye has been moving (a camera cut) starts the history
-    /// afresh: a fit across it would extrapolate the jump. A corner ([`CORNER_TURN`])
+    /// afresh: a fit across it would extrapolate the jump. A corner (see `CORNER_TURN`)
     /// starts it afresh from the sample before the turning step.
     pub fn observe(&mut self, t: f64, eye: DVec3, view: Quat) {
         let Some(&(last_t, last, _)) = self.samples.back() else {
