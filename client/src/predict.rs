@@ -28,7 +28,7 @@ const CUT_MIN_STEP: f64 = 0.5;
 /// time in ten, and by up to 16 m; from the corner on, 1.9 m and 7.2 m. The view's
 /// history goes too, so that for a few frames its turn is hardly foreseen: kept whole,
 /// it asked the forest at rtt 100 for more textures ahead, 1,542–1,636 against
-/// 1,523–1,568, and went stale in 20–53 frames of about 515 against 17–30, six runs
+/// 1,523–1,589, and went stale in 20–53 frames of about 515 against 17–30, six runs
 /// each, alternately.)
 const CORNER_TURN: f64 = 20.0 * std::f64::consts::PI / 180.0;
 
