@@ -122,6 +122,8 @@ pub struct Flown<'a> {
 pub struct FrameRecord {
     /// Seconds since the flight started.
     pub at_s: f64,
+    /// The manager's decisions and requests, milliseconds.
+    pub plan_ms: f64,
     /// Whether the frame was stale (see `Counters::stale_frames`).
     pub stale: bool,
     /// The factor the server's load put on the tolerance ([`Manager::load_scale`]).
@@ -137,9 +139,7 @@ pub struct FrameRecord {
 pub struct FlightLog {
     /// Frames flown (the manager decided each; path frames a slow one skipped are not).
     pub frames: u32,
-    /// Per frame flown: the manager's decisions and requests, milliseconds.
-    pub plan_ms: Vec<f64>,
-    /// Per frame flown: what the manager did and heard.
+    /// Per frame flown: what the manager did and heard, and the time it took.
     pub records: Vec<FrameRecord>,
     /// Per frame drawn: decisions and drawing together, milliseconds.
     pub frame_ms: Vec<f64>,
@@ -238,9 +238,9 @@ impl Flight<'_> {
             let asked = |m: &Manager| m.counters.requests_now + m.counters.requests_predicted;
             let (stale_before, asked_before) = (manager.counters.stale_frames, asked(manager));
             let shows = manager.frame(scene, &camera, t);
-            log.plan_ms.push(began.elapsed().as_secs_f64() * 1e3);
             log.records.push(FrameRecord {
                 at_s: t,
+                plan_ms: began.elapsed().as_secs_f64() * 1e3,
                 stale: manager.counters.stale_frames > stale_before,
                 load_scale: manager.load_scale(),
                 server_wait_ms: manager.server_wait().as_secs_f64() * 1e3,

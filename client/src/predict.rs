@@ -114,36 +114,8 @@ impl Predictor {
         } else {
             Vec3::ZERO
         };
-        if n < 2 {
-            return Some(Motion {
-                last,
-                coefficients: [[0.0; 3]; 3],
-                view_rate,
-                view_span: t_last - t_first,
-            });
-        }
-        // Fit x(τ) = c0 + c1·τ + c2·τ² (τ relative to the last sample, x to its
-        // position: an eye far from the origin is fitted as precisely) by least
-        // squares; with fewer than three samples, a line.
-        let degree = if n >= 3 { 2 } else { 1 };
-        let mut ata = [[0f64; 3]; 3];
-        let mut atb = [[0f64; 3]; 3];
-        for &(t, p, _) in &self.samples {
-            let tau = t - t_last;
-            let basis = [1.0, tau, tau * tau];
-            for r in 0..=degree {
-                for c in 0..=degree {
-                    ata[r][c] += basis[r] * basis[c];
-                }
-                for axis in 0..3 {
-                    atb[axis][r] += basis[r] * (p[axis] - last[axis]);
-                }
-            }
-        }
-        let mut coefficients = [[0f64; 3]; 3];
-        for axis in 0..3 {
-            coefficients[axis] = solve(&ata, &atb[axis], degree + 1)?;
-        }
+        // (With one sample, the eye stays.)
+        let coefficients = if n < 2 { [[0.0; 3]; 3] } else { fit(&self.samples)? };
         Some(Motion {
             last,
             coefficients,
@@ -151,6 +123,34 @@ impl Predictor {
             view_span: t_last - t_first,
         })
     }
+}
+
+/// Per axis, `x(τ) = c0 + c1·τ + c2·τ²` fitted to `samples` (at least two) by least
+/// squares, `τ` relative to the last sample and `x` to its position (an eye far from
+/// the origin is fitted as precisely); with fewer than three samples, a line. `None`
+/// where the fit is singular.
+fn fit(samples: &VecDeque<(f64, DVec3, Quat)>) -> Option<[[f64; 3]; 3]> {
+    let &(t_last, last, _) = samples.back()?;
+    let degree = if samples.len() >= 3 { 2 } else { 1 };
+    let mut ata = [[0f64; 3]; 3];
+    let mut atb = [[0f64; 3]; 3];
+    for &(t, p, _) in samples {
+        let tau = t - t_last;
+        let basis = [1.0, tau, tau * tau];
+        for r in 0..=degree {
+            for c in 0..=degree {
+                ata[r][c] += basis[r] * basis[c];
+            }
+            for axis in 0..3 {
+                atb[axis][r] += basis[r] * (p[axis] - last[axis]);
+            }
+        }
+    }
+    let mut coefficients = [[0f64; 3]; 3];
+    for axis in 0..3 {
+        coefficients[axis] = solve(&ata, &atb[axis], degree + 1)?;
+    }
+    Some(coefficients)
 }
 
 /// The eye's motion as [`Predictor::motion`] fitted it: per axis, the offset from the

@@ -203,9 +203,7 @@ impl Manager {
                 // What it asked for ahead is needed no sooner than the warm-up may last
                 // (see `Manager::predict_for`): come during the flight, its round trips
                 // of seconds would be planned for. The flight asks afresh.
-                for k in 0..self.objects.len() {
-                    self.withdraw_predictions(k, |_| true);
-                }
+                self.withdraw_predicted(|_| true);
                 break false;
             }
             std::thread::sleep(WARM_UP_POLL);

@@ -377,10 +377,11 @@ pub const PLANNING_MARGIN: f32 = 0.75;
 /// texture then serves that turn twice, behind its eye and ahead. Once the eye has
 /// passed the shown texture's, the next one is its partner; none is asked for to be a
 /// partner alone. (Keeping one texture asked for two valid angles past the eye's
-/// future, as a partner, cost a third more requests and bought no fidelity measured. Without it against with it: forest, rtt 100, 5 runs
-/// against 7, 1,385–1,628 predictions against 1,819–2,276, stale frames 15–24 %
-/// against 14–25 %, objects within 1 dB of geometry 89–106 against 84–92; 64 clients,
-/// four alternating pairs, p99 latency 0.37–1.24 s against 1.64–2.21 s.) At the
+/// future, as a partner, cost a third more requests and bought no fidelity measured.
+/// Without it against with it: forest, rtt 100, 5 runs against 7, 1,385–1,628
+/// predictions against 1,819–2,276, stale frames 15–24 % against 14–25 %, objects
+/// within 1 dB of geometry 89–106 against 84–92; 64 clients, four alternating pairs,
+/// p99 latency 0.37–1.24 s against 1.64–2.21 s.) At the
 /// planning margin's share (0.75) the bunny at rtt 100 went stale in 3 frames of 120 in
 /// each of 3 runs, seen 8–12° from textures whose gaps grew 13–14 px; at 0.5, in none.
 pub const LEAD: f32 = 0.5;

@@ -86,10 +86,11 @@ pub(super) fn serve_within(
 
 /// The eye to make a predicted texture for, of an object centred on `centre`: the eye
 /// further along its predicted path (`beyond`, after `future`) where it has turned
-/// about `centre` by `angle` past `future` (the path's last eye if it turns less; `future`
-/// itself where the eye does not turn: `turn`, radians from now to `future`). The texture is then first used `angle`
-/// behind its own eye and stays in use as far ahead: it serves twice the lead of the
-/// motion, where one made for the future eye would serve the lead alone
+/// about `centre` by `angle` past `future` (the path's last eye if it turns less;
+/// `future` itself where the eye does not turn: `turn`, radians from now to `future`).
+/// The texture is then first used `angle` behind its own eye and stays in use as far
+/// ahead: it serves twice the lead of the motion, where one made for the future eye
+/// would serve the lead alone
 /// ([`Manager::lead_angle`] says how far a texture may be seen from). It stops short
 /// where the path's distance from the centre leaves [`LEAD_DISTANCE_SLACK`] of
 /// `future`'s.
@@ -443,9 +444,15 @@ impl Manager {
     }
 
     /// Withdraws object `k`'s predicted requests that are `stale`.
-    pub(super) fn withdraw_predictions(&mut self, k: usize, stale: impl Fn(&Pending) -> bool) {
+    fn withdraw_predictions(&mut self, k: usize, stale: impl Fn(&Pending) -> bool) {
+        self.withdraw_predicted(|p| p.object == k && stale(p));
+    }
+
+    /// Withdraws the predicted requests, of any object, that are `stale`: one
+    /// withdrawal sent for them all.
+    pub(super) fn withdraw_predicted(&mut self, stale: impl Fn(&Pending) -> bool) {
         let stale: Vec<u64> = (self.pending.iter())
-            .filter(|(_, p)| p.object == k && p.predicted() && stale(p))
+            .filter(|(_, p)| p.predicted() && stale(p))
             .map(|(&id, _)| id)
             .collect();
         if !stale.is_empty() {
@@ -500,8 +507,8 @@ mod tests {
         let turn = angle_between(centre, now, future);
         let eye = lead(centre, angle, turn, future, &beyond);
         assert!((eye.y - 1.0).abs() < 1e-6 && (eye.z - 2.0).abs() < 1e-6, "{eye}");
-        let turn = angle_between(centre, future, eye);
-        assert!((turn - angle).abs() < 1e-3, "{turn}");
+        let led = angle_between(centre, future, eye);
+        assert!((led - angle).abs() < 1e-3, "{led}");
         // (Turned on about the centre instead, in the plane of the pass, it would sink
         // below the line.)
         let axis = (now - centre).cross(future - centre).normalize();

@@ -625,6 +625,7 @@ mod tests {
             load_scale,
             server_wait_ms,
             requests,
+            ..FrameRecord::default()
         };
         let records = [
             frame(0.1, false, 1.0, 0.0, 2),

@@ -247,7 +247,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         frame_ms_p95: percentile(&log.frame_ms, 0.95),
         // (Timed below, once the service has stopped.)
         geometry_frame_ms_p50: f64::NAN,
-        frame_stages_ms_p50: FrameStages::median(&log.plan_ms, &counters.render_stages),
+        frame_stages_ms_p50: FrameStages::median(&log.records, &counters.render_stages),
         requests_now: counters.requests_now,
         requests_predicted: counters.requests_predicted,
         withdrawn: counters.withdrawn,

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use relief_client::flight::FrameRecord;
 use relief_client::manager::{RenderStages, StaleCauses};
 use relief_core::stats::median;
 
@@ -25,10 +26,10 @@ pub(super) struct FrameStages {
 }
 
 impl FrameStages {
-    pub(super) fn median(plan_ms: &[f64], render: &[RenderStages]) -> FrameStages {
+    pub(super) fn median(records: &[FrameRecord], render: &[RenderStages]) -> FrameStages {
         let of = |stage: fn(&RenderStages) -> f64| median(render.iter().map(stage).collect());
         FrameStages {
-            plan: median(plan_ms.to_vec()),
+            plan: median(records.iter().map(|r| r.plan_ms).collect()),
             prewarp: of(|r| r.prewarp_ms),
             draw: of(|r| r.draw_ms),
             geometry: of(|r| r.geometry_ms),
