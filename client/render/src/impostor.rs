@@ -31,6 +31,41 @@ impl Faces {
     }
 }
 
+/// The texels of a texture holding surface, bounded: the rectangle of texel rows and
+/// columns they lie in and the depth-table entries
+/// ([`WarpLevels::entry`]) they take. A pre-warp lands only these, so the warp of
+/// the rectangle's corners at the first and last entries bounds its image.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SurfaceExtent {
+    pub columns: std::ops::Range<usize>,
+    pub rows: std::ops::Range<usize>,
+    pub entries: std::ops::RangeInclusive<u16>,
+}
+
+impl SurfaceExtent {
+    /// The extent of the surface texels of a texture whose rows hold surface over
+    /// `occupied` (as [`Impostor::occupied`]), at depth-table `entries` (one per
+    /// surface texel); `None` when no row holds any.
+    fn of(occupied: &[std::ops::Range<usize>], entries: impl Iterator<Item = u16>) -> Option<SurfaceExtent> {
+        let rows = || {
+            occupied
+                .iter()
+                .enumerate()
+                .filter(|(_, texels)| !texels.is_empty())
+        };
+        let (first, _) = rows().next()?;
+        let (last, _) = rows().next_back()?;
+        let left = rows().map(|(_, texels)| texels.start).min()?;
+        let right = rows().map(|(_, texels)| texels.end).max()?;
+        let (lowest, highest) = entries.fold((u16::MAX, 0), |(lo, hi), q| (lo.min(q), hi.max(q)));
+        Some(SurfaceExtent {
+            columns: left..right,
+            rows: first..last + 1,
+            entries: lowest..=highest,
+        })
+    }
+}
+
 /// A relief texture and its texel connectivity.
 ///
 /// Two neighbouring texels belong to one surface when their depth difference is what
@@ -54,6 +89,9 @@ pub struct Impostor {
     /// a row without one): the pre-warp visits no more of the row. (A compact object's
     /// texture is empty around it: the knot's 256² texture, 32 % of its texels.)
     pub occupied: Vec<std::ops::Range<usize>>,
+    /// Where its surface texels lie, `None` when it has none: all of the texture that can
+    /// land in a pre-warp, which sizes its image by it.
+    pub surface: Option<SurfaceExtent>,
     /// Which sides of the surfaces can show.
     pub faces: Faces,
 }
@@ -127,7 +165,7 @@ impl Impostor {
             }
             std::mem::swap(&mut row, &mut below);
         }
-        let occupied = (0..h)
+        let occupied: Vec<std::ops::Range<usize>> = (0..h)
             .map(|j| {
                 let row = &texture.depth[j * w..(j + 1) * w];
                 match (
@@ -140,6 +178,10 @@ impl Impostor {
             })
             .collect();
         let levels = WarpLevels::new(texture.depth_bits);
+        let surface = SurfaceExtent::of(
+            &occupied,
+            (texture.depth.iter().filter(|&&q| q != empty)).map(|&q| levels.entry(q)),
+        );
         let packed = (texture.albedo.iter().zip(&texture.normal).zip(&texture.depth))
             .zip(right.iter().zip(&down))
             .map(|(((&albedo, &normal), &level), (&right, &down))| {
@@ -152,6 +194,7 @@ impl Impostor {
             down,
             packed,
             occupied,
+            surface,
             faces: Faces::Both,
         }
     }

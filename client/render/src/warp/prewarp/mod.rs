@@ -48,7 +48,7 @@ use relief_core::relief::SourceCamera;
 use self::lanes::{Columns, DOWN_LINK, Emitted, LANES, RIGHT_LINK, RowSamples, VALID, first, row_block};
 use super::params::WarpParams;
 use crate::EMPTY_DEPTH;
-use crate::impostor::{Faces, Impostor};
+use crate::impostor::{Faces, Impostor, SurfaceExtent};
 
 /// Pre-warp sampling variant.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -106,6 +106,18 @@ pub struct PrewarpImage {
 }
 
 impl PrewarpImage {
+    /// The image of a pre-warp that lands nothing on the screen: one empty pixel.
+    fn nothing_seen() -> PrewarpImage {
+        PrewarpImage {
+            u0: 0,
+            v0: 0,
+            width: 1,
+            height: 1,
+            texels: vec![PTexel::EMPTY],
+            visited: 0,
+        }
+    }
+
     /// The texel covering plane coordinates `(u, v)`, if inside.
     #[inline]
     pub fn at(&self, u: f32, v: f32) -> Option<&PTexel> {
@@ -123,21 +135,37 @@ impl PrewarpImage {
 /// How far past the source quad (in quad sizes) the pre-warped image may reach.
 const MAX_MARGIN: f32 = 1.0;
 
-/// The range of pre-warped coordinates, `((u0, u1), (v0, v1))`: the quad and its
-/// corners warped at the first and last levels — for one level the warp is affine in
-/// `(u, v)`, and for one point monotonic in the level, so these bound every landing —
-/// within `MAX_MARGIN` quads of the quad.
-fn extent(params: &WarpParams, w: f32, h: f32) -> ((i32, i32), (i32, i32)) {
-    let (mut lo, mut hi) = (Vec2::ZERO, Vec2::new(w, h));
-    for q in [0, params.depth.len().saturating_sub(1)] {
-        for (u, v) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
-            let p = params.warp(u, v, q);
+/// How far past its surface texels' landings a pre-warped image reaches, in its pixels:
+/// a run's ends reach half a pixel past their samples ([`half_gap`]), rounded up.
+const REACH_MARGIN: f32 = 1.0;
+
+/// The range of pre-warped coordinates, `((u0, u1), (v0, v1))`: the rectangle of the
+/// texels holding surface (`surface`) warped at its first and last table entries — for
+/// one entry the warp is affine in `(u, v)`, and for one point monotonic in the level,
+/// so these bound every landing — and [`REACH_MARGIN`] past it, within `MAX_MARGIN`
+/// quads of the quad (`w` × `h` texels). Sized so, an image holds only the pixels a
+/// warp can fill: the quad's corners at the table's ends bounded images 1.5–1.8 times
+/// larger than what the forest's pre-warps filled (an eighth of their time went on
+/// clearing them).
+fn extent(params: &WarpParams, surface: &SurfaceExtent, w: f32, h: f32) -> ((i32, i32), (i32, i32)) {
+    let (columns, rows) = (&surface.columns, &surface.rows);
+    let (from, to) = (
+        Vec2::new(columns.start as f32, rows.start as f32),
+        Vec2::new(columns.end as f32, rows.end as f32),
+    );
+    let (mut lo, mut hi) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
+    for q in [*surface.entries.start(), *surface.entries.end()] {
+        for (u, v) in [(from.x, from.y), (to.x, from.y), (from.x, to.y), (to.x, to.y)] {
+            let p = params.warp(u, v, q.into());
             lo = lo.min(p);
             hi = hi.max(p);
         }
     }
     let size = Vec2::new(w, h);
-    let (lo, hi) = (lo.max(-MAX_MARGIN * size), hi.min((1.0 + MAX_MARGIN) * size));
+    let (lo, hi) = (
+        (lo - REACH_MARGIN).max(-MAX_MARGIN * size),
+        (hi + REACH_MARGIN).min((1.0 + MAX_MARGIN) * size),
+    );
     (
         (lo.x.floor() as i32, hi.x.ceil() as i32),
         (lo.y.floor() as i32, hi.y.ceil() as i32),
@@ -1155,7 +1183,10 @@ fn prewarp_with(
 ) -> PrewarpImage {
     let c = &impostor.texture.camera;
     let (w, h) = (c.width as usize, c.height as usize);
-    let ((mut u0, mut u1), (mut v0, mut v1)) = extent(params, w as f32, h as f32);
+    let Some(surface) = &impostor.surface else {
+        return PrewarpImage::nothing_seen();
+    };
+    let ((mut u0, mut u1), (mut v0, mut v1)) = extent(params, surface, w as f32, h as f32);
     let (column_split, row_split) = (split_at(w, params.epipole.x), split_at(h, params.epipole.y));
     let (mut row_halves, mut rows) = ([0..column_split, column_split..w], [0..row_split, row_split..h]);
     // The scale factors' range: the table's ends (depth is linear in the level).
@@ -1175,14 +1206,7 @@ fn prewarp_with(
         v1 = v1.min((seen.v1.ceil() as i32).saturating_add(WINDOW_MARGIN));
         if u1 <= u0 || v1 <= v0 {
             // The screen sees none of it.
-            return PrewarpImage {
-                u0,
-                v0,
-                width: 1,
-                height: 1,
-                texels: vec![PTexel::EMPTY],
-                visited: 0,
-            };
+            return PrewarpImage::nothing_seen();
         }
         let (e, cu, cv) = (params.epipole, (u0 as f32, u1 as f32), (v0 as f32, v1 as f32));
         row_halves = [

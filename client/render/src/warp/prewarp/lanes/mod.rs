@@ -59,8 +59,8 @@ pub(in crate::warp::prewarp) mod tests {
     use relief_core::scene::Scene;
     use relief_trace::{bake, tracer::ObjectTracer};
 
-    use super::super::{PlaneWindow, PrewarpImage, Variant, prewarp_with};
-    use crate::impostor::{Faces, Impostor};
+    use super::super::{PTexel, PlaneWindow, PrewarpImage, Variant, prewarp_with};
+    use crate::impostor::{Faces, Impostor, SurfaceExtent};
     use crate::warp::params::WarpParams;
 
     thread_local! {
@@ -192,5 +192,67 @@ pub(in crate::warp::prewarp) mod tests {
                 );
             }
         }
+    }
+
+    /// An image bounded by the texels holding surface (`Impostor::surface`) holds every
+    /// pixel one bounded by the whole quad at every depth does, and no other: the
+    /// knot and the tree, orthographic and perspective, from eyes turned every way,
+    /// nearer and farther. And it is smaller (fails if the surface stops bounding it).
+    #[test]
+    fn an_image_bounded_by_its_surface_loses_nothing() {
+        let scene = Scene::load("default").expect("default scene");
+        let (mut cases, mut tight_pixels, mut quad_pixels) = (0, 0, 0);
+        for name in ["knot", "tree"] {
+            let object = scene.object(name).expect("object");
+            let tracer = ObjectTracer::new(object);
+            let centre = object.local_bounds.center();
+            let radius = object.local_bounds.extent().length() * 0.5;
+            let eye = centre + Vec3::new(0.0, 0.25, 1.0).normalize() * 3.0 * radius;
+            for projection in [SourceProjection::Orthographic, SourceProjection::Perspective] {
+                let texture = bake(&tracer, eye, 96, DepthBits::Sixteen, projection).expect("baked");
+                let impostor = Impostor::new(texture.clone());
+                let (w, h) = (texture.camera.width as usize, texture.camera.height as usize);
+                for (yaw, pitch) in [(-40.0f32, 0.0f32), (-5.0, 3.0), (4.0, -20.0), (25.0, 12.0)] {
+                    for distance in [0.6, 1.0, 2.0] {
+                        let turn = Quat::from_rotation_y(yaw.to_radians())
+                            * Quat::from_rotation_x(pitch.to_radians());
+                        let moved = centre + turn * (eye - centre) * distance;
+                        let Ok(params) = WarpParams::new(&impostor.texture, moved) else {
+                            continue;
+                        };
+                        let quad = Impostor {
+                            surface: Some(SurfaceExtent {
+                                columns: 0..w,
+                                rows: 0..h,
+                                entries: 0..=(params.scale.len() - 1) as u16,
+                            }),
+                            ..impostor.clone()
+                        };
+                        let warp = |impostor: &Impostor| {
+                            prewarp_with(impostor, &params, Variant::Interleaved, None, false, true)
+                        };
+                        let (tight, whole) = (warp(&impostor), warp(&quad));
+                        let case = format!("{name} {projection:?} yaw {yaw} pitch {pitch} ×{distance}");
+                        for (k, pixel) in whole.texels.iter().enumerate() {
+                            let (x, y) = (
+                                (k % whole.width as usize) as i32,
+                                (k / whole.width as usize) as i32,
+                            );
+                            let (u, v) = ((whole.u0 + x) as f32 + 0.5, (whole.v0 + y) as f32 + 0.5);
+                            let held = tight.at(u, v).copied().unwrap_or(PTexel::EMPTY);
+                            assert!(held == *pixel, "{case}: pixel ({u}, {v})");
+                        }
+                        tight_pixels += tight.texels.len();
+                        quad_pixels += whole.texels.len();
+                        cases += 1;
+                    }
+                }
+            }
+        }
+        assert!(cases >= 20, "{cases} cases");
+        assert!(
+            tight_pixels * 10 < quad_pixels * 9,
+            "{tight_pixels} pixels bounded by the surface, {quad_pixels} by the quad"
+        );
     }
 }
