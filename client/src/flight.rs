@@ -132,6 +132,13 @@ pub struct FrameRecord {
     pub server_wait_ms: f64,
     /// Textures asked for in the frame, for now and ahead.
     pub requests: u64,
+    /// Whether an object of it had no texture that could be warped to the eye (stale as
+    /// [`StaleCauses::missing`](crate::manager::StaleCauses::missing)).
+    pub missing: bool,
+    /// Textures taken in for it.
+    pub arrived: u32,
+    /// Their round trips (request sent to arrival) summed, ms.
+    pub arrivals_ms_sum: f64,
 }
 
 /// What a flight measured.
@@ -237,7 +244,13 @@ impl Flight<'_> {
             let began = Instant::now();
             let asked = |m: &Manager| m.counters.requests_now + m.counters.requests_predicted;
             let (stale_before, asked_before) = (manager.counters.stale_frames, asked(manager));
+            let (missing_before, arrived_before) = (
+                manager.counters.stale_causes.missing,
+                manager.counters.latencies_ms.len(),
+            );
             let shows = manager.frame(scene, &camera, t);
+            // (Counters start again when a warm-up ends: none then.)
+            let arrivals = || manager.counters.latencies_ms.get(arrived_before..).unwrap_or(&[]);
             log.records.push(FrameRecord {
                 at_s: t,
                 plan_ms: began.elapsed().as_secs_f64() * 1e3,
@@ -245,6 +258,9 @@ impl Flight<'_> {
                 load_scale: manager.load_scale(),
                 server_wait_ms: manager.server_wait().as_secs_f64() * 1e3,
                 requests: asked(manager) - asked_before,
+                missing: manager.counters.stale_causes.missing > missing_before,
+                arrived: arrivals().len() as u32,
+                arrivals_ms_sum: arrivals().iter().sum(),
             });
             let image = draw(log.frames).then(|| {
                 let image = manager.render(scene, &shows, &camera, &mut gbuffer);

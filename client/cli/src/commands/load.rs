@@ -133,6 +133,18 @@ struct SecondOfLoad {
     server_wait_ms_mean: f64,
     /// Textures asked for in the second, by all clients of all runs.
     requests: u64,
+    /// The share of its frames with an object that had no texture to warp (stalled
+    /// for want of one, not for one past the tolerance).
+    missing_frac: f64,
+    /// Textures taken in during the second …
+    arrived: u64,
+    /// … and their mean round trip, request sent to arrival, ms (NaN, null in JSON,
+    /// when none came): a stall with the server's wait at zero and this long is a
+    /// delay outside its queue.
+    arrival_ms_mean: f64,
+    /// The frames' mean time deciding (`FrameRecord::plan_ms`): the clients' own work,
+    /// on the cores the workers bake on.
+    plan_ms_mean: f64,
 }
 
 const HEADER: &str = "tolerance_px,clients,repeats,frames,requests_now,requests_predicted,requests_per_s,latency_ms_p50,latency_ms_p99,latency_ms_p99_lo,latency_ms_p99_hi,latency_now_ms_p99,predictions_late_frac,prediction_lateness_ms_p99,stall_frac,textures_per_client_s,lifetime_s_p10,lifetime_s_p50,psnr_db_mean,psnr_db_min,requests_shed,served_nearby_frac,load_scale_mean";
@@ -538,10 +550,17 @@ fn by_second<'a>(records: impl Iterator<Item = &'a FrameRecord>) -> Vec<SecondOf
         s.load_scale_mean += f64::from(record.load_scale);
         s.server_wait_ms_mean += record.server_wait_ms;
         s.requests += record.requests;
+        s.missing_frac += f64::from(u8::from(record.missing));
+        s.arrived += u64::from(record.arrived);
+        s.arrival_ms_mean += record.arrivals_ms_sum;
+        s.plan_ms_mean += record.plan_ms;
     }
     for s in &mut seconds {
         let frames = s.frames as f64;
         s.stall_frac /= frames;
+        s.missing_frac /= frames;
+        s.arrival_ms_mean /= s.arrived as f64;
+        s.plan_ms_mean /= frames;
         s.load_scale_mean /= frames;
         s.server_wait_ms_mean /= frames;
     }
@@ -627,12 +646,22 @@ mod tests {
             requests,
             ..FrameRecord::default()
         };
+        // (One frame missing an object's texture; textures taken in, with their round trips.)
         let records = [
             frame(0.1, false, 1.0, 0.0, 2),
-            frame(0.9, true, 2.0, 300.0, 0),
+            FrameRecord {
+                missing: true,
+                arrived: 2,
+                arrivals_ms_sum: 300.0,
+                ..frame(0.9, true, 2.0, 300.0, 0)
+            },
             frame(1.5, true, 4.0, 500.0, 1),
             frame(3.2, false, 1.0, 0.0, 0),
-            frame(0.5, false, 3.0, 600.0, 1),
+            FrameRecord {
+                arrived: 1,
+                arrivals_ms_sum: 600.0,
+                ..frame(0.5, false, 3.0, 600.0, 1)
+            },
         ];
         let seconds = by_second(records.iter());
         assert_eq!(seconds.len(), 4);
@@ -643,15 +672,22 @@ mod tests {
                 s.load_scale_mean,
                 s.server_wait_ms_mean,
                 s.requests,
+                s.missing_frac,
+                s.arrived,
             )
         };
-        assert_eq!(told(&seconds[0]), (3, 1.0 / 3.0, 2.0, 300.0, 3));
-        assert_eq!(told(&seconds[1]), (1, 1.0, 4.0, 500.0, 1));
-        assert_eq!(told(&seconds[3]), (1, 0.0, 1.0, 0.0, 0));
+        assert_eq!(told(&seconds[0]), (3, 1.0 / 3.0, 2.0, 300.0, 3, 1.0 / 3.0, 3));
+        assert_eq!(seconds[0].arrival_ms_mean, 300.0);
+        assert_eq!(told(&seconds[1]), (1, 1.0, 4.0, 500.0, 1, 0.0, 0));
+        assert!(seconds[1].arrival_ms_mean.is_nan(), "no arrival, no mean");
+        assert_eq!(told(&seconds[3]), (1, 0.0, 1.0, 0.0, 0, 0.0, 0));
         let empty = seconds[2];
-        assert_eq!((empty.frames, empty.requests), (0, 0));
+        assert_eq!((empty.frames, empty.requests, empty.arrived), (0, 0, 0));
         assert!(
-            empty.stall_frac.is_nan() && empty.load_scale_mean.is_nan() && empty.server_wait_ms_mean.is_nan()
+            empty.stall_frac.is_nan()
+                && empty.load_scale_mean.is_nan()
+                && empty.server_wait_ms_mean.is_nan()
+                && empty.missing_frac.is_nan()
         );
         let json = serde_json::to_string(&empty).expect("json");
         assert!(json.contains(r#""load_scale_mean":null"#), "{json}");
