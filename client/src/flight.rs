@@ -249,7 +249,8 @@ impl Flight<'_> {
                 manager.counters.latencies_ms.len(),
             );
             let shows = manager.frame(scene, &camera, t);
-            // (Counters start again when a warm-up ends: none then.)
+            // (Counters only grow in a flight — a warm-up starts them again — so this
+            // is the frame's arrivals.)
             let arrivals = || manager.counters.latencies_ms.get(arrived_before..).unwrap_or(&[]);
             log.records.push(FrameRecord {
                 at_s: t,
