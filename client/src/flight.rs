@@ -135,7 +135,7 @@ pub struct FrameRecord {
     /// Whether an object of it had no texture that could be warped to the eye (stale as
     /// [`StaleCauses::missing`](crate::manager::StaleCauses::missing)).
     pub missing: bool,
-    /// Textures taken in for it.
+    /// Final textures taken in for it.
     pub arrived: u32,
     /// Their round trips (request sent to arrival) summed, ms.
     pub arrivals_ms_sum: f64,

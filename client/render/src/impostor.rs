@@ -37,8 +37,11 @@ impl Faces {
 /// the rectangle's corners at the first and last entries bounds its image.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SurfaceExtent {
+    /// The texel columns, from the leftmost holding surface to one past the rightmost.
     pub columns: std::ops::Range<usize>,
+    /// The texel rows, likewise.
     pub rows: std::ops::Range<usize>,
+    /// The lowest and the highest table entry they take, both included.
     pub entries: std::ops::RangeInclusive<u16>,
 }
 
@@ -90,7 +93,8 @@ pub struct Impostor {
     /// texture is empty around it: the knot's 256² texture, 32 % of its texels.)
     pub occupied: Vec<std::ops::Range<usize>>,
     /// Where its surface texels lie, `None` when it has none: all of the texture that can
-    /// land in a pre-warp, which sizes its image by it.
+    /// land in a pre-warp, which sizes its image by it. (Made from `texture` with
+    /// [`Impostor::occupied`]: change the texture, and make the impostor anew.)
     pub surface: Option<SurfaceExtent>,
     /// Which sides of the surfaces can show.
     pub faces: Faces,

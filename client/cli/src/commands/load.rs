@@ -112,9 +112,11 @@ struct Row {
     /// much longer the textures were let live than asked.
     load_scale_mean: f64,
     /// Second by second of the flights (all clients, all runs): the frames, the share
-    /// stalled, the load's factor on the tolerance, the server's load as heard, the
-    /// textures asked for — whether a stall is a transient or the load's steady state.
-    /// In `--json` only.
+    /// stalled and the share missing a texture, the load's factor on the tolerance, the
+    /// server's load as heard, the textures asked for, the final textures that arrived
+    /// and their round trips, the time deciding — whether a stall is a transient or the
+    /// load's steady state, and whether its delay was the server's queue. In `--json`
+    /// only.
     by_second: Vec<SecondOfLoad>,
 }
 
@@ -136,7 +138,7 @@ struct SecondOfLoad {
     /// The share of its frames with an object that had no texture to warp (stalled
     /// for want of one, not for one past the tolerance).
     missing_frac: f64,
-    /// Textures taken in during the second …
+    /// Final textures taken in during the second …
     arrived: u64,
     /// … and their mean round trip, request sent to arrival, ms (NaN, null in JSON,
     /// when none came): a stall with the server's wait at zero and this long is a
@@ -644,6 +646,8 @@ mod tests {
             load_scale,
             server_wait_ms,
             requests,
+            // (Each frame deciding for a tenth of its second, in ms.)
+            plan_ms: at_s * 10.0,
             ..FrameRecord::default()
         };
         // (One frame missing an object's texture; textures taken in, with their round trips.)
@@ -680,6 +684,11 @@ mod tests {
         assert_eq!(seconds[0].arrival_ms_mean, 300.0);
         assert_eq!(told(&seconds[1]), (1, 1.0, 4.0, 500.0, 1, 0.0, 0));
         assert!(seconds[1].arrival_ms_mean.is_nan(), "no arrival, no mean");
+        assert!(
+            (seconds[0].plan_ms_mean - 5.0).abs() < 1e-9,
+            "{}",
+            seconds[0].plan_ms_mean
+        );
         assert_eq!(told(&seconds[3]), (1, 0.0, 1.0, 0.0, 0, 0.0, 0));
         let empty = seconds[2];
         assert_eq!((empty.frames, empty.requests, empty.arrived), (0, 0, 0));
@@ -688,6 +697,8 @@ mod tests {
                 && empty.load_scale_mean.is_nan()
                 && empty.server_wait_ms_mean.is_nan()
                 && empty.missing_frac.is_nan()
+                && empty.arrival_ms_mean.is_nan()
+                && empty.plan_ms_mean.is_nan()
         );
         let json = serde_json::to_string(&empty).expect("json");
         assert!(json.contains(r#""load_scale_mean":null"#), "{json}");

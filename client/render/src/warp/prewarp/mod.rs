@@ -91,8 +91,9 @@ impl PTexel {
 }
 
 /// The pre-warped image: texel `(x, y)` covers source-plane coordinates
-/// `[u0 + x, u0 + x + 1) × [v0 + y, v0 + y + 1)`. It extends past the source quad towards
-/// the epipole, where texels of a turned view land.
+/// `[u0 + x, u0 + x + 1) × [v0 + y, v0 + y + 1)`. It spans where the texels holding
+/// surface can land (past the source quad towards the epipole, for a turned view), and
+/// no farther than the quad's own landings.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PrewarpImage {
     pub u0: i32,
@@ -135,36 +136,49 @@ impl PrewarpImage {
 /// How far past the source quad (in quad sizes) the pre-warped image may reach.
 const MAX_MARGIN: f32 = 1.0;
 
-/// How far past its surface texels' landings a pre-warped image reaches, in its pixels:
-/// a run's ends reach half a pixel past their samples ([`half_gap`]), rounded up.
-const REACH_MARGIN: f32 = 1.0;
+/// How far past the warped corners of its surface texels a pre-warped image reaches, in
+/// its pixels: the texel centres land half a texel inside the corners and a run's ends
+/// reach half a pixel past them ([`half_gap`]), so at 2 an empty pixel always lies
+/// between what is written and the image's edge — whose outermost half texel the
+/// texture mapping draws by a rule of its own (see `texmap::map`): it meets a surface
+/// only where the bound by the quad put it.
+const REACH_MARGIN: f32 = 2.0;
 
 /// The range of pre-warped coordinates, `((u0, u1), (v0, v1))`: the rectangle of the
-/// texels holding surface (`surface`) warped at its first and last table entries — for
-/// one entry the warp is affine in `(u, v)`, and for one point monotonic in the level,
-/// so these bound every landing — and [`REACH_MARGIN`] past it, within `MAX_MARGIN`
-/// quads of the quad (`w` × `h` texels). Sized so, an image holds only the pixels a
-/// warp can fill: the quad's corners at the table's ends bounded images 1.5–1.8 times
-/// larger than what the forest's pre-warps filled (an eighth of their time went on
-/// clearing them).
+/// texels holding surface (`surface`) warped at its first and last table entries, and
+/// [`REACH_MARGIN`] past it — for one entry the warp is affine in `(u, v)`, and for one
+/// point monotonic in the entry, so these bound every landing — within the same of the
+/// whole quad (`w` × `h` texels) at the table's ends, and `MAX_MARGIN` quads of the
+/// quad. Bounded by the quad alone, the forest's images were 1.5–1.8 times what the
+/// pre-warps filled, and clearing them took an eighth of their time.
 fn extent(params: &WarpParams, surface: &SurfaceExtent, w: f32, h: f32) -> ((i32, i32), (i32, i32)) {
+    // The box of the rectangle `from`–`to` warped at entries `first` and `last`.
+    let warped = |from: Vec2, to: Vec2, first: usize, last: usize| {
+        let (mut lo, mut hi) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
+        for q in [first, last] {
+            for (u, v) in [(from.x, from.y), (to.x, from.y), (from.x, to.y), (to.x, to.y)] {
+                let p = params.warp(u, v, q);
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        (lo, hi)
+    };
+    let last = params.scale.len().saturating_sub(1);
+    // (The quad's bound takes in the quad itself.)
+    let (quad_lo, quad_hi) = warped(Vec2::ZERO, Vec2::new(w, h), 0, last);
+    let (quad_lo, quad_hi) = (quad_lo.min(Vec2::ZERO), quad_hi.max(Vec2::new(w, h)));
     let (columns, rows) = (&surface.columns, &surface.rows);
-    let (from, to) = (
+    let (lo, hi) = warped(
         Vec2::new(columns.start as f32, rows.start as f32),
         Vec2::new(columns.end as f32, rows.end as f32),
+        usize::from(*surface.entries.start()).min(last),
+        usize::from(*surface.entries.end()).min(last),
     );
-    let (mut lo, mut hi) = (Vec2::INFINITY, Vec2::NEG_INFINITY);
-    for q in [*surface.entries.start(), *surface.entries.end()] {
-        for (u, v) in [(from.x, from.y), (to.x, from.y), (from.x, to.y), (to.x, to.y)] {
-            let p = params.warp(u, v, q.into());
-            lo = lo.min(p);
-            hi = hi.max(p);
-        }
-    }
     let size = Vec2::new(w, h);
     let (lo, hi) = (
-        (lo - REACH_MARGIN).max(-MAX_MARGIN * size),
-        (hi + REACH_MARGIN).min((1.0 + MAX_MARGIN) * size),
+        (lo - REACH_MARGIN).max(quad_lo).max(-MAX_MARGIN * size),
+        (hi + REACH_MARGIN).min(quad_hi).min((1.0 + MAX_MARGIN) * size),
     );
     (
         (lo.x.floor() as i32, hi.x.ceil() as i32),
@@ -1187,6 +1201,10 @@ fn prewarp_with(
         return PrewarpImage::nothing_seen();
     };
     let ((mut u0, mut u1), (mut v0, mut v1)) = extent(params, surface, w as f32, h as f32);
+    if u1 <= u0 || v1 <= v0 {
+        // Every landing past the farthest an image reaches (`MAX_MARGIN`).
+        return PrewarpImage::nothing_seen();
+    }
     let (column_split, row_split) = (split_at(w, params.epipole.x), split_at(h, params.epipole.y));
     let (mut row_halves, mut rows) = ([0..column_split, column_split..w], [0..row_split, row_split..h]);
     // The scale factors' range: the table's ends (depth is linear in the level).
