@@ -55,13 +55,12 @@ pub(in crate::warp::prewarp) mod tests {
     use std::cell::Cell;
 
     use glam::{Quat, Vec3};
+    use relief_core::camera::Camera;
     use relief_core::relief::{DepthBits, SourceProjection};
     use relief_core::scene::Scene;
     use relief_trace::{bake, tracer::ObjectTracer};
 
     use super::super::{PTexel, PlaneWindow, PrewarpImage, Variant, prewarp_with};
-    use relief_core::camera::Camera;
-
     use crate::gbuffer::GBuffer;
     use crate::impostor::{Faces, Impostor, SurfaceExtent};
     use crate::warp::display;
@@ -200,10 +199,12 @@ pub(in crate::warp::prewarp) mod tests {
 
     /// An image bounded by the texels holding surface (`Impostor::surface`) holds every
     /// pixel one bounded by the whole quad at every depth does, and the texture mapping
-    /// draws the same frame from it — the image's edge, which it draws by a rule of its
-    /// own, meets a surface only where the quad's did: the knot and the tree,
-    /// orthographic and perspective, from eyes turned every way, nearer and farther.
-    /// And it is smaller (fails if the surface stops bounding it).
+    /// draws the same frame from it: the knot and the tree, orthographic and
+    /// perspective, from eyes turned every way, nearer and farther. And it is smaller
+    /// (fails if the surface stops bounding it). (Where a surface meets its texture's
+    /// edge, the image's edge, which the mapping draws by a rule of its own, must stay
+    /// there: the lab's `texture_mapping_covers_a_full_texture_to_its_edges` shows such a
+    /// texture; none of these does.)
     #[test]
     fn an_image_bounded_by_its_surface_loses_nothing() {
         let scene = Scene::load("default").expect("default scene");
@@ -252,8 +253,8 @@ pub(in crate::warp::prewarp) mod tests {
                         // And the texture mapping draws the same frame from either: the same
                         // pixels covered, by the same objects, to the rounding of plane
                         // coordinates taken from another image origin (a blend's weight a
-                        // 256th off: a level of albedo, an encoded normal's quantum, and
-                        // in all 30 cases when written, colours off by at most 1).
+                        // 256th off: a level of albedo, an encoded normal's quantum; in the
+                        // 46 cases when written, colours off by at most 1).
                         let camera = Camera::look_at(moved, centre, Vec3::Y, 50.0, 160, 120).expect("camera");
                         let drawn = |impostor: &Impostor| {
                             let mut frame = GBuffer::new(160, 120);
