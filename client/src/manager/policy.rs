@@ -473,7 +473,8 @@ pub const LOAD_STEP_UP: f32 = 1.5;
 /// 11 s) they still went stale together as the factor reached 1, a few seconds into
 /// the flight: the round trips rose to 23–1,022 ms and 2 of 6 runs stalled 2.8 and 13.3
 /// %; at this step, 11–37 ms and 0.1 % in all 6, for 10–20 % fewer requests and client
-/// 0's frames 0.3 dB lower (37.4–37.8 dB against 37.8–38.7), alternating runs.
+/// 0's frames 0.3 dB lower (37.4–37.8 dB against 37.8–38.7), alternating runs. (Not
+/// the episodes that follow forest runs: see docs/load-test.md.)
 pub const LOAD_STEP_DOWN: f32 = 1.03;
 
 /// The most the server's load may multiply the tolerance by: textures live at most
