@@ -73,6 +73,30 @@ pub(in crate::warp::prewarp) mod tests {
         pub(in super::super) static TAKEN_IN_COLUMNS: [Cell<usize>; 2] = const { [Cell::new(0), Cell::new(0)] };
     }
 
+    /// An object of the default scene as these tests bake it: its tracer, its centre, and
+    /// the textures' eye, three bounding radii off and a little above.
+    fn baked_from(scene: &Scene, name: &str) -> (ObjectTracer, Vec3, Vec3) {
+        let object = scene.object(name).expect("object");
+        let centre = object.local_bounds.center();
+        let radius = object.local_bounds.extent().length() * 0.5;
+        let eye = centre + Vec3::new(0.0, 0.25, 1.0).normalize() * 3.0 * radius;
+        (ObjectTracer::new(object), centre, eye)
+    }
+
+    /// Eyes turned every way about `centre` from the textures' `eye`, nearer and farther
+    /// than it (so visited towards the epipole and outwards): yaw and pitch (degrees),
+    /// the distance's factor, and the eye.
+    fn turned_eyes(centre: Vec3, eye: Vec3) -> impl Iterator<Item = (f32, f32, f32, Vec3)> {
+        let turns = [(-40.0f32, 0.0f32), (-5.0, 3.0), (4.0, -20.0), (25.0, 12.0)];
+        turns.into_iter().flat_map(move |(yaw, pitch)| {
+            [0.6f32, 1.0, 2.0].into_iter().map(move |distance| {
+                let turn =
+                    Quat::from_rotation_y(yaw.to_radians()) * Quat::from_rotation_x(pitch.to_radians());
+                (yaw, pitch, distance, centre + turn * (eye - centre) * distance)
+            })
+        })
+    }
+
     /// The image's placement, and each texel's depth bits and attribute bytes.
     fn bits(image: &PrewarpImage) -> Vec<u64> {
         let texels = image.texels.iter().flat_map(|t| {
@@ -109,11 +133,7 @@ pub(in crate::warp::prewarp) mod tests {
         };
         let (rows_before, columns_before) = counts();
         for name in ["knot", "tree"] {
-            let object = scene.object(name).expect("object");
-            let tracer = ObjectTracer::new(object);
-            let centre = object.local_bounds.center();
-            let radius = object.local_bounds.extent().length() * 0.5;
-            let eye = centre + Vec3::new(0.0, 0.25, 1.0).normalize() * 3.0 * radius;
+            let (tracer, centre, eye) = baked_from(&scene, name);
             for projection in [SourceProjection::Orthographic, SourceProjection::Perspective] {
                 for depth_bits in [DepthBits::Eight, DepthBits::Sixteen] {
                     let texture = bake(&tracer, eye, 96, depth_bits, projection).expect("baked");
@@ -124,50 +144,38 @@ pub(in crate::warp::prewarp) mod tests {
                             occupied: vec![0..texture.camera.width as usize; texture.camera.height as usize],
                             ..impostor.clone()
                         };
-                        for (yaw, pitch) in [(-40.0f32, 0.0f32), (-5.0, 3.0), (4.0, -20.0), (25.0, 12.0)] {
-                            for distance in [0.6, 1.0, 2.0] {
-                                let turn = Quat::from_rotation_y(yaw.to_radians())
-                                    * Quat::from_rotation_x(pitch.to_radians());
-                                let moved = centre + turn * (eye - centre) * distance;
-                                let Ok(params) = WarpParams::new(&impostor.texture, moved) else {
-                                    continue;
+                        for (yaw, pitch, distance, moved) in turned_eyes(centre, eye) {
+                            let Ok(params) = WarpParams::new(&impostor.texture, moved) else {
+                                continue;
+                            };
+                            let window = PlaneWindow {
+                                u0: 30.0,
+                                v0: -4.0,
+                                u1: 70.0,
+                                v1: 60.0,
+                            };
+                            for seen in [None, Some(&window)] {
+                                let warp = |impostor: &Impostor, lanes| {
+                                    prewarp_with(impostor, &params, Variant::Interleaved, seen, false, lanes)
                                 };
-                                let window = PlaneWindow {
-                                    u0: 30.0,
-                                    v0: -4.0,
-                                    u1: 70.0,
-                                    v1: 60.0,
-                                };
-                                for seen in [None, Some(&window)] {
-                                    let warp = |impostor: &Impostor, lanes| {
-                                        prewarp_with(
-                                            impostor,
-                                            &params,
-                                            Variant::Interleaved,
-                                            seen,
-                                            false,
-                                            lanes,
-                                        )
-                                    };
-                                    let lanes = warp(&impostor, true);
-                                    let scalar = bits(&warp(&impostor, false));
-                                    let whole = warp(&whole_rows, false);
-                                    whole_visited += whole.visited;
-                                    assert!(
-                                        scalar == bits(&whole),
-                                        "occupied texels only: {name} {projection:?} {depth_bits:?} {faces:?} \
+                                let lanes = warp(&impostor, true);
+                                let scalar = bits(&warp(&impostor, false));
+                                let whole = warp(&whole_rows, false);
+                                whole_visited += whole.visited;
+                                assert!(
+                                    scalar == bits(&whole),
+                                    "occupied texels only: {name} {projection:?} {depth_bits:?} {faces:?} \
                                          yaw {yaw} pitch {pitch} ×{distance} window {}",
-                                        seen.is_some()
-                                    );
-                                    assert!(
-                                        bits(&lanes) == scalar,
-                                        "{name} {projection:?} {depth_bits:?} {faces:?} yaw {yaw} pitch {pitch} \
+                                    seen.is_some()
+                                );
+                                assert!(
+                                    bits(&lanes) == scalar,
+                                    "{name} {projection:?} {depth_bits:?} {faces:?} yaw {yaw} pitch {pitch} \
                                          ×{distance} window {}",
-                                        seen.is_some()
-                                    );
-                                    cases += 1;
-                                    visited += lanes.visited;
-                                }
+                                    seen.is_some()
+                                );
+                                cases += 1;
+                                visited += lanes.visited;
                             }
                         }
                     }
@@ -210,81 +218,70 @@ pub(in crate::warp::prewarp) mod tests {
         let scene = Scene::load("default").expect("default scene");
         let (mut cases, mut tight_pixels, mut quad_pixels) = (0, 0, 0);
         for name in ["knot", "tree"] {
-            let object = scene.object(name).expect("object");
             let index = scene.objects.iter().position(|o| o.name == name).expect("index") as u32;
-            let tracer = ObjectTracer::new(object);
-            let centre = object.local_bounds.center();
-            let radius = object.local_bounds.extent().length() * 0.5;
-            let eye = centre + Vec3::new(0.0, 0.25, 1.0).normalize() * 3.0 * radius;
+            let (tracer, centre, eye) = baked_from(&scene, name);
             for projection in [SourceProjection::Orthographic, SourceProjection::Perspective] {
                 let texture = bake(&tracer, eye, 96, DepthBits::Sixteen, projection).expect("baked");
                 let impostor = Impostor::new(texture.clone());
                 let (w, h) = (texture.camera.width as usize, texture.camera.height as usize);
-                for (yaw, pitch) in [(-40.0f32, 0.0f32), (-5.0, 3.0), (4.0, -20.0), (25.0, 12.0)] {
-                    for distance in [0.6, 1.0, 2.0] {
-                        let turn = Quat::from_rotation_y(yaw.to_radians())
-                            * Quat::from_rotation_x(pitch.to_radians());
-                        let moved = centre + turn * (eye - centre) * distance;
-                        let Ok(params) = WarpParams::new(&impostor.texture, moved) else {
-                            continue;
-                        };
-                        let quad = Impostor {
-                            surface: Some(SurfaceExtent {
-                                columns: 0..w,
-                                rows: 0..h,
-                                entries: 0..=(params.scale.len() - 1) as u16,
-                            }),
-                            ..impostor.clone()
-                        };
-                        let warp = |impostor: &Impostor| {
-                            prewarp_with(impostor, &params, Variant::Interleaved, None, false, true)
-                        };
-                        let (tight, whole) = (warp(&impostor), warp(&quad));
-                        let case = format!("{name} {projection:?} yaw {yaw} pitch {pitch} ×{distance}");
-                        for (k, pixel) in whole.texels.iter().enumerate() {
-                            let (x, y) = (
-                                (k % whole.width as usize) as i32,
-                                (k / whole.width as usize) as i32,
-                            );
-                            let (u, v) = ((whole.u0 + x) as f32 + 0.5, (whole.v0 + y) as f32 + 0.5);
-                            let held = tight.at(u, v).copied().unwrap_or(PTexel::EMPTY);
-                            assert!(held == *pixel, "{case}: pixel ({u}, {v})");
-                        }
-                        // And the texture mapping draws the same frame from either: the same
-                        // pixels covered, by the same objects, to the rounding of plane
-                        // coordinates taken from another image origin (a blend's weight a
-                        // 256th off: a level of albedo, an encoded normal's quantum; in the
-                        // 46 cases when written, colours off by at most 1).
-                        let camera = Camera::look_at(moved, centre, Vec3::Y, 50.0, 160, 120).expect("camera");
-                        let drawn = |impostor: &Impostor| {
-                            let mut frame = GBuffer::new(160, 120);
-                            display(Variant::Interleaved, impostor, index, &camera, &mut frame)
-                                .expect("shown");
-                            let pixels: Vec<_> =
-                                (0..120).flat_map(|y| (0..160).map(move |x| (x, y))).collect();
-                            let kept = pixels.iter().map(|&(x, y)| frame.get(x, y)).collect::<Vec<_>>();
-                            (kept, frame.shade(&scene, &camera))
-                        };
-                        let ((kept, shaded), (quad_kept, quad_shaded)) = (drawn(&impostor), drawn(&quad));
-                        for (p, q) in kept.iter().zip(&quad_kept) {
-                            assert!(
-                                p == q
-                                    || p.object == q.object
-                                        && (0..3).all(|c| p.albedo[c].abs_diff(q.albedo[c]) <= 1)
-                                        && (p.depth - q.depth).abs() <= 1e-4 * q.depth.abs().max(1.0)
-                                        && p.normal.dot(q.normal) >= 0.999,
-                                "{case}: {p:?} against {q:?}"
-                            );
-                        }
-                        let off = (shaded.color.iter().zip(&quad_shaded.color))
-                            .map(|(p, q)| (0..3).map(|c| p[c].abs_diff(q[c])).max().unwrap_or(0))
-                            .max()
-                            .unwrap_or(0);
-                        assert!(off <= 2, "{case}: colours off by {off}");
-                        tight_pixels += tight.texels.len();
-                        quad_pixels += whole.texels.len();
-                        cases += 1;
+                for (yaw, pitch, distance, moved) in turned_eyes(centre, eye) {
+                    let Ok(params) = WarpParams::new(&impostor.texture, moved) else {
+                        continue;
+                    };
+                    let quad = Impostor {
+                        surface: Some(SurfaceExtent {
+                            columns: 0..w,
+                            rows: 0..h,
+                            entries: 0..=(params.scale.len() - 1) as u16,
+                        }),
+                        ..impostor.clone()
+                    };
+                    let warp = |impostor: &Impostor| {
+                        prewarp_with(impostor, &params, Variant::Interleaved, None, false, true)
+                    };
+                    let (tight, whole) = (warp(&impostor), warp(&quad));
+                    let case = format!("{name} {projection:?} yaw {yaw} pitch {pitch} ×{distance}");
+                    for (k, pixel) in whole.texels.iter().enumerate() {
+                        let (x, y) = (
+                            (k % whole.width as usize) as i32,
+                            (k / whole.width as usize) as i32,
+                        );
+                        let (u, v) = ((whole.u0 + x) as f32 + 0.5, (whole.v0 + y) as f32 + 0.5);
+                        let held = tight.at(u, v).copied().unwrap_or(PTexel::EMPTY);
+                        assert!(held == *pixel, "{case}: pixel ({u}, {v})");
                     }
+                    // And the texture mapping draws the same frame from either: the same
+                    // pixels covered, by the same objects, to the rounding of plane
+                    // coordinates taken from another image origin (a blend's weight a
+                    // 256th off: a level of albedo, an encoded normal's quantum; in the
+                    // 46 cases when written, colours off by at most 1).
+                    let camera = Camera::look_at(moved, centre, Vec3::Y, 50.0, 160, 120).expect("camera");
+                    let drawn = |impostor: &Impostor| {
+                        let mut frame = GBuffer::new(160, 120);
+                        display(Variant::Interleaved, impostor, index, &camera, &mut frame).expect("shown");
+                        let pixels: Vec<_> = (0..120).flat_map(|y| (0..160).map(move |x| (x, y))).collect();
+                        let kept = pixels.iter().map(|&(x, y)| frame.get(x, y)).collect::<Vec<_>>();
+                        (kept, frame.shade(&scene, &camera))
+                    };
+                    let ((kept, shaded), (quad_kept, quad_shaded)) = (drawn(&impostor), drawn(&quad));
+                    for (p, q) in kept.iter().zip(&quad_kept) {
+                        assert!(
+                            p == q
+                                || p.object == q.object
+                                    && (0..3).all(|c| p.albedo[c].abs_diff(q.albedo[c]) <= 1)
+                                    && (p.depth - q.depth).abs() <= 1e-4 * q.depth.abs().max(1.0)
+                                    && p.normal.dot(q.normal) >= 0.999,
+                            "{case}: {p:?} against {q:?}"
+                        );
+                    }
+                    let off = (shaded.color.iter().zip(&quad_shaded.color))
+                        .map(|(p, q)| (0..3).map(|c| p[c].abs_diff(q[c])).max().unwrap_or(0))
+                        .max()
+                        .unwrap_or(0);
+                    assert!(off <= 2, "{case}: colours off by {off}");
+                    tight_pixels += tight.texels.len();
+                    quad_pixels += whole.texels.len();
+                    cases += 1;
                 }
             }
         }
