@@ -74,7 +74,7 @@ impl Columns {
 
     /// Feeds `emitted`, made by row number `seq`, into its columns (image columns from
     /// `base`), visited downwards when `DOWN_ROWS`: each lane that continues its
-    /// column's run with at most one pixel centre, as eight lanes; and returns the
+    /// column's run with at most two pixel centres, as eight lanes; and returns the
     /// others (bit `l` for lane `l`) for the scalar column step.
     #[inline(always)]
     pub fn take_block<const DOWN_ROWS: bool>(
@@ -116,37 +116,48 @@ impl Columns {
         let centres = below_b - below_a;
         let exact = a.abs().simd_lt(f32x8::splat(EXACT)) & b.abs().simd_lt(f32x8::splat(EXACT));
         let gap_known = !load(&self.last_gap, base).is_nan();
-        let simple = exact & b.simd_ge(a) & centres.simd_le(f32x8::ONE) & gap_known;
+        let two = f32x8::splat(2.0);
+        let simple = exact & b.simd_ge(a) & centres.simd_le(two) & gap_known;
         let taken = linked & simple.to_bitmask() & first(n as u32);
         #[cfg(test)]
         super::tests::TAKEN_IN_COLUMNS.with(|c| {
             let c = &c[usize::from(DOWN_ROWS)];
             c.set(c.get() + taken.count_ones() as usize)
         });
-        let end = signed_end::<DOWN_ROWS>(out.v0..out.v1);
-        let puts =
-            taken & (centres.simd_eq(f32x8::ONE) & below_b.simd_le(f32x8::splat(end as f32))).to_bitmask();
+        let ends = f32x8::splat(signed_end::<DOWN_ROWS>(out.v0..out.v1) as f32);
+        // The first centre past `a`, and where there are two, the second (`below_b`).
+        let first_centre = below_a + f32x8::ONE;
+        let puts = taken & (centres.simd_ge(f32x8::ONE) & first_centre.simd_le(ends)).to_bitmask();
         let last_attributes = eight(&self.attributes, base);
         if puts != 0 {
-            let t = ((below_b + half - a) * (f32x8::ONE / (b - a))).fast_clamp(f32x8::ZERO, f32x8::ONE);
-            let depth = (last_depth + (f32x8::from(emitted.depth) - last_depth) * t).to_array();
-            let attributes = lerp_attributes(&last_attributes, &emitted.attributes, t);
-            // (Whole numbers below `EXACT`: they convert exactly, as vectors; one by one
-            // to `i64`, each saturating conversion cost a tenth of the column step.)
-            let rows = below_b.fast_trunc_int().to_array();
-            let mut lanes = puts;
-            while lanes != 0 {
-                let l = lanes.trailing_zeros() as usize;
-                lanes &= lanes - 1;
-                let y = i64::from(rows[l]);
-                out.put_texel(
-                    base + l,
-                    if DOWN_ROWS { y } else { -y - 1 },
-                    PTexel {
-                        depth: depth[l],
-                        attributes: Attributes(attributes[l]),
-                    },
-                );
+            let inv = f32x8::ONE / (b - a);
+            let next = f32x8::from(emitted.depth);
+            let mut put = |centre: f32x8, lanes: u32| {
+                let t = ((centre + half - a) * inv).fast_clamp(f32x8::ZERO, f32x8::ONE);
+                let depth = (last_depth + (next - last_depth) * t).to_array();
+                let attributes = lerp_attributes(&last_attributes, &emitted.attributes, t);
+                // (Whole numbers below `EXACT`: they convert exactly, as vectors; one by
+                // one to `i64`, each saturating conversion cost a tenth of the column step.)
+                let rows = centre.fast_trunc_int().to_array();
+                let mut lanes = lanes;
+                while lanes != 0 {
+                    let l = lanes.trailing_zeros() as usize;
+                    lanes &= lanes - 1;
+                    let y = i64::from(rows[l]);
+                    out.put_texel(
+                        base + l,
+                        if DOWN_ROWS { y } else { -y - 1 },
+                        PTexel {
+                            depth: depth[l],
+                            attributes: Attributes(attributes[l]),
+                        },
+                    );
+                }
+            };
+            put(first_centre, puts);
+            let seconds = puts & (centres.simd_eq(two) & below_b.simd_le(ends)).to_bitmask();
+            if seconds != 0 {
+                put(below_b, seconds);
             }
         }
         if taken == 0 {

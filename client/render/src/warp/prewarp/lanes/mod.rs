@@ -2,14 +2,16 @@
 //!
 //! Seen a few degrees from its eye, a texture's texels land about one pre-warped pixel
 //! apart: most spans between connected neighbours hold one pixel centre, or none, and
-//! the column each lands in continues a run there. Eight such spans are computed as one
-//! vector ([`row_block`], module `rows`): where each lands, whether it holds a centre, the
-//! interpolated sample there. Their samples fall in consecutive columns, and those eight
-//! columns take their next sample as one vector too ([`Columns::take_block`], module `columns`). Lanes
-//! that meet anything else — a run's end, a crack, a span of two centres or more, a
-//! column starting a run — go through the scalar code: a row's in the visit's order, a
-//! column's after the block's vector step (each lane is a column of its own, so no
-//! write of one comes between another's).
+//! the column each lands in continues a run there. Turned further, the surfaces the
+//! view turns towards stretch, and spans of two centres come often. Eight spans of up
+//! to two centres (eight samples in all) are computed as one vector ([`row_block`],
+//! module `rows`): where each lands, which centres it holds, the interpolated samples
+//! there. Their samples fall in consecutive columns, and those columns take their next
+//! sample as one vector too, a span of up to two centres each
+//! ([`Columns::take_block`], module `columns`). Lanes that meet anything else — a run's
+//! end, a crack, a span of three centres or more, a column starting a run — go through
+//! the scalar code: a row's in the visit's order, a column's after the block's vector
+//! step (each lane is a column of its own, so no write of one comes between another's).
 //!
 //! # Same pixels
 //!
