@@ -17,6 +17,8 @@
 //!   generator.
 //! - [`remote`] — the client side of the protocol: scenes up, textures down,
 //!   withdrawals.
+//! - [`intake`] — arrived textures made ready, once per texture in a process however
+//!   many of its clients receive it.
 //! - [`link`] — the link to the server kept alive: the scene uploaded again when the
 //!   server lost it, and whether textures can come at all ([`link::Health`]).
 //! - [`flight`] — the real-time flight along a camera path that `relief demo`,
@@ -46,6 +48,7 @@
 //! ```
 
 pub mod flight;
+pub mod intake;
 pub mod link;
 pub mod manager;
 pub mod predict;

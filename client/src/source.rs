@@ -4,18 +4,19 @@
 
 use std::collections::{HashMap, VecDeque};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender, unbounded_channel};
 
 use relief_core::hash::ContentHash;
 use relief_core::scene::Scene;
-use relief_proto::convert::{projection_to_pb, texture_from_pb, vec3_to_pb};
+use relief_proto::convert::{projection_to_pb, vec3_to_pb};
 use relief_proto::pb;
 use relief_render::impostor::Faces;
 use relief_trace::bake;
 use relief_trace::tracer::ObjectTracer;
 
+use crate::intake::Intake;
 use crate::link::{Degraded, Link};
 use crate::manager::{Arrival, Command, Config, Failure, Manager, ReadyTexture, TextureRequest};
 
@@ -43,10 +44,12 @@ fn to_pb(request: &TextureRequest, scene: ContentHash, client_id: &str) -> pb::I
 }
 
 /// What a request to the server is made of besides itself: the link it goes over, the
-/// faces its object shows, and the half round trip injected each way.
+/// faces its object shows, where its textures are made ready, and the half round trip
+/// injected each way.
 struct Served<'a> {
     link: &'a Link,
     faces: Faces,
+    intake: &'a Intake,
     half: Duration,
 }
 
@@ -56,15 +59,16 @@ struct Served<'a> {
 /// (Loaded loopback runs answer within 5 s at p99.)
 pub const ANSWER_DEADLINE: Duration = Duration::from_secs(10);
 
-/// Serves `commands` over `link` on the current tokio runtime; `rtt` is added to every
-/// exchange (half each way). While the link is degraded (see [`crate::link`]) requests
-/// go to the local generator instead.
+/// Serves `commands` over `link` on the current tokio runtime, the textures made ready
+/// through `intake`; `rtt` is added to every exchange (half each way). While the link
+/// is degraded (see [`crate::link`]) requests go to the local generator instead.
 pub fn spawn_remote(
     link: Arc<Link>,
     scene: Arc<Scene>,
     mut commands: UnboundedReceiver<Command>,
     arrivals: UnboundedSender<Arrival>,
     rtt: Duration,
+    intake: Intake,
 ) {
     let half = rtt / 2;
     let (local_tx, local_rx) = unbounded_channel();
@@ -76,6 +80,7 @@ pub fn spawn_remote(
             let scene = scene.clone();
             let arrivals = arrivals.clone();
             let local = local_tx.clone();
+            let intake = intake.clone();
             tokio::spawn(async move {
                 tokio::time::sleep(half).await;
                 match command {
@@ -88,6 +93,7 @@ pub fn spawn_remote(
                         let from = Served {
                             link: &link,
                             faces,
+                            intake: &intake,
                             half,
                         };
                         serve_request(request, from, &arrivals, &local).await;
@@ -136,7 +142,12 @@ fn saturated_wait(status: &tonic::Status) -> Option<Duration> {
 /// hands the request to the local generator.
 async fn serve_request(
     request: TextureRequest,
-    Served { link, faces, half }: Served<'_>,
+    Served {
+        link,
+        faces,
+        intake,
+        half,
+    }: Served<'_>,
     arrivals: &UnboundedSender<Arrival>,
     local: &UnboundedSender<Command>,
 ) {
@@ -206,8 +217,9 @@ async fn serve_request(
                 // runtime's threads, whose timers (the link's looks among them) they
                 // held up — with many clients in one process, long enough for a busy
                 // server to look lost.
+                let (arrived, intake) = (Instant::now(), intake.clone());
                 let ready = tokio::task::spawn_blocking(move || {
-                    texture_from_pb("texture", &texture).map(|t| Box::new(ReadyTexture::new(t, faces)))
+                    intake.ready("texture", &texture, faces, arrived).map(Box::new)
                 })
                 .await;
                 match ready {
@@ -333,12 +345,19 @@ pub fn spawn_local(
 }
 
 /// A manager of `scene` whose textures come over `link` (its requests served on the
-/// current tokio runtime; `rtt` added to every exchange, half each way). The link's
-/// [`Health`](crate::link::Health) says how long the run was degraded.
-pub fn remote_manager(scene: &Arc<Scene>, config: Config, link: Arc<Link>, rtt: Duration) -> Manager {
+/// current tokio runtime; `rtt` added to every exchange, half each way), made ready
+/// through `intake` — shared by the clients of a process, its own for a client alone.
+/// The link's [`Health`](crate::link::Health) says how long the run was degraded.
+pub fn remote_manager(
+    scene: &Arc<Scene>,
+    config: Config,
+    link: Arc<Link>,
+    rtt: Duration,
+    intake: Intake,
+) -> Manager {
     let (commands_tx, commands_rx) = unbounded_channel();
     let (arrivals_tx, arrivals_rx) = unbounded_channel();
-    spawn_remote(link, scene.clone(), commands_rx, arrivals_tx, rtt);
+    spawn_remote(link, scene.clone(), commands_rx, arrivals_tx, rtt, intake);
     Manager::new(scene, config, commands_tx, arrivals_rx)
 }
 

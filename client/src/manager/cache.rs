@@ -2,7 +2,7 @@
 //! one's valid angle probed, those relied on and then the nearest the eye kept, and
 //! each shared with the other placements of its mesh that can show it.
 
-use std::sync::Arc;
+use std::sync::{Arc, Weak};
 use std::time::Instant;
 
 use glam::Vec3;
@@ -26,11 +26,13 @@ use super::{Manager, TextureLifetimes};
 /// A texture made ready for the frame loop: its pyramid (with texel connectivity),
 /// critical points, the gaps it shows at its own eye, its rim and the weight of its
 /// gaps' growth. Building this takes milliseconds for big textures, so the texture
-/// sources do it on their own threads.
+/// sources do it on their own threads; what it holds is shared, not copied, by every
+/// client in a process given the same texture (see [`crate::intake`]).
+#[derive(Clone)]
 pub struct ReadyTexture {
-    pyramid: Pyramid,
-    critical: CriticalPoints,
-    baseline: Vec<f32>,
+    pyramid: Arc<Pyramid>,
+    critical: Arc<CriticalPoints>,
+    baseline: Arc<[f32]>,
     rim: Rim,
     growth_weight: f32,
     /// When the texture reached the client, before it was made ready.
@@ -41,7 +43,11 @@ impl ReadyTexture {
     /// Makes `texture`, which has just reached the client, ready for the frame loop,
     /// showing `faces` of its object's surfaces.
     pub fn new(texture: ReliefTexture, faces: Faces) -> ReadyTexture {
-        let arrived = Instant::now();
+        ReadyTexture::arrived_at(texture, faces, Instant::now())
+    }
+
+    /// [`ReadyTexture::new`] for a texture that reached the client at `arrived`.
+    pub fn arrived_at(texture: ReliefTexture, faces: Faces, arrived: Instant) -> ReadyTexture {
         let critical = CriticalPoints::find(&texture, CRITICAL_REGIONS, CRITICAL_REGIONS);
         let baseline = WarpParams::without_tables(&texture, texture.eye).map_or_else(
             |_| vec![0.0; critical.pairs.len()],
@@ -51,11 +57,62 @@ impl ReadyTexture {
         ReadyTexture {
             rim: Rim::find(&pyramid.levels[0].texture),
             growth_weight: growth_weight(EdgeError::of(&pyramid.levels[0])),
-            pyramid,
-            critical,
-            baseline,
+            pyramid: Arc::new(pyramid),
+            critical: Arc::new(critical),
+            baseline: baseline.into(),
             arrived,
         }
+    }
+
+    /// When it reached the client.
+    pub fn arrived(&self) -> Instant {
+        self.arrived
+    }
+
+    /// Whether it holds the very parts `other` holds (made ready once, for both).
+    pub fn shares_parts_with(&self, other: &ReadyTexture) -> bool {
+        Arc::ptr_eq(&self.pyramid, &other.pyramid)
+    }
+
+    /// A handle on this texture's parts that does not keep them alive: what a process's
+    /// [`Intake`](crate::intake::Intake) remembers of the textures it made ready.
+    pub(crate) fn downgrade(&self) -> WeakReady {
+        WeakReady {
+            pyramid: Arc::downgrade(&self.pyramid),
+            critical: Arc::downgrade(&self.critical),
+            baseline: self.baseline.clone(),
+            rim: self.rim.clone(),
+            growth_weight: self.growth_weight,
+        }
+    }
+}
+
+/// A [`ReadyTexture`]'s parts, the big ones held weakly ([`ReadyTexture::downgrade`]).
+pub(crate) struct WeakReady {
+    pyramid: Weak<Pyramid>,
+    critical: Weak<CriticalPoints>,
+    baseline: Arc<[f32]>,
+    rim: Rim,
+    growth_weight: f32,
+}
+
+impl WeakReady {
+    /// The texture again, reached a client at `arrived`, while some client still holds
+    /// it.
+    pub(crate) fn upgrade(&self, arrived: Instant) -> Option<ReadyTexture> {
+        Some(ReadyTexture {
+            pyramid: self.pyramid.upgrade()?,
+            critical: self.critical.upgrade()?,
+            baseline: self.baseline.clone(),
+            rim: self.rim.clone(),
+            growth_weight: self.growth_weight,
+            arrived,
+        })
+    }
+
+    /// Whether some client still holds it.
+    pub(crate) fn is_held(&self) -> bool {
+        self.pyramid.strong_count() > 0 && self.critical.strong_count() > 0
     }
 }
 
@@ -73,7 +130,7 @@ pub(super) struct Held {
     pub(super) pyramid: Arc<Pyramid>,
     pub(super) critical: Arc<CriticalPoints>,
     /// The regions' gaps at the texture's own eye: what it shows at best.
-    pub(super) baseline: Vec<f32>,
+    pub(super) baseline: Arc<[f32]>,
     /// Its rim's curvature: the band past the outline it cannot show from a turned eye.
     pub(super) rim: Rim,
     /// What a pixel of its gaps' growth counts for ([`growth_weight`]).
@@ -173,8 +230,8 @@ impl Manager {
                     }
                     let held = Held {
                         eye,
-                        pyramid: Arc::new(pyramid),
-                        critical: Arc::new(critical),
+                        pyramid,
+                        critical,
                         baseline,
                         rim,
                         growth_weight,

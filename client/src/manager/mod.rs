@@ -52,6 +52,7 @@ use relief_render::geometry::{GeometryReason, geometry_reason};
 use crate::predict::{Predictor, view_of};
 
 pub use cache::ReadyTexture;
+pub(crate) use cache::WeakReady;
 pub use choose::{Show, ShownTexture};
 pub use counters::{Counters, RenderStages, StaleCauses, TextureLifetimes, late_fraction};
 pub use messages::{Arrival, Command, Failure, TextureRequest};

@@ -13,6 +13,7 @@ use clap::Args;
 use serde::Serialize;
 
 use relief_client::flight::{Flight, FrameRecord, WARM_UP_LIMIT};
+use relief_client::intake::Intake;
 use relief_client::link::Link;
 use relief_client::manager::{Config, Counters, Manager, late_fraction};
 use relief_client::remote::Remote;
@@ -338,6 +339,9 @@ impl Setup<'_> {
             .collect::<Result<Vec<_>>>()?;
         let line = Arc::new(StartLine::new(clients));
         let mut stats_remote = remote.clone();
+        // One process, one intake: a texture many clients receive is made ready once (see
+        // `relief_client::intake`), so the clients' own work stays off the workers' cores.
+        let intake = Intake::default();
         let handles: Vec<_> = remotes
             .into_iter()
             .enumerate()
@@ -354,6 +358,7 @@ impl Setup<'_> {
                         config,
                         Link::new(remote, self.bundle.clone(), hash),
                         Duration::from_millis(args.rtt_ms),
+                        intake.clone(),
                     )
                 };
                 let scene = self.scene.clone();

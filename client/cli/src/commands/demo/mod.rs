@@ -15,6 +15,7 @@ use anyhow::{Context, Result, bail};
 use clap::Args;
 
 use relief_client::flight::{Flight, WARM_UP_LIMIT};
+use relief_client::intake::Intake;
 use relief_client::link::Link;
 use relief_client::manager::{Config, late_fraction};
 use relief_client::source::{local_manager, remote_manager};
@@ -163,7 +164,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
             runtime.block_on(link.look());
             let health = link.health.clone();
             (
-                remote_manager(&scene, config, link, rtt),
+                remote_manager(&scene, config, link, rtt, Intake::default()),
                 format!("server {url}"),
                 Some(health),
             )
