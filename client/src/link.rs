@@ -310,8 +310,11 @@ impl Link {
     }
 
     /// [`Link::look`] every [`HEALTH_POLL`], for ever (the task serving the link's
-    /// requests ends it with the run), passing the server's load on to the manager.
-    pub async fn watch(self: Arc<Link>, arrivals: UnboundedSender<Arrival>) {
+    /// requests ends it with the run), passing the server's load on to the manager, and
+    /// the look's round trip — `half` added each way, as to every exchange over the
+    /// link — when the server answered it: the link's own, which no bake or queue
+    /// lengthens ([`Arrival::LinkRoundTrip`]).
+    pub async fn watch(self: Arc<Link>, arrivals: UnboundedSender<Arrival>, half: Duration) {
         let mut tick = tokio::time::interval(HEALTH_POLL);
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         loop {
@@ -320,9 +323,18 @@ impl Link {
             if arrivals.is_closed() {
                 return;
             }
-            if let Some(wait) = self.look().await
-                && arrivals.send(Arrival::ServerLoad { wait }).is_err()
-            {
+            let started = Instant::now();
+            tokio::time::sleep(half).await;
+            let wait = self.look().await;
+            // (A look the server was too busy to answer took its whole timeout.)
+            let answered = started.elapsed() < half + HEALTH_POLL_TIMEOUT;
+            tokio::time::sleep(half).await;
+            let Some(wait) = wait else { continue };
+            let round_trip = answered.then(|| Arrival::LinkRoundTrip {
+                round_trip: started.elapsed(),
+            });
+            let sent = std::iter::once(Arrival::ServerLoad { wait }).chain(round_trip);
+            if sent.map(|a| arrivals.send(a)).any(|r| r.is_err()) {
                 return;
             }
         }

@@ -73,7 +73,7 @@ pub fn spawn_remote(
     let half = rtt / 2;
     let (local_tx, local_rx) = unbounded_channel();
     spawn_local(scene.clone(), local_rx, arrivals.clone());
-    let watch = tokio::spawn(link.clone().watch(arrivals.clone()));
+    let watch = tokio::spawn(link.clone().watch(arrivals.clone(), half));
     tokio::spawn(async move {
         while let Some(command) = commands.recv().await {
             let link = link.clone();

@@ -378,7 +378,9 @@ fn the_local_generator_serves_requests_for_now_in_the_order_asked() {
             |_| match arrivals_rx.blocking_recv().expect("the generator stopped") {
                 Arrival::Texture { id, .. } => id,
                 Arrival::Failed { id, failure } => panic!("request {id} failed: {failure}"),
-                Arrival::ServerLoad { .. } => panic!("the local generator has no load to report"),
+                Arrival::ServerLoad { .. } | Arrival::LinkRoundTrip { .. } => {
+                    panic!("the local generator has no link to report on")
+                }
             },
         )
         .collect();
@@ -868,6 +870,63 @@ fn a_saturated_server_lengthens_the_textures_lives() {
         arrivals.send(Arrival::ServerLoad { wait }).unwrap();
     }
     assert_eq!(report(&mut manager, busy), LOAD_STEP_UP);
+}
+
+/// Over a link whose looks take longer than the default tolerance is tuned for, the
+/// client's textures live longer in proportion to its shortest look lately — a single
+/// slow look lifts nothing — and the server's load multiplies on top, within
+/// `MAX_LOAD_SCALE` in all.
+#[test]
+fn a_long_link_lengthens_the_textures_lives() {
+    use relief_client::manager::policy::{
+        LINK_TUNED_ROUND_TRIP, LOAD_HIGH_WAIT, LOAD_STEP_UP, MAX_LOAD_SCALE,
+    };
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let config = Config::default();
+    let asked = config.tolerance;
+    let (mut manager, _commands, arrivals) = wired(&scene, config);
+    let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
+    let look = |manager: &mut Manager, round_trip: Duration| {
+        arrivals.send(Arrival::LinkRoundTrip { round_trip }).unwrap();
+        manager.frame(&scene, &camera_round(centre, 0.0), 0.0);
+        manager.tolerance() / asked
+    };
+    assert_eq!(look(&mut manager, LINK_TUNED_ROUND_TRIP / 2), 1.0, "a short link");
+    assert_eq!(
+        look(&mut manager, LINK_TUNED_ROUND_TRIP * 3),
+        1.0,
+        "one slow look"
+    );
+    let (mut far, _commands, far_arrivals) = wired(&scene, Config::default());
+    let mut far_look = |round_trip: Duration| {
+        far_arrivals.send(Arrival::LinkRoundTrip { round_trip }).unwrap();
+        far.frame(&scene, &camera_round(centre, 0.0), 0.0);
+        far.tolerance() / asked
+    };
+    assert!((far_look(LINK_TUNED_ROUND_TRIP * 2) - 2.0).abs() < 1e-5);
+    assert!(
+        (far_look(LINK_TUNED_ROUND_TRIP * 3) - 2.0).abs() < 1e-5,
+        "the shortest counts"
+    );
+    assert_eq!(far.link_scale(), 2.0);
+    // The server's load on top.
+    far_arrivals
+        .send(Arrival::ServerLoad {
+            wait: LOAD_HIGH_WAIT + Duration::from_millis(1),
+        })
+        .unwrap();
+    far.frame(&scene, &camera_round(centre, 0.0), 0.0);
+    assert!((far.tolerance() / asked - 2.0 * LOAD_STEP_UP).abs() < 1e-5);
+    for _ in 0..20 {
+        far_arrivals
+            .send(Arrival::ServerLoad {
+                wait: LOAD_HIGH_WAIT + Duration::from_millis(1),
+            })
+            .unwrap();
+        far.frame(&scene, &camera_round(centre, 0.0), 0.0);
+    }
+    assert_eq!(far.tolerance() / asked, MAX_LOAD_SCALE);
 }
 
 /// A prediction's texture is counted by its arrival against the time it was predicted

@@ -256,6 +256,9 @@ impl Manager {
                     self.hold(p.object, held, centre, local.eye_f32());
                 }
                 Arrival::ServerLoad { wait } => load = Some(wait),
+                Arrival::LinkRoundTrip { round_trip } => {
+                    (self.round_trip_floor).round_trip(round_trip.as_secs_f64() * 1e3, Instant::now());
+                }
                 Arrival::Failed { id, failure } => {
                     // (A withdrawn request's end is no news.)
                     let Some(pending) = self.pending.remove(&id) else {

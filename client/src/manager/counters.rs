@@ -28,6 +28,9 @@ pub struct Counters {
     /// The factor the server's load put on the tolerance, summed over the frames drawn
     /// (over their count: its mean; see [`LOAD_HIGH_WAIT`](super::policy::LOAD_HIGH_WAIT)).
     pub load_scale_sum: f64,
+    /// The factor the link put on it, summed likewise (see
+    /// [`Manager::link_scale`](super::Manager::link_scale)).
+    pub link_scale_sum: f64,
     /// Request sent → final texture received by the client, milliseconds …
     pub latencies_ms: Vec<f64>,
     /// … of the requests needed now alone (a frame waits on them) …

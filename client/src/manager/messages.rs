@@ -50,6 +50,11 @@ pub enum Arrival {
     ServerLoad {
         wait: std::time::Duration,
     },
+    /// The round trip of a look at the server's load that it answered: the link's own,
+    /// which no bake or queue lengthens (see the manager's `link_scale` module).
+    LinkRoundTrip {
+        round_trip: std::time::Duration,
+    },
 }
 
 /// Why a request ended without its final texture.

@@ -35,6 +35,7 @@ mod cache;
 mod choose;
 mod counters;
 mod draw;
+mod link_scale;
 mod messages;
 pub mod policy;
 mod requests;
@@ -95,6 +96,8 @@ pub struct Manager {
     load_scale: f32,
     /// The server's load as last heard (see [`Manager::server_wait`]).
     server_wait: Duration,
+    /// The shortest round trip lately: the link's factor on the tolerance.
+    round_trip_floor: link_scale::RoundTripFloor,
     /// While warming up ([`Manager::warm_up`]), the latest it ends: the flight starts
     /// no sooner than what was asked for is in, so nothing is needed before then.
     warm_up_until: Option<Instant>,
@@ -125,6 +128,7 @@ impl Manager {
             planned_at: Instant::now(),
             load_scale: 1.0,
             server_wait: Duration::ZERO,
+            round_trip_floor: link_scale::RoundTripFloor::default(),
             warm_up_until: None,
             counters: Counters::default(),
         }
@@ -140,10 +144,18 @@ impl Manager {
         self.objects.iter().map(|o| o.held.len()).sum()
     }
 
-    /// The tolerance decisions use now: the user's, times the factor the server's load
-    /// puts on it (see [`policy::LOAD_HIGH_WAIT`]).
+    /// The tolerance decisions use now: the user's, times the factors the server's load
+    /// and the link put on it ([`Manager::load_scale`], [`Manager::link_scale`]; both
+    /// at most [`policy::MAX_LOAD_SCALE`]).
     pub fn tolerance(&self) -> f32 {
-        self.config.tolerance * self.load_scale
+        self.config.tolerance * (self.load_scale * self.link_scale()).min(policy::MAX_LOAD_SCALE)
+    }
+
+    /// The factor a link with long round trips puts on the user's tolerance: the shortest
+    /// round trip lately over [`policy::LINK_TUNED_ROUND_TRIP`], at least 1 (see the
+    /// `link_scale` module).
+    pub fn link_scale(&self) -> f32 {
+        self.round_trip_floor.scale()
     }
 
     /// The factor the server's load puts on the user's tolerance now (see
@@ -391,6 +403,7 @@ impl Manager {
             self.counters.stale_frames += 1;
         }
         self.counters.load_scale_sum += f64::from(self.load_scale);
+        self.counters.link_scale_sum += f64::from(self.link_scale());
         shows
     }
 }

@@ -258,6 +258,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         requests_shed: counters.requests_shed,
         textures_shared: counters.textures_shared,
         load_scale_mean: counters.load_scale_sum / f64::from(log.frames.max(1)),
+        link_scale_mean: counters.link_scale_sum / f64::from(log.frames.max(1)),
         degraded_s: health.as_ref().map(|h| h.degraded_s()),
         latency_ms_p50: percentile(&counters.latencies_ms, 0.5),
         latency_ms_p99: percentile(&counters.latencies_ms, 0.99),

@@ -66,6 +66,9 @@ pub(super) struct Summary {
     /// The mean factor the server's load put on the tolerance over the frames (1: the
     /// tolerance asked for throughout).
     pub(super) load_scale_mean: f64,
+    /// The mean factor the link's round trips put on the tolerance (1: a link as short
+    /// as the default tolerance is tuned for; see `LINK_TUNED_ROUND_TRIP`).
+    pub(super) link_scale_mean: f64,
     /// Seconds the server could not serve (unreachable, or without a worker);
     /// `null` without a server.
     pub(super) degraded_s: Option<f64>,
