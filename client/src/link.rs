@@ -330,12 +330,14 @@ impl Link {
             let answered = started.elapsed() < half + HEALTH_POLL_TIMEOUT;
             tokio::time::sleep(half).await;
             let Some(wait) = wait else { continue };
-            let round_trip = answered.then(|| Arrival::LinkRoundTrip {
-                round_trip: started.elapsed(),
-            });
-            let sent = std::iter::once(Arrival::ServerLoad { wait }).chain(round_trip);
-            if sent.map(|a| arrivals.send(a)).any(|r| r.is_err()) {
+            if arrivals.send(Arrival::ServerLoad { wait }).is_err() {
                 return;
+            }
+            if answered {
+                let round_trip = started.elapsed();
+                if arrivals.send(Arrival::LinkRoundTrip { round_trip }).is_err() {
+                    return;
+                }
             }
         }
     }

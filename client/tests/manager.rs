@@ -927,6 +927,17 @@ fn a_long_link_lengthens_the_textures_lives() {
         far.frame(&scene, &camera_round(centre, 0.0), 0.0);
     }
     assert_eq!(far.tolerance() / asked, MAX_LOAD_SCALE);
+    // The load's factor stopped where the two reached the bound: its first step down
+    // shows at once.
+    far_arrivals
+        .send(Arrival::ServerLoad { wait: Duration::ZERO })
+        .unwrap();
+    far.frame(&scene, &camera_round(centre, 0.0), 0.0);
+    assert!(
+        far.tolerance() / asked < MAX_LOAD_SCALE,
+        "{}",
+        far.tolerance() / asked
+    );
 }
 
 /// A prediction's texture is counted by its arrival against the time it was predicted

@@ -70,7 +70,8 @@ impl ReadyTexture {
     }
 
     /// Whether it holds the very parts `other` holds (made ready once, for both).
-    pub fn shares_parts_with(&self, other: &ReadyTexture) -> bool {
+    #[cfg(test)]
+    pub(crate) fn shares_parts_with(&self, other: &ReadyTexture) -> bool {
         Arc::ptr_eq(&self.pyramid, &other.pyramid)
     }
 
@@ -257,7 +258,8 @@ impl Manager {
                 }
                 Arrival::ServerLoad { wait } => load = Some(wait),
                 Arrival::LinkRoundTrip { round_trip } => {
-                    (self.round_trip_floor).round_trip(round_trip.as_secs_f64() * 1e3, Instant::now());
+                    self.round_trip_floor
+                        .record(round_trip.as_secs_f64() * 1e3, Instant::now());
                 }
                 Arrival::Failed { id, failure } => {
                     // (A withdrawn request's end is no news.)

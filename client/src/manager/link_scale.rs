@@ -39,9 +39,17 @@ impl Default for RoundTripFloor {
 
 impl RoundTripFloor {
     /// Takes in a round trip of `ms`, ended at `now`.
-    pub fn round_trip(&mut self, ms: f64, now: Instant) {
-        if now.saturating_duration_since(self.period_start) >= ROUND_TRIP_FLOOR_PERIOD {
-            self.floors = [f64::INFINITY, self.floors[0]];
+    pub fn record(&mut self, ms: f64, now: Instant) {
+        let periods = now.saturating_duration_since(self.period_start).as_secs_f64()
+            / ROUND_TRIP_FLOOR_PERIOD.as_secs_f64();
+        if periods >= 1.0 {
+            // (Two periods or more without a look answered: nothing before counts.)
+            let before = if periods < 2.0 {
+                self.floors[0]
+            } else {
+                f64::INFINITY
+            };
+            self.floors = [f64::INFINITY, before];
             self.period_start = now;
         }
         self.floors[0] = self.floors[0].min(ms);
@@ -78,15 +86,25 @@ mod tests {
         assert_eq!(floor.scale(), 1.0, "none yet");
         let now = Instant::now();
         for ms in [3.0 * tuned, 2.0 * tuned, 2.5 * tuned] {
-            floor.round_trip(ms, now);
+            floor.record(ms, now);
         }
         assert_eq!(floor.ms(), 2.0 * tuned);
         assert!((floor.scale() - 2.0).abs() < 1e-6, "{}", floor.scale());
-        floor.round_trip(0.5 * tuned, now);
+        floor.record(0.5 * tuned, now);
         assert_eq!(floor.scale(), 1.0, "under the tuned round trip");
         let mut far = RoundTripFloor::default();
-        far.round_trip(100.0 * tuned, now);
+        far.record(100.0 * tuned, now);
         assert_eq!(far.scale(), MAX_LOAD_SCALE);
+    }
+
+    /// Two periods without a look answered, the floor starts afresh.
+    #[test]
+    fn a_silence_of_two_periods_forgets_the_floor() {
+        let mut floor = RoundTripFloor::default();
+        let start = Instant::now();
+        floor.record(10.0, start);
+        floor.record(300.0, start + ROUND_TRIP_FLOOR_PERIOD * 3);
+        assert_eq!(floor.ms(), 300.0);
     }
 
     /// The floor forgets round trips two periods old: a link that shortened for good
@@ -95,11 +113,11 @@ mod tests {
     fn the_floor_rises_after_two_periods() {
         let mut floor = RoundTripFloor::default();
         let start = Instant::now();
-        floor.round_trip(10.0, start);
+        floor.record(10.0, start);
         let later = start + ROUND_TRIP_FLOOR_PERIOD;
-        floor.round_trip(300.0, later);
+        floor.record(300.0, later);
         assert_eq!(floor.ms(), 10.0, "one period on, the floor holds");
-        floor.round_trip(300.0, later + ROUND_TRIP_FLOOR_PERIOD);
+        floor.record(300.0, later + ROUND_TRIP_FLOOR_PERIOD);
         assert_eq!(floor.ms(), 300.0, "two periods on, it has risen");
     }
 }

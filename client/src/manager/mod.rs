@@ -145,8 +145,8 @@ impl Manager {
     }
 
     /// The tolerance decisions use now: the user's, times the factors the server's load
-    /// and the link put on it ([`Manager::load_scale`], [`Manager::link_scale`]; both
-    /// at most [`policy::MAX_LOAD_SCALE`]).
+    /// and the link put on it ([`Manager::load_scale`], [`Manager::link_scale`];
+    /// together at most [`policy::MAX_LOAD_SCALE`]).
     pub fn tolerance(&self) -> f32 {
         self.config.tolerance * (self.load_scale * self.link_scale()).min(policy::MAX_LOAD_SCALE)
     }
@@ -177,8 +177,11 @@ impl Manager {
     /// a step.
     fn feel_load(&mut self, wait: Duration) {
         self.server_wait = wait;
+        // (Within the bound with the link's factor: past it, a factor the tolerance no
+        // longer shows would take its steps down unseen.)
+        let most = policy::MAX_LOAD_SCALE / self.link_scale();
         self.load_scale = if wait > policy::LOAD_HIGH_WAIT {
-            (self.load_scale * policy::LOAD_STEP_UP).min(policy::MAX_LOAD_SCALE)
+            (self.load_scale * policy::LOAD_STEP_UP).min(most)
         } else if wait < policy::LOAD_LOW_WAIT {
             (self.load_scale / policy::LOAD_STEP_DOWN).max(1.0)
         } else {

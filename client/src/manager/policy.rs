@@ -478,7 +478,7 @@ pub const LOAD_STEP_UP: f32 = 1.5;
 pub const LOAD_STEP_DOWN: f32 = 1.03;
 
 /// The longest round trip the default tolerance is tuned for: the fidelity figures
-/// were measured at 0 and 100 ms. Over a link whose looks' shortest round trip is
+/// were measured at 0 and 100 ms (this leaves 100 ms links' looks room for jitter). Over a link whose looks' shortest round trip is
 /// longer, the tolerance grows in proportion (see the manager's `link_scale` module).
 /// At 250 ms, 5.0–8.0 % of the default demo's frames went stale at the default
 /// tolerance, 3.7 % at 4/3 of it and 0.7 % at twice it; with the factor this gives
@@ -491,8 +491,9 @@ pub const LINK_TUNED_ROUND_TRIP: Duration = Duration::from_millis(125);
 /// old lives for long.
 pub const ROUND_TRIP_FLOOR_PERIOD: Duration = Duration::from_secs(10);
 
-/// The most the server's load may multiply the tolerance by: textures live at most
-/// this much longer (in gap growth) than the user asked; past it, frames go stale.
+/// The most the server's load and a long link together may multiply the tolerance by
+/// (the load's factor stops where the two reach it): textures live at most this much
+/// longer (in gap growth) than the user asked; past it, frames go stale.
 pub const MAX_LOAD_SCALE: f32 = 8.0;
 
 /// After a prediction of an object is refused by a server that reports itself

@@ -112,6 +112,10 @@ struct Row {
     /// The mean factor the server's load put on the tolerance, over the frames: how
     /// much longer the textures were let live than asked.
     load_scale_mean: f64,
+    /// The same of the link's factor (1 on 127.0.0.1; see
+    /// [`Manager::link_scale`](relief_client::manager::Manager::link_scale)). In
+    /// `--json` only.
+    link_scale_mean: f64,
     /// Second by second of the flights (all clients, all runs): the frames, the share
     /// stalled and the share missing a texture, the load's factor on the tolerance, the
     /// server's load as heard, the textures asked for, the final textures that arrived
@@ -538,6 +542,7 @@ fn pooled(clients: u32, tolerance: f32, runs: &[Run]) -> Row {
             }
         },
         load_scale_mean: results().map(|r| r.counters.load_scale_sum).sum::<f64>() / frames.max(1) as f64,
+        link_scale_mean: results().map(|r| r.counters.link_scale_sum).sum::<f64>() / frames.max(1) as f64,
         by_second: by_second(results().flat_map(|r| &r.records)),
     }
 }
