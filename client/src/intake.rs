@@ -141,40 +141,23 @@ fn digest(texture: &pb::ReliefTexture, faces: Faces) -> ContentHash {
 
 #[cfg(test)]
 mod tests {
+    use glam::Vec3;
+    use relief_proto::convert::vec3_to_pb;
+
     use super::*;
 
     fn texture(fill: u8) -> pb::ReliefTexture {
         pb::ReliefTexture {
             width: 2,
             height: 1,
-            origin: Some(pb::Vec3 {
-                x: 0.0,
-                y: 0.0,
-                z: 0.0,
-            }),
-            a: Some(pb::Vec3 {
-                x: 1.0,
-                y: 0.0,
-                z: 0.0,
-            }),
-            b: Some(pb::Vec3 {
-                x: 0.0,
-                y: 1.0,
-                z: 0.0,
-            }),
-            f: Some(pb::Vec3 {
-                x: 0.0,
-                y: 0.0,
-                z: 1.0,
-            }),
+            origin: Some(vec3_to_pb(Vec3::ZERO)),
+            a: Some(vec3_to_pb(Vec3::X)),
+            b: Some(vec3_to_pb(Vec3::Y)),
+            f: Some(vec3_to_pb(Vec3::Z)),
             depth_near: 1.0,
             depth_far: 2.0,
             depth_bits: 8,
-            eye: Some(pb::Vec3 {
-                x: 0.5,
-                y: 0.5,
-                z: -3.0,
-            }),
+            eye: Some(vec3_to_pb(Vec3::new(0.5, 0.5, -3.0))),
             albedo: vec![fill; 6].into(),
             normal: vec![128; 6].into(),
             depth: vec![3, 255].into(),
