@@ -177,16 +177,17 @@ impl Manager {
     /// a step.
     fn feel_load(&mut self, wait: Duration) {
         self.server_wait = wait;
-        // (Within the bound with the link's factor: past it, a factor the tolerance no
-        // longer shows would take its steps down unseen.)
-        let most = policy::MAX_LOAD_SCALE / self.link_scale();
-        self.load_scale = if wait > policy::LOAD_HIGH_WAIT {
-            (self.load_scale * policy::LOAD_STEP_UP).min(most)
+        let stepped = if wait > policy::LOAD_HIGH_WAIT {
+            self.load_scale * policy::LOAD_STEP_UP
         } else if wait < policy::LOAD_LOW_WAIT {
             (self.load_scale / policy::LOAD_STEP_DOWN).max(1.0)
         } else {
             self.load_scale
         };
+        // Within the bound with the link's factor (at most the bound itself, so this is
+        // at least 1): past it, a factor the tolerance no longer shows would take its
+        // steps down unseen.
+        self.load_scale = stepped.min(policy::MAX_LOAD_SCALE / self.link_scale());
         tracing::debug!(
             wait_ms = wait.as_millis() as u64,
             scale = self.load_scale,
