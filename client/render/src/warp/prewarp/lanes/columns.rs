@@ -157,6 +157,8 @@ impl Columns {
             put(first_centre, puts);
             let seconds = puts & (centres.simd_eq(two) & below_b.simd_le(ends)).to_bitmask();
             if seconds != 0 {
+                #[cfg(test)]
+                super::tests::PAIRS_TAKEN.with(|n| n[1].set(n[1].get() + seconds.count_ones() as usize));
                 put(below_b, seconds);
             }
         }

@@ -71,6 +71,8 @@ pub(in crate::warp::prewarp) mod tests {
     thread_local! {
         /// Texels the row blocks took on this thread, visiting leftwards and rightwards.
         pub(in super::super) static TAKEN_IN_ROWS: [Cell<usize>; 2] = const { [Cell::new(0), Cell::new(0)] };
+        /// Spans of two pixel centres the row blocks and the column blocks took.
+        pub(in super::super) static PAIRS_TAKEN: [Cell<usize>; 2] = const { [Cell::new(0), Cell::new(0)] };
         /// Samples the column blocks took, visiting upwards and downwards.
         pub(in super::super) static TAKEN_IN_COLUMNS: [Cell<usize>; 2] = const { [Cell::new(0), Cell::new(0)] };
     }
@@ -134,6 +136,8 @@ pub(in crate::warp::prewarp) mod tests {
             (TAKEN_IN_ROWS.with(read), TAKEN_IN_COLUMNS.with(read))
         };
         let (rows_before, columns_before) = counts();
+        let pairs = || PAIRS_TAKEN.with(|n| [n[0].get(), n[1].get()]);
+        let pairs_before = pairs();
         for name in ["knot", "tree"] {
             let (tracer, centre, eye) = baked_from(&scene, name);
             for projection in [SourceProjection::Orthographic, SourceProjection::Perspective] {
@@ -194,6 +198,15 @@ pub(in crate::warp::prewarp) mod tests {
             visited * 4 < whole_visited * 3,
             "{visited} texels visited, {whole_visited} in whole rows"
         );
+        // Spans of two centres go through the lanes too, in rows and in columns (fails
+        // if they stop being taken).
+        let pairs_after = pairs();
+        for (what, (after, before)) in ["rows", "columns"]
+            .iter()
+            .zip(pairs_after.into_iter().zip(pairs_before))
+        {
+            assert!(after > before, "{what}: no span of two centres taken in lanes");
+        }
         // Each way of visiting rows and columns takes its share in lanes (of every texel
         // visited, empty ones within rows included, when written: rows 27 and 30 %,
         // columns 18 and 19 %).

@@ -241,6 +241,8 @@ pub(in crate::warp::prewarp) fn row_block<const RIGHT: bool>(
                 (da + (db - da) * t).to_array(),
                 lerp_attributes(&attributes_a, &attributes_b, t),
             );
+            #[cfg(test)]
+            super::tests::PAIRS_TAKEN.with(|n| n[0].set(n[0].get() + seconds.count_ones() as usize));
             let first_ones = (v.to_array(), depth.to_array(), attributes);
             // In the visit's order, each lane's first sample, then its second.
             let mut j = 0;
