@@ -19,7 +19,7 @@
 //! weakly: once no client holds one, it is gone.
 
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex, PoisonError};
+use std::sync::{Arc, Mutex, PoisonError, Weak};
 use std::time::Instant;
 
 use relief_core::hash::ContentHash;
@@ -27,7 +27,7 @@ use relief_proto::convert::texture_from_pb;
 use relief_proto::pb;
 use relief_render::impostor::Faces;
 
-use crate::manager::{ReadyTexture, WeakReady};
+use crate::manager::{Prepared, ReadyTexture};
 
 /// Where the clients of a process take in their textures: clone it to share it.
 #[derive(Clone, Default)]
@@ -38,7 +38,7 @@ pub struct Intake {
 /// The textures made ready, by digest, and how many were added since the last sweep.
 #[derive(Default)]
 struct Made {
-    by_digest: HashMap<ContentHash, WeakReady>,
+    by_digest: HashMap<ContentHash, Weak<Prepared>>,
     added: usize,
 }
 
@@ -62,7 +62,8 @@ impl Intake {
             .lock()
             .by_digest
             .get(&digest)
-            .and_then(|w| w.upgrade(arrived));
+            .and_then(Weak::upgrade)
+            .map(|prepared| ReadyTexture::shared(prepared, arrived));
         if let Some(ready) = known {
             return Ok(ready);
         }
@@ -70,10 +71,10 @@ impl Intake {
         // later one's is remembered.)
         let ready = ReadyTexture::arrived_at(texture_from_pb(field, texture)?, faces, arrived);
         let mut made = self.lock();
-        made.by_digest.insert(digest, ready.downgrade());
+        made.by_digest.insert(digest, Arc::downgrade(ready.prepared()));
         made.added += 1;
         if made.added >= SWEEP_EVERY {
-            made.by_digest.retain(|_, w| w.is_held());
+            made.by_digest.retain(|_, w| w.strong_count() > 0);
             made.added = 0;
         }
         Ok(ready)
@@ -146,6 +147,11 @@ mod tests {
 
     use super::*;
 
+    /// Whether `a` and `b` hold the very parts made ready once.
+    fn same(a: &ReadyTexture, b: &ReadyTexture) -> bool {
+        Arc::ptr_eq(a.prepared(), b.prepared())
+    }
+
     fn texture(fill: u8) -> pb::ReliefTexture {
         pb::ReliefTexture {
             width: 2,
@@ -182,24 +188,24 @@ mod tests {
         let again = intake
             .ready("t", &texture(10), Faces::Both, second)
             .expect("ready");
-        assert!(one.shares_parts_with(&again), "the same texture shared");
+        assert!(same(&one, &again), "the same texture shared");
         assert_eq!((one.arrived(), again.arrived()), (first, second));
         let other = intake
             .ready("t", &texture(11), Faces::Both, first)
             .expect("ready");
-        assert!(!other.shares_parts_with(&one), "another plane, another texture");
+        assert!(!same(&other, &one), "another plane, another texture");
         let front = intake
             .ready("t", &texture(10), Faces::Front, first)
             .expect("ready");
-        assert!(!front.shares_parts_with(&one), "other faces, another texture");
-        let kept = one.downgrade();
+        assert!(!same(&front, &one), "other faces, another texture");
+        let kept = Arc::downgrade(one.prepared());
         drop((one, again));
-        assert!(kept.upgrade(first).is_none(), "no client holds it");
+        assert!(kept.upgrade().is_none(), "no client holds it");
         let anew = intake
             .ready("t", &texture(10), Faces::Both, first)
             .expect("ready");
-        assert!(kept.upgrade(first).is_none(), "made anew, not the parts let go");
-        assert!(!anew.shares_parts_with(&other) && !anew.shares_parts_with(&front));
+        assert!(kept.upgrade().is_none(), "made anew, not the parts let go");
+        assert!(!same(&anew, &other) && !same(&anew, &front));
         assert_eq!(intake.remembered(), 3);
     }
 
@@ -226,7 +232,7 @@ mod tests {
         let again = intake
             .ready("t", &texture(0), Faces::Both, Instant::now())
             .expect("ready");
-        assert!(again.shares_parts_with(&held));
+        assert!(same(&again, &held));
     }
 
     /// A bad message is an error naming the field, remembered by nothing.

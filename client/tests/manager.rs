@@ -883,61 +883,47 @@ fn a_long_link_lengthens_the_textures_lives() {
     };
 
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
-    let config = Config::default();
-    let asked = config.tolerance;
-    let (mut manager, _commands, arrivals) = wired(&scene, config);
+    let asked = Config::default().tolerance;
     let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
-    let look = |manager: &mut Manager, round_trip: Duration| {
-        arrivals.send(Arrival::LinkRoundTrip { round_trip }).unwrap();
+    // Takes `arrival` in with a frame; the tolerance then, over the user's.
+    let tell = |manager: &mut Manager, arrivals: &UnboundedSender<Arrival>, arrival| {
+        arrivals.send(arrival).unwrap();
         manager.frame(&scene, &camera_round(centre, 0.0), 0.0);
         manager.tolerance() / asked
     };
-    assert_eq!(look(&mut manager, LINK_TUNED_ROUND_TRIP / 2), 1.0, "a short link");
+    let look = |round_trip| Arrival::LinkRoundTrip { round_trip };
+    let load = |wait| Arrival::ServerLoad { wait };
+    let busy = LOAD_HIGH_WAIT + Duration::from_millis(1);
+
+    let (mut near, _commands, arrivals) = wired(&scene, Config::default());
     assert_eq!(
-        look(&mut manager, LINK_TUNED_ROUND_TRIP * 3),
+        tell(&mut near, &arrivals, look(LINK_TUNED_ROUND_TRIP / 2)),
+        1.0,
+        "a short link"
+    );
+    assert_eq!(
+        tell(&mut near, &arrivals, look(LINK_TUNED_ROUND_TRIP * 3)),
         1.0,
         "one slow look"
     );
-    let (mut far, _commands, far_arrivals) = wired(&scene, Config::default());
-    let mut far_look = |round_trip: Duration| {
-        far_arrivals.send(Arrival::LinkRoundTrip { round_trip }).unwrap();
-        far.frame(&scene, &camera_round(centre, 0.0), 0.0);
-        far.tolerance() / asked
-    };
-    assert!((far_look(LINK_TUNED_ROUND_TRIP * 2) - 2.0).abs() < 1e-5);
+
+    let (mut far, _commands, arrivals) = wired(&scene, Config::default());
+    assert!((tell(&mut far, &arrivals, look(LINK_TUNED_ROUND_TRIP * 2)) - 2.0).abs() < 1e-5);
     assert!(
-        (far_look(LINK_TUNED_ROUND_TRIP * 3) - 2.0).abs() < 1e-5,
+        (tell(&mut far, &arrivals, look(LINK_TUNED_ROUND_TRIP * 3)) - 2.0).abs() < 1e-5,
         "the shortest counts"
     );
     assert_eq!(far.link_scale(), 2.0);
     // The server's load on top.
-    far_arrivals
-        .send(Arrival::ServerLoad {
-            wait: LOAD_HIGH_WAIT + Duration::from_millis(1),
-        })
-        .unwrap();
-    far.frame(&scene, &camera_round(centre, 0.0), 0.0);
-    assert!((far.tolerance() / asked - 2.0 * LOAD_STEP_UP).abs() < 1e-5);
+    assert!((tell(&mut far, &arrivals, load(busy)) - 2.0 * LOAD_STEP_UP).abs() < 1e-5);
     for _ in 0..20 {
-        far_arrivals
-            .send(Arrival::ServerLoad {
-                wait: LOAD_HIGH_WAIT + Duration::from_millis(1),
-            })
-            .unwrap();
-        far.frame(&scene, &camera_round(centre, 0.0), 0.0);
+        tell(&mut far, &arrivals, load(busy));
     }
     assert_eq!(far.tolerance() / asked, MAX_LOAD_SCALE);
     // The load's factor stopped where the two reached the bound: its first step down
     // shows at once.
-    far_arrivals
-        .send(Arrival::ServerLoad { wait: Duration::ZERO })
-        .unwrap();
-    far.frame(&scene, &camera_round(centre, 0.0), 0.0);
-    assert!(
-        far.tolerance() / asked < MAX_LOAD_SCALE,
-        "{}",
-        far.tolerance() / asked
-    );
+    let eased = tell(&mut far, &arrivals, load(Duration::ZERO));
+    assert!(eased < MAX_LOAD_SCALE, "{eased}");
 }
 
 /// A prediction's texture is counted by its arrival against the time it was predicted

@@ -2,7 +2,7 @@
 //! one's valid angle probed, those relied on and then the nearest the eye kept, and
 //! each shared with the other placements of its mesh that can show it.
 
-use std::sync::{Arc, Weak};
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -23,18 +23,29 @@ use super::messages::{Arrival, Failure};
 use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, SHED_QUIET, growth_weight};
 use super::{Manager, TextureLifetimes};
 
-/// A texture made ready for the frame loop: its pyramid (with texel connectivity),
+/// What making a texture ready builds: its pyramid (with texel connectivity), critical
+/// points, the gaps it shows at its own eye, its rim and the weight of its gaps'
+/// growth. One per texture, shared by every placement and every client in a process
+/// that holds it (see [`Manager::share`], [`crate::intake`]).
+pub(crate) struct Prepared {
+    pub(super) pyramid: Pyramid,
+    pub(super) critical: CriticalPoints,
+    /// The regions' gaps at the texture's own eye: what it shows at best.
+    pub(super) baseline: Vec<f32>,
+    /// Its rim's curvature: the band past the outline it cannot show from a turned eye.
+    pub(super) rim: Rim,
+    /// What a pixel of its gaps' growth counts for ([`growth_weight`]).
+    pub(super) growth_weight: f32,
+}
+
+/// A texture made ready for the frame loop — its pyramid (with texel connectivity),
 /// critical points, the gaps it shows at its own eye, its rim and the weight of its
-/// gaps' growth. Building this takes milliseconds for big textures, so the texture
-/// sources do it on their own threads; what it holds is shared, not copied, by every
-/// client in a process given the same texture (see [`crate::intake`]).
+/// gaps' growth, shared by every client in a process given the same texture (see
+/// [`crate::intake`]) — and when it reached the client. Building it takes milliseconds
+/// for big textures, so the texture sources do it on their own threads.
 #[derive(Clone)]
 pub struct ReadyTexture {
-    pyramid: Arc<Pyramid>,
-    critical: Arc<CriticalPoints>,
-    baseline: Arc<[f32]>,
-    rim: Rim,
-    growth_weight: f32,
+    prepared: Arc<Prepared>,
     /// When the texture reached the client, before it was made ready.
     arrived: Instant,
 }
@@ -54,88 +65,44 @@ impl ReadyTexture {
             |params| critical.region_gaps(&params),
         );
         let pyramid = Pyramid::new(texture, MIN_LEVEL_EDGE).with_faces(faces);
-        ReadyTexture {
+        let prepared = Prepared {
             rim: Rim::find(&pyramid.levels[0].texture),
             growth_weight: growth_weight(EdgeError::of(&pyramid.levels[0])),
-            pyramid: Arc::new(pyramid),
-            critical: Arc::new(critical),
-            baseline: baseline.into(),
-            arrived,
-        }
+            pyramid,
+            critical,
+            baseline,
+        };
+        ReadyTexture::shared(Arc::new(prepared), arrived)
+    }
+
+    /// A texture made ready already (`prepared`), reached a client at `arrived`.
+    pub(crate) fn shared(prepared: Arc<Prepared>, arrived: Instant) -> ReadyTexture {
+        ReadyTexture { prepared, arrived }
+    }
+
+    /// What making it ready built.
+    pub(crate) fn prepared(&self) -> &Arc<Prepared> {
+        &self.prepared
     }
 
     /// When it reached the client.
     pub fn arrived(&self) -> Instant {
         self.arrived
     }
-
-    /// Whether it holds the very parts `other` holds (made ready once, for both).
-    #[cfg(test)]
-    pub(crate) fn shares_parts_with(&self, other: &ReadyTexture) -> bool {
-        Arc::ptr_eq(&self.pyramid, &other.pyramid)
-    }
-
-    /// A handle on this texture's parts that does not keep them alive: what a process's
-    /// [`Intake`](crate::intake::Intake) remembers of the textures it made ready.
-    pub(crate) fn downgrade(&self) -> WeakReady {
-        WeakReady {
-            pyramid: Arc::downgrade(&self.pyramid),
-            critical: Arc::downgrade(&self.critical),
-            baseline: self.baseline.clone(),
-            rim: self.rim.clone(),
-            growth_weight: self.growth_weight,
-        }
-    }
-}
-
-/// A [`ReadyTexture`]'s parts, the big ones held weakly ([`ReadyTexture::downgrade`]).
-pub(crate) struct WeakReady {
-    pyramid: Weak<Pyramid>,
-    critical: Weak<CriticalPoints>,
-    baseline: Arc<[f32]>,
-    rim: Rim,
-    growth_weight: f32,
-}
-
-impl WeakReady {
-    /// The texture again, reached a client at `arrived`, while some client still holds
-    /// it.
-    pub(crate) fn upgrade(&self, arrived: Instant) -> Option<ReadyTexture> {
-        Some(ReadyTexture {
-            pyramid: self.pyramid.upgrade()?,
-            critical: self.critical.upgrade()?,
-            baseline: self.baseline.clone(),
-            rim: self.rim.clone(),
-            growth_weight: self.growth_weight,
-            arrived,
-        })
-    }
-
-    /// Whether some client still holds it.
-    pub(crate) fn is_held(&self) -> bool {
-        self.pyramid.strong_count() > 0 && self.critical.strong_count() > 0
-    }
 }
 
 impl std::fmt::Debug for ReadyTexture {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let c = &self.pyramid.levels[0].texture.camera;
+        let c = &self.prepared.pyramid.levels[0].texture.camera;
         write!(f, "ReadyTexture({}x{})", c.width, c.height)
     }
 }
 
-/// A texture held for an object. (Placements of one mesh hold one texture alike,
-/// its pyramid and critical points shared: see [`Manager::share`].)
+/// A texture held for an object. (Placements of one mesh hold one texture alike, what
+/// was made ready shared: see [`Manager::share`].)
 #[derive(Clone)]
 pub(super) struct Held {
-    pub(super) pyramid: Arc<Pyramid>,
-    pub(super) critical: Arc<CriticalPoints>,
-    /// The regions' gaps at the texture's own eye: what it shows at best.
-    pub(super) baseline: Arc<[f32]>,
-    /// Its rim's curvature: the band past the outline it cannot show from a turned eye.
-    pub(super) rim: Rim,
-    /// What a pixel of its gaps' growth counts for ([`growth_weight`]).
-    pub(super) growth_weight: f32,
+    pub(super) prepared: Arc<Prepared>,
     pub(super) eye: Vec3,
     pub(super) is_final: bool,
     /// When it reached the client, and the last frame it was shown in (as the shown
@@ -193,14 +160,7 @@ impl Manager {
                     let Some(p) = self.pending.get(&id).copied() else {
                         continue; // Withdrawn meanwhile.
                     };
-                    let ReadyTexture {
-                        pyramid,
-                        critical,
-                        baseline,
-                        rim,
-                        growth_weight,
-                        arrived,
-                    } = *texture;
+                    let ReadyTexture { prepared, arrived } = *texture;
                     if is_final {
                         self.pending.remove(&id);
                         self.record_round_trip(&p, arrived);
@@ -210,11 +170,11 @@ impl Manager {
                     state.received += is_final as u64;
                     // Its own eye: one the server made for a nearby eye serves too (see
                     // `SERVE_REACH`).
-                    let eye = pyramid.levels[0].texture.eye;
-                    let edge = |p: &Pyramid| p.levels[0].texture.camera.width;
-                    let new_edge = edge(&pyramid);
+                    let eye = prepared.pyramid.levels[0].texture.eye;
+                    let edge = |p: &Prepared| p.pyramid.levels[0].texture.camera.width;
+                    let new_edge = edge(&prepared);
                     // Held already, as fine: the texture that served another request.
-                    let answered = |h: &Held| h.is_final && h.eye == eye && edge(&h.pyramid) >= new_edge;
+                    let answered = |h: &Held| h.is_final && h.eye == eye && edge(&h.prepared) >= new_edge;
                     if let Some(held) = state.held.iter_mut().find(|h| answered(h)) {
                         held.relied_on = Instant::now();
                         continue;
@@ -223,7 +183,7 @@ impl Manager {
                     // eye (a finer one asked for as the texels grew: `REFINE_TEXEL`).
                     let (replaced, kept): (Vec<Held>, Vec<Held>) =
                         std::mem::take(&mut state.held).into_iter().partition(|h| {
-                            h.eye == eye && (!h.is_final || (is_final && edge(&h.pyramid) < new_edge))
+                            h.eye == eye && (!h.is_final || (is_final && edge(&h.prepared) < new_edge))
                         });
                     state.held = kept;
                     for h in &replaced {
@@ -231,11 +191,7 @@ impl Manager {
                     }
                     let held = Held {
                         eye,
-                        pyramid,
-                        critical,
-                        baseline,
-                        rim,
-                        growth_weight,
+                        prepared,
                         is_final,
                         arrived,
                         last_shown: None,

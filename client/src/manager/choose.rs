@@ -77,7 +77,8 @@ pub(super) struct Grade {
 /// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`,
 /// counted [`growth_weight`](super::policy::growth_weight) times over.
 pub(super) fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
-    let texture = &held.pyramid.levels[0].texture;
+    let prepared = &held.prepared;
+    let texture = &prepared.pyramid.levels[0].texture;
     let c = &texture.camera;
     let centre = c.plane_centre();
     let middle = volume_centre(c);
@@ -92,15 +93,15 @@ pub(super) fn growth(held: &Held, eye: Vec3, camera: &Camera) -> f32 {
     // widest.)
     let pixels_per_texel =
         c.a.length().max(c.b.length()) * focal / centre.distance(eye).max(f32::MIN_POSITIVE);
-    held.critical.worst_growth(&params, &held.baseline) * pixels_per_texel * held.growth_weight
+    prepared.critical.worst_growth(&params, &prepared.baseline) * pixels_per_texel * prepared.growth_weight
 }
 
 /// The band (screen pixels) past `held`'s rim that it cannot show alone at `eye`, about
 /// the object's `centre`.
 pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32 {
     let focal = camera.focal_pixels();
-    let texture = &held.pyramid.levels[0].texture;
-    held.rim.band(texture, centre, eye) * focal / centre.distance(eye).max(f32::MIN_POSITIVE)
+    let texture = &held.prepared.pyramid.levels[0].texture;
+    held.prepared.rim.band(texture, centre, eye) * focal / centre.distance(eye).max(f32::MIN_POSITIVE)
 }
 
 /// How far round from `held`'s eye an eye may turn about `axis` through the object's
@@ -274,7 +275,7 @@ impl Manager {
             ..*camera
         };
         let grade = |h: &Held| {
-            let texture = &h.pyramid.levels[0].texture.camera;
+            let texture = &h.prepared.pyramid.levels[0].texture.camera;
             let texel = magnification(texture, &at_eye);
             Grade {
                 growth: growth(h, eye, camera),
@@ -303,7 +304,7 @@ impl Manager {
         let eye = camera.eye_f32();
         let turn = |i: usize| Some(angle_between(centre, held.get(i)?.eye, eye).to_degrees());
         let shown = held.get(texture)?;
-        let drawn = &shown.pyramid.levels.get(level)?.texture.camera;
+        let drawn = &shown.prepared.pyramid.levels.get(level)?.texture.camera;
         Some(ShownTexture {
             turn_deg: turn(texture)?,
             distance_ratio: (shown.eye - centre).length() / (eye - centre).length(),
@@ -355,8 +356,8 @@ impl Manager {
             })
             .min_by(|a, b| a.2.total_cmp(&b.2).then(a.3.total_cmp(&b.3)))
             .map(|(i, h, _, _)| {
-                let level = h.pyramid.level_for(camera, MAX_TEXEL_PIXELS) + PARTNER_LEVELS_COARSER;
-                (i, level.min(h.pyramid.levels.len() - 1))
+                let level = h.prepared.pyramid.level_for(camera, MAX_TEXEL_PIXELS) + PARTNER_LEVELS_COARSER;
+                (i, level.min(h.prepared.pyramid.levels.len() - 1))
             })
     }
 }

@@ -116,7 +116,13 @@ impl Manager {
                 && !sprite_holds[k]
             {
                 let at = |(texture, level): (usize, usize)| {
-                    self.objects[k].held.get(texture)?.pyramid.levels.get(level)
+                    self.objects[k]
+                        .held
+                        .get(texture)?
+                        .prepared
+                        .pyramid
+                        .levels
+                        .get(level)
                 };
                 let Some(shown) = at((texture, level)) else {
                     continue;

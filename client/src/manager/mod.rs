@@ -52,8 +52,8 @@ use relief_render::geometry::{GeometryReason, geometry_reason};
 
 use crate::predict::{Predictor, view_of};
 
+pub(crate) use cache::Prepared;
 pub use cache::ReadyTexture;
-pub(crate) use cache::WeakReady;
 pub use choose::{Show, ShownTexture};
 pub use counters::{Counters, RenderStages, StaleCauses, TextureLifetimes, late_fraction};
 pub use messages::{Arrival, Command, Failure, TextureRequest};
@@ -392,6 +392,7 @@ impl Manager {
                         held[j].relied_on = now;
                     }
                     let level = held[i]
+                        .prepared
                         .pyramid
                         .level_for(camera, texel_pixels(&scene.objects[k], camera));
                     Show::Impostor {
