@@ -185,6 +185,49 @@ fn predicted_textures_are_made_for_eyes_past_the_predicted_one() {
     assert!((eye.distance(centre) - future.distance(centre)).abs() < 0.05);
 }
 
+/// An eye heading straight for the sphere, near enough by the horizon to draw it as
+/// geometry but not yet when a texture asked for now could come back: the texture is
+/// asked ahead for the last eye before that, not for none.
+#[test]
+fn an_object_too_near_by_the_horizon_is_predicted_for_before_it() {
+    use relief_render::geometry::{GeometryReason, geometry_reason};
+
+    let scene = Scene::load("default").unwrap();
+    let sphere = scene.object("sphere").unwrap();
+    let centre = sphere.world_bounds().center();
+    // A round trip of 2 s, so that the horizon is 0.55 s past it.
+    let config = Config {
+        initial_latency: 2.0,
+        ..Config::default()
+    };
+    let (mut manager, mut commands) = unanswered(&scene, config);
+    // 1 m/s towards the centre from 4.4 m: too near by the horizon from the first frame
+    // (4.4 − 2.55 m is within the sphere's near margin), not 2 s ahead.
+    let eye_at = |t: f32| centre + Vec3::new(0.0, 0.0, 4.4 - t);
+    let too_near = |eye: Vec3| geometry_reason(sphere, eye.as_dvec3()) == Some(GeometryReason::TooNear);
+    assert!(too_near(eye_at(2.55)) && !too_near(eye_at(0.3 + 2.0)));
+    let mut predicted = Vec::new();
+    for frame in 0..10 {
+        let t = frame as f32 / 30.0;
+        predicted.extend(requests_from_frame(
+            &mut manager,
+            &mut commands,
+            &scene,
+            (eye_at(t), centre, t as f64),
+            "sphere",
+            true,
+        ));
+    }
+    let eye = *predicted.last().expect("nothing asked ahead for the sphere");
+    // (The lead takes it no nearer: a texture from nearer still would be drawn as
+    // geometry.)
+    assert!(!too_near(eye), "asked ahead for {eye}, too near to be shown");
+    assert!(
+        eye.distance(centre) < eye_at(0.3).distance(centre),
+        "asked for {eye}: not ahead"
+    );
+}
+
 #[test]
 fn a_texture_far_too_coarse_for_the_screen_gives_way_to_geometry() {
     let scene = Arc::new(Scene::load("default").unwrap());

@@ -537,6 +537,11 @@ pub const HORIZON_MARGIN_S: f64 = 0.05;
 /// shown where 3,328–3,365 were.)
 pub const PREDICTED_VIEW_MARGIN: f32 = 30.0 * PI / 180.0;
 
+/// Times between the round trip and the horizon at which an object in view now, but
+/// out of view or too near at the horizon, is looked for to be planned for (see
+/// `Manager::prediction`): enough to find the last glimpse of one swept past.
+pub const HORIZON_FALLBACK_STEPS: usize = 4;
+
 /// The farthest ahead predictions look, seconds: the predictor's quadratic fit of the
 /// recent eyes means little further out.
 pub const MAX_HORIZON_S: f64 = 3.0;

@@ -20,10 +20,10 @@ use super::around::angle_between;
 use super::choose::{Grade, held_covering, held_partners, probe_lone_reach};
 use super::messages::{Command, TextureRequest};
 use super::policy::{
-    HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD, LEAD_DISTANCE_SLACK,
-    LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PENDING_DISTANCE_SLACK, PENDING_REACH,
-    PREDICTED_VIEW_MARGIN, REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH, asked_for,
-    largest_edge,
+    HORIZON_FALLBACK_STEPS, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
+    LEAD_DISTANCE_SLACK, LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PENDING_DISTANCE_SLACK,
+    PENDING_REACH, PREDICTED_VIEW_MARGIN, REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH,
+    asked_for, largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -310,28 +310,50 @@ impl Manager {
         // The round trip to plan for, with time to spare, and the eye then.
         let horizon = (HORIZON_SPARE * self.latency(k) + HORIZON_MARGIN_S).min(MAX_HORIZON_S);
         let motion = self.predictor.motion()?;
-        let future = motion.at(horizon);
         let object = &scene.objects[k];
-        // Drawn as geometry from there: nothing to ask for.
-        if geometry_reason(object, future) == Some(GeometryReason::TooNear) {
-            return None;
-        }
-        let future = object.to_local(future);
-        let from_future = Camera {
-            eye: future.as_dvec3(),
-            ..*camera
-        };
-        // Seen from there looking as now (turned by up to the margin), or — where the
-        // view is turning faster than the margin allows for (a corner of the path) — in
-        // the view as it will then look. (With the margin round that view too, or every
-        // turn taken into account, the forest's wandering flight asked a fifth more
-        // predictions and went stale more.)
         let bounds = &object.local_bounds;
-        let in_view = from_future.may_see_turned(bounds, PREDICTED_VIEW_MARGIN)
-            || (motion.view_turn(horizon) > PREDICTED_VIEW_MARGIN
-                && object
-                    .local_camera(&motion.camera_at(horizon, world_camera))
-                    .may_see(bounds));
+        // Shown as an impostor from `ahead` seconds on: not too near, and seen from there
+        // looking as now (turned by up to the margin), or — where the view is turning
+        // faster than the margin allows for (a corner of the path) — in the view as it
+        // will then look. (With the margin round that view too, or every turn taken
+        // into account, the forest's wandering flight asked a fifth more predictions
+        // and went stale more.)
+        let shown_at = |ahead: f64| {
+            let eye = motion.at(ahead);
+            if geometry_reason(object, eye) == Some(GeometryReason::TooNear) {
+                return None;
+            }
+            let local = object.to_local(eye);
+            let from_there = Camera {
+                eye: local.as_dvec3(),
+                ..*camera
+            };
+            let in_view = from_there.may_see_turned(bounds, PREDICTED_VIEW_MARGIN)
+                || (motion.view_turn(ahead) > PREDICTED_VIEW_MARGIN
+                    && object
+                        .local_camera(&motion.camera_at(ahead, world_camera))
+                        .may_see(bounds));
+            Some(in_view)
+        };
+        // An object in view now that will be out of view, or too near, at the horizon
+        // is still shown until then: planned for the last of the times between the
+        // round trip and the horizon it is shown at. (Planned for the horizon alone, an
+        // eye sweeping past the rock in a lossy flight saw it turned 90° round
+        // unforeseen. Looked for whether in view now or not, the forest asked 10 %
+        // more predictions and went stale more.)
+        let (mut ahead, mut shown) = (horizon, shown_at(horizon));
+        if shown != Some(true) && camera.may_see(bounds) {
+            let arrival = self.latency(k).min(horizon);
+            let sooner = (1..=HORIZON_FALLBACK_STEPS)
+                .map(|step| horizon - (horizon - arrival) * step as f64 / HORIZON_FALLBACK_STEPS as f64);
+            if let Some(found) = sooner.map(|t| (t, shown_at(t))).find(|(_, s)| *s == Some(true)) {
+                (ahead, shown) = found;
+            }
+        }
+        // Drawn as geometry from there: nothing to ask for.
+        let in_view = shown?;
+        let horizon = ahead;
+        let future = object.to_local(motion.at(horizon));
         let held = if in_view {
             // (Asked for as soon as a texture would pay: see `GEOMETRY_STAND_IN`.)
             let grades = self.grades(scene, k, future, camera)?;
