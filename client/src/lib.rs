@@ -12,7 +12,8 @@
 //!
 //! - [`manager`] — per object and frame: geometry or impostor, which texture, what to
 //!   ask for; its tuning in [`manager::policy`].
-//! - [`predict`] — the viewpoint predictor (least-squares quadratic fit of recent eyes).
+//! - [`predict`] — the viewpoint predictor (least-squares quadratic fit of recent eyes,
+//!   extrapolated as a steady turn).
 //! - [`source`] — where textures come from: a server over gRPC, or the in-process
 //!   generator.
 //! - [`remote`] — the client side of the protocol: scenes up, textures down,

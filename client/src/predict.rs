@@ -5,8 +5,8 @@
 //! samples' mean time (where a quadratic fit's slope and curvature are truest) and
 //! extrapolated as a steady turn: the velocity turning at the rate the acceleration
 //! across it turns it, the speed changing as the acceleration along it changes it.
-//! Straight paths, at a steady speed or a steady change of speed, and orbits are
-//! predicted exactly. The view turns on at the mean rate it turned over the same
+//! Straight paths, at a steady speed or a steady change of speed, are predicted
+//! exactly, and orbits closely (the fit's bias: a centimetre a second ahead). The view turns on at the mean rate it turned over the same
 //! samples.
 //!
 //! (Extrapolated as the quadratic itself, an orbit of the default demo was off by
@@ -44,9 +44,9 @@ const CORNER_TURN: f64 = 20.0 * std::f64::consts::PI / 180.0;
 /// an orbit of 240 frames turns 45° a second, 20° in a frame of 0.44 s.
 const CORNER_TURN_RATE: f64 = std::f64::consts::PI;
 
-/// A turn (radians, over the time predicted) below which the eye is foreseen along the
-/// fitted quadratic: the two differ by a part in `MIN_TURN²/6` of the way gone, and the
-/// turn's terms lose precision as it vanishes.
+/// A turn (radians, from the samples' mean time to the time predicted) below which the
+/// eye is foreseen along the fitted quadratic: the two differ by about `MIN_TURN²/6` of
+/// the way gone, and the turn's terms lose precision as it vanishes.
 const MIN_TURN: f64 = 1e-3;
 
 /// The farthest the view is foreseen to turn, radians: a turn kept up much longer
@@ -201,7 +201,8 @@ impl Motion {
     /// (see the [module](self)): its velocity turned at the rate `ω` the acceleration
     /// across it turns it, about the axis it turns it about, its speed changed at the
     /// rate `α` the acceleration along it changes it. Where it hardly turns, or turns
-    /// faster than a curve is followed ([`CORNER_TURN_RATE`]), the fitted quadratic.
+    /// faster than a curve is followed (`CORNER_TURN_RATE`: a turn that tight is a corner the
+    /// history will start again from), the fitted quadratic.
     /// (That sample's eye where neither gives a finite position.)
     pub fn at(&self, dt: f64) -> DVec3 {
         let t = dt - self.mid;

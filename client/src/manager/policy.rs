@@ -537,13 +537,14 @@ pub const HORIZON_MARGIN_S: f64 = 0.05;
 /// shown where 3,328–3,365 were.)
 pub const PREDICTED_VIEW_MARGIN: f32 = 30.0 * PI / 180.0;
 
-/// Times between the round trip and the horizon at which an object in view now, but
-/// out of view or too near at the horizon, is looked for to be planned for (see
-/// `Manager::prediction`): enough to find the last glimpse of one swept past.
+/// How many times, evenly spaced back from the horizon to the round trip, an object in
+/// view now but not shown at the horizon is looked for at, to plan for its last glimpse
+/// (see `Manager::prediction`): the spacing is a frame or two at a 100 ms round trip,
+/// about what a frame's own planning moves on by.
 pub const HORIZON_FALLBACK_STEPS: usize = 4;
 
-/// The farthest ahead predictions look, seconds: the predictor's quadratic fit of the
-/// recent eyes means little further out.
+/// The farthest ahead predictions look, seconds: the predictor's fit of the recent eyes
+/// means little further out (but on a steady orbit).
 pub const MAX_HORIZON_S: f64 = 3.0;
 
 /// How often [`Manager::warm_up`](super::Manager::warm_up) looks for the first

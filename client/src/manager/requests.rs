@@ -137,7 +137,7 @@ fn path_beyond(object: &SceneObject, motion: &Motion, horizon: f64, span: f64) -
 
 /// What [`Manager::predict_for`] decides from ([`Manager::prediction`]).
 pub(super) struct Prediction {
-    /// Seconds ahead.
+    /// Seconds ahead the eye is planned for.
     horizon: f64,
     /// The eye's motion as fitted, to follow its path past `future` ([`path_beyond`]).
     motion: Motion,
@@ -291,12 +291,14 @@ impl Manager {
     }
 
     /// Where the eye will be once a request for object `k` made now comes back (in the
-    /// object's frame, as `camera` is; `world_camera` is the same in the world), and how
-    /// each held texture grades there (none where the object will be out of view: see
-    /// [`Prediction::held`]): what [`Manager::predict_for`] decides from. `None` where
-    /// nothing is to be asked ahead: not predicting, no eye observed yet, or drawn as
-    /// geometry from there. It only reads, so a frame works it out for every object at
-    /// once.
+    /// object's frame, as `camera` is; `world_camera` is the same in the world) — or, for
+    /// an object in view now that will not be shown by then, where it last will be
+    /// (`HORIZON_FALLBACK_STEPS`) — and how each held texture grades there (none where
+    /// the object will be out of view: see [`Prediction::held`]): what
+    /// [`Manager::predict_for`] decides from. `None` where nothing is to be asked ahead:
+    /// not predicting, no eye observed yet, drawn as geometry from there, or in view now
+    /// and not shown again once a texture could come. It only reads, so a frame works it
+    /// out for every object at once.
     pub(super) fn prediction(
         &self,
         scene: &Scene,
@@ -307,7 +309,7 @@ impl Manager {
         if !self.config.predict {
             return None;
         }
-        // The round trip to plan for, with time to spare, and the eye then.
+        // The round trip to plan for, with time to spare.
         let horizon = (HORIZON_SPARE * self.latency(k) + HORIZON_MARGIN_S).min(MAX_HORIZON_S);
         let motion = self.predictor.motion()?;
         let object = &scene.objects[k];
@@ -341,19 +343,22 @@ impl Manager {
         // eye sweeping past the rock in a lossy flight saw it turned 90° round
         // unforeseen. Looked for whether in view now or not, the forest asked 10 %
         // more predictions and went stale more.)
+        // Where it is not shown then either, nothing is asked, and what was asked is
+        // kept: the predictions for its last glimpse are still coming (withdrawn, they
+        // were lost once that glimpse came within the round trip).
         let (mut ahead, mut shown) = (horizon, shown_at(horizon));
         if shown != Some(true) && camera.may_see(bounds) {
-            let arrival = self.latency(k).min(horizon);
+            let arrival = self.latency(k);
             let sooner = (1..=HORIZON_FALLBACK_STEPS)
                 .map(|step| horizon - (horizon - arrival) * step as f64 / HORIZON_FALLBACK_STEPS as f64);
-            if let Some(found) = sooner.map(|t| (t, shown_at(t))).find(|(_, s)| *s == Some(true)) {
-                (ahead, shown) = found;
-            }
+            (ahead, shown) = (arrival < horizon)
+                .then(|| sooner.map(|t| (t, shown_at(t))).find(|(_, s)| *s == Some(true)))
+                .flatten()
+                .unwrap_or((horizon, None));
         }
         // Drawn as geometry from there: nothing to ask for.
         let in_view = shown?;
-        let horizon = ahead;
-        let future = object.to_local(motion.at(horizon));
+        let future = object.to_local(motion.at(ahead));
         let held = if in_view {
             // (Asked for as soon as a texture would pay: see `GEOMETRY_STAND_IN`.)
             let grades = self.grades(scene, k, future, camera)?;
@@ -362,7 +367,7 @@ impl Manager {
             None
         };
         Some(Prediction {
-            horizon,
+            horizon: ahead,
             motion,
             future,
             held,
