@@ -356,7 +356,7 @@ impl Manager {
                 .flatten()
                 .unwrap_or((horizon, None));
         }
-        // Drawn as geometry from there: nothing to ask for.
+        // Drawn as geometry from there, or not shown again: nothing to ask for.
         let in_view = shown?;
         let future = object.to_local(motion.at(ahead));
         let held = if in_view {
