@@ -478,8 +478,9 @@ pub const LOAD_STEP_UP: f32 = 1.5;
 pub const LOAD_STEP_DOWN: f32 = 1.03;
 
 /// The longest round trip the default tolerance is tuned for: the fidelity figures
-/// were measured at 0 and 100 ms (this leaves 100 ms links' looks room for jitter). Over a link whose looks' shortest round trip is
-/// longer, the tolerance grows in proportion (see the manager's `link_scale` module).
+/// were measured at 0 and 100 ms (this leaves 100 ms links' looks room for jitter).
+/// Over a link whose looks' shortest round trip is longer, the tolerance grows in
+/// proportion (see the manager's `link_scale` module).
 /// At 250 ms, 5.0–8.0 % of the default demo's frames went stale at the default
 /// tolerance, 3.7 % at 4/3 of it and 0.7 % at twice it; with the factor this gives
 /// there (2.0), 0.45–0.68 % (3 runs).

@@ -310,7 +310,8 @@ impl Manager {
             return None;
         }
         // The round trip to plan for, with time to spare.
-        let horizon = (HORIZON_SPARE * self.latency(k) + HORIZON_MARGIN_S).min(MAX_HORIZON_S);
+        let round_trip = self.latency(k);
+        let horizon = (HORIZON_SPARE * round_trip + HORIZON_MARGIN_S).min(MAX_HORIZON_S);
         let motion = self.predictor.motion()?;
         let object = &scene.objects[k];
         let bounds = &object.local_bounds;
@@ -348,10 +349,9 @@ impl Manager {
         // were lost once that glimpse came within the round trip).
         let (mut ahead, mut shown) = (horizon, shown_at(horizon));
         if shown != Some(true) && camera.may_see(bounds) {
-            let arrival = self.latency(k);
             let sooner = (1..=HORIZON_FALLBACK_STEPS)
-                .map(|step| horizon - (horizon - arrival) * step as f64 / HORIZON_FALLBACK_STEPS as f64);
-            (ahead, shown) = (arrival < horizon)
+                .map(|step| horizon - (horizon - round_trip) * step as f64 / HORIZON_FALLBACK_STEPS as f64);
+            (ahead, shown) = (round_trip < horizon)
                 .then(|| sooner.map(|t| (t, shown_at(t))).find(|(_, s)| *s == Some(true)))
                 .flatten()
                 .unwrap_or((horizon, None));
