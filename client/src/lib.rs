@@ -40,7 +40,7 @@
 //! let scene = Arc::new(Scene::load("orbit-sphere")?);
 //! let mut manager = local_manager(&scene, Config::default());
 //! let camera = scene.path.pose(0).unwrap().camera(scene.fov_y_degrees, 160, 90)?;
-//! assert!(manager.warm_up(&scene, &camera, std::time::Duration::from_secs(30)));
+//! assert!(manager.warm_up(&scene, &[camera], std::time::Duration::from_secs(30)));
 //! let shows = manager.frame(&scene, &camera, 0.0);
 //! assert!(shows.iter().any(|show| matches!(show, Show::Impostor { .. })));
 //! let frame = manager.render(&scene, &shows, &camera, &mut GBuffer::new(160, 90));

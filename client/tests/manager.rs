@@ -25,7 +25,7 @@ fn still_eyes_draw_sprites_and_moving_eyes_warp() {
     let view = |eye: Vec3, at: Vec3| Camera::look_at(eye, at, Vec3::Y, 60.0, 160, 90).unwrap();
     let camera = view(Vec3::new(2.0, 3.0, 9.0), Vec3::new(0.0, 1.0, 0.0));
     assert!(
-        manager.warm_up(&scene, &camera, Duration::from_secs(60)),
+        manager.warm_up(&scene, &[camera], Duration::from_secs(60)),
         "textures did not arrive"
     );
     let shows = manager.frame(&scene, &camera, 0.0);
@@ -239,7 +239,7 @@ fn a_texture_far_too_coarse_for_the_screen_gives_way_to_geometry() {
     let eye = centre + Vec3::new(0.0, 0.5, 8.0);
     // Textures sized for a small screen …
     let small = Camera::look_at(eye, centre, Vec3::Y, 60.0, 64, 36).unwrap();
-    assert!(manager.warm_up(&scene, &small, Duration::from_secs(60)));
+    assert!(manager.warm_up(&scene, &[small], Duration::from_secs(60)));
     assert!(matches!(
         manager.frame(&scene, &small, 0.0)[sphere],
         Show::Impostor { .. }
@@ -469,7 +469,7 @@ fn between_two_textures_the_other_is_drawn_behind() {
     let camera_at = |degrees: f32| camera_round(centre, degrees);
     for degrees in [0.0, 70.0] {
         assert!(
-            manager.warm_up(&scene, &camera_at(degrees), Duration::from_secs(60)),
+            manager.warm_up(&scene, &[camera_at(degrees)], Duration::from_secs(60)),
             "textures for {degrees}° did not arrive"
         );
     }
@@ -517,7 +517,7 @@ fn stale_object_frames_are_counted_by_cause() {
     );
 
     let mut manager = served_locally(&scene, config);
-    assert!(manager.warm_up(&scene, &camera_at(0.0), Duration::from_secs(60)));
+    assert!(manager.warm_up(&scene, &[camera_at(0.0)], Duration::from_secs(60)));
     manager.frame(&scene, &camera_at(50.0), 0.0);
     let causes = manager.counters.stale_causes;
     assert_eq!(
@@ -525,6 +525,29 @@ fn stale_object_frames_are_counted_by_cause() {
         (0, 0, 1)
     );
     assert_eq!(manager.counters.stale_frames, 1);
+}
+
+/// A warm-up readies every view it is given, not the first alone: warmed up for the
+/// sphere from 0° and 50° round it, neither frame is stale (warmed up for 0° alone, the
+/// frame at 50° is: see `stale_object_frames_are_counted_by_cause`).
+#[test]
+fn a_warm_up_readies_every_view_it_is_given() {
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
+    let camera_at = |degrees: f32| camera_round(centre, degrees);
+    let config = Config {
+        predict: false,
+        ..Config::default()
+    };
+    let mut manager = served_locally(&scene, config);
+    assert!(manager.warm_up(
+        &scene,
+        &[camera_at(0.0), camera_at(50.0)],
+        Duration::from_secs(60)
+    ));
+    manager.frame(&scene, &camera_at(50.0), 0.0);
+    manager.frame(&scene, &camera_at(0.0), 0.1);
+    assert_eq!(manager.counters.stale_frames, 0);
 }
 
 /// An object without a valid texture is drawn exactly as geometry where that costs no
@@ -570,7 +593,7 @@ fn a_stale_object_stands_in_as_geometry_where_that_costs_little() {
             "{distance} m: {wanted} texels"
         );
         let mut manager = served_locally(&scene, config.clone());
-        assert!(manager.warm_up(&scene, &from, Duration::from_secs(60)));
+        assert!(manager.warm_up(&scene, &[from], Duration::from_secs(60)));
         let shows = manager.frame(&scene, &to, 0.0);
         let counters = &manager.counters;
         // Either way a texture for the eye is asked for now.
@@ -615,7 +638,7 @@ fn a_lone_texture_goes_stale_when_its_rim_band_opens() {
     };
     let mut manager = served_locally(&scene, config);
     let first = camera_round(centre, 0.0);
-    assert!(manager.warm_up(&scene, &first, Duration::from_secs(60)));
+    assert!(manager.warm_up(&scene, &[first], Duration::from_secs(60)));
     let radius_px = scene.objects[sphere].world_bounds().extent().x * 0.5 * first.focal_pixels()
         / first.eye.as_vec3().distance(centre);
     let expected = (1.0 - LONE_BAND / radius_px).acos().to_degrees();
@@ -722,7 +745,7 @@ fn warm_up_predictions_are_needed_when_the_flight_starts() {
     let (mut manager, mut commands) = unanswered(&scene, Config::default());
     let limit = Duration::from_secs(1);
     // (Nobody answers: it waits out the limit.)
-    assert!(!manager.warm_up(&scene, &camera, limit));
+    assert!(!manager.warm_up(&scene, &[camera], limit));
     let mut needed = Vec::new();
     let mut withdrawn = Vec::new();
     while let Ok(command) = commands.try_recv() {

@@ -201,15 +201,18 @@ impl Manager {
         self.pending.len()
     }
 
-    /// Before the first frame: asks for the textures `camera` needs and waits (at most
-    /// `limit`) until they are all there, so a flight starts with its impostors ready.
-    /// Returns whether they all arrived. Counters start afresh afterwards.
-    pub fn warm_up(&mut self, scene: &Scene, camera: &Camera, limit: std::time::Duration) -> bool {
+    /// Before the first frame: asks for the textures each of `cameras` needs (the first
+    /// frame's, and any the flight will soon need) and waits (at most `limit`) until
+    /// they are all there, so a flight starts with its impostors ready. Returns whether
+    /// they all arrived. Counters start afresh afterwards.
+    pub fn warm_up(&mut self, scene: &Scene, cameras: &[Camera], limit: std::time::Duration) -> bool {
         let start = Instant::now();
         self.warm_up_until = Some(start + limit);
         let ready = loop {
             let before = self.counters.stale_frames;
-            self.frame(scene, camera, 0.0);
+            for camera in cameras {
+                self.frame(scene, camera, 0.0);
+            }
             // Previews make a frame valid before the final textures are in; a final
             // arriving after the flight started would count its cold-start round trip
             // as the flight's and make the predictor plan for it.
