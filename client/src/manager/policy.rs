@@ -538,11 +538,20 @@ pub const HORIZON_MARGIN_S: f64 = 0.05;
 /// shown where 3,328–3,365 were.)
 pub const PREDICTED_VIEW_MARGIN: f32 = 30.0 * PI / 180.0;
 
-/// How many times, evenly spaced back from the horizon to the round trip, an object in
+/// How many times, evenly spaced back from the horizon to a typical round trip
+/// ([`GLIMPSE_LATENCY_PERCENTILE`]), an object in
 /// view now but not shown at the horizon is looked for at, to plan for its last glimpse
 /// (see `Manager::prediction`): the spacing is a frame or two at a 100 ms round trip,
 /// about what a frame's own planning moves on by.
 pub const HORIZON_FALLBACK_STEPS: usize = 4;
+
+/// The percentile of the recent round trips from which on an object's last glimpse
+/// is looked for (see [`HORIZON_FALLBACK_STEPS`]): a typical answer can still come in
+/// time for it. (From the planned round trip on, [`LATENCY_PERCENTILE`], one slow
+/// answer of the rock's over a lossy link raised it from 0.6 to 0.97 s as the eye
+/// neared the rock, and the eye's sweep past it, 0.5–1 s ahead, was never planned
+/// for: 20 frames stale.)
+pub const GLIMPSE_LATENCY_PERCENTILE: f64 = 0.5;
 
 /// The farthest ahead predictions look, seconds: the predictor's fit of the recent eyes
 /// means little further out (but on a steady orbit).

@@ -20,10 +20,10 @@ use super::around::angle_between;
 use super::choose::{Grade, held_covering, held_partners, probe_lone_reach};
 use super::messages::{Command, TextureRequest};
 use super::policy::{
-    HORIZON_FALLBACK_STEPS, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE, LATENCY_WINDOW, LEAD,
-    LEAD_DISTANCE_SLACK, LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES, PENDING_DISTANCE_SLACK,
-    PENDING_REACH, PREDICTED_VIEW_MARGIN, REQUESTED_DEPTH_BITS, SERVE_REACH, TEXTURE_LADDER, WITHDRAW_REACH,
-    asked_for, largest_edge,
+    GLIMPSE_LATENCY_PERCENTILE, HORIZON_FALLBACK_STEPS, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE,
+    LATENCY_WINDOW, LEAD, LEAD_DISTANCE_SLACK, LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES,
+    PENDING_DISTANCE_SLACK, PENDING_REACH, PREDICTED_VIEW_MARGIN, REQUESTED_DEPTH_BITS, SERVE_REACH,
+    TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -193,6 +193,11 @@ impl Manager {
     /// An object with [`OWN_LATENCIES`] round trips of its own plans for those: a heavy
     /// object takes longer to trace than the rest.
     pub(super) fn latency(&self, object: usize) -> f64 {
+        self.latency_at(object, LATENCY_PERCENTILE)
+    }
+
+    /// The `percentile` of the recent round trips [`Manager::latency`] plans from.
+    fn latency_at(&self, object: usize, percentile_wanted: f64) -> f64 {
         let own = &self.objects[object].recent_latencies;
         let recent = if own.len() >= OWN_LATENCIES {
             own
@@ -202,7 +207,7 @@ impl Manager {
         if recent.is_empty() {
             return self.config.initial_latency;
         }
-        percentile(recent, LATENCY_PERCENTILE)
+        percentile(recent, percentile_wanted)
     }
 
     /// How urgently a request already out for `object`, or for another placement of its
@@ -339,8 +344,8 @@ impl Manager {
             Some(in_view)
         };
         // An object in view now that will be out of view, or too near, at the horizon
-        // is still shown until then: planned for the last of the times between the
-        // round trip and the horizon it is shown at. (Planned for the horizon alone, an
+        // is still shown until then: planned for the last of the times between a
+        // typical round trip and the horizon it is shown at. (Planned for the horizon alone, an
         // eye sweeping past the rock in a lossy flight saw it turned 90° round
         // unforeseen. Looked for whether in view now or not, the forest asked 10 %
         // more predictions and went stale more.)
@@ -349,9 +354,10 @@ impl Manager {
         // were lost once that glimpse came within the round trip).
         let (mut ahead, mut shown) = (horizon, shown_at(horizon));
         if shown != Some(true) && camera.may_see(bounds) {
+            let typical = self.latency_at(k, GLIMPSE_LATENCY_PERCENTILE);
             let sooner = (1..=HORIZON_FALLBACK_STEPS)
-                .map(|step| horizon - (horizon - round_trip) * step as f64 / HORIZON_FALLBACK_STEPS as f64);
-            (ahead, shown) = (round_trip < horizon)
+                .map(|step| horizon - (horizon - typical) * step as f64 / HORIZON_FALLBACK_STEPS as f64);
+            (ahead, shown) = (typical < horizon)
                 .then(|| sooner.map(|t| (t, shown_at(t))).find(|(_, s)| *s == Some(true)))
                 .flatten()
                 .unwrap_or((horizon, None));
