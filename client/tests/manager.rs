@@ -529,7 +529,11 @@ fn stale_object_frames_are_counted_by_cause() {
 
 /// A warm-up readies every view it is given, not the first alone: warmed up for the
 /// sphere from 0° and 50° round it, neither frame is stale (warmed up for 0° alone, the
-/// frame at 50° is: see `stale_object_frames_are_counted_by_cause`).
+/// frame at 50° is: see `stale_object_frames_are_counted_by_cause`). With predictions
+/// on, a second view from another eye, turned onto what the first does not see, is
+/// readied too, and only the first view predicts (predicted from every view, the
+/// second's predictions, made for the first's eye, were withdrawn by the first's frame
+/// and asked again by its own: over a slow link, never all in).
 #[test]
 fn a_warm_up_readies_every_view_it_is_given() {
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
@@ -548,6 +552,33 @@ fn a_warm_up_readies_every_view_it_is_given() {
     manager.frame(&scene, &camera_at(50.0), 0.0);
     manager.frame(&scene, &camera_at(0.0), 0.1);
     assert_eq!(manager.counters.stale_frames, 0);
+
+    let scene = Arc::new(Scene::load("default").unwrap());
+    // Between the sphere and the knot, looking at one, then from 1.5 m on at the other.
+    let view = |eye: Vec3, at: Vec3| Camera::look_at(eye, at, Vec3::Y, 60.0, 160, 90).unwrap();
+    let sphere = view(Vec3::new(0.0, 2.0, 0.5), Vec3::new(-3.0, 1.0, 0.0));
+    let knot = view(Vec3::new(0.0, 2.0, 2.0), Vec3::new(3.0, 1.3, 0.0));
+    let mut manager = served_locally(&scene, Config::default());
+    assert!(manager.warm_up(&scene, &[sphere, knot], Duration::from_secs(30)));
+    manager.frame(&scene, &knot, 0.0);
+    manager.frame(&scene, &sphere, 0.1);
+    assert_eq!(manager.counters.stale_frames, 0);
+    // Nothing is predicted from the second view: unanswered, the warm-up asks for the
+    // knot only as needed now.
+    let (mut manager, mut commands) = unanswered(&scene, Config::default());
+    assert!(!manager.warm_up(&scene, &[sphere, knot], Duration::from_millis(200)));
+    let mut knot_asked = (0, 0);
+    while let Ok(command) = commands.try_recv() {
+        if let Command::Request(r) = command
+            && r.object == "knot"
+        {
+            match r.needed_in_ms {
+                Some(_) => knot_asked.1 += 1,
+                None => knot_asked.0 += 1,
+            }
+        }
+    }
+    assert_eq!(knot_asked, (1, 0), "(now, predicted)");
 }
 
 /// An object without a valid texture is drawn exactly as geometry where that costs no

@@ -201,18 +201,26 @@ impl Manager {
         self.pending.len()
     }
 
-    /// Before the first frame: asks for the textures each of `cameras` needs (the first
-    /// frame's, and any the flight will soon need) and waits (at most `limit`) until
-    /// they are all there, so a flight starts with its impostors ready. Returns whether
-    /// they all arrived. Counters start afresh afterwards.
+    /// Before the first frame: asks for the textures each of `cameras` needs — the
+    /// first frame's first, then any the flight will soon need — and waits (at most
+    /// `limit`) until they are all there, so a flight starts with its impostors ready.
+    /// Returns whether they all arrived (`true` at once for no camera). Counters start
+    /// afresh afterwards.
+    ///
+    /// Predictions are made from the first camera only: the predictor sees one eye
+    /// while warming up, and from the others' views they would be made for it, asked
+    /// from one view and withdrawn by the next, never all in.
     pub fn warm_up(&mut self, scene: &Scene, cameras: &[Camera], limit: std::time::Duration) -> bool {
         let start = Instant::now();
         self.warm_up_until = Some(start + limit);
+        let predict = self.config.predict;
         let ready = loop {
             let before = self.counters.stale_frames;
-            for camera in cameras {
+            for (k, camera) in cameras.iter().enumerate() {
+                self.config.predict = predict && k == 0;
                 self.frame(scene, camera, 0.0);
             }
+            self.config.predict = predict;
             // Previews make a frame valid before the final textures are in; a final
             // arriving after the flight started would count its cold-start round trip
             // as the flight's and make the predictor plan for it.

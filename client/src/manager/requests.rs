@@ -196,8 +196,9 @@ impl Manager {
         self.latency_at(object, LATENCY_PERCENTILE)
     }
 
-    /// The `percentile` of the recent round trips [`Manager::latency`] plans from.
-    fn latency_at(&self, object: usize, percentile_wanted: f64) -> f64 {
+    /// The `wanted` percentile of the recent round trips [`Manager::latency`] plans
+    /// from.
+    fn latency_at(&self, object: usize, wanted: f64) -> f64 {
         let own = &self.objects[object].recent_latencies;
         let recent = if own.len() >= OWN_LATENCIES {
             own
@@ -207,7 +208,7 @@ impl Manager {
         if recent.is_empty() {
             return self.config.initial_latency;
         }
-        percentile(recent, percentile_wanted)
+        percentile(recent, wanted)
     }
 
     /// How urgently a request already out for `object`, or for another placement of its
@@ -354,6 +355,8 @@ impl Manager {
         // were lost once that glimpse came within the round trip).
         let (mut ahead, mut shown) = (horizon, shown_at(horizon));
         if shown != Some(true) && camera.may_see(bounds) {
+            // (Needed that soon, such a request is often late — and the server puts it
+            // before the predictions needed later.)
             let typical = self.latency_at(k, GLIMPSE_LATENCY_PERCENTILE);
             let sooner = (1..=HORIZON_FALLBACK_STEPS)
                 .map(|step| horizon - (horizon - typical) * step as f64 / HORIZON_FALLBACK_STEPS as f64);
