@@ -88,12 +88,12 @@ pub const WARM_UP_LIMIT: Duration = Duration::from_secs(20);
 /// needs a few frames of motion first. (Warmed up for the first frame alone, the
 /// default demo's knot, orbited at 45° a second, went stale 0.5–0.7 s in, past its
 /// first texture's valid angle, in about half the flights over a 100 ms link with 2 %
-/// loss; with views 0.5 and 1 s in, in none of 24. Those two were 22° apart round the
-/// knot, more than its textures' valid angle: held, they counted as covering the eye's
-/// future, so nothing was predicted between them, and the knot 0.17 s in was drawn
-/// between the two, 3.7 dB below geometry. A quarter of a second apart, they are
-/// 11°.) Only one request for now is out per object, so a cold start's textures of an
-/// object come one after another: the warm-up lasts longer.
+/// loss; with views in its first second, in none of 28. At 0.5 and 1 s, 22° apart
+/// round the knot, wider than its textures' valid angle, the two views' textures
+/// counted as covering the eye's future, so nothing was predicted between them, and
+/// the knot 0.17 s in was drawn between the two, 3.7 dB below geometry. A quarter of a
+/// second apart, they are 11°.) Only one request for now is out per object, so a cold
+/// start's textures of an object come one after another: the warm-up lasts longer.
 pub const WARM_UP_AHEAD_S: [f64; 4] = [0.25, 0.5, 0.75, 1.0];
 
 /// A flight: which path, how fast, how long, at what frame size.

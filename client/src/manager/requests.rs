@@ -346,9 +346,9 @@ impl Manager {
         };
         // An object in view now that will be out of view, or too near, at the horizon
         // is still shown until then: planned for the last of the times between a
-        // typical round trip and the horizon it is shown at. (Planned for the horizon alone, an
-        // eye sweeping past the rock in a lossy flight saw it turned 90° round
-        // unforeseen. Looked for whether in view now or not, the forest asked 10 %
+        // typical round trip and the horizon it is shown at. (Planned for the horizon
+        // alone, an eye sweeping past the rock in a lossy flight saw it turned 90°
+        // round unforeseen. Looked for whether in view now or not, the forest asked 10 %
         // more predictions and went stale more.)
         // Where it is not shown then either, nothing is asked, and what was asked is
         // kept: the predictions for its last glimpse are still coming (withdrawn, they
