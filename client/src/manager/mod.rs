@@ -240,11 +240,8 @@ impl Manager {
         self.predictor = Predictor::default();
         self.counters = Counters::default();
         // The cold start's round trips (scene upload, every object at once) say
-        // little about the flight's, nor does the server's load then. (Kept, the
-        // load of 64 clients warming up for five views each held their tolerance at
-        // 3.3 times the one asked, on average over 20 s of flight.)
+        // little about the flight's.
         self.recent_latencies.clear();
-        self.load_scale = 1.0;
         for o in &mut self.objects {
             o.recent_latencies.clear();
             o.received = 0;
