@@ -6,8 +6,8 @@
 //! extrapolated as a steady turn: the velocity turning at the rate the acceleration
 //! across it turns it, the speed changing as the acceleration along it changes it.
 //! Straight paths, at a steady speed or a steady change of speed, are predicted
-//! exactly, and orbits closely (the fit's bias: a centimetre a second ahead). The view turns on at the mean rate it turned over the same
-//! samples.
+//! exactly, and orbits closely (the fit's bias: a centimetre a second ahead). The view
+//! turns on at the mean rate it turned over the same samples.
 //!
 //! (Extrapolated as the quadratic itself, an orbit of the default demo was off by
 //! 0.49 m a second ahead, half the time; as a turn, by 4 mm. On its straight legs the
@@ -201,8 +201,8 @@ impl Motion {
     /// (see the [module](self)): its velocity turned at the rate `ω` the acceleration
     /// across it turns it, about the axis it turns it about, its speed changed at the
     /// rate `α` the acceleration along it changes it. Where it hardly turns, or turns
-    /// faster than a curve is followed (`CORNER_TURN_RATE`: a turn that tight is a corner the
-    /// history will start again from), the fitted quadratic.
+    /// faster than a curve is followed (`CORNER_TURN_RATE`: a turn that tight is a
+    /// corner the history will start again from), the fitted quadratic.
     /// (That sample's eye where neither gives a finite position.)
     pub fn at(&self, dt: f64) -> DVec3 {
         let t = dt - self.mid;

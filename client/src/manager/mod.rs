@@ -213,14 +213,11 @@ impl Manager {
     pub fn warm_up(&mut self, scene: &Scene, cameras: &[Camera], limit: std::time::Duration) -> bool {
         let start = Instant::now();
         self.warm_up_until = Some(start + limit);
-        let predict = self.config.predict;
         let ready = loop {
             let before = self.counters.stale_frames;
             for (k, camera) in cameras.iter().enumerate() {
-                self.config.predict = predict && k == 0;
-                self.frame(scene, camera, 0.0);
+                self.plan(scene, camera, 0.0, self.config.predict && k == 0);
             }
-            self.config.predict = predict;
             // Previews make a frame valid before the final textures are in; a final
             // arriving after the flight started would count its cold-start round trip
             // as the flight's and make the predictor plan for it.
@@ -252,6 +249,11 @@ impl Manager {
     /// Decides how each object is drawn from `camera` at time `t` (seconds), asking for
     /// textures as needed. Never blocks.
     pub fn frame(&mut self, scene: &Scene, camera: &Camera, t: f64) -> Vec<Show> {
+        self.plan(scene, camera, t, self.config.predict)
+    }
+
+    /// [`Manager::frame`], asking ahead only where `predict` holds.
+    fn plan(&mut self, scene: &Scene, camera: &Camera, t: f64, predict: bool) -> Vec<Show> {
         self.drain(camera, scene);
         let tolerance = self.tolerance();
         self.predictor.observe(t, camera.eye, view_of(camera));
@@ -268,7 +270,7 @@ impl Manager {
         // cores once there are enough objects to share ([`ASSESSMENTS_PER_TASK`]).
         let assess_and_predict = |&k: &usize| {
             let assessment = self.assess(scene, k, world_camera);
-            let prediction = (assessment.reason != Some(GeometryReason::Cheap))
+            let prediction = (predict && assessment.reason != Some(GeometryReason::Cheap))
                 .then(|| self.prediction(scene, k, &assessment.camera, world_camera))
                 .flatten();
             (k, assessment, prediction)

@@ -302,9 +302,10 @@ impl Manager {
     /// (`HORIZON_FALLBACK_STEPS`) — and how each held texture grades there (none where
     /// the object will be out of view: see [`Prediction::held`]): what
     /// [`Manager::predict_for`] decides from. `None` where nothing is to be asked ahead:
-    /// not predicting, no eye observed yet, drawn as geometry from there, or in view now
-    /// and not shown again once a texture could come. It only reads, so a frame works it
-    /// out for every object at once.
+    /// no eye observed yet, drawn as geometry from there, or in view now and not shown
+    /// again once a texture could come (and never asked for where the frame does not
+    /// predict: `Manager::plan`). It only reads, so a frame works it out for every
+    /// object at once.
     pub(super) fn prediction(
         &self,
         scene: &Scene,
@@ -312,9 +313,6 @@ impl Manager {
         camera: &Camera,
         world_camera: &Camera,
     ) -> Option<Prediction> {
-        if !self.config.predict {
-            return None;
-        }
         // The round trip to plan for, with time to spare.
         let round_trip = self.latency(k);
         let horizon = (HORIZON_SPARE * round_trip + HORIZON_MARGIN_S).min(MAX_HORIZON_S);
