@@ -13,6 +13,7 @@
 
 use glam::Vec3;
 use rayon::prelude::*;
+use wide::bytemuck::cast;
 use wide::{f32x8, i16x8, i32x8, u32x8};
 
 use crate::EMPTY_DEPTH;
@@ -72,6 +73,9 @@ fn encode_normal_i16(n: Vec3) -> [i16; 3] {
 fn pack_albedo([r, g, b]: [u8; 3]) -> u32 {
     u32::from_le_bytes([r, g, b, 0])
 }
+
+/// Bit `l` in lane `l`: a lane mask from a bit mask.
+const LANE_BITS: i32x8 = i32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
 
 /// A surface's object, albedo and normal as the buffer stores them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -214,9 +218,9 @@ impl Rows<'_> {
 
     /// [`Rows::keep_nearer_stored`] for the [`LANES`] pixels from `i` whose bits are set
     /// in `lanes` (bit `l` is pixel `i + l`), all with one surface: one vector depth
-    /// test, and whole groups written as arrays (a flat triangle's pixels — the ground
-    /// covers half a frame — cost a few instructions each instead of a test and six
-    /// stores).
+    /// test, and the group written by vector selects (a flat triangle's pixels — the
+    /// ground covers half a frame — cost a few instructions each instead of a test and
+    /// six stores, and a leaf's ragged edge no branch a lane).
     #[inline(always)]
     pub fn keep_nearer_stored_lanes(&mut self, i: usize, lanes: u32, depths: f32x8, stored: &Stored) {
         let group = i..i + LANES;
@@ -233,9 +237,13 @@ impl Rows<'_> {
             }
             return;
         };
-        let nearer = depths.simd_gt(f32x8::ZERO) & depths.simd_lt(f32x8::new(*held));
-        let nearer = nearer.to_bitmask() & lanes;
-        if nearer == ALL_LANES {
+        let old = f32x8::new(*held);
+        let nearer = depths.simd_gt(f32x8::ZERO) & depths.simd_lt(old);
+        let bits = nearer.to_bitmask() & lanes;
+        if bits == 0 {
+            return;
+        }
+        if bits == ALL_LANES {
             *held = depths.to_array();
             let fill = |plane: &mut [u32], value: u32| {
                 if let Ok(plane) = <&mut [u32; LANES]>::try_from(&mut plane[group.clone()]) {
@@ -251,10 +259,20 @@ impl Rows<'_> {
             }
             return;
         }
-        let depths = depths.to_array();
-        for (l, &depth) in depths.iter().enumerate() {
-            if nearer & (1 << l) != 0 {
-                self.set_stored(i + l, depth, stored);
+        let mask = (i32x8::splat(bits as i32) & LANE_BITS).simd_ne(i32x8::ZERO);
+        *held = cast::<i32x8, f32x8>(mask).select(depths, old).to_array();
+        let words = cast::<i32x8, u32x8>(mask);
+        let select_words = |plane: &mut [u32], value: u32| {
+            if let Ok(plane) = <&mut [u32; LANES]>::try_from(&mut plane[group.clone()]) {
+                *plane = words.select(u32x8::splat(value), u32x8::new(*plane)).to_array();
+            }
+        };
+        select_words(self.object, stored.object);
+        select_words(self.albedo, stored.albedo);
+        let halves = i16x8::from_i32x8_saturate(mask);
+        for (plane, value) in self.normal.iter_mut().zip(stored.normal) {
+            if let Ok(plane) = <&mut [i16; LANES]>::try_from(&mut plane[group.clone()]) {
+                *plane = halves.select(i16x8::splat(value), i16x8::new(*plane)).to_array();
             }
         }
     }

@@ -47,7 +47,7 @@ use rayon::prelude::*;
 use tokio::sync::mpsc::{UnboundedReceiver, UnboundedSender};
 
 use relief_core::camera::Camera;
-use relief_core::scene::Scene;
+use relief_core::scene::{Scene, SceneObject};
 use relief_render::geometry::{GeometryReason, geometry_reason};
 
 use crate::predict::{Predictor, view_of};
@@ -440,6 +440,18 @@ struct Assessment {
 }
 
 impl Manager {
+    /// Whether `object` is drawn as geometry from `world_camera` whatever textures are
+    /// held: too near or too cheap ([`geometry_reason`]), or no dearer drawn than the
+    /// texture its eye would ask for warped ([`cheaper_as_geometry`]).
+    pub fn always_geometry(object: &SceneObject, world_camera: &Camera) -> bool {
+        if geometry_reason(object, world_camera.eye).is_some() {
+            return true;
+        }
+        let camera = object.local_camera(world_camera);
+        let (wanted, _) = Self::size_for(object, camera.eye_f32(), &camera);
+        cheaper_as_geometry(object, wanted, 1.0)
+    }
+
     /// Object `k` seen from `world_camera`: its camera, and how its textures grade.
     fn assess(&self, scene: &Scene, k: usize, world_camera: &Camera) -> Assessment {
         let object = &scene.objects[k];

@@ -4,9 +4,11 @@
 //! - [`raytrace`] — BVH build and primary-ray throughput of a bake.
 //! - [`reference`](mod@reference) — a reference frame through the top-level BVH against every object
 //!   in turn.
+//! - [`raster`] — the rasterizer drawing objects along a camera path, against shading.
 //! - [`warp`] — every display method's time against memcpy and a naive pre-warp.
 //! - [`rpc`] — loopback RPC latency against a bare gRPC call; requests end to end.
 
+mod raster;
 mod raytrace;
 mod reference;
 mod rpc;
@@ -22,6 +24,9 @@ pub enum BenchCommand {
     /// A reference frame through the top-level BVH, nearest object first, against
     /// tracing every object in turn.
     Reference(reference::ReferenceBenchArgs),
+    /// The rasterizer drawing objects as geometry along the camera path, against the
+    /// shading pass of the same frames.
+    Raster(raster::RasterArgs),
     /// Display time of every warp method against memcpy and a naive pre-warp.
     Warp(warp::WarpArgs),
     /// Loopback RPC latency against a bare gRPC call, and impostor requests end to end.
@@ -32,6 +37,7 @@ pub fn run(command: BenchCommand) -> Result<()> {
     match command {
         BenchCommand::Raytrace(args) => raytrace::run(args),
         BenchCommand::Reference(args) => reference::run(args),
+        BenchCommand::Raster(args) => raster::run(args),
         BenchCommand::Warp(args) => warp::run(args),
         BenchCommand::Rpc(args) => rpc::run(args),
     }
