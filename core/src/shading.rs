@@ -6,7 +6,7 @@
 //! [`to_rgb8`] clamps and quantises them for PNG output.
 
 use glam::Vec3;
-use wide::{f32x8, i32x8};
+use wide::{f32x8, i32x8, u32x8};
 
 /// A light source. `color` already includes intensity.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -87,6 +87,14 @@ pub const LANES: usize = 8;
 
 /// Each lane's index: `l` in lane `l` (the offsets of [`LANES`] consecutive pixels).
 pub const LANE_INDEX: f32x8 = f32x8::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
+
+/// All ones in the lanes whose bit is set in `bits` (bit `l`, lane `l`): a bit mask
+/// (`to_bitmask`'s) back as a lane mask.
+#[inline(always)]
+pub fn lane_mask(bits: u32) -> u32x8 {
+    let each = u32x8::from([1, 2, 4, 8, 16, 32, 64, 128]);
+    (u32x8::splat(bits) & each).simd_eq(each)
+}
 
 /// [`LANES`] vectors, one SIMD register per component: lane `l` of `x`, `y`, `z` is
 /// vector `l`.

@@ -21,7 +21,7 @@ use relief_core::camera::Camera;
 use relief_core::frame::{Frame, NO_OBJECT};
 use relief_core::scene::Scene;
 use relief_core::shading::{
-    LANE_INDEX, LANES, Specular, SurfaceLanes, SurfacePoint, Vec3x8, to_rgb8, to_rgb8_lanes,
+    LANE_INDEX, LANES, Specular, SurfaceLanes, SurfacePoint, Vec3x8, lane_mask, to_rgb8, to_rgb8_lanes,
 };
 
 /// One pixel's nearest surface, as writers give it and readers get it back.
@@ -73,9 +73,6 @@ fn encode_normal_i16(n: Vec3) -> [i16; 3] {
 fn pack_albedo([r, g, b]: [u8; 3]) -> u32 {
     u32::from_le_bytes([r, g, b, 0])
 }
-
-/// Bit `l` in lane `l`: a lane mask from a bit mask.
-const LANE_BITS: i32x8 = i32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
 
 /// A surface's object, albedo and normal as the buffer stores them.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -259,20 +256,24 @@ impl Rows<'_> {
             }
             return;
         }
-        let mask = (i32x8::splat(bits as i32) & LANE_BITS).simd_ne(i32x8::ZERO);
-        *held = cast::<i32x8, f32x8>(mask).select(depths, old).to_array();
-        let words = cast::<i32x8, u32x8>(mask);
-        let select_words = |plane: &mut [u32], value: u32| {
+        let mask_u32 = lane_mask(bits);
+        *held = cast::<u32x8, f32x8>(mask_u32).select(depths, old).to_array();
+        let select_u32 = |plane: &mut [u32], value: u32| {
             if let Ok(plane) = <&mut [u32; LANES]>::try_from(&mut plane[group.clone()]) {
-                *plane = words.select(u32x8::splat(value), u32x8::new(*plane)).to_array();
+                *plane = mask_u32
+                    .select(u32x8::splat(value), u32x8::new(*plane))
+                    .to_array();
             }
         };
-        select_words(self.object, stored.object);
-        select_words(self.albedo, stored.albedo);
-        let halves = i16x8::from_i32x8_saturate(mask);
+        select_u32(self.object, stored.object);
+        select_u32(self.albedo, stored.albedo);
+        // (All ones stay all ones, saturated to 16 bits.)
+        let mask_i16 = i16x8::from_i32x8_saturate(cast::<u32x8, i32x8>(mask_u32));
         for (plane, value) in self.normal.iter_mut().zip(stored.normal) {
             if let Ok(plane) = <&mut [i16; LANES]>::try_from(&mut plane[group.clone()]) {
-                *plane = halves.select(i16x8::splat(value), i16x8::new(*plane)).to_array();
+                *plane = mask_i16
+                    .select(i16x8::splat(value), i16x8::new(*plane))
+                    .to_array();
             }
         }
     }

@@ -16,7 +16,7 @@ use super::cache::Held;
 use super::policy::{
     COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_MAX_TURN, MAX_TEXEL_PIXELS,
     MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
-    PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, cheaper_as_geometry,
+    PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL,
 };
 
 /// How an object is drawn this frame.
@@ -256,7 +256,7 @@ impl Manager {
     /// own eye, in screen pixels (`INFINITY` when it cannot be warped there), whether it
     /// is too coarse to be shown, and whether a finer one can be had (eq. 4-1) — of the
     /// edge an eye there asks for ([`Manager::size_for`]). `None` where the object costs
-    /// no more drawn as geometry than that texture warped ([`cheaper_as_geometry`]).
+    /// no more drawn as geometry than that texture warped ([`cheaper_as_geometry`](super::policy::cheaper_as_geometry)).
     pub(super) fn grades(
         &self,
         scene: &Scene,
@@ -265,10 +265,10 @@ impl Manager {
         camera: &Camera,
     ) -> Option<Vec<Grade>> {
         let o = &scene.objects[object];
-        let (wanted, _) = Self::size_for(o, eye, camera);
-        if cheaper_as_geometry(o, wanted, 1.0) {
+        if Self::cheaper_drawn(o, eye, camera) {
             return None;
         }
+        let (wanted, _) = Self::size_for(o, eye, camera);
         let centre = o.local_bounds.center();
         let at_eye = Camera {
             eye: eye.as_dvec3(),

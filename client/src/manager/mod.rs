@@ -448,7 +448,13 @@ impl Manager {
             return true;
         }
         let camera = object.local_camera(world_camera);
-        let (wanted, _) = Self::size_for(object, camera.eye_f32(), &camera);
+        Self::cheaper_drawn(object, camera.eye_f32(), &camera)
+    }
+
+    /// Whether `object` costs no more drawn as geometry than the texture an `eye` (in
+    /// its frame, as `camera` is) asks for warped ([`cheaper_as_geometry`]).
+    pub(super) fn cheaper_drawn(object: &SceneObject, eye: glam::Vec3, camera: &Camera) -> bool {
+        let (wanted, _) = Self::size_for(object, eye, camera);
         cheaper_as_geometry(object, wanted, 1.0)
     }
 

@@ -52,12 +52,7 @@ pub(super) fn wide_mask(bits: u32) -> u64x4 {
     (u64x4::splat(u64::from(bits)) & each).simd_eq(each)
 }
 
-/// All ones in the lanes whose bit is set in `bits`.
-#[inline(always)]
-pub(super) fn lane_mask(bits: u32) -> u32x8 {
-    let each = u32x8::from([1, 2, 4, 8, 16, 32, 64, 128]);
-    (u32x8::splat(bits) & each).simd_eq(each)
-}
+pub(super) use relief_core::shading::lane_mask;
 
 /// [`Attributes::lerp`](crate::warp::prewarp::Attributes::lerp) of eight pairs at once, `a[l]` towards `b[l]` by `t[l] ∈ [0,
 /// 1]` (each weight rounded as there): two texels' bytes to a vector of sixteen
