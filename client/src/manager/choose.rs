@@ -14,9 +14,9 @@ use super::Manager;
 use super::around::{angle_between, similar_distance};
 use super::cache::Held;
 use super::policy::{
-    COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_MAX_TURN, MAX_TEXEL_PIXELS,
+    COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_TURN_CAP, MAX_TEXEL_PIXELS,
     MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
-    PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL,
+    PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, lone_max_turn,
 };
 
 /// How an object is drawn this frame.
@@ -72,6 +72,8 @@ pub(super) struct Grade {
     /// Coarser than [`REFINE_TEXEL`] pixels (shown or not) and a finer texture can be
     /// had (the edge asked for now, [`Manager::size_for`], is larger).
     pub(super) finer_available: bool,
+    /// The turn past which it counts as stale shown alone ([`lone_max_turn`]).
+    pub(super) lone_turn: f32,
 }
 
 /// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`,
@@ -120,12 +122,13 @@ pub(super) fn probe_lone_reach(
     tolerance: f32,
 ) -> f32 {
     let from = (held.eye - centre).normalize_or_zero() * distance;
+    let lone_turn = lone_max_turn(&held.prepared.pyramid.levels[0].texture.camera);
     let within = |angle: f32| {
         [angle, -angle].iter().all(|&a| {
             let eye = centre + Quat::from_axis_angle(axis, a) * from;
             let band = band(held, centre, eye, camera);
             // (The growth, dearer, only where the rim and the turn allow.)
-            may_show(band, angle, false, PLANNING_MARGIN, tolerance)
+            may_show(band, angle, lone_turn, false, PLANNING_MARGIN, tolerance)
                 && growth(held, eye, camera) <= LEAD * tolerance
         })
     };
@@ -151,18 +154,32 @@ pub(super) fn widest_within(within: impl Fn(f32) -> bool) -> f32 {
 
 /// Whether a texture leaving a `band` past its rim (pixels: [`band`]) at an eye `turn`
 /// radians round from its own may be shown there, `partnered` or not: alone, the band
-/// under [`LONE_BAND`] and the turn under [`LONE_MAX_TURN`]; with a partner filling the
+/// under [`LONE_BAND`] and the turn under `lone_turn` (its [`lone_max_turn`]); with a partner filling the
 /// band, the band under [`PARTNERED_BAND`] (the texels inside the rim stretch as the
 /// band widens) and the turn under [`MAX_TURN`] — all times `margin` (1 to draw; the
 /// planning margin to plan).
 ///
-/// The bands are the default's: they scale with `tolerance` over [`DEFAULT_TOLERANCE`],
-/// so the one knob — and the server's load, which raises it — trades both predicted
-/// errors for lifetime. (With the band alone fixed, four times the tolerance left the
-/// requests as many: the band, not the gaps, retired the textures.) The turns are where
-/// the warp stops being the object's near side, whatever the tolerance.
-pub(super) fn may_show(band: f32, turn: f32, partnered: bool, margin: f32, tolerance: f32) -> bool {
-    let turn_limit = if partnered { MAX_TURN } else { LONE_MAX_TURN };
+/// The bands and the turn alone are the default's: they scale with `tolerance` over
+/// [`DEFAULT_TOLERANCE`] (the turn up to [`LONE_TURN_CAP`]), so the one knob — and the
+/// server's load, which raises it — trades these predicted errors for lifetime. (With
+/// the band alone fixed, four times the tolerance left the requests as many: the band,
+/// not the gaps, retired the textures; with the lone turn fixed at 15°, 64 clients at
+/// twice the tolerance asked 73 % more textures, living 0.53 s where they lived 1.83;
+/// uncapped, the load's factor let them live 7.3 s, the worst frame 2.5 dB lower.) The
+/// turn partnered is where the warp stops being the object's near side, whatever the
+/// tolerance.
+pub(super) fn may_show(
+    band: f32,
+    turn: f32,
+    lone_turn: f32,
+    partnered: bool,
+    margin: f32,
+    tolerance: f32,
+) -> bool {
+    let turn_limit = match partnered {
+        true => MAX_TURN,
+        false => (lone_turn * tolerance / DEFAULT_TOLERANCE).min(LONE_TURN_CAP),
+    };
     band <= margin * band_limit(partnered, tolerance) && turn <= margin * turn_limit
 }
 
@@ -221,8 +238,8 @@ pub(super) fn held_covering(
         let turn = angle_between(centre, eye, future);
         g.growth <= PLANNING_MARGIN * tolerance
             && !g.finer_available
-            && (may_show(g.band, turn, false, PLANNING_MARGIN, tolerance)
-                || (may_show(g.band, turn, true, PLANNING_MARGIN, tolerance) && partnered(eye)))
+            && (may_show(g.band, turn, g.lone_turn, false, PLANNING_MARGIN, tolerance)
+                || (may_show(g.band, turn, g.lone_turn, true, PLANNING_MARGIN, tolerance) && partnered(eye)))
     })
 }
 
@@ -282,6 +299,7 @@ impl Manager {
                 band: band(h, centre, eye, camera),
                 too_coarse: texel > COARSEST_SHOWN,
                 finer_available: texel > REFINE_TEXEL && texture.width < wanted,
+                lone_turn: lone_max_turn(texture),
             }
         };
         Some(self.objects[object].held.iter().map(grade).collect())
@@ -365,6 +383,7 @@ impl Manager {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::manager::policy::LONE_MAX_TURN;
 
     /// The texture shown among four with these growths, turns 0.7, 0.1, 0.05 and 0.3
     /// from the eye; the third (the nearest) too coarse to be shown. Tolerance 4.
@@ -375,6 +394,7 @@ mod tests {
             band: 0.0,
             too_coarse: false,
             finer_available: false,
+            lone_turn: LONE_MAX_TURN,
         });
         grades[2].too_coarse = true;
         shown_texture(&grades, 4.0, |i| turns[i]).map(|s| s.0)
@@ -395,6 +415,7 @@ mod tests {
             band: 0.0,
             too_coarse,
             finer_available: too_coarse,
+            lone_turn: LONE_MAX_TURN,
         };
         let future = around(40.0);
         let covers = |partner_too_coarse, asked: &[Vec3]| {
@@ -402,14 +423,14 @@ mod tests {
                 (around(0.0), grade(false)),
                 (around(75.0), grade(partner_too_coarse)),
             ];
-            held_covering(Vec3::ZERO, future, &held, asked, 4.0).is_some()
+            held_covering(Vec3::ZERO, future, &held, asked, DEFAULT_TOLERANCE).is_some()
         };
         assert!(covers(false, &[]));
         assert!(!covers(true, &[]));
         assert!(covers(true, &[around(60.0)]));
         // Near a held texture's own eye no partner is needed.
         let near = [(around(35.0), grade(false))];
-        assert!(held_covering(Vec3::ZERO, future, &near, &[], 4.0).is_some());
+        assert!(held_covering(Vec3::ZERO, future, &near, &[], DEFAULT_TOLERANCE).is_some());
     }
 
     /// Alone, a texture may be shown while its rim's band stays under [`LONE_BAND`];
@@ -418,7 +439,9 @@ mod tests {
     fn the_rim_band_decides_what_may_be_shown_alone_or_partnered() {
         let turn = 10f32.to_radians();
         let between = 0.5 * (LONE_BAND + PARTNERED_BAND);
-        let may = |band, turn, partnered, margin| may_show(band, turn, partnered, margin, DEFAULT_TOLERANCE);
+        let may = |band, turn, partnered, margin| {
+            may_show(band, turn, LONE_MAX_TURN, partnered, margin, DEFAULT_TOLERANCE)
+        };
         assert!(may(0.9 * LONE_BAND, turn, false, 1.0));
         assert!(!may(between, turn, false, 1.0));
         assert!(may(between, turn, true, 1.0));
@@ -427,12 +450,20 @@ mod tests {
         // The turn still bounds a texture whose rim shows no band (sharp edges).
         assert!(!may(0.0, 1.1 * LONE_MAX_TURN, false, 1.0));
         assert!(!may(0.0, 1.1 * MAX_TURN, true, 1.0));
-        // Twice the tolerance lets the band open twice as far, and no turn further.
-        let twice = |band, turn, partnered| may_show(band, turn, partnered, 1.0, 2.0 * DEFAULT_TOLERANCE);
+        // Twice the tolerance lets the band open twice as far, and a texture alone turn
+        // twice as far (a partnered one no further).
+        let twice = |band, turn, partnered| {
+            may_show(band, turn, LONE_MAX_TURN, partnered, 1.0, 2.0 * DEFAULT_TOLERANCE)
+        };
         assert!(twice(1.9 * LONE_BAND, turn, false));
         assert!(!twice(2.1 * LONE_BAND, turn, false));
         assert!(twice(1.9 * PARTNERED_BAND, turn, true));
-        assert!(!twice(0.0, 1.1 * LONE_MAX_TURN, false));
+        assert!(twice(0.0, 1.9 * LONE_MAX_TURN, false));
+        assert!(!twice(0.0, 2.1 * LONE_MAX_TURN, false));
+        assert!(!twice(0.0, 1.1 * MAX_TURN, true));
+        // Alone, never past the cap.
+        let tenfold = |turn| may_show(0.0, turn, LONE_MAX_TURN, false, 1.0, 10.0 * DEFAULT_TOLERANCE);
+        assert!(tenfold(0.9 * LONE_TURN_CAP) && !tenfold(1.1 * LONE_TURN_CAP));
     }
 
     #[test]
@@ -449,6 +480,7 @@ mod tests {
             band: 0.0,
             too_coarse: true,
             finer_available: false,
+            lone_turn: LONE_MAX_TURN,
         };
         assert!(shown_texture(&[coarse], 4.0, |_| 0.0).is_none());
     }

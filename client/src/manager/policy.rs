@@ -102,16 +102,39 @@ pub const MAX_TURN: f32 = 60.0 * PI / 180.0;
 /// −5.0, another frame), for about 6 % more requests.)
 pub const MAX_DISTANCE_RATIO: f32 = 1.5;
 
-/// Beyond this turn a texture drawn without a partner counts as stale (and one for now
-/// is asked for): alone, it misses the side of the object the eye has turned to see.
-/// (A curved rim's band, [`LONE_BAND`], says so sooner; this bounds the rest: sharp
-/// edges, open surfaces, and the texels just inside a rim, grazed by the texture's
-/// rays, which a turned eye sees stretched.) At 40°, the scanned bunny flown at a 100 ms
-/// round trip was shown 29° from its only texture early in the flight, its turned side
-/// stepped, 3.10–3.16 dB below geometry's worst frame in 4 runs of 5; at 30°, 1.05–1.08
-/// in 3, the sphere's orbit (`orbit-sphere`) asking 20 textures where two runs at 40°
-/// asked 18 and 19.
-pub const LONE_MAX_TURN: f32 = 30.0 * PI / 180.0;
+/// Beyond this turn a texture of a solid drawn without a partner counts as stale (and
+/// one for now is asked for) at the default tolerance: alone, it misses the side of the
+/// object the eye has turned to see. (A curved rim's band, [`LONE_BAND`], says so
+/// sooner on an object large on screen; this bounds the rest: sharp edges, and the
+/// texels just inside a rim, grazed by the texture's rays, which a turned eye sees
+/// stretched.) A small object's band stays narrow far round: at 30° the demo's sphere,
+/// 70 px across, was shown alone 16° from its first texture, its turned rim ragged,
+/// 3.6–3.8 dB below geometry's worst in 6 runs of 6 (rtt 0 and 100; the same frame from
+/// the same texture with a partner scored as geometry). At 15° (where partners start,
+/// [`PARTNER_FROM`]) −0.2 to −1.5 in 4, as many requests, and the sphere's orbit asks 13
+/// textures where it asked 12 (at 12°, 16, with 9 stale frames in the demo). It scales
+/// with the tolerance up to [`LONE_TURN_CAP`] (see `may_show`).
+pub const LONE_MAX_TURN: f32 = 15.0 * PI / 180.0;
+
+/// The farthest any texture is shown alone, whatever the tolerance, and a texture of
+/// leaves or sheets (perspective, [`projection_for`]) at any: it has no rim of grazed
+/// texels, and trees near the eye turn fast (at 15° the forest at 1280×720 over a 100 ms
+/// round trip went stale in 16–20 % of its frames in 2 runs, against 7–9 % at this,
+/// asking 900–920 predictions where it asked 700–740). At 40°, the scanned bunny flown
+/// at a 100 ms round trip was shown 29° from its only texture early in the flight, its
+/// turned side stepped, 3.10–3.16 dB below geometry's worst frame in 4 runs of 5; at
+/// 30°, 1.05–1.08 in 3.
+pub const LONE_TURN_CAP: f32 = 30.0 * PI / 180.0;
+
+/// The turn past which a texture `texture` (its source camera) counts as stale drawn
+/// alone at the default tolerance: [`LONE_TURN_CAP`] for a perspective one, else
+/// [`LONE_MAX_TURN`].
+pub fn lone_max_turn(texture: &SourceCamera) -> f32 {
+    match texture.centre {
+        Some(_) => LONE_TURN_CAP,
+        None => LONE_MAX_TURN,
+    }
+}
 
 /// A texture drawn without a partner counts as stale once the band past its rim it
 /// cannot show ([`Rim::band`](relief_render::validity::rim::Rim::band)) is wider than
