@@ -20,6 +20,7 @@ use relief_render::warp::params::WarpParams;
 use super::around::{angle_between, similar_distance};
 use super::choose::{growth, widest_within};
 use super::messages::{Arrival, Failure};
+use super::policy::lone_max_turn;
 use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, SHED_QUIET, growth_weight};
 use super::{Manager, TextureLifetimes};
 
@@ -117,6 +118,9 @@ pub(super) struct Held {
     /// Asked for by another placement of the mesh, and shared with this one: counted
     /// in that placement's lifetimes, not here.
     pub(super) shared: bool,
+    /// The turn past which it counts as stale shown alone, at the default tolerance
+    /// ([`lone_max_turn`] of its object).
+    pub(super) lone_turn: f32,
 }
 
 #[derive(Default)]
@@ -189,6 +193,7 @@ impl Manager {
                     for h in &replaced {
                         self.counters.retired.retire(h);
                     }
+                    let object = &scene.objects[p.object];
                     let held = Held {
                         eye,
                         prepared,
@@ -197,8 +202,8 @@ impl Manager {
                         last_shown: None,
                         relied_on: Instant::now(),
                         shared: false,
+                        lone_turn: lone_max_turn(object),
                     };
-                    let object = &scene.objects[p.object];
                     let (local, centre) = (object.local_camera(camera), object.local_bounds.center());
                     if is_final {
                         let angle = probe_valid_angle(&held, centre, &local, tolerance);

@@ -16,7 +16,7 @@ use super::cache::Held;
 use super::policy::{
     COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_TURN_CAP, MAX_TEXEL_PIXELS,
     MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
-    PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, lone_max_turn,
+    PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL,
 };
 
 /// How an object is drawn this frame.
@@ -72,7 +72,8 @@ pub(super) struct Grade {
     /// Coarser than [`REFINE_TEXEL`] pixels (shown or not) and a finer texture can be
     /// had (the edge asked for now, [`Manager::size_for`], is larger).
     pub(super) finer_available: bool,
-    /// The turn past which it counts as stale shown alone ([`lone_max_turn`]).
+    /// The turn past which it counts as stale shown alone, at the default tolerance
+    /// ([`lone_max_turn`](super::policy::lone_max_turn) of its object).
     pub(super) lone_turn: f32,
 }
 
@@ -122,7 +123,7 @@ pub(super) fn probe_lone_reach(
     tolerance: f32,
 ) -> f32 {
     let from = (held.eye - centre).normalize_or_zero() * distance;
-    let lone_turn = lone_max_turn(&held.prepared.pyramid.levels[0].texture.camera);
+    let lone_turn = held.lone_turn;
     let within = |angle: f32| {
         [angle, -angle].iter().all(|&a| {
             let eye = centre + Quat::from_axis_angle(axis, a) * from;
@@ -154,14 +155,16 @@ pub(super) fn widest_within(within: impl Fn(f32) -> bool) -> f32 {
 
 /// Whether a texture leaving a `band` past its rim (pixels: [`band`]) at an eye `turn`
 /// radians round from its own may be shown there, `partnered` or not: alone, the band
-/// under [`LONE_BAND`] and the turn under `lone_turn` (its [`lone_max_turn`]); with a partner filling the
+/// under [`LONE_BAND`] and the turn under `lone_turn` (the texture's at the default
+/// tolerance, [`lone_max_turn`](super::policy::lone_max_turn)); with a partner filling the
 /// band, the band under [`PARTNERED_BAND`] (the texels inside the rim stretch as the
 /// band widens) and the turn under [`MAX_TURN`] — all times `margin` (1 to draw; the
 /// planning margin to plan).
 ///
 /// The bands and the turn alone are the default's: they scale with `tolerance` over
 /// [`DEFAULT_TOLERANCE`] (the turn up to [`LONE_TURN_CAP`]), so the one knob — and the
-/// server's load, which raises it — trades these predicted errors for lifetime. (With
+/// server's load and the link, which raise it — trades these predicted errors for
+/// lifetime. (With
 /// the band alone fixed, four times the tolerance left the requests as many: the band,
 /// not the gaps, retired the textures; with the lone turn fixed at 15°, 64 clients at
 /// twice the tolerance asked 73 % more textures, living 0.53 s where they lived 1.83;
@@ -299,7 +302,7 @@ impl Manager {
                 band: band(h, centre, eye, camera),
                 too_coarse: texel > COARSEST_SHOWN,
                 finer_available: texel > REFINE_TEXEL && texture.width < wanted,
-                lone_turn: lone_max_turn(texture),
+                lone_turn: h.lone_turn,
             }
         };
         Some(self.objects[object].held.iter().map(grade).collect())
@@ -346,8 +349,7 @@ impl Manager {
     /// and [`MAX_DISTANCE_RATIO`] of its distance — it holds what the eye has turned to
     /// see and `shown` cannot. The least growth first, then the nearest (past
     /// [`MAX_TURN`] every growth is infinite). `None` while the eye is within
-    /// [`PARTNER_FROM`] of `shown`'s and `shown` leaves no band past its rim wider than
-    /// [`LONE_BAND`].
+    /// [`PARTNER_FROM`] of `shown`'s and `shown` may be shown alone there ([`may_show`]).
     pub(super) fn partner(
         &self,
         k: usize,
@@ -359,8 +361,8 @@ impl Manager {
         let held = &self.objects[k].held;
         let (from, eye) = (held[shown].eye - centre, camera.eye_f32() - centre);
         // (Wanted where the texture could not be shown alone: as `may_show` rules.)
-        if from.angle_between(eye) < PARTNER_FROM && grades[shown].band <= band_limit(false, self.tolerance())
-        {
+        let (turn, g) = (from.angle_between(eye), &grades[shown]);
+        if turn < PARTNER_FROM && may_show(g.band, turn, g.lone_turn, false, 1.0, self.tolerance()) {
             return None;
         }
         held.iter()

@@ -107,7 +107,7 @@ pub const MAX_DISTANCE_RATIO: f32 = 1.5;
 /// object the eye has turned to see. (A curved rim's band, [`LONE_BAND`], says so
 /// sooner on an object large on screen; this bounds the rest: sharp edges, and the
 /// texels just inside a rim, grazed by the texture's rays, which a turned eye sees
-/// stretched.) A small object's band stays narrow far round: at 30° the demo's sphere,
+/// stretched.) A small object's band stays narrow far round: with the limit at 30° the demo's sphere,
 /// 70 px across, was shown alone 16° from its first texture, its turned rim ragged,
 /// 3.6–3.8 dB below geometry's worst in 6 runs of 6 (rtt 0 and 100; the same frame from
 /// the same texture with a partner scored as geometry). At 15° (where partners start,
@@ -116,8 +116,8 @@ pub const MAX_DISTANCE_RATIO: f32 = 1.5;
 /// with the tolerance up to [`LONE_TURN_CAP`] (see `may_show`).
 pub const LONE_MAX_TURN: f32 = 15.0 * PI / 180.0;
 
-/// The farthest any texture is shown alone, whatever the tolerance, and a texture of
-/// leaves or sheets (perspective, [`projection_for`]) at any: it has no rim of grazed
+/// The farthest any texture is shown alone, whatever the tolerance, and how far a
+/// texture of leaves or sheets ([`is_sheets`]) is at the default one: it has no rim of grazed
 /// texels, and trees near the eye turn fast (at 15° the forest at 1280×720 over a 100 ms
 /// round trip went stale in 16–20 % of its frames in 2 runs, against 7–9 % at this,
 /// asking 900–920 predictions where it asked 700–740). At 40°, the scanned bunny flown
@@ -126,14 +126,21 @@ pub const LONE_MAX_TURN: f32 = 15.0 * PI / 180.0;
 /// 30°, 1.05–1.08 in 3.
 pub const LONE_TURN_CAP: f32 = 30.0 * PI / 180.0;
 
-/// The turn past which a texture `texture` (its source camera) counts as stale drawn
-/// alone at the default tolerance: [`LONE_TURN_CAP`] for a perspective one, else
-/// [`LONE_MAX_TURN`].
-pub fn lone_max_turn(texture: &SourceCamera) -> f32 {
-    match texture.centre {
-        Some(_) => LONE_TURN_CAP,
-        None => LONE_MAX_TURN,
+/// The turn past which a texture of `object` counts as stale drawn alone at the default
+/// tolerance: [`LONE_TURN_CAP`] for leaves or sheets ([`is_sheets`], whichever way its
+/// textures' rays go: near the eye they are asked orthographic), else [`LONE_MAX_TURN`].
+pub fn lone_max_turn(object: &SceneObject) -> f32 {
+    if is_sheets(object) {
+        LONE_TURN_CAP
+    } else {
+        LONE_MAX_TURN
     }
+}
+
+/// Whether `object` is taken for leaves or sheets: more than [`SHEET_RIM_SHARE`] of its
+/// edges bound one triangle only.
+pub fn is_sheets(object: &SceneObject) -> bool {
+    object.edge_census().rim_share > SHEET_RIM_SHARE
 }
 
 /// A texture drawn without a partner counts as stale once the band past its rim it
@@ -247,8 +254,8 @@ pub const REQUESTED_DEPTH_BITS: DepthBits = DepthBits::Sixteen;
 /// `eye`, here and in the other functions of an object and a camera below, is in the
 /// object's frame ([`SceneObject::local_camera`]).
 pub fn projection_for(object: &SceneObject, eye: Vec3) -> SourceProjection {
-    let sheets = object.edge_census().rim_share > SHEET_RIM_SHARE;
-    if sheets && SourceCamera::facing(eye, &object.local_bounds, 1, 1, SourceProjection::Perspective).is_ok()
+    if is_sheets(object)
+        && SourceCamera::facing(eye, &object.local_bounds, 1, 1, SourceProjection::Perspective).is_ok()
     {
         SourceProjection::Perspective
     } else {
