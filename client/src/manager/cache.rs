@@ -20,8 +20,7 @@ use relief_render::warp::params::WarpParams;
 use super::around::{angle_between, similar_distance};
 use super::choose::{growth, widest_within};
 use super::messages::{Arrival, Failure};
-use super::policy::lone_max_turn;
-use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, SHED_QUIET, growth_weight};
+use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, SHED_QUIET, growth_weight, lone_max_turn};
 use super::{Manager, TextureLifetimes};
 
 /// What making a texture ready builds: its pyramid (with texel connectivity), critical

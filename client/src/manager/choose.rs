@@ -156,21 +156,20 @@ pub(super) fn widest_within(within: impl Fn(f32) -> bool) -> f32 {
 /// Whether a texture leaving a `band` past its rim (pixels: [`band`]) at an eye `turn`
 /// radians round from its own may be shown there, `partnered` or not: alone, the band
 /// under [`LONE_BAND`] and the turn under `lone_turn` (the texture's at the default
-/// tolerance, [`lone_max_turn`](super::policy::lone_max_turn)); with a partner filling the
-/// band, the band under [`PARTNERED_BAND`] (the texels inside the rim stretch as the
+/// tolerance, [`lone_max_turn`](super::policy::lone_max_turn)); with a partner filling
+/// the band, the band under [`PARTNERED_BAND`] (the texels inside the rim stretch as the
 /// band widens) and the turn under [`MAX_TURN`] — all times `margin` (1 to draw; the
 /// planning margin to plan).
 ///
 /// The bands and the turn alone are the default's: they scale with `tolerance` over
 /// [`DEFAULT_TOLERANCE`] (the turn up to [`LONE_TURN_CAP`]), so the one knob — and the
 /// server's load and the link, which raise it — trades these predicted errors for
-/// lifetime. (With
-/// the band alone fixed, four times the tolerance left the requests as many: the band,
-/// not the gaps, retired the textures; with the lone turn fixed at 15°, 64 clients at
-/// twice the tolerance asked 73 % more textures, living 0.53 s where they lived 1.83;
-/// uncapped, the load's factor let them live 7.3 s, the worst frame 2.5 dB lower.) The
-/// turn partnered is where the warp stops being the object's near side, whatever the
-/// tolerance.
+/// lifetime. (With the band alone fixed, four times the tolerance left the requests as
+/// many: the band, not the gaps, retired the textures; with the lone turn fixed at 15°,
+/// 64 clients at twice the tolerance asked 73 % more textures, living 0.53 s where they
+/// lived 1.83; uncapped, the load's factor let them live 7.3 s, the worst frame 2.5 dB
+/// lower.) The turn partnered is where the warp stops being the object's near side,
+/// whatever the tolerance.
 pub(super) fn may_show(
     band: f32,
     turn: f32,
@@ -276,7 +275,8 @@ impl Manager {
     /// own eye, in screen pixels (`INFINITY` when it cannot be warped there), whether it
     /// is too coarse to be shown, and whether a finer one can be had (eq. 4-1) — of the
     /// edge an eye there asks for ([`Manager::size_for`]). `None` where the object costs
-    /// no more drawn as geometry than that texture warped ([`cheaper_as_geometry`](super::policy::cheaper_as_geometry)).
+    /// no more drawn as geometry than that texture warped
+    /// ([`cheaper_as_geometry`](super::policy::cheaper_as_geometry)).
     pub(super) fn grades(
         &self,
         scene: &Scene,

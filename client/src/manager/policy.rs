@@ -107,13 +107,13 @@ pub const MAX_DISTANCE_RATIO: f32 = 1.5;
 /// object the eye has turned to see. (A curved rim's band, [`LONE_BAND`], says so
 /// sooner on an object large on screen; this bounds the rest: sharp edges, and the
 /// texels just inside a rim, grazed by the texture's rays, which a turned eye sees
-/// stretched.) A small object's band stays narrow far round: with the limit at 30° the demo's sphere,
-/// 70 px across, was shown alone 16° from its first texture, its turned rim ragged,
-/// 3.6–3.8 dB below geometry's worst in 6 runs of 6 (rtt 0 and 100; the same frame from
-/// the same texture with a partner scored as geometry). At 15° (where partners start,
-/// [`PARTNER_FROM`]) −0.2 to −1.5 in 4, as many requests, and the sphere's orbit asks 13
-/// textures where it asked 12 (at 12°, 16, with 9 stale frames in the demo). It scales
-/// with the tolerance up to [`LONE_TURN_CAP`] (see `may_show`).
+/// stretched.) A small object's band stays narrow far round: with the limit at 30°, the
+/// demo's sphere, 70 px across, was shown alone 16° from its first texture, its turned
+/// rim ragged, 3.3–3.8 dB below geometry's worst in 8 runs of 9 (rtt 0 and 100; the
+/// same frame from the same texture with a partner scored as geometry). At 15° (where
+/// partners start, [`PARTNER_FROM`]) −0.2 to −1.5 in 6, as many requests, and the
+/// sphere's orbit asks 13 textures where it asked 12 (at 12°, 16, with 9 stale frames in
+/// the demo). It scales with the tolerance up to [`LONE_TURN_CAP`] (see `may_show`).
 pub const LONE_MAX_TURN: f32 = 15.0 * PI / 180.0;
 
 /// The farthest any texture is shown alone, whatever the tolerance, and how far a
