@@ -122,7 +122,8 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
         .into_par_iter()
         .zip(bins.par_iter())
         // (Band by band: an object covers few bands, which rayon's default halves
-        // left mostly to one thread — the tree drew 14-21 % slower.)
+        // left mostly to one thread — the default tree took 1.75-1.83 ms a frame,
+        // against 1.51-1.53 so.)
         .with_max_len(1)
         .for_each(|(mut rows, bin)| {
             for &k in bin {
@@ -285,7 +286,8 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
     let inv_area = f32x8::splat(inv_area);
     let inv_depth = inv_depth.map(f32x8::splat);
     let spans = RowSpans::new([a, b, c], sign);
-    // (A box one group of lanes wide is tested whole: its span would spare no test.)
+    // (A box one group of lanes wide is tested whole: its span would spare at most
+    // that one group's test, and cost about as much to work out.)
     let narrow = x_end - x_start < LANES;
     for y in y_start..=y_end {
         let py = y as f32 + 0.5;
