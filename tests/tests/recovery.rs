@@ -345,10 +345,10 @@ const LOSSY: Link = Link {
 /// runs of the client as it is; 5.0 % in one of 14 before an object's last glimpse
 /// was looked for from a typical round trip on (the rock, passed close on the orbit
 /// while its answers took up to a second), and 0.0–9.0 % in 9 before that glimpse was
-/// planned for at all and an orbit was foreseen as a turn. (An earlier 0–0.3 % over 10 s
-/// was the client taking the workers' round trip for saturation, and letting its
-/// textures live 8× longer than asked all flight.) A breakdown shows far above this: 35–49 %
-/// over 250 ms links. (Flying beside another flight is kept out by `ONE_FLIGHT`.)
+/// planned for at all and an orbit was foreseen as a turn. (An earlier 0–0.3 % over
+/// 10 s was the client taking the workers' round trip for saturation, and letting its
+/// textures live 8× longer than asked all flight.) A breakdown shows far above this:
+/// 35–49 % over 250 ms links. (Flying beside another flight is kept out by `ONE_FLIGHT`.)
 const LOSSY_STALE_AT_MOST: f64 = 0.10;
 
 /// The tolerance the lossy flight asks for, pixels: the lifetime such a link affords

@@ -285,10 +285,7 @@ impl Manager {
         camera: &Camera,
     ) -> Option<Vec<Grade>> {
         let o = &scene.objects[object];
-        if Self::cheaper_drawn(o, eye, camera) {
-            return None;
-        }
-        let (wanted, _) = Self::size_for(o, eye, camera);
+        let wanted = Self::warped_edge(o, eye, camera)?;
         let centre = o.local_bounds.center();
         let at_eye = Camera {
             eye: eye.as_dvec3(),

@@ -442,20 +442,21 @@ struct Assessment {
 impl Manager {
     /// Whether `object` is drawn as geometry from `world_camera` whatever textures are
     /// held: too near or too cheap ([`geometry_reason`]), or no dearer drawn than the
-    /// texture its eye would ask for warped ([`cheaper_as_geometry`]).
+    /// texture its eye would ask for warped (`Manager::warped_edge`, [`cheaper_as_geometry`]).
     pub fn always_geometry(object: &SceneObject, world_camera: &Camera) -> bool {
         if geometry_reason(object, world_camera.eye).is_some() {
             return true;
         }
         let camera = object.local_camera(world_camera);
-        Self::cheaper_drawn(object, camera.eye_f32(), &camera)
+        Self::warped_edge(object, camera.eye_f32(), &camera).is_none()
     }
 
-    /// Whether `object` costs no more drawn as geometry than the texture an `eye` (in
-    /// its frame, as `camera` is) asks for warped ([`cheaper_as_geometry`]).
-    pub(super) fn cheaper_drawn(object: &SceneObject, eye: glam::Vec3, camera: &Camera) -> bool {
+    /// The edge of the texture an `eye` (in `object`'s frame, as `camera` is) asks for,
+    /// where warping it costs more than drawing `object` as geometry
+    /// ([`cheaper_as_geometry`]); `None` where it does not.
+    pub(super) fn warped_edge(object: &SceneObject, eye: glam::Vec3, camera: &Camera) -> Option<u32> {
         let (wanted, _) = Self::size_for(object, eye, camera);
-        cheaper_as_geometry(object, wanted, 1.0)
+        (!cheaper_as_geometry(object, wanted, 1.0)).then_some(wanted)
     }
 
     /// Object `k` seen from `world_camera`: its camera, and how its textures grade.

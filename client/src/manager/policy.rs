@@ -117,13 +117,13 @@ pub const MAX_DISTANCE_RATIO: f32 = 1.5;
 pub const LONE_MAX_TURN: f32 = 15.0 * PI / 180.0;
 
 /// The farthest any texture is shown alone, whatever the tolerance, and how far a
-/// texture of leaves or sheets ([`is_sheets`]) is at the default one: it has no rim of grazed
-/// texels, and trees near the eye turn fast (at 15° the forest at 1280×720 over a 100 ms
-/// round trip went stale in 16–20 % of its frames in 2 runs, against 7–9 % at this,
-/// asking 900–920 predictions where it asked 700–740). At 40°, the scanned bunny flown
-/// at a 100 ms round trip was shown 29° from its only texture early in the flight, its
-/// turned side stepped, 3.10–3.16 dB below geometry's worst frame in 4 runs of 5; at
-/// 30°, 1.05–1.08 in 3.
+/// texture of leaves or sheets ([`is_sheets`]) is at the default one: it has no rim of
+/// grazed texels, and trees near the eye turn fast (at 15° the forest at 1280×720 over
+/// a 100 ms round trip went stale in 16–20 % of its frames in 2 runs, against 7–9 % at
+/// this, asking 900–920 predictions where it asked 700–740). At 40°, the scanned bunny
+/// flown at a 100 ms round trip was shown 29° from its only texture early in the
+/// flight, its turned side stepped, 3.10–3.16 dB below geometry's worst frame in 4 runs
+/// of 5; at 30°, 1.05–1.08 in 3.
 pub const LONE_TURN_CAP: f32 = 30.0 * PI / 180.0;
 
 /// The turn past which a texture of `object` counts as stale drawn alone at the default

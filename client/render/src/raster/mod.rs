@@ -285,16 +285,14 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
     let edges = [(b, c), (c, a), (a, b)].map(|(p, q)| OrderedEdge::new(p, q, sign));
     let inv_area = f32x8::splat(inv_area);
     let inv_depth = inv_depth.map(f32x8::splat);
-    let spans = RowSpans::new([a, b, c], sign);
-    // (A box one group of lanes wide is tested whole: its span would spare at most
-    // that one group's test, and cost about as much to work out.)
-    let narrow = x_end - x_start < LANES;
+    // (A box one group of lanes wide is tested whole, without spans: one would spare at
+    // most that group's test, and cost about as much to work out.)
+    let spans = (x_end - x_start >= LANES).then(|| RowSpans::new([a, b, c], sign));
     for y in y_start..=y_end {
         let py = y as f32 + 0.5;
-        let span = if narrow {
-            Some((x_start, x_end))
-        } else {
-            spans.row(py, (x_start, x_end))
+        let span = match &spans {
+            Some(spans) => spans.row(py, (x_start, x_end)),
+            None => Some((x_start, x_end)),
         };
         let Some((x_first, x_last)) = span else {
             continue;
