@@ -581,75 +581,104 @@ fn a_warm_up_readies_every_view_it_is_given() {
     assert_eq!(knot_asked, (1, 0), "(now, predicted)");
 }
 
-/// An object without a valid texture is drawn exactly as geometry where that costs no
-/// more than [`GEOMETRY_STAND_IN`] times its impostor: near a tree, whose texture would
-/// be large, a frame turned past its texture's valid angle draws it as geometry and is
-/// not stale; farther off, where its texture is small, the same turn is stale.
+/// An object without a valid texture is drawn exactly as geometry, nearest first,
+/// while the frame's [`STAND_IN_TRIANGLES`] last: of two rocks of a million triangles
+/// each and a tree beyond them, holding nothing yet, the nearer rock and the tree are
+/// drawn as geometry and the farther rock, which no longer fits, is stale; each asks
+/// for its first texture once. And a tree turned past its texture's valid angle is
+/// drawn as geometry, not stale, while its texture for the eye is asked for.
 ///
-/// [`GEOMETRY_STAND_IN`]: relief_client::manager::policy::GEOMETRY_STAND_IN
+/// [`STAND_IN_TRIANGLES`]: relief_client::manager::policy::STAND_IN_TRIANGLES
 #[test]
-fn a_stale_object_stands_in_as_geometry_where_that_costs_little() {
-    use relief_client::manager::policy::{GEOMETRY_STAND_IN, asked_for, cheaper_as_geometry};
+fn stale_objects_stand_in_as_geometry_nearest_first_within_the_frames_triangles() {
+    use relief_client::manager::policy::STAND_IN_TRIANGLES;
 
     let text = r#"
         [[objects]]
+        name = "rock"
+        generator = { kind = "rock", resolution = 289, seed = 11 }
+        instances = [{ translate = [0, 0, -4] }, { translate = [0, 0, -8] }]
+
+        [[objects]]
         name = "tree"
         generator = { kind = "tree", seed = 7, depth = 5, leaves = 10 }
+        translate = [0, 0, -12]
         "#;
     let scene = Arc::new(Scene::parse(text).unwrap());
-    let tree = &scene.objects[0];
-    let centre = tree.world_bounds().center();
-    let camera_at = |distance: f32, degrees: f32| {
-        let angle = degrees.to_radians();
-        let eye = centre + distance * Vec3::new(angle.cos(), 0.2, angle.sin());
-        Camera::look_at(eye, centre, Vec3::Y, 60.0, 640, 360).unwrap()
-    };
-    let edge = |camera: &Camera| texture_ladder(asked_for(tree, &tree.local_camera(camera)).1.unwrap());
+    let (rock, tree) = (index(&scene, "rock.1"), index(&scene, "tree"));
+    let rock_triangles = scene.objects[rock].mesh.triangle_count();
+    // (The premise: one rock fits, and with it the tree, but not both rocks.)
+    let tree_triangles = scene.objects[tree].mesh.triangle_count();
+    assert!(2 * rock_triangles > STAND_IN_TRIANGLES);
+    assert!(rock_triangles + tree_triangles <= STAND_IN_TRIANGLES);
     let config = Config {
         predict: false,
         ..Config::default()
     };
-    for (distance, stands_in) in [(7.0, true), (16.0, false)] {
-        let (from, to) = (camera_at(distance, 0.0), camera_at(distance, 15.0));
-        // (The premise: near, geometry costs more than the texture but not twice;
-        // far, more than twice.)
-        let wanted = edge(&to);
-        assert!(
-            !cheaper_as_geometry(tree, wanted, 1.0),
-            "{distance} m: {wanted} texels"
-        );
-        assert_eq!(
-            cheaper_as_geometry(tree, wanted, GEOMETRY_STAND_IN),
-            stands_in,
-            "{distance} m: {wanted} texels"
-        );
-        let mut manager = served_locally(&scene, config.clone());
-        assert!(manager.warm_up(&scene, &[from], Duration::from_secs(60)));
-        let shows = manager.frame(&scene, &to, 0.0);
-        let counters = &manager.counters;
-        // Either way a texture for the eye is asked for now.
-        let counted = (counters.stand_ins, counters.stale_frames, counters.requests_now);
-        if stands_in {
-            assert!(matches!(shows[0], Show::Geometry), "{distance} m: {:?}", shows[0]);
-            assert_eq!(counted, (1, 0, 1), "{distance} m");
-        } else {
-            assert_eq!(counted, (0, 1, 1), "{distance} m");
-        }
-    }
-
-    // Holding nothing yet, near: it stands in, and its first texture is asked for once.
-    let (mut waiting, mut commands) = unanswered(&scene, config);
-    let near = camera_at(7.0, 0.0);
+    let (mut waiting, mut commands) = unanswered(&scene, config.clone());
+    let camera = Camera::look_at(
+        Vec3::new(0.5, 1.0, 2.0),
+        Vec3::new(0.0, 0.5, -8.0),
+        Vec3::Y,
+        60.0,
+        640,
+        360,
+    )
+    .unwrap();
     for _ in 0..3 {
-        let shows = waiting.frame(&scene, &near, 0.0);
-        assert!(matches!(shows[0], Show::Geometry), "{:?}", shows[0]);
+        let shows = waiting.frame(&scene, &camera, 0.0);
+        assert!(shows.iter().all(|s| matches!(s, Show::Geometry)), "{shows:?}");
     }
     let counters = &waiting.counters;
-    assert_eq!((counters.stand_ins, counters.stale_frames), (3, 0));
-    let asked = std::iter::from_fn(|| commands.try_recv().ok())
-        .filter(|c| matches!(c, Command::Request(_)))
-        .count();
-    assert_eq!(asked, 1, "one request for the first texture");
+    assert_eq!(
+        (
+            counters.stand_ins,
+            counters.stale_frames,
+            counters.stale_causes.missing
+        ),
+        (6, 3, 3),
+        "(object-frames drawn as geometry instead, stale frames, stale object-frames)"
+    );
+    let mut asked: Vec<String> = std::iter::from_fn(|| commands.try_recv().ok())
+        .filter_map(|c| match c {
+            Command::Request(r) => Some(r.object),
+            _ => None,
+        })
+        .collect();
+    asked.sort();
+    assert_eq!(
+        asked,
+        ["rock.1", "rock.2", "tree"],
+        "one request each for its first texture"
+    );
+
+    // Turned past its texture's valid angle.
+    let tree_scene = Arc::new(
+        Scene::parse(
+            r#"
+        [[objects]]
+        name = "tree"
+        generator = { kind = "tree", seed = 7, depth = 5, leaves = 10 }
+        "#,
+        )
+        .unwrap(),
+    );
+    let centre = tree_scene.objects[0].world_bounds().center();
+    let camera_at = |degrees: f32| {
+        let angle = degrees.to_radians();
+        let eye = centre + 16.0 * Vec3::new(angle.cos(), 0.2, angle.sin());
+        Camera::look_at(eye, centre, Vec3::Y, 60.0, 640, 360).unwrap()
+    };
+    let mut manager = served_locally(&tree_scene, config);
+    assert!(manager.warm_up(&tree_scene, &[camera_at(0.0)], Duration::from_secs(60)));
+    let shows = manager.frame(&tree_scene, &camera_at(15.0), 0.0);
+    assert!(matches!(shows[0], Show::Geometry), "{:?}", shows[0]);
+    let counters = &manager.counters;
+    assert_eq!(
+        (counters.stand_ins, counters.stale_frames, counters.requests_now),
+        (1, 0, 1),
+        "(drawn as geometry instead, stale frames, asked for now)"
+    );
 }
 
 /// A texture shown alone goes stale once the band past its rim that it cannot show

@@ -57,11 +57,10 @@ pub struct Counters {
     /// Why: the object-frames without a valid texture, by cause (those drawn as
     /// geometry instead, `stand_ins`, left out).
     pub stale_causes: StaleCauses,
-    /// Object-frames without a valid texture drawn exactly as geometry, where that
-    /// cost more than the impostor but little more (see
-    /// [`GEOMETRY_STAND_IN`](super::policy::GEOMETRY_STAND_IN)): not stale, and among
-    /// the `needs`. (Objects no dearer as geometry than as impostors are drawn so
-    /// whatever they hold, and are in neither.)
+    /// Object-frames without a valid texture drawn exactly as geometry instead, within
+    /// the frame's [`STAND_IN_TRIANGLES`](super::policy::STAND_IN_TRIANGLES): not
+    /// stale, and among the `needs`. (Objects no dearer as geometry than as impostors
+    /// are drawn so whatever they hold, and are in neither.)
     pub stand_ins: u64,
     /// Where each [`Manager::render`](super::Manager::render) spent its time.
     pub render_stages: Vec<RenderStages>,

@@ -65,7 +65,7 @@ use cache::ObjectState;
 use choose::{Grade, may_show, shown_texture};
 use draw::Kept;
 use policy::{
-    ASSESSMENTS_PER_TASK, GEOMETRY_STAND_IN, SHOWN_STALE, WARM_UP_POLL, cheaper_as_geometry, texel_pixels,
+    ASSESSMENTS_PER_TASK, SHOWN_STALE, STAND_IN_TRIANGLES, WARM_UP_POLL, cheaper_as_geometry, texel_pixels,
 };
 use requests::{Asked, Pending};
 
@@ -276,6 +276,7 @@ impl Manager {
             (k, assessment, prediction)
         };
         let order = nearest_first(scene, world_camera);
+        let mut stand_in_triangles = STAND_IN_TRIANGLES;
         let assessed: Vec<_> = (order.par_iter().with_min_len(ASSESSMENTS_PER_TASK))
             .map(assess_and_predict)
             .collect();
@@ -319,10 +320,13 @@ impl Manager {
             });
             let within_any = grades.iter().any(|g| g.growth <= tolerance);
             let valid = within_any && !too_far;
-            // Without a valid texture, drawn exactly as geometry where that costs little
-            // more than its impostor would (see `GEOMETRY_STAND_IN`): not stale.
-            let stands_in = !valid
-                && cheaper_as_geometry(object, Self::size_for(object, eye, camera).0, GEOMETRY_STAND_IN);
+            // Without a valid texture, drawn exactly as geometry while the frame's
+            // triangles to spare for that last (see `STAND_IN_TRIANGLES`): not stale.
+            let triangles = object.mesh.triangle_count();
+            let stands_in = !valid && triangles <= stand_in_triangles;
+            if stands_in {
+                stand_in_triangles -= triangles;
+            }
             // A finer texture is asked for while the shown one is still shown, once its
             // texels grow past `REFINE_TEXEL` (the eye drawing near), as when the only
             // one within tolerance is too coarse to be shown at all.
@@ -456,7 +460,7 @@ impl Manager {
     /// ([`cheaper_as_geometry`]); `None` where it does not.
     pub(super) fn warped_edge(object: &SceneObject, eye: glam::Vec3, camera: &Camera) -> Option<u32> {
         let (wanted, _) = Self::size_for(object, eye, camera);
-        (!cheaper_as_geometry(object, wanted, 1.0)).then_some(wanted)
+        (!cheaper_as_geometry(object, wanted)).then_some(wanted)
     }
 
     /// Object `k` seen from `world_camera`: its camera, and how its textures grade.

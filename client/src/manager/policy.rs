@@ -332,24 +332,23 @@ pub const WARP_NS_PER_TEXEL: f32 = 12.0;
 /// path, rtt 0 and 100, against the same before) the tree then matched geometry where
 /// its impostor was 2.9–3.3 dB below, the frame took 6.45–6.64 ms where it took
 /// 6.63–6.73, and 84–119 textures were asked for where 125–143 were.
-///
-/// With `factor` over 1, whether geometry costs no more than `factor` times the
-/// impostor (see [`GEOMETRY_STAND_IN`]).
-pub fn cheaper_as_geometry(object: &SceneObject, edge: u32, factor: f32) -> bool {
+pub fn cheaper_as_geometry(object: &SceneObject, edge: u32) -> bool {
     let geometry = object.mesh.triangle_count() as f32 * GEOMETRY_NS_PER_TRIANGLE;
-    geometry <= factor * (edge as f32).powi(2) * WARP_NS_PER_TEXEL
+    geometry <= (edge as f32).powi(2) * WARP_NS_PER_TEXEL
 }
 
 /// An object without a valid texture — none held yet, or none within tolerance of the
-/// eye — is drawn as geometry, exact and so not stale, while that costs no more than
-/// this many times its impostor would; a texture is asked for as soon as it would pay
-/// ([`cheaper_as_geometry`] at 1). Without it, the tree stepping back from the
-/// 360-texel edge that is drawn as geometry to the 256 one that is not went stale until
-/// its texture came: 7–19 of the 300 frames of a flight over 100 ms links with 2 %
-/// loss, each drawing it exactly at about the same cost. In the forest's low flight,
-/// trees passing a metre or two from the eye turn faster than any round trip can
-/// follow; drawn as geometry then, they are what it costs (a default tree, ~1.5 ms).
-pub const GEOMETRY_STAND_IN: f32 = 2.0;
+/// eye — is drawn as geometry, exact and so not stale, while the frame's objects drawn
+/// so in its stead, nearest first, add up to at most this many triangles: the frame
+/// is slower, never wrong, until the texture comes. A million small triangles (the
+/// rock) rasterize in about 10 ms at 640×360, the default tree's 9,228 in 1.3 ms
+/// (`relief bench raster`). The forest's low flight at 1280×720, 100 ms round trip, 3
+/// runs each: stale in 1.0, 1.1 and 1.4 % of its frames with every such object drawn
+/// as geometry, against 4.6–5.7 % when only those costing at most twice their
+/// impostor were; the median frame and the 95th percentile unchanged (52.6–55.1 against
+/// 52.3–60.6 ms, and 113–124 against 114–119). A stale frame there had one to three
+/// objects without a texture, rocks (a million triangles each) among them.
+pub const STAND_IN_TRIANGLES: usize = 2_000_000;
 
 /// The texel, in pixels' angles, a texture of `object` is asked for and shown at from
 /// `camera`: [`SHEET_TEXEL_PIXELS`] for leaves and sheets; for solids
@@ -671,15 +670,11 @@ mod tests {
         let scene = Scene::load("default").expect("default scene");
         let object = |name| scene.object(name).expect("object");
         let (tree, knot, sphere, rock) = (object("tree"), object("knot"), object("sphere"), object("rock"));
-        assert!(cheaper_as_geometry(tree, SHEET_MAX_EDGE, 1.0) && cheaper_as_geometry(tree, 360, 1.0));
-        assert!(!cheaper_as_geometry(tree, 256, 1.0));
-        // With no valid texture to show, the tree stands in as geometry at 256 texels,
-        // not at 184.
-        assert!(cheaper_as_geometry(tree, 256, GEOMETRY_STAND_IN));
-        assert!(!cheaper_as_geometry(tree, 184, GEOMETRY_STAND_IN));
-        assert!(!cheaper_as_geometry(rock, SOLID_MAX_EDGE, 1.0));
-        assert!(cheaper_as_geometry(sphere, 720, 1.0) && !cheaper_as_geometry(sphere, 512, 1.0));
-        assert!(cheaper_as_geometry(knot, SOLID_MAX_EDGE, 1.0) && !cheaper_as_geometry(knot, 720, 1.0));
+        assert!(cheaper_as_geometry(tree, SHEET_MAX_EDGE) && cheaper_as_geometry(tree, 360));
+        assert!(!cheaper_as_geometry(tree, 256));
+        assert!(!cheaper_as_geometry(rock, SOLID_MAX_EDGE));
+        assert!(cheaper_as_geometry(sphere, 720) && !cheaper_as_geometry(sphere, 512));
+        assert!(cheaper_as_geometry(knot, SOLID_MAX_EDGE) && !cheaper_as_geometry(knot, 720));
     }
 
     /// Small textures of solids get the fine texel, those the frame is full of the

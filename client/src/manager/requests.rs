@@ -367,7 +367,7 @@ impl Manager {
         let in_view = shown?;
         let future = object.to_local(motion.at(ahead));
         let held = if in_view {
-            // (Asked for as soon as a texture would pay: see `GEOMETRY_STAND_IN`.)
+            // (Asked for as soon as a texture would pay: `cheaper_as_geometry`.)
             let grades = self.grades(scene, k, future, camera)?;
             Some((self.objects[k].held.iter().map(|h| h.eye)).zip(grades).collect())
         } else {
