@@ -79,6 +79,15 @@ fn index(scene: &Scene, name: &str) -> usize {
     scene.objects.iter().position(|o| o.name == name).unwrap()
 }
 
+/// The default settings, but no object drawn as geometry in the stead of a stale
+/// texture: for the tests of what a stale object does.
+fn without_stand_ins() -> Config {
+    Config {
+        stand_in_triangles: 0,
+        ..Config::default()
+    }
+}
+
 /// A manager wired to the test: the channel its requests go out on, and the one the
 /// test answers them on.
 fn wired(scene: &Scene, config: Config) -> (Manager, UnboundedReceiver<Command>, UnboundedSender<Arrival>) {
@@ -364,7 +373,7 @@ fn a_stale_object_asks_now_though_a_late_prediction_covers_its_eye() {
 
     let scene = Scene::load("default").unwrap();
     let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
-    let (mut manager, mut commands, arrivals) = wired(&scene, Config::default());
+    let (mut manager, mut commands, arrivals) = wired(&scene, without_stand_ins());
     // Orbit the sphere at 30°/s until a prediction for it goes out; nothing answers.
     let (mut now, mut predicted) = (Vec::new(), None);
     let mut t = 0.0;
@@ -506,7 +515,7 @@ fn stale_object_frames_are_counted_by_cause() {
     let camera_at = |degrees: f32| camera_round(centre, degrees);
     let config = Config {
         predict: false,
-        ..Config::default()
+        ..without_stand_ins()
     };
     let (mut unserved, _commands) = unanswered(&scene, config.clone());
     unserved.frame(&scene, &camera_at(0.0), 0.0);
@@ -695,7 +704,7 @@ fn a_lone_texture_goes_stale_when_its_rim_band_opens_or_past_its_turn() {
     let centre = scene.objects[sphere].world_bounds().center();
     let config = Config {
         predict: false,
-        ..Config::default()
+        ..without_stand_ins()
     };
     // Turned round the sphere a degree at a time, seen at `width × height`: where it
     // first goes stale, and where the band predicts.
@@ -820,11 +829,15 @@ fn an_object_off_screen_is_not_needed_now() {
     let withdrawn = std::iter::from_fn(|| predictions.try_recv().ok())
         .any(|c| matches!(c, Command::Withdraw(ids) if !ids.is_empty()));
     assert!(withdrawn && predicting.requests_open() == 0);
-    // Turned towards it: needed, stale without a texture, asked for now.
+    // Turned towards it: needed, drawn as geometry without a texture, asked for now.
     let towards = (eye, centre, 0.2);
     let now = requests_from_frame(&mut manager, &mut commands, &scene, towards, "sphere", false);
     assert_eq!(now.len(), 1);
-    assert_eq!((manager.counters.needs, manager.counters.stale_frames), (1, 1));
+    let counters = &manager.counters;
+    assert_eq!(
+        (counters.needs, counters.stand_ins, counters.stale_frames),
+        (1, 1, 0)
+    );
 }
 
 /// While warming up, an object just off the screen's side is asked for ahead, needed no
@@ -890,7 +903,7 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
     use relief_trace::tracer::ObjectTracer;
 
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
-    let (mut manager, mut commands, arrivals) = wired(&scene, Config::default());
+    let (mut manager, mut commands, arrivals) = wired(&scene, without_stand_ins());
     let sphere = index(&scene, "sphere");
     let centre = scene.objects[sphere].world_bounds().center();
     let eye = centre + Vec3::new(0.0, 1.0, 4.5);

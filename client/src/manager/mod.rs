@@ -64,9 +64,7 @@ use around::angle_between;
 use cache::ObjectState;
 use choose::{Grade, may_show, shown_texture};
 use draw::Kept;
-use policy::{
-    ASSESSMENTS_PER_TASK, SHOWN_STALE, STAND_IN_TRIANGLES, WARM_UP_POLL, cheaper_as_geometry, texel_pixels,
-};
+use policy::{ASSESSMENTS_PER_TASK, SHOWN_STALE, WARM_UP_POLL, cheaper_as_geometry, texel_pixels};
 use requests::{Asked, Pending};
 
 /// The manager of one client: what it holds and has asked for per object, where the eye
@@ -276,7 +274,7 @@ impl Manager {
             (k, assessment, prediction)
         };
         let order = nearest_first(scene, world_camera);
-        let mut stand_in_triangles = STAND_IN_TRIANGLES;
+        let mut stand_in_triangles = self.config.stand_in_triangles;
         let assessed: Vec<_> = (order.par_iter().with_min_len(ASSESSMENTS_PER_TASK))
             .map(assess_and_predict)
             .collect();
@@ -321,7 +319,8 @@ impl Manager {
             let within_any = grades.iter().any(|g| g.growth <= tolerance);
             let valid = within_any && !too_far;
             // Without a valid texture, drawn exactly as geometry while the frame's
-            // triangles to spare for that last (see `STAND_IN_TRIANGLES`): not stale.
+            // triangles to spare for that last (`Config::stand_in_triangles`): not
+            // stale.
             let triangles = object.mesh.triangle_count();
             let stands_in = !valid && triangles <= stand_in_triangles;
             if stands_in {

@@ -36,6 +36,10 @@ pub struct Config {
     pub initial_latency: f64,
     /// Textures kept per object.
     pub keep: usize,
+    /// Triangles a frame may draw as geometry in the stead of objects without a valid
+    /// texture ([`STAND_IN_TRIANGLES`]; 0: such objects show their stale texture, or
+    /// nothing).
+    pub stand_in_triangles: usize,
 }
 
 impl Default for Config {
@@ -45,6 +49,7 @@ impl Default for Config {
             predict: true,
             initial_latency: INITIAL_LATENCY_S,
             keep: TEXTURES_KEPT,
+            stand_in_triangles: STAND_IN_TRIANGLES,
         }
     }
 }
