@@ -72,6 +72,10 @@ pub struct DemoArgs {
     /// replaced: the impostor lifetime knob.
     #[arg(long, default_value_t = relief_client::manager::policy::DEFAULT_TOLERANCE, allow_hyphen_values = true, value_parser = args::positive)]
     tolerance: f32,
+    /// Triangles a frame may draw as geometry, nearest first, in the stead of objects
+    /// without a valid texture (0: they show their stale texture, or nothing).
+    #[arg(long, default_value_t = relief_client::manager::policy::STAND_IN_TRIANGLES)]
+    stand_in_triangles: usize,
     /// Compare with the ray-traced reference every K-th frame (0: never).
     #[arg(long, default_value = "20")]
     reference_every: u32,
@@ -141,6 +145,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let config = Config {
         tolerance: args.tolerance,
         predict: !args.no_predict,
+        stand_in_triangles: args.stand_in_triangles,
         ..Config::default()
     };
     // (`health`: whether the server could serve, for a run with one.)
