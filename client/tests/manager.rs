@@ -366,14 +366,21 @@ fn one_request_for_now_is_in_flight_per_object() {
 /// A prediction not come by the time the eye is where it was made for is late: the
 /// object, stale, asks for its texture as needed now (on a server that request joins
 /// the prediction's job and moves it ahead of predicted work) instead of waiting on it
-/// — at 64 load-test clients, waiting made most of the stalled frames.
+/// — at 64 load-test clients, waiting made most of the stalled frames. So does one
+/// drawn as geometry in the stead of its texture meanwhile.
 #[test]
 fn a_stale_object_asks_now_though_a_late_prediction_covers_its_eye() {
+    for config in [without_stand_ins(), Config::default()] {
+        asks_now_though_a_late_prediction_covers_its_eye(config);
+    }
+}
+
+fn asks_now_though_a_late_prediction_covers_its_eye(config: Config) {
     use relief_client::manager::Failure;
 
     let scene = Scene::load("default").unwrap();
     let centre = scene.objects[index(&scene, "sphere")].world_bounds().center();
-    let (mut manager, mut commands, arrivals) = wired(&scene, without_stand_ins());
+    let (mut manager, mut commands, arrivals) = wired(&scene, config.clone());
     // Orbit the sphere at 30°/s until a prediction for it goes out; nothing answers.
     let (mut now, mut predicted) = (Vec::new(), None);
     let mut t = 0.0;
@@ -400,8 +407,16 @@ fn a_stale_object_asks_now_though_a_late_prediction_covers_its_eye() {
     let eye = scene.object("sphere").unwrap().to_world(predicted).as_vec3();
     let drawn = (eye, centre, f64::from(t) + 0.5);
     let asked = requests_from_frame(&mut manager, &mut commands, &scene, drawn, "sphere", false);
-    assert_eq!(asked.len(), 1, "the stale sphere waited on its late prediction");
+    assert_eq!(
+        asked.len(),
+        1,
+        "the sphere waited on its late prediction ({config:?})"
+    );
     assert!(asked[0].distance(eye) < 1e-3);
+    let counters = &manager.counters;
+    let standing_in = config.stand_in_triangles > 0;
+    assert_eq!(counters.stand_ins > 0, standing_in, "{config:?}");
+    assert_eq!(counters.stale_frames > 0, !standing_in, "{config:?}");
 }
 
 #[test]
@@ -590,12 +605,13 @@ fn a_warm_up_readies_every_view_it_is_given() {
     assert_eq!(knot_asked, (1, 0), "(now, predicted)");
 }
 
-/// An object without a valid texture is drawn exactly as geometry, nearest first,
-/// while the frame's [`STAND_IN_TRIANGLES`] last: of two rocks of a million triangles
-/// each and a tree beyond them, holding nothing yet, the nearer rock and the tree are
-/// drawn as geometry and the farther rock, which no longer fits, is stale; each asks
-/// for its first texture once. And a tree turned past its texture's valid angle is
-/// drawn as geometry, not stale, while its texture for the eye is asked for.
+/// An object without a valid texture is drawn exactly as geometry, nearest first, each
+/// that still fits in the frame's [`STAND_IN_TRIANGLES`]: of a rock of 1.5 M triangles
+/// and two of 0.6 M beyond it, holding nothing yet, the near one fits and neither far
+/// one does after it (farthest first, both far ones would have), so they count as
+/// stale; each asks for its first texture once. And a tree turned past its texture's
+/// valid angle is drawn as geometry, not stale, while its texture for the eye is asked
+/// for.
 ///
 /// [`STAND_IN_TRIANGLES`]: relief_client::manager::policy::STAND_IN_TRIANGLES
 #[test]
@@ -604,29 +620,28 @@ fn stale_objects_stand_in_as_geometry_nearest_first_within_the_frames_triangles(
 
     let text = r#"
         [[objects]]
-        name = "rock"
-        generator = { kind = "rock", resolution = 289, seed = 11 }
-        instances = [{ translate = [0, 0, -4] }, { translate = [0, 0, -8] }]
+        name = "boulder"
+        generator = { kind = "rock", resolution = 354, seed = 11 }
+        translate = [0, 0, -4]
 
         [[objects]]
-        name = "tree"
-        generator = { kind = "tree", seed = 7, depth = 5, leaves = 10 }
-        translate = [0, 0, -12]
+        name = "stone"
+        generator = { kind = "rock", resolution = 224, seed = 12 }
+        instances = [{ translate = [1, 0, -9] }, { translate = [-1, 0, -10] }]
         "#;
     let scene = Arc::new(Scene::parse(text).unwrap());
-    let (rock, tree) = (index(&scene, "rock.1"), index(&scene, "tree"));
-    let rock_triangles = scene.objects[rock].mesh.triangle_count();
-    // (The premise: one rock fits, and with it the tree, but not both rocks.)
-    let tree_triangles = scene.objects[tree].mesh.triangle_count();
-    assert!(2 * rock_triangles > STAND_IN_TRIANGLES);
-    assert!(rock_triangles + tree_triangles <= STAND_IN_TRIANGLES);
+    let triangles = |name| scene.objects[index(&scene, name)].mesh.triangle_count();
+    let (boulder, stone) = (triangles("boulder"), triangles("stone.1"));
+    // (The premise: the boulder fits, and then no stone; the two stones would.)
+    assert!(boulder <= STAND_IN_TRIANGLES && boulder + stone > STAND_IN_TRIANGLES);
+    assert!(2 * stone <= STAND_IN_TRIANGLES);
     let config = Config {
         predict: false,
         ..Config::default()
     };
     let (mut waiting, mut commands) = unanswered(&scene, config.clone());
     let camera = Camera::look_at(
-        Vec3::new(0.5, 1.0, 2.0),
+        Vec3::new(0.0, 1.0, 2.0),
         Vec3::new(0.0, 0.5, -8.0),
         Vec3::Y,
         60.0,
@@ -645,7 +660,7 @@ fn stale_objects_stand_in_as_geometry_nearest_first_within_the_frames_triangles(
             counters.stale_frames,
             counters.stale_causes.missing
         ),
-        (6, 3, 3),
+        (3, 3, 6),
         "(object-frames drawn as geometry instead, stale frames, stale object-frames)"
     );
     let mut asked: Vec<String> = std::iter::from_fn(|| commands.try_recv().ok())
@@ -657,7 +672,7 @@ fn stale_objects_stand_in_as_geometry_nearest_first_within_the_frames_triangles(
     asked.sort();
     assert_eq!(
         asked,
-        ["rock.1", "rock.2", "tree"],
+        ["boulder", "stone.1", "stone.2"],
         "one request each for its first texture"
     );
 
@@ -1369,7 +1384,7 @@ fn an_orbit_asks_for_no_eye_twice() {
 #[test]
 fn an_orbit_spaces_its_textures_a_lone_reach_apart() {
     let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
-    let (mut manager, mut commands, arrivals) = wired(&scene, Config::default());
+    let (mut manager, mut commands, arrivals) = wired(&scene, without_stand_ins());
     // 45° a second: one orbit in 8 s, after 1 s to settle.
     let wires = (&mut commands, &arrivals);
     orbit_the_sphere_answered(&scene, &mut manager, wires, 45.0, 0..30, |_, _| {});

@@ -52,14 +52,15 @@ pub struct Counters {
     /// … and one was there or already asked for.
     pub prediction_hits: u64,
     /// Frames where some impostor was shown above tolerance, alone too far from its
-    /// eye, or missing.
+    /// eye, or missing (and not drawn as geometry instead: `stand_ins`).
     pub stale_frames: u64,
     /// Why: the object-frames without a valid texture, by cause (those drawn as
     /// geometry instead, `stand_ins`, left out).
     pub stale_causes: StaleCauses,
-    /// Object-frames without a valid texture drawn exactly as geometry instead, within
-    /// the frame's [`STAND_IN_TRIANGLES`](super::policy::STAND_IN_TRIANGLES): not
-    /// stale, and among the `needs`. (Objects no dearer as geometry than as impostors
+    /// Object-frames without a valid texture drawn exactly as geometry instead, nearest
+    /// first, each that still fits in the frame's
+    /// [`STAND_IN_TRIANGLES`](super::policy::STAND_IN_TRIANGLES): not stale, and among
+    /// the `needs`. (Objects no dearer as geometry than as impostors
     /// are drawn so whatever they hold, and are in neither.)
     pub stand_ins: u64,
     /// Where each [`Manager::render`](super::Manager::render) spent its time.

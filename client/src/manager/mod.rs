@@ -318,11 +318,11 @@ impl Manager {
             });
             let within_any = grades.iter().any(|g| g.growth <= tolerance);
             let valid = within_any && !too_far;
-            // Without a valid texture, drawn exactly as geometry while the frame's
-            // triangles to spare for that last (`Config::stand_in_triangles`): not
-            // stale.
+            // Without a valid texture, drawn exactly as geometry where it still fits in
+            // the frame's triangles to spare for that (`Config::stand_in_triangles`):
+            // not stale.
             let triangles = object.mesh.triangle_count();
-            let stands_in = !valid && triangles <= stand_in_triangles;
+            let stands_in = !valid && stand_in_triangles > 0 && triangles <= stand_in_triangles;
             if stands_in {
                 stand_in_triangles -= triangles;
             }
@@ -388,12 +388,12 @@ impl Manager {
             // only a prediction out covers the eye: that prediction is late, and the
             // request for now joins its job on the server and moves it ahead of the
             // predicted work there (or, not near enough to join, is baked first itself).
-            // One standing in as geometry is exact meanwhile: its prediction may take its
-            // turn.
+            // So does one standing in as geometry: exact meanwhile, but up to the
+            // frame's whole budget of triangles (a rock) for as long as it waits.
             let asking_now = self.pending.values().any(|p| p.object == k && !p.predicted());
             let wanted = match asked_for {
                 Asked::Not => !valid || want_finer,
-                Asked::Predicted => !valid && !stands_in,
+                Asked::Predicted => !valid,
                 Asked::Now => false,
             };
             if wanted && !asking_now {

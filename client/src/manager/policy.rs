@@ -37,8 +37,7 @@ pub struct Config {
     /// Textures kept per object.
     pub keep: usize,
     /// Triangles a frame may draw as geometry in the stead of objects without a valid
-    /// texture ([`STAND_IN_TRIANGLES`]; 0: such objects show their stale texture, or
-    /// nothing).
+    /// texture ([`STAND_IN_TRIANGLES`]; 0: none, each such object counts as stale).
     pub stand_in_triangles: usize,
 }
 
@@ -314,7 +313,7 @@ pub const SHEET_TEXEL_PIXELS: f32 = 0.6;
 /// The largest texture edge asked for leaves or sheets ([`SHEET_TEXEL_PIXELS`]).
 pub const SHEET_MAX_EDGE: u32 = 720;
 
-// ---- Geometry where it costs no more -----------------------------------------------
+// ---- Geometry where it costs no more, and in the stead of stale textures ------------
 
 /// Nanoseconds this client's rasterizer takes a triangle of leaves, shading included:
 /// drawn as geometry in the demo, the default scene's tree (9,228 triangles) added
@@ -343,16 +342,19 @@ pub fn cheaper_as_geometry(object: &SceneObject, edge: u32) -> bool {
 }
 
 /// An object without a valid texture — none held yet, or none within tolerance of the
-/// eye — is drawn as geometry, exact and so not stale, while the frame's objects drawn
-/// so in its stead, nearest first, add up to at most this many triangles: the frame
-/// is slower, never wrong, until the texture comes. A million small triangles (the
-/// rock) rasterize in about 10 ms at 640×360, the default tree's 9,228 in 1.3 ms
-/// (`relief bench raster`). The forest's low flight at 1280×720, 100 ms round trip, 3
-/// runs each: stale in 1.0, 1.1 and 1.4 % of its frames with every such object drawn
-/// as geometry, against 4.6–5.7 % when only those costing at most twice their
-/// impostor were; the median frame and the 95th percentile unchanged (52.6–55.1 against
-/// 52.3–60.6 ms, and 113–124 against 114–119). A stale frame there had one to three
-/// objects without a texture, rocks (a million triangles each) among them.
+/// eye — is drawn as geometry, exact and so not stale, nearest first, each that still
+/// fits within this many triangles a frame: the frame is slower, not wrong, until its
+/// texture comes. (Past it, an object shows its texture beyond the tolerance where one
+/// can be shown, else is drawn as geometry all the same, and counts as stale.) A
+/// million small triangles (the rock) take 13 ms on two cores at 640×360 and 27 ms at
+/// 1280×720, the default tree's 9,228 about 1.3 ms (`relief bench raster`): at most
+/// about 26 and 55 ms of stand-ins a frame. The forest's low flight at 1280×720, 100 ms
+/// round trip, 3 runs each: 0, 2 and 1 stale frames of 272–283 (≤ 0.7 %), against
+/// 13–16 of 266–287 (4.6–5.7 %) when only objects costing at most twice their impostor
+/// stood in; 14–22 object-frames a run stood in, the median frame 52.4–56.6 ms
+/// against 52.3–60.6 and the 95th percentile 116–122 against 114–119. Its stale frames
+/// had had one to three objects without a texture, rocks (a million triangles each)
+/// among them.
 pub const STAND_IN_TRIANGLES: usize = 2_000_000;
 
 /// The texel, in pixels' angles, a texture of `object` is asked for and shown at from

@@ -351,8 +351,11 @@ impl Setup<'_> {
             .enumerate()
             .map(|(c, remote)| {
                 let c = c as u32;
+                // (No object drawn as geometry in a texture's stead: a stalled frame is
+                // one whose textures did not come, whatever the frame could afford.)
                 let config = Config {
                     tolerance,
+                    stand_in_triangles: 0,
                     ..Config::default()
                 };
                 let mut manager = {

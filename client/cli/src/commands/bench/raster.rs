@@ -32,7 +32,8 @@ pub struct RasterArgs {
     objects: Vec<String>,
     /// Of those, only the ones a client draws as geometry whatever textures it holds,
     /// frame by frame (`Manager::always_geometry`): the least geometry an impostor frame
-    /// draws (stand-ins for textures not yet held, and warps refused, add to it).
+    /// draws (objects standing in for textures not yet valid, and warps refused, add
+    /// to it).
     #[arg(long)]
     as_client: bool,
     /// Draw every K-th frame of the camera path.

@@ -72,8 +72,9 @@ pub struct DemoArgs {
     /// replaced: the impostor lifetime knob.
     #[arg(long, default_value_t = relief_client::manager::policy::DEFAULT_TOLERANCE, allow_hyphen_values = true, value_parser = args::positive)]
     tolerance: f32,
-    /// Triangles a frame may draw as geometry, nearest first, in the stead of objects
-    /// without a valid texture (0: they show their stale texture, or nothing).
+    /// Triangles a frame may draw as geometry in the stead of objects without a valid
+    /// texture, nearest first, each that still fits (0: none; such objects count as
+    /// stale).
     #[arg(long, default_value_t = relief_client::manager::policy::STAND_IN_TRIANGLES)]
     stand_in_triangles: usize,
     /// Compare with the ray-traced reference every K-th frame (0: never).
