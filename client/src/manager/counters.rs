@@ -60,8 +60,8 @@ pub struct Counters {
     /// Object-frames without a valid texture drawn exactly as geometry instead, nearest
     /// first, each that still fits in the frame's
     /// [`STAND_IN_TRIANGLES`](super::policy::STAND_IN_TRIANGLES): not stale, and among
-    /// the `needs`. (Objects no dearer as geometry than as impostors
-    /// are drawn so whatever they hold, and are in neither.)
+    /// the `needs`. (Objects no dearer as geometry than as impostors are drawn so
+    /// whatever they hold, and are in neither.)
     pub stand_ins: u64,
     /// Where each [`Manager::render`](super::Manager::render) spent its time.
     pub render_stages: Vec<RenderStages>,

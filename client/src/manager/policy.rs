@@ -353,8 +353,8 @@ pub fn cheaper_as_geometry(object: &SceneObject, edge: u32) -> bool {
 /// 13–16 of 266–287 (4.6–5.7 %) when only objects costing at most twice their impostor
 /// stood in; 14–22 object-frames a run stood in, the median frame 52.4–56.6 ms
 /// against 52.3–60.6 and the 95th percentile 116–122 against 114–119. Its stale frames
-/// had had one to three objects without a texture, rocks (a million triangles each)
-/// among them.
+/// before had one to three objects without a texture each, rocks (a million triangles
+/// each) among them.
 pub const STAND_IN_TRIANGLES: usize = 2_000_000;
 
 /// The texel, in pixels' angles, a texture of `object` is asked for and shown at from
