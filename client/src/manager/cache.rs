@@ -20,7 +20,7 @@ use relief_render::warp::params::WarpParams;
 use super::around::{angle_between, similar_distance};
 use super::choose::{growth, widest_within};
 use super::messages::{Arrival, Failure};
-use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, SHED_QUIET, growth_weight, lone_max_turn};
+use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, SHED_QUIET, growth_weight};
 use super::{Manager, TextureLifetimes};
 
 /// What making a texture ready builds: its pyramid (with texel connectivity), critical
@@ -117,9 +117,6 @@ pub(super) struct Held {
     /// Asked for by another placement of the mesh, and shared with this one: counted
     /// in that placement's lifetimes, not here.
     pub(super) shared: bool,
-    /// The turn past which it counts as stale shown alone, at the default tolerance
-    /// ([`lone_max_turn`] of its object).
-    pub(super) lone_turn: f32,
 }
 
 #[derive(Default)]
@@ -201,7 +198,6 @@ impl Manager {
                         last_shown: None,
                         relied_on: Instant::now(),
                         shared: false,
-                        lone_turn: lone_max_turn(object),
                     };
                     let (local, centre) = (object.local_camera(camera), object.local_bounds.center());
                     if is_final {

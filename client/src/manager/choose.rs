@@ -16,7 +16,7 @@ use super::cache::Held;
 use super::policy::{
     COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_TURN_CAP, MAX_TEXEL_PIXELS,
     MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
-    PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL,
+    PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, lone_max_turn,
 };
 
 /// How an object is drawn this frame.
@@ -109,13 +109,14 @@ pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32
 
 /// How far round from `held`'s eye an eye may turn about `axis` through the object's
 /// `centre`, at `distance` from it, with `held` still planned to be shown there alone:
-/// the band past its rim and the turn within the planning margin of theirs
-/// ([`may_show`]), its gaps' growth within [`LEAD`] of the tolerance — either way, as
+/// the band past its rim and the turn (`lone_turn`, its object's
+/// [`lone_max_turn`]) within the planning margin of theirs ([`may_show`]), its gaps' growth within [`LEAD`] of the tolerance — either way, as
 /// a texture made ahead of the eye is first seen behind its own eye
 /// ([`widest_within`]). (The band is the rim's geometry; the growth, measured on
 /// another texture than the one to be made, is where the margin is kept.)
 pub(super) fn probe_lone_reach(
     held: &Held,
+    lone_turn: f32,
     centre: Vec3,
     axis: Vec3,
     distance: f32,
@@ -123,7 +124,6 @@ pub(super) fn probe_lone_reach(
     tolerance: f32,
 ) -> f32 {
     let from = (held.eye - centre).normalize_or_zero() * distance;
-    let lone_turn = held.lone_turn;
     let within = |angle: f32| {
         [angle, -angle].iter().all(|&a| {
             let eye = centre + Quat::from_axis_angle(axis, a) * from;
@@ -286,7 +286,7 @@ impl Manager {
     ) -> Option<Vec<Grade>> {
         let o = &scene.objects[object];
         let wanted = Self::warped_edge(o, eye, camera)?;
-        let centre = o.local_bounds.center();
+        let (centre, lone_turn) = (o.local_bounds.center(), lone_max_turn(o));
         let at_eye = Camera {
             eye: eye.as_dvec3(),
             ..*camera
@@ -299,7 +299,7 @@ impl Manager {
                 band: band(h, centre, eye, camera),
                 too_coarse: texel > COARSEST_SHOWN,
                 finer_available: texel > REFINE_TEXEL && texture.width < wanted,
-                lone_turn: h.lone_turn,
+                lone_turn,
             }
         };
         Some(self.objects[object].held.iter().map(grade).collect())
