@@ -452,9 +452,11 @@ fn crack<const FORWARDS: bool>(a: f32, last_gap: f32, b: f32, end: i64, mut put:
 
 /// The crack between a column's last sample and `cell`, of another surface in the next
 /// row, filled with the deeper ([`crack`], itself out of line). (Inlined into the
-/// column step: out of line, its call cost the pre-warp 5–18 % — most where surfaces
-/// break often, as leaves do — the tree's 256² texture at 5° 0.99 ms against 0.88, the
-/// knot's 0.62 against 0.58, one core.)
+/// column step, though it runs as often as `crack`: called, it cost the pre-warp 4–20 %
+/// of its time for about the same instructions — most where surfaces break often, as
+/// leaves do: the tree's 256² texture at 5°, one core, 0.99 → 0.88 ms; the knot's 0.62
+/// → 0.58. Once, inlined, it made the row pass's span step a call instead and slowed
+/// the pre-warp: `#[inline]` is a hint, so time both again when the column step grows.)
 #[inline]
 fn fill_column_crack<const DOWN: bool>(
     column: &Column,
