@@ -30,20 +30,22 @@ pub(super) struct Judged {
     pub(super) hole_frac: Vec<f64>,
     pub(super) psnr_aa: Vec<f64>,
     pub(super) geometry_psnr_aa: Vec<f64>,
-    /// Per object that may be an impostor: its own PSNR in each frame showing it
-    /// ([`object_psnr`]) against the anti-aliased reference, as drawn and as exact
-    /// geometry.
+    /// Per object that may be an impostor, in each frame where it covers at least
+    /// [`MIN_JUDGED_OBJECT_PIXELS`] of the reference: its own PSNR ([`object_psnr`])
+    /// against the anti-aliased reference, as drawn and as exact geometry (`psnr.csv`
+    /// has every frame's) …
     pub(super) by_object: BTreeMap<String, Vec<f64>>,
     pub(super) geometry_by_object: BTreeMap<String, Vec<f64>>,
-    /// … and, in each frame where the object covers at least
-    /// [`MIN_JUDGED_OBJECT_PIXELS`] of the reference, the first minus the second.
+    /// … and the first minus the second.
     pub(super) gap_by_object: BTreeMap<String, Vec<f64>>,
 }
 
-/// The fewest pixels of the reference an object must cover for its frame's paired
-/// gap to count: on fewer (an object cut by the frame's edge), one misplaced texel
-/// moves the figure by many dB (the sphere at 9.6 dB against geometry's 34.2 on a
-/// sliver at the edge).
+/// The fewest pixels of the reference an object must cover for its frame to count in
+/// the summary's figures by object: on fewer (an object cut by the frame's edge), one
+/// misplaced texel moves the figure by many dB (the sphere at 9.6 dB against
+/// geometry's 34.2 on a sliver at the edge; the rock at 12.4 dB on a frame where the
+/// reference showed none of it and the impostor one pixel, with no figure for
+/// geometry to set beside it).
 pub(super) const MIN_JUDGED_OBJECT_PIXELS: usize = 400;
 
 /// A frame kept to be judged after the flight.
@@ -113,6 +115,14 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
             if let (Some(a), Some(b)) = (own, own_floor)
                 && covered >= MIN_JUDGED_OBJECT_PIXELS
             {
+                // The impostor's and geometry's figures over the same frames, so that
+                // their minima and medians compare.
+                judged.by_object.entry(name.to_string()).or_default().push(a);
+                judged
+                    .geometry_by_object
+                    .entry(name.to_string())
+                    .or_default()
+                    .push(b);
                 let gaps = judged.gap_by_object.entry(name.to_string()).or_default();
                 if (a - b).is_finite()
                     && gaps.iter().all(|&g| g > a - b)
@@ -122,14 +132,10 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
                 }
                 gaps.push(a - b);
             }
-            for (value, into) in [
-                (own, &mut judged.by_object),
-                (own_floor, &mut judged.geometry_by_object),
-            ] {
+            for value in [own, own_floor] {
                 log.push(',');
                 if let Some(v) = value {
                     log.push_str(&format!("{v:.3}"));
-                    into.entry(name.to_string()).or_default().push(v);
                 }
             }
             let drawn = image.object.iter().filter(|&&o| o == k).count();

@@ -122,7 +122,9 @@ pub(super) struct Summary {
     pub(super) geometry_psnr_aa_db_min: Option<f64>,
     /// Per object that may be an impostor, the lowest PSNR of its own pixels against
     /// the anti-aliased reference — wherever either frame shows it, so silhouette
-    /// errors count.
+    /// errors count — over the compared frames where it covers at least
+    /// [`MIN_JUDGED_OBJECT_PIXELS`](super::judge::MIN_JUDGED_OBJECT_PIXELS) pixels of
+    /// the reference (the same frames for every figure by object below).
     pub(super) psnr_aa_db_min_by_object: BTreeMap<String, f64>,
     /// … and the floor for it: the object drawn as exact geometry, one sample per
     /// pixel, against the anti-aliased reference.
@@ -130,9 +132,7 @@ pub(super) struct Summary {
     /// The median of the same, per object, for the impostor and for exact geometry.
     pub(super) psnr_aa_db_median_by_object: BTreeMap<String, f64>,
     pub(super) geometry_psnr_aa_db_median_by_object: BTreeMap<String, f64>,
-    /// Per object, frame by frame, the impostor's figure minus exact geometry's, over
-    /// the frames where it covers at least
-    /// [`MIN_JUDGED_OBJECT_PIXELS`](super::judge::MIN_JUDGED_OBJECT_PIXELS) pixels: the
+    /// Per object, frame by frame, the impostor's figure minus exact geometry's: the
     /// worst frame's, and the median.
     pub(super) psnr_aa_gap_db_min_by_object: BTreeMap<String, f64>,
     pub(super) psnr_aa_gap_db_median_by_object: BTreeMap<String, f64>,
