@@ -87,9 +87,9 @@ fn the_demo_flies_and_summarises() {
     assert!(summary["psnr_db_mean"].as_f64().unwrap() > 25.0, "{summary}");
     // Each object that may be an impostor and covers 400 pixels of some compared frame
     // (`MIN_JUDGED_OBJECT_PIXELS`) has its own figures; the ground (two triangles,
-    // always geometry) has none. The knot — smooth, seen from
-    // its orbit — as exact geometry stays near the one-sample floor of the whole frame,
-    // and its impostor (silhouettes a pixel off included) not far below.
+    // always geometry) has none. The knot — smooth, seen from its orbit — as exact
+    // geometry stays near the one-sample floor of the whole frame, and its impostor
+    // (silhouettes a pixel off included) not far below.
     for (key, floor) in [
         ("psnr_aa_db_min_by_object", 17.0),
         ("geometry_psnr_aa_db_min_by_object", 28.0),

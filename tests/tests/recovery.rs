@@ -352,14 +352,15 @@ const LOSSY: Link = Link {
 
 /// The most of its frames a 20 s flight over [`LOSSY`] at [`LOSSY_TOLERANCE`] may show
 /// stale (every object without a valid texture counted, none drawn as geometry in its
-/// stead: `--stand-in-triangles 0`). The target is 2 %: run in this file after the other tests, 0.0–1.8 % in 14
-/// runs of the client as it is; 5.0 % in one of 14 before an object's last glimpse
-/// was looked for from a typical round trip on (the rock, passed close on the orbit
-/// while its answers took up to a second), and 0.0–9.0 % in 9 before that glimpse was
-/// planned for at all and an orbit was foreseen as a turn. (An earlier 0–0.3 % over
-/// 10 s was the client taking the workers' round trip for saturation, and letting its
-/// textures live 8× longer than asked all flight.) A breakdown shows far above this:
-/// 35–49 % over 250 ms links. (Flying beside another flight is kept out by `ONE_FLIGHT`.)
+/// stead: `--stand-in-triangles 0`). The target is 2 %: run in this file after the
+/// other tests, 0.0–1.8 % in 14 runs of the client as it is; 5.0 % in one of 14 before
+/// an object's last glimpse was looked for from a typical round trip on (the rock,
+/// passed close on the orbit while its answers took up to a second), and 0.0–9.0 % in 9
+/// before that glimpse was planned for at all and an orbit was foreseen as a turn. (An
+/// earlier 0–0.3 % over 10 s was the client taking the workers' round trip for
+/// saturation, and letting its textures live 8× longer than asked all flight.) A
+/// breakdown shows far above this: 35–49 % over 250 ms links. (Flying beside another
+/// flight is kept out by `ONE_FLIGHT`.)
 const LOSSY_STALE_AT_MOST: f64 = 0.10;
 
 /// The tolerance the lossy flight asks for, pixels: the lifetime such a link affords

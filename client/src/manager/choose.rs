@@ -109,9 +109,10 @@ pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32
 
 /// How far round from `held`'s eye an eye may turn about `axis` through the object's
 /// `centre`, at `distance` from it, with `held` still planned to be shown there alone:
-/// the band past its rim and the turn (`lone_turn`, its object's
-/// [`lone_max_turn`]) within the planning margin of theirs ([`may_show`]), its gaps' growth within [`LEAD`] of the tolerance — either way, as
-/// a texture made ahead of the eye is first seen behind its own eye
+/// the band past its rim and the turn (`lone_turn`, its object's [`lone_max_turn`])
+/// within the planning margin of theirs ([`may_show`]), its gaps' growth within
+/// [`LEAD`] of the tolerance — either way, as a texture made ahead of the eye is first
+/// seen behind its own eye
 /// ([`widest_within`]). (The band is the rim's geometry; the growth, measured on
 /// another texture than the one to be made, is where the margin is kept.)
 pub(super) fn probe_lone_reach(
