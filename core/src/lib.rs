@@ -45,6 +45,7 @@
 pub mod bounds;
 pub mod camera;
 pub mod error;
+pub mod facing;
 pub mod frame;
 pub mod generators;
 pub mod gltf;

@@ -127,6 +127,7 @@ fn the_demo_flies_and_summarises() {
         "texel_px",
         "growth_px",
         "band_px",
+        "unseen_pct",
     ]
     .map(|c| column(&format!("{c}_knot")));
     let (edge, level) = (column("edge_knot"), column("level_knot"));

@@ -6,7 +6,7 @@
 use glam::{Quat, Vec3};
 
 use relief_core::camera::Camera;
-use relief_core::scene::Scene;
+use relief_core::scene::{Scene, SceneObject};
 use relief_render::validity::schaufler::{magnification, texel_angle, volume_centre};
 use relief_render::warp::params::WarpParams;
 
@@ -14,9 +14,10 @@ use super::Manager;
 use super::around::{angle_between, similar_distance};
 use super::cache::Held;
 use super::policy::{
-    COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_TURN_CAP, MAX_TEXEL_PIXELS,
-    MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND, PLANNING_MARGIN,
-    PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, lone_max_turn,
+    COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_TURN_CAP, LONE_UNSEEN,
+    MAX_TEXEL_PIXELS, MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND,
+    PARTNERED_UNSEEN, PLANNING_MARGIN, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, is_sheets,
+    lone_max_turn,
 };
 
 /// How an object is drawn this frame.
@@ -54,6 +55,9 @@ pub struct ShownTexture {
     /// The band past the texture's rim it cannot show alone, pixels (see
     /// [`Rim::band`](relief_render::validity::rim::Rim::band)).
     pub band_pixels: f32,
+    /// Of what the eye sees face-on, the share the texture's rays never met, percent
+    /// ([`unseen`]).
+    pub unseen_percent: f32,
     /// The partner's turn from the eye, degrees, when one was drawn.
     pub partner_turn_deg: Option<f32>,
 }
@@ -63,9 +67,8 @@ pub struct ShownTexture {
 pub(super) struct Grade {
     /// Growth of the widest predicted gap, screen pixels, weighted ([`growth`]).
     pub(super) growth: f32,
-    /// The band past its rim it cannot show alone, screen pixels
-    /// ([`Rim::band`](relief_render::validity::rim::Rim::band)).
-    pub(super) band: f32,
+    /// What it cannot show alone.
+    pub(super) unshown: Unshown,
     /// Too coarse to be shown: its texels would cover more than [`COARSEST_SHOWN`]
     /// pixels (eq. 4-1).
     pub(super) too_coarse: bool,
@@ -75,6 +78,26 @@ pub(super) struct Grade {
     /// The turn past which it counts as stale shown alone, at the default tolerance
     /// ([`lone_max_turn`](super::policy::lone_max_turn) of its object).
     pub(super) lone_turn: f32,
+}
+
+/// What a texture cannot show at an eye alone ([`may_show`] bounds both).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub(super) struct Unshown {
+    /// The band past its rim, screen pixels ([`band`]).
+    pub(super) band: f32,
+    /// The share of the surface the eye sees face-on that its rays never met
+    /// ([`unseen`]).
+    pub(super) unseen: f32,
+}
+
+impl Unshown {
+    /// What `held` cannot show of `object` (about its `centre`) at `eye`.
+    pub(super) fn at(held: &Held, object: &SceneObject, centre: Vec3, eye: Vec3, camera: &Camera) -> Unshown {
+        Unshown {
+            band: band(held, centre, eye, camera),
+            unseen: unseen(held, object, centre, eye),
+        }
+    }
 }
 
 /// The growth (screen pixels) of `held`'s widest predicted gap when warped to `eye`,
@@ -107,17 +130,31 @@ pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32
     held.prepared.rim.band(texture, centre, eye) * focal / centre.distance(eye).max(f32::MIN_POSITIVE)
 }
 
-/// How far round from `held`'s eye an eye may turn about `axis` through the object's
+/// Of the surface of `object` that `eye` sees face-on, looking at its `centre`, the
+/// share `held`'s rays never met
+/// ([`FacingCensus::unseen_share`](relief_core::facing::FacingCensus::unseen_share)):
+/// what turned into view past a sharp edge. 0 for perspective textures and for leaves
+/// or sheets (two-sided: every face is seen from one side or the other).
+pub(super) fn unseen(held: &Held, object: &SceneObject, centre: Vec3, eye: Vec3) -> f32 {
+    let c = &held.prepared.pyramid.levels[0].texture.camera;
+    if c.centre.is_some() || is_sheets(object) {
+        return 0.0;
+    }
+    let view = (centre - eye).normalize_or_zero();
+    object.facing_census().unseen_share(&[c.f], view)
+}
+
+/// How far round from `held`'s eye an eye may turn about `axis` through `object`'s
 /// `centre`, at `distance` from it, with `held` still planned to be shown there alone:
-/// the band past its rim and the turn (`lone_turn`, its object's [`lone_max_turn`])
-/// within the planning margin of theirs ([`may_show`]), its gaps' growth within
+/// the band past its rim, the surface its rays never met, and the turn (the object's
+/// [`lone_max_turn`]) within the planning margin of theirs ([`may_show`]), its gaps' growth within
 /// [`LEAD`] of the tolerance — either way, as a texture made ahead of the eye is first
 /// seen behind its own eye
 /// ([`widest_within`]). (The band is the rim's geometry; the growth, measured on
 /// another texture than the one to be made, is where the margin is kept.)
 pub(super) fn probe_lone_reach(
     held: &Held,
-    lone_turn: f32,
+    object: &SceneObject,
     centre: Vec3,
     axis: Vec3,
     distance: f32,
@@ -125,12 +162,13 @@ pub(super) fn probe_lone_reach(
     tolerance: f32,
 ) -> f32 {
     let from = (held.eye - centre).normalize_or_zero() * distance;
+    let lone_turn = lone_max_turn(object);
     let within = |angle: f32| {
         [angle, -angle].iter().all(|&a| {
             let eye = centre + Quat::from_axis_angle(axis, a) * from;
-            let band = band(held, centre, eye, camera);
+            let unshown = Unshown::at(held, object, centre, eye, camera);
             // (The growth, dearer, only where the rim and the turn allow.)
-            may_show(band, angle, lone_turn, false, PLANNING_MARGIN, tolerance)
+            may_show(unshown, angle, lone_turn, false, PLANNING_MARGIN, tolerance)
                 && growth(held, eye, camera) <= LEAD * tolerance
         })
     };
@@ -172,7 +210,7 @@ pub(super) fn widest_within(within: impl Fn(f32) -> bool) -> f32 {
 /// lower.) The turn partnered is where the warp stops being the object's near side,
 /// whatever the tolerance.
 pub(super) fn may_show(
-    band: f32,
+    unshown: Unshown,
     turn: f32,
     lone_turn: f32,
     partnered: bool,
@@ -183,7 +221,11 @@ pub(super) fn may_show(
         true => MAX_TURN,
         false => (lone_turn * tolerance / DEFAULT_TOLERANCE).min(LONE_TURN_CAP),
     };
-    band <= margin * band_limit(partnered, tolerance) && turn <= margin * turn_limit
+    let scale = margin * tolerance / DEFAULT_TOLERANCE;
+    let unseen_limit = if partnered { PARTNERED_UNSEEN } else { LONE_UNSEEN };
+    unshown.band <= margin * band_limit(partnered, tolerance)
+        && unshown.unseen <= scale * unseen_limit
+        && turn <= margin * turn_limit
 }
 
 /// The widest band past its rim a texture may leave open, alone or `partnered`, at
@@ -241,8 +283,9 @@ pub(super) fn held_covering(
         let turn = angle_between(centre, eye, future);
         g.growth <= PLANNING_MARGIN * tolerance
             && !g.finer_available
-            && (may_show(g.band, turn, g.lone_turn, false, PLANNING_MARGIN, tolerance)
-                || (may_show(g.band, turn, g.lone_turn, true, PLANNING_MARGIN, tolerance) && partnered(eye)))
+            && (may_show(g.unshown, turn, g.lone_turn, false, PLANNING_MARGIN, tolerance)
+                || (may_show(g.unshown, turn, g.lone_turn, true, PLANNING_MARGIN, tolerance)
+                    && partnered(eye)))
     })
 }
 
@@ -297,7 +340,7 @@ impl Manager {
             let texel = magnification(texture, &at_eye);
             Grade {
                 growth: growth(h, eye, camera),
-                band: band(h, centre, eye, camera),
+                unshown: Unshown::at(h, o, centre, eye, camera),
                 too_coarse: texel > COARSEST_SHOWN,
                 finer_available: texel > REFINE_TEXEL && texture.width < wanted,
                 lone_turn,
@@ -332,6 +375,7 @@ impl Manager {
             level,
             growth_pixels: growth(shown, eye, camera),
             band_pixels: band(shown, centre, eye, camera),
+            unseen_percent: 100.0 * unseen(shown, object, centre, eye),
             partner_turn_deg: partner.and_then(|(i, _)| turn(i)),
         })
     }
@@ -360,7 +404,7 @@ impl Manager {
         let (from, eye) = (held[shown].eye - centre, camera.eye_f32() - centre);
         // (Wanted where the texture could not be shown alone: as `may_show` rules.)
         let (turn, g) = (from.angle_between(eye), &grades[shown]);
-        if turn < PARTNER_FROM && may_show(g.band, turn, g.lone_turn, false, 1.0, self.tolerance()) {
+        if turn < PARTNER_FROM && may_show(g.unshown, turn, g.lone_turn, false, 1.0, self.tolerance()) {
             return None;
         }
         held.iter()
@@ -391,7 +435,7 @@ mod tests {
         let turns = [0.7, 0.1, 0.05, 0.3];
         let mut grades = growths.map(|growth| Grade {
             growth,
-            band: 0.0,
+            unshown: Unshown::default(),
             too_coarse: false,
             finer_available: false,
             lone_turn: LONE_MAX_TURN,
@@ -412,7 +456,7 @@ mod tests {
         // (Too coarse, and a finer one to be had: not shown there either.)
         let grade = |too_coarse| Grade {
             growth: 0.0,
-            band: 0.0,
+            unshown: Unshown::default(),
             too_coarse,
             finer_available: too_coarse,
             lone_turn: LONE_MAX_TURN,
@@ -440,7 +484,14 @@ mod tests {
         let turn = 10f32.to_radians();
         let between = 0.5 * (LONE_BAND + PARTNERED_BAND);
         let may = |band, turn, partnered, margin| {
-            may_show(band, turn, LONE_MAX_TURN, partnered, margin, DEFAULT_TOLERANCE)
+            may_show(
+                Unshown { band, unseen: 0.0 },
+                turn,
+                LONE_MAX_TURN,
+                partnered,
+                margin,
+                DEFAULT_TOLERANCE,
+            )
         };
         assert!(may(0.9 * LONE_BAND, turn, false, 1.0));
         assert!(!may(between, turn, false, 1.0));
@@ -453,7 +504,14 @@ mod tests {
         // Twice the tolerance lets the band open twice as far, and a texture alone turn
         // twice as far (a partnered one no further).
         let twice = |band, turn, partnered| {
-            may_show(band, turn, LONE_MAX_TURN, partnered, 1.0, 2.0 * DEFAULT_TOLERANCE)
+            may_show(
+                Unshown { band, unseen: 0.0 },
+                turn,
+                LONE_MAX_TURN,
+                partnered,
+                1.0,
+                2.0 * DEFAULT_TOLERANCE,
+            )
         };
         assert!(twice(1.9 * LONE_BAND, turn, false));
         assert!(!twice(2.1 * LONE_BAND, turn, false));
@@ -462,8 +520,36 @@ mod tests {
         assert!(!twice(0.0, 2.1 * LONE_MAX_TURN, false));
         assert!(!twice(0.0, 1.1 * MAX_TURN, true));
         // Alone, never past the cap.
-        let tenfold = |turn| may_show(0.0, turn, LONE_MAX_TURN, false, 1.0, 10.0 * DEFAULT_TOLERANCE);
+        let tenfold = |turn| {
+            may_show(
+                Unshown::default(),
+                turn,
+                LONE_MAX_TURN,
+                false,
+                1.0,
+                10.0 * DEFAULT_TOLERANCE,
+            )
+        };
         assert!(tenfold(0.9 * LONE_TURN_CAP) && !tenfold(1.1 * LONE_TURN_CAP));
+    }
+
+    /// Alone, a texture may be shown while the surface turned into view that its rays
+    /// never met stays under [`LONE_UNSEEN`] of what the eye sees; partnered, under
+    /// [`PARTNERED_UNSEEN`]; with the tolerance, the limits scale.
+    #[test]
+    fn the_surface_its_rays_never_met_decides_too() {
+        let turn = 5f32.to_radians();
+        let may = |unseen, partnered, tolerance| {
+            let unshown = Unshown { band: 0.0, unseen };
+            may_show(unshown, turn, LONE_MAX_TURN, partnered, 1.0, tolerance)
+        };
+        let between = 0.5 * (LONE_UNSEEN + PARTNERED_UNSEEN);
+        assert!(may(0.9 * LONE_UNSEEN, false, DEFAULT_TOLERANCE));
+        assert!(!may(between, false, DEFAULT_TOLERANCE));
+        assert!(may(between, true, DEFAULT_TOLERANCE));
+        assert!(!may(1.1 * PARTNERED_UNSEEN, true, DEFAULT_TOLERANCE));
+        assert!(may(1.9 * LONE_UNSEEN, false, 2.0 * DEFAULT_TOLERANCE));
+        assert!(!may(2.1 * LONE_UNSEEN, false, 2.0 * DEFAULT_TOLERANCE));
     }
 
     #[test]
@@ -477,7 +563,7 @@ mod tests {
         // Only a too coarse one: none.
         let coarse = Grade {
             growth: 0.0,
-            band: 0.0,
+            unshown: Unshown::default(),
             too_coarse: true,
             finer_available: false,
             lone_turn: LONE_MAX_TURN,

@@ -314,7 +314,7 @@ impl Manager {
             let shown_turn = best.map(|(i, _)| angle_between(centre, held[i].eye, eye));
             let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
             let too_far = best.zip(shown_turn).is_some_and(|((_, g), turn)| {
-                !may_show(g.band, turn, g.lone_turn, partner.is_some(), 1.0, tolerance)
+                !may_show(g.unshown, turn, g.lone_turn, partner.is_some(), 1.0, tolerance)
             });
             let within_any = grades.iter().any(|g| g.growth <= tolerance);
             let valid = within_any && !too_far;

@@ -154,6 +154,20 @@ pub fn is_sheets(object: &SceneObject) -> bool {
 /// in a row — the spikes the eye sees — so at 2 px about half a pixel is lost.
 pub const LONE_BAND: f32 = 2.0;
 
+/// A texture drawn without a partner counts as stale once more than this share of the
+/// surface the eye sees face-on was turned away from or edge-on to its rays
+/// ([`FacingCensus::unseen_share`](relief_core::facing::FacingCensus::unseen_share)):
+/// past a sharp edge a flat face comes into view at once, and the texture shows a hole
+/// the rim's band does not foresee. A smooth surface turns into view slowly — a sphere
+/// at [`LONE_MAX_TURN`] shows 1.7 % it was not seen in, which its rim's band bounds —
+/// where the scanned fandisk's side came into view as 7.1 % at 8.7° and 15.8 % at
+/// 11.6° (the object 11 and 14.5 dB below geometry in those frames).
+pub const LONE_UNSEEN: f32 = 0.02;
+
+/// With a partner, the share of [`LONE_UNSEEN`] allowed: the partner, from the far side
+/// of the eye, holds what turned into view.
+pub const PARTNERED_UNSEEN: f32 = 2.0 * LONE_UNSEEN;
+
 /// With a partner filling the band past its rim, a texture counts as stale once that
 /// band is wider than this, in pixels: the texels just inside the rim, grazed by the
 /// texture's rays, stretch over as much again (the sphere shown 35–47° from its eye with

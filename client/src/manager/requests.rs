@@ -23,7 +23,7 @@ use super::policy::{
     GLIMPSE_LATENCY_PERCENTILE, HORIZON_FALLBACK_STEPS, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE,
     LATENCY_WINDOW, LEAD, LEAD_DISTANCE_SLACK, LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES,
     PENDING_DISTANCE_SLACK, PENDING_REACH, PREDICTED_VIEW_MARGIN, REQUESTED_DEPTH_BITS, SERVE_REACH,
-    TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge, lone_max_turn,
+    TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -427,8 +427,7 @@ impl Manager {
         // (Quiet a while after the saturated server refused one: see `SHED_QUIET`.)
         let quiet = self.objects[k].quiet_until.is_some_and(|t| now < t);
         if !covered && !quiet {
-            let lone_turn = lone_max_turn(&scene.objects[k]);
-            let lead_angle = self.lead_angle(k, lone_turn, centre, eye, future, camera);
+            let lead_angle = self.lead_angle(k, &scene.objects[k], centre, eye, future, camera);
             // Time for the eye, turning as it has been, to turn the lead past the future
             // (the path known no further than `MAX_HORIZON_S` ahead).
             let turn = angle_between(centre, eye, future);
@@ -458,7 +457,7 @@ impl Manager {
     /// held texture nearest the future could be seen from behind its own eye and still
     /// be planned to be shown alone there, its gaps grown [`LEAD`] of the tolerance at
     /// most ([`probe_lone_reach`]: turned the way the eye moves, at the future's
-    /// distance, the object's `lone_turn`), so that the texture, first seen that far
+    /// distance), so that the texture, first seen that far
     /// behind its eye, covers the future on its own. With none held, [`LEAD`] of the
     /// valid angle assumed. Never past [`PENDING_REACH`] of the valid angle: a request
     /// made farther would not count as covering the future, and the next frame would ask
@@ -466,7 +465,7 @@ impl Manager {
     fn lead_angle(
         &self,
         k: usize,
-        lone_turn: f32,
+        object: &SceneObject,
         centre: Vec3,
         now: Vec3,
         future: Vec3,
@@ -481,7 +480,7 @@ impl Manager {
             let axis = (held.eye - centre).cross(future - now).normalize_or_zero();
             let distance = centre.distance(future);
             (axis != Vec3::ZERO)
-                .then(|| probe_lone_reach(held, lone_turn, centre, axis, distance, camera, self.tolerance()))
+                .then(|| probe_lone_reach(held, object, centre, axis, distance, camera, self.tolerance()))
         });
         probed.unwrap_or(LEAD * valid).min(PENDING_REACH * valid)
     }

@@ -16,6 +16,7 @@ use glam::{DQuat, DVec3, Vec3};
 use crate::bounds::Aabb;
 use crate::camera::{Camera, CameraPath, PathSegment};
 use crate::error::{Error, Result};
+use crate::facing::FacingCensus;
 use crate::hash::{ContentHash, mesh_hash};
 use crate::mesh::{EdgeCensus, Mesh};
 use crate::reach::Reach;
@@ -219,6 +220,9 @@ pub struct SceneObject {
     /// is asked (only a client drawing impostors needs it, and it costs a pass over the
     /// mesh); shared by the mesh's placements.
     edges: Arc<std::sync::OnceLock<EdgeCensus>>,
+    /// Which way the mesh's surface faces, and where ([`FacingCensus`]), found the
+    /// first time it is asked, as `edges`; shared by the mesh's placements.
+    facing: Arc<std::sync::OnceLock<FacingCensus>>,
 }
 
 impl SceneObject {
@@ -231,6 +235,11 @@ impl SceneObject {
     /// How the mesh's edges are shared ([`Mesh::edge_census`]).
     pub fn edge_census(&self) -> EdgeCensus {
         *self.edges.get_or_init(|| self.mesh.edge_census())
+    }
+
+    /// Which way the mesh's surface faces, and where ([`FacingCensus::of`]).
+    pub fn facing_census(&self) -> &FacingCensus {
+        self.facing.get_or_init(|| FacingCensus::of(&self.mesh))
     }
 
     /// Whether the object's frame has the world's axes and metres: then moving into it
@@ -341,6 +350,7 @@ impl SceneObject {
             local_bounds: mesh.bounds(),
             hash: mesh_hash(&mesh),
             edges: Arc::default(),
+            facing: Arc::default(),
             mesh: Arc::new(mesh),
             specular,
         }

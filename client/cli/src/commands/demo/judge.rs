@@ -83,7 +83,7 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
     for (_, name) in &candidates {
         let name = column(name);
         log.push_str(&format!(
-            ",psnr_aa_db_{name},geometry_psnr_aa_db_{name},pixels_{name},drawn_px_{name},turn_deg_{name},distance_ratio_{name},texel_px_{name},edge_{name},level_{name},growth_px_{name},band_px_{name},partner_turn_deg_{name}"
+            ",psnr_aa_db_{name},geometry_psnr_aa_db_{name},pixels_{name},drawn_px_{name},turn_deg_{name},distance_ratio_{name},texel_px_{name},edge_{name},level_{name},growth_px_{name},band_px_{name},unseen_pct_{name},partner_turn_deg_{name}"
         ));
     }
     log.push('\n');
@@ -147,20 +147,20 @@ pub(super) fn judge(scene: &Scene, compared: &[Compared], out: &Path) -> Result<
                     s.texel_pixels,
                     (s.edge, s.level),
                     s.growth_pixels,
-                    s.band_pixels,
+                    (s.band_pixels, s.unseen_percent),
                     s.partner_turn_deg,
                 )
             });
             match fields {
-                Some(((turn, ratio), texel, (edge, level), growth, band, partner)) => {
+                Some(((turn, ratio), texel, (edge, level), growth, (band, unseen), partner)) => {
                     log.push_str(&format!(
-                        ",{turn:.1},{ratio:.3},{texel:.2},{edge},{level},{growth:.2},{band:.2},"
+                        ",{turn:.1},{ratio:.3},{texel:.2},{edge},{level},{growth:.2},{band:.2},{unseen:.2},"
                     ));
                     if let Some(p) = partner {
                         log.push_str(&format!("{p:.1}"));
                     }
                 }
-                None => log.push_str(",,,,,,,,"),
+                None => log.push_str(",,,,,,,,,"),
             }
         }
         log.push('\n');

@@ -1,0 +1,199 @@
+//! Which way a mesh's surface faces: the area of its triangles gathered by normal
+//! ([`FacingCensus`]), so that how much of the surface a view sees face-on that a
+//! relief texture's parallel rays never met can be told without a pass over the
+//! triangles ([`FacingCensus::unseen_share`]).
+//!
+//! A texture's rays see a face only from its front: a face edge-on to them, or turned
+//! away, is not in the texture. Turned by `φ`, a view sees round a curved outline a
+//! band growing as `1 − cos φ` (the rim's measure, in the client); but past a sharp
+//! edge a flat face that was edge-on comes into view at once, `sin φ` of its width — a
+//! CAD part's side, a plinth — and the texture alone shows a hole there.
+//!
+//! The census keeps, per bin of normal direction ([`NORMAL_CELLS`] a side of each cube
+//! face), the summed area and the area-weighted normal: a flat face's triangles share
+//! their normal, and its bin holds it exactly. Occlusion is left out (a face behind
+//! another counts as seen by a view that faces it), and so is the spread of a near
+//! eye's rays: it is a census of facing, not of visibility.
+
+use glam::Vec3;
+
+use crate::mesh::Mesh;
+
+/// Cells a side on each face of the cube normals are binned by: 6 × 12² directions,
+/// about 7.5° each. (A bin straddling the edge of what a texture sees is counted whole
+/// on one side: on a sphere turned 10°, finer bins change the share by a fraction of a
+/// percent.)
+pub const NORMAL_CELLS: usize = 12;
+
+/// One bin of the census: triangles of like normal.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FacingBin {
+    /// Their summed area.
+    pub area: f32,
+    /// Their area-weighted mean normal, unit length.
+    pub normal: Vec3,
+}
+
+/// A mesh's surface by facing (see the module docs).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FacingCensus {
+    /// The bins holding any area.
+    pub bins: Vec<FacingBin>,
+}
+
+impl FacingCensus {
+    /// The census of `mesh`'s triangles (degenerate ones left out).
+    pub fn of(mesh: &Mesh) -> FacingCensus {
+        // Per bin: area, area × normal.
+        let mut sums = vec![(0.0f64, Vec3::ZERO); 6 * NORMAL_CELLS * NORMAL_CELLS];
+        for t in &mesh.triangles {
+            let [a, b, c] = t.map(|v| mesh.positions.get(v as usize).copied().unwrap_or(Vec3::ZERO));
+            let cross = (b - a).cross(c - a);
+            let area = 0.5 * cross.length();
+            if !(area > 0.0 && area.is_finite()) {
+                continue;
+            }
+            let normal = cross / (2.0 * area);
+            let sum = &mut sums[direction_cell(normal)];
+            sum.0 += f64::from(area);
+            sum.1 += normal * area;
+        }
+        let bins = sums
+            .into_iter()
+            .filter(|s| s.0 > 0.0)
+            .filter_map(|(area, normal)| {
+                Some(FacingBin {
+                    area: area as f32,
+                    normal: normal.try_normalize()?,
+                })
+            })
+            .collect();
+        FacingCensus { bins }
+    }
+
+    /// Of the surface a view along unit `view` sees face-on (its projected area,
+    /// occlusion left out: each bin weighted by how squarely it faces the view), the
+    /// share that faces away from every one of `rays` (the unit directions parallel
+    /// texture rays travel in) or lies edge-on to them: what no such texture holds. 0
+    /// when the view sees nothing.
+    pub fn unseen_share(&self, rays: &[Vec3], view: Vec3) -> f32 {
+        let (mut facing, mut unseen) = (0.0f32, 0.0f32);
+        for bin in &self.bins {
+            let projected = bin.area * (-bin.normal.dot(view)).max(0.0);
+            if projected == 0.0 {
+                continue;
+            }
+            facing += projected;
+            if rays.iter().all(|f| bin.normal.dot(*f) >= 0.0) {
+                unseen += projected;
+            }
+        }
+        if facing > 0.0 { unseen / facing } else { 0.0 }
+    }
+}
+
+/// The cube-face cell a unit normal falls in ([`NORMAL_CELLS`] a side).
+fn direction_cell(n: Vec3) -> usize {
+    let abs = n.abs();
+    let (face, u, v, major) = if abs.x >= abs.y && abs.x >= abs.z {
+        (usize::from(n.x < 0.0), n.y, n.z, abs.x)
+    } else if abs.y >= abs.z {
+        (2 + usize::from(n.y < 0.0), n.z, n.x, abs.y)
+    } else {
+        (4 + usize::from(n.z < 0.0), n.x, n.y, abs.z)
+    };
+    let cell = |s: f32| (((s / major + 1.0) * 0.5 * NORMAL_CELLS as f32) as usize).min(NORMAL_CELLS - 1);
+    (face * NORMAL_CELLS + cell(u)) * NORMAL_CELLS + cell(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::generators::Generator;
+    use crate::mesh::Material;
+
+    /// A box as a mesh (12 triangles, outward normals), `size` along each axis, its
+    /// centre at `at`.
+    fn cuboid(size: Vec3, at: Vec3) -> Mesh {
+        let h = size * 0.5;
+        let corner = |i: u32| {
+            at + Vec3::new(
+                if i & 1 == 0 { -h.x } else { h.x },
+                if i & 2 == 0 { -h.y } else { h.y },
+                if i & 4 == 0 { -h.z } else { h.z },
+            )
+        };
+        // (Corners counted anticlockwise seen from outside.)
+        let quads = [
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+        ];
+        Mesh {
+            positions: (0..8).map(corner).collect(),
+            triangles: quads
+                .iter()
+                .flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]])
+                .collect(),
+            materials: vec![Material::default()],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn the_cuboid_faces_outwards() {
+        let m = cuboid(Vec3::ONE, Vec3::ZERO);
+        for t in 0..m.triangles.len() {
+            let [a, b, c] = m.corners(t);
+            let n = (b - a).cross(c - a);
+            assert!(n.dot((a + b + c) / 3.0) > 0.0, "triangle {t}");
+        }
+    }
+
+    #[test]
+    fn a_face_edge_on_to_the_texture_shows_turned_by_its_sine() {
+        // A flat slab, 4 × 1 × 4: its top face edge-on to rays along −z.
+        let census = FacingCensus::of(&cuboid(Vec3::new(4.0, 1.0, 4.0), Vec3::ZERO));
+        let rays = [Vec3::NEG_Z];
+        assert_eq!(census.unseen_share(&rays, Vec3::NEG_Z), 0.0);
+        for degrees in [5.0f32, 10.0, 20.0] {
+            let t = degrees.to_radians();
+            let view = -Vec3::new(0.0, t.sin(), t.cos());
+            // Seen: the front face (4 × 1) at cos t; not: the top (4 × 4) at sin t.
+            let (front, top) = (4.0 * t.cos(), 16.0 * t.sin());
+            let share = census.unseen_share(&rays, view);
+            assert!((share - top / (front + top)).abs() < 1e-3, "{degrees}°: {share}");
+        }
+        // Turned the other way, the bottom shows: as unseen as the top.
+        let view = -Vec3::new(0.0, -0.2f32.sin(), 0.2f32.cos());
+        assert!(census.unseen_share(&rays, view) > 0.4);
+    }
+
+    #[test]
+    fn a_sphere_turned_shows_little_it_was_not_seen_in() {
+        let census = FacingCensus::of(&Generator::Sphere { subdivisions: 5 }.build());
+        let rays = [Vec3::NEG_Z];
+        let at = |degrees: f32| {
+            let t = degrees.to_radians();
+            census.unseen_share(&rays, -Vec3::new(t.sin(), 0.0, t.cos()))
+        };
+        // Exactly: the lune turned into view, ∫ sin over it, against π: (1 − cos t)/2.
+        for degrees in [10.0f32, 30.0] {
+            let exact = (1.0 - degrees.to_radians().cos()) / 2.0;
+            assert!(
+                (at(degrees) - exact).abs() < 0.02,
+                "{degrees}°: {} against {exact}",
+                at(degrees)
+            );
+        }
+        assert!(at(0.0) < 0.01);
+        // A partner from the far side sees it all.
+        let t = 20f32.to_radians();
+        let partner = -Vec3::new(t.sin(), 0.0, t.cos());
+        let view = -Vec3::new(0.17, 0.0, 1.0).normalize();
+        assert_eq!(census.unseen_share(&[Vec3::NEG_Z, partner], view), 0.0);
+    }
+}
