@@ -16,8 +16,7 @@ use super::cache::Held;
 use super::policy::{
     COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_TURN_CAP, LONE_UNSEEN,
     MAX_TEXEL_PIXELS, MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND,
-    PARTNERED_UNSEEN, PLANNING_MARGIN, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, is_sheets,
-    lone_max_turn,
+    PLANNING_MARGIN, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, is_sheets, lone_max_turn,
 };
 
 /// How an object is drawn this frame.
@@ -192,15 +191,16 @@ pub(super) fn widest_within(within: impl Fn(f32) -> bool) -> f32 {
     lo
 }
 
-/// Whether a texture leaving a `band` past its rim (pixels: [`band`]) at an eye `turn`
-/// radians round from its own may be shown there, `partnered` or not: alone, the band
-/// under [`LONE_BAND`] and the turn under `lone_turn` (the texture's at the default
+/// Whether a texture leaving `unshown` (the band past its rim, the surface its rays
+/// never met: [`Unshown`]) at an eye `turn` radians round from its own may be shown
+/// there, `partnered` or not: alone, the band under [`LONE_BAND`], the surface under
+/// [`LONE_UNSEEN`], and the turn under `lone_turn` (the texture's at the default
 /// tolerance, [`lone_max_turn`](super::policy::lone_max_turn)); with a partner filling
 /// the band, the band under [`PARTNERED_BAND`] (the texels inside the rim stretch as the
 /// band widens) and the turn under [`MAX_TURN`] — all times `margin` (1 to draw; the
 /// planning margin to plan).
 ///
-/// The bands and the turn alone are the default's: they scale with `tolerance` over
+/// The bands, the surface and the turn alone are the default's: they scale with `tolerance` over
 /// [`DEFAULT_TOLERANCE`] (the turn up to [`LONE_TURN_CAP`]), so the one knob — and the
 /// server's load and the link, which raise it — trades these predicted errors for
 /// lifetime. (With the band alone fixed, four times the tolerance left the requests as
@@ -221,10 +221,12 @@ pub(super) fn may_show(
         true => MAX_TURN,
         false => (lone_turn * tolerance / DEFAULT_TOLERANCE).min(LONE_TURN_CAP),
     };
-    let scale = margin * tolerance / DEFAULT_TOLERANCE;
-    let unseen_limit = if partnered { PARTNERED_UNSEEN } else { LONE_UNSEEN };
+    let unseen_limit = match partnered {
+        true => f32::INFINITY,
+        false => margin * LONE_UNSEEN * tolerance / DEFAULT_TOLERANCE,
+    };
     unshown.band <= margin * band_limit(partnered, tolerance)
-        && unshown.unseen <= scale * unseen_limit
+        && unshown.unseen <= unseen_limit
         && turn <= margin * turn_limit
 }
 
@@ -534,8 +536,8 @@ mod tests {
     }
 
     /// Alone, a texture may be shown while the surface turned into view that its rays
-    /// never met stays under [`LONE_UNSEEN`] of what the eye sees; partnered, under
-    /// [`PARTNERED_UNSEEN`]; with the tolerance, the limits scale.
+    /// never met stays under [`LONE_UNSEEN`] of what the eye sees, the limit scaling
+    /// with the tolerance; partnered, the partner holds it.
     #[test]
     fn the_surface_its_rays_never_met_decides_too() {
         let turn = 5f32.to_radians();
@@ -543,11 +545,9 @@ mod tests {
             let unshown = Unshown { band: 0.0, unseen };
             may_show(unshown, turn, LONE_MAX_TURN, partnered, 1.0, tolerance)
         };
-        let between = 0.5 * (LONE_UNSEEN + PARTNERED_UNSEEN);
         assert!(may(0.9 * LONE_UNSEEN, false, DEFAULT_TOLERANCE));
-        assert!(!may(between, false, DEFAULT_TOLERANCE));
-        assert!(may(between, true, DEFAULT_TOLERANCE));
-        assert!(!may(1.1 * PARTNERED_UNSEEN, true, DEFAULT_TOLERANCE));
+        assert!(!may(1.1 * LONE_UNSEEN, false, DEFAULT_TOLERANCE));
+        assert!(may(1.0, true, DEFAULT_TOLERANCE));
         assert!(may(1.9 * LONE_UNSEEN, false, 2.0 * DEFAULT_TOLERANCE));
         assert!(!may(2.1 * LONE_UNSEEN, false, 2.0 * DEFAULT_TOLERANCE));
     }
