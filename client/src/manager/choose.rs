@@ -55,7 +55,7 @@ pub struct ShownTexture {
     /// [`Rim::band`](relief_render::validity::rim::Rim::band)).
     pub band_pixels: f32,
     /// Of what the eye sees face-on, the share the texture's rays never met, percent
-    /// ([`unseen`]).
+    /// ([`FacingCensus::unseen_share`](relief_core::facing::FacingCensus::unseen_share)).
     pub unseen_percent: f32,
     /// The partner's turn from the eye, degrees, when one was drawn.
     pub partner_turn_deg: Option<f32>,
