@@ -30,6 +30,8 @@
 //! - [`scene`] — scenes (objects placed in the world, lights, camera path), loaded from a
 //!   built-in name, a TOML scene file, or a bare `.obj` or glTF file ([`gltf`]).
 //! - [`joins`] — when two samples of a relief texture are one surface.
+//! - [`normals`] — a mesh's area by the direction it faces: what a view sees that a
+//!   texture's rays never met.
 //! - [`relief`] — the relief texture: its source camera, depth quantisation and on-disk
 //!   format (`texture.json` + PNG planes).
 //! - [`frame`] — a rendered RGB8 frame with per-pixel object ids.
@@ -45,13 +47,13 @@
 pub mod bounds;
 pub mod camera;
 pub mod error;
-pub mod facing;
 pub mod frame;
 pub mod generators;
 pub mod gltf;
 pub mod hash;
 pub mod joins;
 pub mod mesh;
+pub mod normals;
 pub mod obj;
 pub mod reach;
 pub mod relief;

@@ -110,7 +110,8 @@ fn the_demo_flies_and_summarises() {
     );
     assert!(-15.0 < worst && worst <= median && median < 3.0, "{summary}");
     // psnr.csv: per object its figures, the pixels it covers and how it was drawn,
-    // every row as wide as the header; a drawn impostor's predicted errors are pixels.
+    // every row as wide as the header; a drawn impostor's predicted errors are pixels
+    // (and the surface its rays never met a percentage).
     let csv = std::fs::read_to_string(out.join("psnr.csv")).unwrap();
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
@@ -150,6 +151,8 @@ fn the_demo_flies_and_summarises() {
                 let v: f32 = row[*k].parse().unwrap();
                 assert!(v.is_finite() && v >= 0.0, "{line}");
             }
+            let unseen: f32 = row[knot[9]].parse().unwrap();
+            assert!(unseen <= 100.0, "{line}");
             // The level drawn: within the pyramid of a texture the ladder asks for.
             let (edge, level) = (
                 row[edge].parse::<u32>().unwrap(),

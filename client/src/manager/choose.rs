@@ -55,7 +55,7 @@ pub struct ShownTexture {
     /// [`Rim::band`](relief_render::validity::rim::Rim::band)).
     pub band_pixels: f32,
     /// Of what the eye sees face-on, the share the texture's rays never met, percent
-    /// ([`FacingCensus::unseen_share`](relief_core::facing::FacingCensus::unseen_share)).
+    /// ([`NormalCensus::unseen_share`](relief_core::normals::NormalCensus::unseen_share)).
     pub unseen_percent: f32,
     /// The partner's turn from the eye, degrees, when one was drawn.
     pub partner_turn_deg: Option<f32>,
@@ -131,26 +131,28 @@ pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32
 
 /// Of the surface of `object` that `eye` sees face-on, looking at its `centre`, the
 /// share `held`'s rays never met
-/// ([`FacingCensus::unseen_share`](relief_core::facing::FacingCensus::unseen_share)):
-/// what turned into view past a sharp edge. 0 for perspective textures and for leaves
-/// or sheets (two-sided: every face is seen from one side or the other).
+/// ([`NormalCensus::unseen_share`](relief_core::normals::NormalCensus::unseen_share)):
+/// what turned into view past a sharp edge. 0 for leaves or sheets (two-sided: every
+/// face is seen from one side or the other), and so for perspective textures, asked
+/// for those only ([`projection_for`](super::policy::projection_for)), whose rays
+/// part.
 pub(super) fn unseen(held: &Held, object: &SceneObject, centre: Vec3, eye: Vec3) -> f32 {
     let c = &held.prepared.pyramid.levels[0].texture.camera;
     if c.centre.is_some() || is_sheets(object) {
         return 0.0;
     }
     let view = (centre - eye).normalize_or_zero();
-    object.facing_census().unseen_share(&[c.f], view)
+    object.normal_census().unseen_share(&[c.f], view)
 }
 
 /// How far round from `held`'s eye an eye may turn about `axis` through `object`'s
 /// `centre`, at `distance` from it, with `held` still planned to be shown there alone:
 /// the band past its rim, the surface its rays never met, and the turn (the object's
-/// [`lone_max_turn`]) within the planning margin of theirs ([`may_show`]), its gaps' growth within
-/// [`LEAD`] of the tolerance — either way, as a texture made ahead of the eye is first
-/// seen behind its own eye
-/// ([`widest_within`]). (The band is the rim's geometry; the growth, measured on
-/// another texture than the one to be made, is where the margin is kept.)
+/// [`lone_max_turn`]) within the planning margin of theirs ([`may_show`]), its gaps'
+/// growth within [`LEAD`] of the tolerance — either way, as a texture made ahead of the
+/// eye is first seen behind its own eye ([`widest_within`]). (The band and the surface
+/// are the object's geometry, the same for the texture to be made; the growth, measured
+/// on another texture than the one to be made, is where the margin is kept.)
 pub(super) fn probe_lone_reach(
     held: &Held,
     object: &SceneObject,
@@ -197,11 +199,14 @@ pub(super) fn widest_within(within: impl Fn(f32) -> bool) -> f32 {
 /// [`LONE_UNSEEN`], and the turn under `lone_turn` (the texture's at the default
 /// tolerance, [`lone_max_turn`](super::policy::lone_max_turn)); with a partner filling
 /// the band, the band under [`PARTNERED_BAND`] (the texels inside the rim stretch as the
-/// band widens) and the turn under [`MAX_TURN`] — all times `margin` (1 to draw; the
-/// planning margin to plan).
+/// band widens) and the turn under [`MAX_TURN`], the surface unbounded (the partner,
+/// from the far side of the eye, holds what turned into view; measured against both,
+/// the partner would have to be chosen before the grade) — all times `margin` (1 to
+/// draw; the planning margin to plan).
 ///
-/// The bands, the surface and the turn alone are the default's: they scale with `tolerance` over
-/// [`DEFAULT_TOLERANCE`] (the turn up to [`LONE_TURN_CAP`]), so the one knob — and the
+/// The bands, the surface and the turn alone are the default's: they scale with
+/// `tolerance` over [`DEFAULT_TOLERANCE`] (the turn up to [`LONE_TURN_CAP`]), so the
+/// one knob — and the
 /// server's load and the link, which raise it — trades these predicted errors for
 /// lifetime. (With the band alone fixed, four times the tolerance left the requests as
 /// many: the band, not the gaps, retired the textures; with the lone turn fixed at 15°,

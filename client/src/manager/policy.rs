@@ -156,12 +156,12 @@ pub const LONE_BAND: f32 = 2.0;
 
 /// A texture drawn without a partner counts as stale once more than this share of the
 /// surface the eye sees face-on was turned away from or edge-on to its rays
-/// ([`FacingCensus::unseen_share`](relief_core::facing::FacingCensus::unseen_share)):
+/// ([`NormalCensus::unseen_share`](relief_core::normals::NormalCensus::unseen_share)):
 /// past a sharp edge a flat face comes into view at once, and the texture shows a hole
 /// the rim's band does not foresee. A smooth surface turns into view slowly, as
 /// `(1 − cos φ)/2` on a sphere: 1.7 % at [`LONE_MAX_TURN`], which its rim's band and
-/// the turn bound (at 2 % here, the orbit's small sphere went stale a degree before its
-/// lone turn, by the census's binning); the scanned fandisk's side came into
+/// the turn bound (at 2 % here, the orbit's small sphere went stale at 15°, a degree
+/// before its lone turn, in the manager's tests); the scanned fandisk's side came into
 /// view as 7.1 % at 8.7° and 15.8 % at 11.6° (the object 11 and 14.5 dB below geometry
 /// in those frames). (A partner, from the far side of the eye, holds what turned into
 /// view: with one, the rim's band and the turn bound the texture.)

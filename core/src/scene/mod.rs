@@ -16,9 +16,9 @@ use glam::{DQuat, DVec3, Vec3};
 use crate::bounds::Aabb;
 use crate::camera::{Camera, CameraPath, PathSegment};
 use crate::error::{Error, Result};
-use crate::facing::FacingCensus;
 use crate::hash::{ContentHash, mesh_hash};
 use crate::mesh::{EdgeCensus, Mesh};
+use crate::normals::NormalCensus;
 use crate::reach::Reach;
 use crate::shading::{Light, Lighting, Specular};
 
@@ -191,15 +191,15 @@ fn name_char(c: char) -> bool {
 ///
 /// One mesh placed many times (a scene file's `instances`) is one [`Mesh`] in memory:
 /// each placement is a `SceneObject` of its own, named apart, sharing the mesh, its
-/// hash and its edge census ([`SceneObject::placed`]). A placement may also turn and
-/// scale its frame: a world point is `origin + scale · rotation · x` of a point `x`
-/// of the frame. A camera moved into the frame ([`SceneObject::local_camera`]) sees
-/// the same image (a similarity moves eye and object alike), so the textures, bakes,
-/// warps and every decision about the object are the mesh's own, shared by its
-/// placements. Three things leave the frame: depths a writer puts into a frame's
-/// buffer, in the world's metres (times [`SceneObject::depth_scale`]); normals,
-/// turned into the world where the frame is lit ([`SceneObject::normal_to_world`]);
-/// and a reference's rays and hits.
+/// hash, its edge census and its normal census ([`SceneObject::placed`]). A placement
+/// may also turn and scale its frame: a world point is `origin + scale · rotation · x`
+/// of a point `x` of the frame. A camera moved into the frame
+/// ([`SceneObject::local_camera`]) sees the same image (a similarity moves eye and
+/// object alike), so the textures, bakes, warps and every decision about the object are
+/// the mesh's own, shared by its placements. Three things leave the frame: depths a
+/// writer puts into a frame's buffer, in the world's metres (times
+/// [`SceneObject::depth_scale`]); normals, turned into the world where the frame is lit
+/// ([`SceneObject::normal_to_world`]); and a reference's rays and hits.
 #[derive(Debug, Clone)]
 pub struct SceneObject {
     pub name: String,
@@ -220,9 +220,9 @@ pub struct SceneObject {
     /// is asked (only a client drawing impostors needs it, and it costs a pass over the
     /// mesh); shared by the mesh's placements.
     edges: Arc<std::sync::OnceLock<EdgeCensus>>,
-    /// Which way the mesh's surface faces, and where ([`FacingCensus`]), found the
-    /// first time it is asked, as `edges`; shared by the mesh's placements.
-    facing: Arc<std::sync::OnceLock<FacingCensus>>,
+    /// The mesh's area by the direction it faces ([`NormalCensus`]), found the first
+    /// time it is asked, as `edges`; shared by the mesh's placements.
+    normals: Arc<std::sync::OnceLock<NormalCensus>>,
 }
 
 impl SceneObject {
@@ -237,9 +237,9 @@ impl SceneObject {
         *self.edges.get_or_init(|| self.mesh.edge_census())
     }
 
-    /// Which way the mesh's surface faces, and where ([`FacingCensus::of`]).
-    pub fn facing_census(&self) -> &FacingCensus {
-        self.facing.get_or_init(|| FacingCensus::of(&self.mesh))
+    /// The mesh's area by the direction it faces ([`NormalCensus::of`]).
+    pub fn normal_census(&self) -> &NormalCensus {
+        self.normals.get_or_init(|| NormalCensus::of(&self.mesh))
     }
 
     /// Whether the object's frame has the world's axes and metres: then moving into it
@@ -350,7 +350,7 @@ impl SceneObject {
             local_bounds: mesh.bounds(),
             hash: mesh_hash(&mesh),
             edges: Arc::default(),
-            facing: Arc::default(),
+            normals: Arc::default(),
             mesh: Arc::new(mesh),
             specular,
         }

@@ -1,7 +1,6 @@
-//! Which way a mesh's surface faces: the area of its triangles gathered by normal
-//! ([`FacingCensus`]), so that how much of the surface a view sees face-on that a
-//! relief texture's parallel rays never met can be told without a pass over the
-//! triangles ([`FacingCensus::unseen_share`]).
+//! A mesh's area by the direction it faces ([`NormalCensus`]), so that how much of the
+//! surface a view sees face-on that a relief texture's parallel rays never met can be
+//! told without a pass over the triangles ([`NormalCensus::unseen_share`]).
 //!
 //! A texture's rays see a face only from its front: a face edge-on to them, or turned
 //! away, is not in the texture. Turned by `φ`, a view sees round a curved outline a
@@ -11,43 +10,47 @@
 //!
 //! The census keeps, per bin of normal direction ([`NORMAL_CELLS`] a side of each cube
 //! face), the summed area and the area-weighted normal: a flat face's triangles share
-//! their normal, and its bin holds it exactly. Occlusion is left out (a face behind
-//! another counts as seen by a view that faces it), and so is the spread of a near
-//! eye's rays: it is a census of facing, not of visibility.
+//! their normal, and its bin holds it exactly. It is a census of facing, not of
+//! visibility: occlusion is left out (a face behind another counts as seen by a view
+//! that faces it), and so is the spread of a near eye's rays. It trusts the mesh's
+//! winding (counter-clockwise seen from outside, as the shading's front faces); a mesh
+//! wound the other way counts its seen faces as unseen.
 
 use glam::Vec3;
 
 use crate::mesh::Mesh;
 
 /// Cells a side on each face of the cube normals are binned by: 6 × 12² directions,
-/// about 7.5° each. (A bin straddling the edge of what a texture sees is counted whole
-/// on one side: on a sphere turned 10°, finer bins change the share by a fraction of a
-/// percent.)
+/// about 7.5° each. A bin straddling the edge of what a texture sees counts whole on
+/// one side, by its mean normal: on a sphere turned 10–30° the share comes within 4 %
+/// of the exact one with rays off the cube's axes, 15 % with rays along one (where the
+/// bins' edges lie along that edge). A flat face, one normal, is counted exactly.
 pub const NORMAL_CELLS: usize = 12;
 
 /// One bin of the census: triangles of like normal.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FacingBin {
+pub struct NormalBin {
     /// Their summed area.
     pub area: f32,
     /// Their area-weighted mean normal, unit length.
     pub normal: Vec3,
 }
 
-/// A mesh's surface by facing (see the module docs).
+/// A mesh's area by the direction it faces (see the module docs).
 #[derive(Debug, Clone, PartialEq, Default)]
-pub struct FacingCensus {
+pub struct NormalCensus {
     /// The bins holding any area.
-    pub bins: Vec<FacingBin>,
+    pub bins: Vec<NormalBin>,
 }
 
-impl FacingCensus {
-    /// The census of `mesh`'s triangles (degenerate ones left out).
-    pub fn of(mesh: &Mesh) -> FacingCensus {
+impl NormalCensus {
+    /// The census of `mesh`'s triangles (degenerate ones left out); `mesh` is valid
+    /// ([`Mesh::validate`]).
+    pub fn of(mesh: &Mesh) -> NormalCensus {
         // Per bin: area, area × normal.
         let mut sums = vec![(0.0f64, Vec3::ZERO); 6 * NORMAL_CELLS * NORMAL_CELLS];
-        for t in &mesh.triangles {
-            let [a, b, c] = t.map(|v| mesh.positions.get(v as usize).copied().unwrap_or(Vec3::ZERO));
+        for t in 0..mesh.triangle_count() {
+            let [a, b, c] = mesh.corners(t);
             let cross = (b - a).cross(c - a);
             let area = 0.5 * cross.length();
             if !(area > 0.0 && area.is_finite()) {
@@ -62,20 +65,23 @@ impl FacingCensus {
             .into_iter()
             .filter(|s| s.0 > 0.0)
             .filter_map(|(area, normal)| {
-                Some(FacingBin {
+                Some(NormalBin {
                     area: area as f32,
                     normal: normal.try_normalize()?,
                 })
             })
             .collect();
-        FacingCensus { bins }
+        NormalCensus { bins }
     }
 
     /// Of the surface a view along unit `view` sees face-on (its projected area,
     /// occlusion left out: each bin weighted by how squarely it faces the view), the
     /// share that faces away from every one of `rays` (the unit directions parallel
     /// texture rays travel in) or lies edge-on to them: what no such texture holds. 0
-    /// when the view sees nothing.
+    /// when the view sees nothing. (A face the rays meet nearly edge-on counts as seen:
+    /// its few samples stretch as the view turns to it, which costs little on a flat
+    /// face of one shade — counted as unseen until 4 times its size on screen, such
+    /// faces flagged the fandisk's frames where its impostor matched geometry.)
     pub fn unseen_share(&self, rays: &[Vec3], view: Vec3) -> f32 {
         let (mut facing, mut unseen) = (0.0f32, 0.0f32);
         for bin in &self.bins {
@@ -156,7 +162,7 @@ mod tests {
     #[test]
     fn a_face_edge_on_to_the_texture_shows_turned_by_its_sine() {
         // A flat slab, 4 × 1 × 4: its top face edge-on to rays along −z.
-        let census = FacingCensus::of(&cuboid(Vec3::new(4.0, 1.0, 4.0), Vec3::ZERO));
+        let census = NormalCensus::of(&cuboid(Vec3::new(4.0, 1.0, 4.0), Vec3::ZERO));
         let rays = [Vec3::NEG_Z];
         assert_eq!(census.unseen_share(&rays, Vec3::NEG_Z), 0.0);
         for degrees in [5.0f32, 10.0, 20.0] {
@@ -174,26 +180,32 @@ mod tests {
 
     #[test]
     fn a_sphere_turned_shows_little_it_was_not_seen_in() {
-        let census = FacingCensus::of(&Generator::Sphere { subdivisions: 5 }.build());
-        let rays = [Vec3::NEG_Z];
+        let census = NormalCensus::of(&Generator::Sphere { subdivisions: 5 }.build());
+        // Rays off the cube's axes (on an axis, the bins' edges would lie along the
+        // line between seen and unseen), and views turned from them about `axis`.
+        let ray = Vec3::new(0.3, 0.2, -1.0).normalize();
+        let axis = ray.any_orthonormal_vector();
         let at = |degrees: f32| {
-            let t = degrees.to_radians();
-            census.unseen_share(&rays, -Vec3::new(t.sin(), 0.0, t.cos()))
+            let turn = glam::Quat::from_axis_angle(axis, degrees.to_radians());
+            census.unseen_share(&[ray], turn * ray)
         };
-        // Exactly: the lune turned into view, ∫ sin over it, against π: (1 − cos t)/2.
-        for degrees in [10.0f32, 30.0] {
+        // Exactly: the unseen lune's projection (a half-disc less a half-ellipse of
+        // semi-axes 1 and cos t), over the disc's π: (1 − cos t)/2. Binned: within
+        // 4–7 % here.
+        for degrees in [10.0f32, 15.0, 30.0] {
             let exact = (1.0 - degrees.to_radians().cos()) / 2.0;
+            let share = at(degrees);
             assert!(
-                (at(degrees) - exact).abs() < 0.02,
-                "{degrees}°: {} against {exact}",
-                at(degrees)
+                (share / exact - 1.0).abs() < 0.1,
+                "{degrees}°: {share} against {exact}"
             );
         }
-        assert!(at(0.0) < 0.01);
-        // A partner from the far side sees it all.
-        let t = 20f32.to_radians();
-        let partner = -Vec3::new(t.sin(), 0.0, t.cos());
-        let view = -Vec3::new(0.17, 0.0, 1.0).normalize();
-        assert_eq!(census.unseen_share(&[Vec3::NEG_Z, partner], view), 0.0);
+        assert!(at(0.0) < 0.005);
+        // A partner from the far side of the view sees all the view does (for unit
+        // normals the view between the two rays: a check of "every ray", not "any").
+        let partner = glam::Quat::from_axis_angle(axis, 20f32.to_radians()) * ray;
+        let between = glam::Quat::from_axis_angle(axis, 10f32.to_radians()) * ray;
+        assert_eq!(census.unseen_share(&[ray, partner], between), 0.0);
+        assert!(census.unseen_share(&[ray], between) > 0.0);
     }
 }
