@@ -17,6 +17,7 @@
 //! wound the other way counts its seen faces as unseen.
 
 use glam::Vec3;
+use wide::f32x8;
 
 use crate::mesh::Mesh;
 
@@ -27,20 +28,21 @@ use crate::mesh::Mesh;
 /// bins' edges lie along that edge). A flat face, one normal, is counted exactly.
 pub const NORMAL_CELLS: usize = 12;
 
-/// One bin of the census: triangles of like normal.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct NormalBin {
-    /// Their summed area.
-    pub area: f32,
-    /// Their area-weighted mean normal, unit length.
-    pub normal: Vec3,
-}
-
 /// A mesh's area by the direction it faces (see the module docs).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct NormalCensus {
-    /// The bins holding any area.
-    pub bins: Vec<NormalBin>,
+    /// The bins holding any area, eight to a block, lane by lane (the last block padded
+    /// with bins of no area): a client weighs every held texture against them every
+    /// frame.
+    blocks: Vec<Bins>,
+}
+
+/// Eight bins of a [`NormalCensus`]: their summed areas, and the components of their
+/// area-weighted mean normals (unit length).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Bins {
+    area: f32x8,
+    normal: [f32x8; 3],
 }
 
 impl NormalCensus {
@@ -61,17 +63,23 @@ impl NormalCensus {
             sum.0 += f64::from(area);
             sum.1 += normal * area;
         }
-        let bins = sums
+        let bins: Vec<(f32, Vec3)> = sums
             .into_iter()
             .filter(|s| s.0 > 0.0)
-            .filter_map(|(area, normal)| {
-                Some(NormalBin {
-                    area: area as f32,
-                    normal: normal.try_normalize()?,
-                })
+            .filter_map(|(area, normal)| Some((area as f32, normal.try_normalize()?)))
+            .collect();
+        let blocks = bins
+            .chunks(8)
+            .map(|chunk| {
+                let lane = |k: usize| chunk.get(k).copied().unwrap_or((0.0, Vec3::Z));
+                let component = |axis: usize| f32x8::new(std::array::from_fn(|k| lane(k).1[axis]));
+                Bins {
+                    area: f32x8::new(std::array::from_fn(|k| lane(k).0)),
+                    normal: [component(0), component(1), component(2)],
+                }
             })
             .collect();
-        NormalCensus { bins }
+        NormalCensus { blocks }
     }
 
     /// Of the surface a view along unit `view` sees face-on (its projected area,
@@ -83,18 +91,22 @@ impl NormalCensus {
     /// face of one shade — counted as unseen until 4 times its size on screen, such
     /// faces flagged the fandisk's frames where its impostor matched geometry.)
     pub fn unseen_share(&self, rays: &[Vec3], view: Vec3) -> f32 {
-        let (mut facing, mut unseen) = (0.0f32, 0.0f32);
-        for bin in &self.bins {
-            let projected = bin.area * (-bin.normal.dot(view)).max(0.0);
-            if projected == 0.0 {
-                continue;
-            }
+        let dot = |n: &[f32x8; 3], d: Vec3| n[0] * d.x + n[1] * d.y + n[2] * d.z;
+        let (mut facing, mut unseen) = (f32x8::ZERO, f32x8::ZERO);
+        for block in &self.blocks {
+            let projected = block.area * (-dot(&block.normal, view)).max(f32x8::ZERO);
+            let away = (rays.iter()).fold(f32x8::splat(f32::from_bits(u32::MAX)), |away, &f| {
+                away & dot(&block.normal, f).simd_ge(f32x8::ZERO)
+            });
             facing += projected;
-            if rays.iter().all(|f| bin.normal.dot(*f) >= 0.0) {
-                unseen += projected;
-            }
+            unseen += projected & away;
         }
-        if facing > 0.0 { unseen / facing } else { 0.0 }
+        let facing = facing.reduce_add();
+        if facing > 0.0 {
+            unseen.reduce_add() / facing
+        } else {
+            0.0
+        }
     }
 }
 

@@ -151,8 +151,8 @@ pub(super) fn unseen(held: &Held, object: &SceneObject, centre: Vec3, eye: Vec3)
 /// [`lone_max_turn`]) within the planning margin of theirs ([`may_show`]), its gaps'
 /// growth within [`LEAD`] of the tolerance — either way, as a texture made ahead of the
 /// eye is first seen behind its own eye ([`widest_within`]). (The band and the surface
-/// are the object's geometry, the same for the texture to be made; the growth, measured
-/// on another texture than the one to be made, is where the margin is kept.)
+/// come from the object's shape, much the same for a texture made nearby; the growth,
+/// measured on another texture than the one to be made, is where the margin is kept.)
 pub(super) fn probe_lone_reach(
     held: &Held,
     object: &SceneObject,
@@ -206,14 +206,13 @@ pub(super) fn widest_within(within: impl Fn(f32) -> bool) -> f32 {
 ///
 /// The bands, the surface and the turn alone are the default's: they scale with
 /// `tolerance` over [`DEFAULT_TOLERANCE`] (the turn up to [`LONE_TURN_CAP`]), so the
-/// one knob — and the
-/// server's load and the link, which raise it — trades these predicted errors for
-/// lifetime. (With the band alone fixed, four times the tolerance left the requests as
-/// many: the band, not the gaps, retired the textures; with the lone turn fixed at 15°,
-/// 64 clients at twice the tolerance asked 73 % more textures, living 0.53 s where they
-/// lived 1.83; uncapped, the load's factor let them live 7.3 s, the worst frame 2.5 dB
-/// lower.) The turn partnered is where the warp stops being the object's near side,
-/// whatever the tolerance.
+/// one knob — and the server's load and the link, which raise it — trades these
+/// predicted errors for lifetime. (With the band alone fixed, four times the tolerance
+/// left the requests as many: the band, not the gaps, retired the textures; with the
+/// lone turn fixed at 15°, 64 clients at twice the tolerance asked 73 % more textures,
+/// living 0.53 s where they lived 1.83; uncapped, the load's factor let them live 7.3
+/// s, the worst frame 2.5 dB lower.) The turn partnered is where the warp stops being
+/// the object's near side, whatever the tolerance.
 pub(super) fn may_show(
     unshown: Unshown,
     turn: f32,
