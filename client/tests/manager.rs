@@ -767,6 +767,92 @@ fn a_lone_texture_goes_stale_when_its_rim_band_opens_or_past_its_turn() {
     );
 }
 
+/// A cube of `cells`² quads a face (two triangles each), side 2, centred on the
+/// origin, wound counter-clockwise seen from outside: as an OBJ file's text.
+fn cube_obj(cells: usize) -> String {
+    let mut text = String::new();
+    let mut vertices = 0;
+    // Each face: its normal's axis and sign, and the two axes across it (u × v = normal).
+    for (axis, sign) in [(0, 1.0f32), (0, -1.0), (1, 1.0), (1, -1.0), (2, 1.0), (2, -1.0)] {
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let at = |i: usize, j: usize| {
+            let mut p = [0.0f32; 3];
+            p[axis] = sign;
+            // (On the negative face, v runs the other way: the winding stays outward.)
+            p[u] = -1.0 + 2.0 * i as f32 / cells as f32;
+            p[v] = sign * (-1.0 + 2.0 * j as f32 / cells as f32);
+            p
+        };
+        for j in 0..=cells {
+            for i in 0..=cells {
+                let [x, y, z] = at(i, j);
+                text += &format!("v {x} {y} {z}\n");
+            }
+        }
+        let index = |i: usize, j: usize| vertices + j * (cells + 1) + i + 1;
+        for j in 0..cells {
+            for i in 0..cells {
+                let (a, b, c, d) = (index(i, j), index(i + 1, j), index(i + 1, j + 1), index(i, j + 1));
+                text += &format!("f {a} {b} {c} {d}\n");
+            }
+        }
+        vertices += (cells + 1) * (cells + 1);
+    }
+    text
+}
+
+/// Past a sharp edge a flat face comes into view at once: a cube's texture made with
+/// two of its faces edge-on goes stale alone within a few degrees' turn
+/// ([`LONE_UNSEEN`] of what the eye sees is that face), where its outline, all sharp
+/// edges, leaves no band past its rim and the turn alone would allow
+/// [`LONE_MAX_TURN`].
+#[test]
+fn a_lone_texture_goes_stale_when_a_flat_face_turns_into_view() {
+    use relief_client::manager::policy::{LONE_MAX_TURN, LONE_UNSEEN};
+
+    let dir = std::env::temp_dir().join(relief_core::scratch::unique_name("relief-cube"));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("cube.obj");
+    // (Triangles enough that a texture costs less than drawing them.)
+    std::fs::write(&path, cube_obj(24)).unwrap();
+    let scene = Arc::new(Scene::load(path.to_str().unwrap()).unwrap());
+    std::fs::remove_dir_all(&dir).ok();
+    let cube = index(&scene, "cube");
+    let centre = scene.objects[cube].world_bounds().center();
+    let config = Config {
+        predict: false,
+        ..without_stand_ins()
+    };
+    let mut manager = served_locally(&scene, config);
+    // From +x, level with the top but for `around`'s height: the faces ±z edge-on.
+    let first = camera_round(centre, 0.0);
+    assert!(manager.warm_up(&scene, &[first], Duration::from_secs(60)));
+    assert!(
+        matches!(manager.frame(&scene, &first, 0.0)[cube], Show::Impostor { .. }),
+        "the cube is drawn from a texture at its own eye"
+    );
+    // Turned towards +z a degree at a time: the face +z comes into view as sin(turn)
+    // of its area against the front's cos(turn) (and the top's little).
+    let stale = (1..20)
+        .map(|degrees| degrees as f32)
+        .find(|&degrees| {
+            manager.frame(&scene, &camera_round(centre, degrees), 0.0);
+            manager.counters.stale_frames > 0
+        })
+        .expect("stale before 20°");
+    assert_eq!(manager.counters.stale_causes.too_far, 1);
+    let share = |degrees: f32| {
+        let t = degrees.to_radians();
+        t.sin() / (t.cos() + t.sin())
+    };
+    assert!(
+        share(stale) > LONE_UNSEEN && share(stale - 1.0) <= LONE_UNSEEN + 0.01,
+        "stale from {stale}°, the face's share then {:.3}",
+        share(stale)
+    );
+    assert!(stale < LONE_MAX_TURN.to_degrees() - 5.0, "stale from {stale}°");
+}
+
 /// A solid's texture is shown alone [`LONE_MAX_TURN`] round at the default tolerance;
 /// one of leaves or sheets (an open mesh: the ground's plane here) up to
 /// [`LONE_TURN_CAP`].
