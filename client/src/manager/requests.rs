@@ -458,10 +458,10 @@ impl Manager {
     /// be planned to be shown alone there, its gaps grown [`LEAD`] of the tolerance at
     /// most ([`probe_lone_reach`]: turned the way the eye moves, at the future's
     /// distance), so that the texture, first seen that far behind its eye, covers the
-    /// future on its own. With none held, [`LEAD`] of the
-    /// valid angle assumed. Never past [`PENDING_REACH`] of the valid angle: a request
-    /// made farther would not count as covering the future, and the next frame would ask
-    /// again. All in the object's frame.
+    /// future on its own. With none held, [`LEAD`] of the valid angle assumed. Never
+    /// past [`PENDING_REACH`] of the valid angle: a request made farther would not count
+    /// as covering the future, and the next frame would ask again. All in the object's
+    /// frame.
     fn lead_angle(
         &self,
         k: usize,
