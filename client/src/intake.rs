@@ -111,6 +111,10 @@ fn digest(texture: &pb::ReliefTexture, faces: Faces) -> ContentHash {
         depth,
         centre,
         encoding,
+        hidden_texels,
+        hidden_sides,
+        hidden_inward,
+        hidden_depths,
     } = texture;
     let mut hasher = blake3::Hasher::new();
     for word in [*width, *height, *depth_bits, *encoding as u32, faces as u32] {
@@ -136,6 +140,13 @@ fn digest(texture: &pb::ReliefTexture, faces: Faces) -> ContentHash {
     for plane in [albedo, normal, depth] {
         hasher.update(&(plane.len() as u64).to_le_bytes());
         hasher.update(plane);
+    }
+    // And the lists of what the rim hides, each after its length.
+    for list in [hidden_texels, hidden_sides, hidden_inward, hidden_depths] {
+        hasher.update(&(list.len() as u64).to_le_bytes());
+        for word in list {
+            hasher.update(&word.to_le_bytes());
+        }
     }
     ContentHash(*hasher.finalize().as_bytes())
 }
@@ -169,6 +180,10 @@ mod tests {
             depth: vec![3, 255].into(),
             centre: None,
             encoding: 0,
+            hidden_texels: vec![],
+            hidden_sides: vec![],
+            hidden_inward: vec![],
+            hidden_depths: vec![],
         }
     }
 

@@ -253,6 +253,37 @@ impl Mesh {
         }
     }
 
+    /// A box, `size` along each axis, its centre at `centre`: 12 triangles wound
+    /// anticlockwise seen from outside (normals outwards), one default material.
+    pub fn cuboid(size: Vec3, centre: Vec3) -> Mesh {
+        let h = size * 0.5;
+        let corner = |i: u32| {
+            centre
+                + Vec3::new(
+                    if i & 1 == 0 { -h.x } else { h.x },
+                    if i & 2 == 0 { -h.y } else { h.y },
+                    if i & 4 == 0 { -h.z } else { h.z },
+                )
+        };
+        let quads = [
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+        ];
+        Mesh {
+            positions: (0..8).map(corner).collect(),
+            triangles: quads
+                .iter()
+                .flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]])
+                .collect(),
+            materials: vec![Material::default()],
+            ..Default::default()
+        }
+    }
+
     /// Bounds of the vertices that triangles use.
     pub fn bounds(&self) -> Aabb {
         let mut b = Aabb::EMPTY;

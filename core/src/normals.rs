@@ -128,42 +128,10 @@ fn direction_cell(n: Vec3) -> usize {
 mod tests {
     use super::*;
     use crate::generators::Generator;
-    use crate::mesh::Material;
-
-    /// A box as a mesh (12 triangles, outward normals), `size` along each axis, its
-    /// centre at `at`.
-    fn cuboid(size: Vec3, at: Vec3) -> Mesh {
-        let h = size * 0.5;
-        let corner = |i: u32| {
-            at + Vec3::new(
-                if i & 1 == 0 { -h.x } else { h.x },
-                if i & 2 == 0 { -h.y } else { h.y },
-                if i & 4 == 0 { -h.z } else { h.z },
-            )
-        };
-        // (Corners counted anticlockwise seen from outside.)
-        let quads = [
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-        ];
-        Mesh {
-            positions: (0..8).map(corner).collect(),
-            triangles: quads
-                .iter()
-                .flat_map(|&[a, b, c, d]| [[a, b, c], [a, c, d]])
-                .collect(),
-            materials: vec![Material::default()],
-            ..Default::default()
-        }
-    }
 
     #[test]
     fn the_cuboid_faces_outwards() {
-        let m = cuboid(Vec3::ONE, Vec3::ZERO);
+        let m = Mesh::cuboid(Vec3::ONE, Vec3::ZERO);
         for t in 0..m.triangles.len() {
             let [a, b, c] = m.corners(t);
             let n = (b - a).cross(c - a);
@@ -174,7 +142,7 @@ mod tests {
     #[test]
     fn a_face_edge_on_to_the_texture_shows_turned_by_its_sine() {
         // A flat slab, 4 × 1 × 4: its top face edge-on to rays along −z.
-        let census = NormalCensus::of(&cuboid(Vec3::new(4.0, 1.0, 4.0), Vec3::ZERO));
+        let census = NormalCensus::of(&Mesh::cuboid(Vec3::new(4.0, 1.0, 4.0), Vec3::ZERO));
         let rays = [Vec3::NEG_Z];
         assert_eq!(census.unseen_share(&rays, Vec3::NEG_Z), 0.0);
         for degrees in [5.0f32, 10.0, 20.0] {

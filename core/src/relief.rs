@@ -380,6 +380,136 @@ pub struct ReliefTexture {
     pub normal: Vec<[u8; 3]>,
     /// Depth levels; `depth_bits.empty()` marks an empty texel.
     pub depth: Vec<u16>,
+    /// What the texture's rim hides ([`Hidden`]), in [`Hidden::key`] order. Empty where
+    /// nothing was looked for (a texture's coarser levels, a perspective texture, one
+    /// read from disk without it).
+    pub hidden: Vec<Hidden>,
+}
+
+/// What is wrong with a texture's [`ReliefTexture::hidden`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum HiddenError {
+    #[error("hidden[{index}]: texel {texel} does not come after the one before")]
+    Unordered { index: usize, texel: u32 },
+    #[error("hidden[{index}]: texel {texel} is past the texture's last")]
+    PastTheEnd { index: usize, texel: u32 },
+    #[error("hidden[{index}]: texel {texel} is empty")]
+    Empty { index: usize, texel: u32 },
+    #[error("hidden[{index}]: depth level {depth} is not behind the texel's own ({own})")]
+    NotBehind { index: usize, depth: u16, own: u16 },
+    #[error("hidden[{index}]: {depth} is not a depth level of the texture")]
+    NotALevel { index: usize, depth: u16 },
+    #[error("hidden[{index}]: side {side} is not one of a texel's four")]
+    NoSuchSide { index: usize, side: u8 },
+    #[error("hidden[{index}]: {inward} texels in from the rim is outside the texture")]
+    Outside { index: usize, inward: u8 },
+}
+
+/// Whether `hidden` is laid out right for a texture of `texels` texels in `bits`: in
+/// increasing [`Hidden::key`] order, each texel one of the texture's, each side one of
+/// [`TEXEL_SIDES`], each depth a level (what can be checked without the depth plane).
+pub fn check_hidden_layout(
+    hidden: &[Hidden],
+    texels: usize,
+    bits: DepthBits,
+) -> std::result::Result<(), HiddenError> {
+    let mut last = None;
+    for (index, h) in hidden.iter().enumerate() {
+        let texel = h.texel;
+        if last.is_some_and(|last| h.key() <= last) {
+            return Err(HiddenError::Unordered { index, texel });
+        }
+        last = Some(h.key());
+        if texel as usize >= texels {
+            return Err(HiddenError::PastTheEnd { index, texel });
+        }
+        if h.side as usize >= TEXEL_SIDES.len() {
+            return Err(HiddenError::NoSuchSide { index, side: h.side });
+        }
+        if h.depth > bits.max_level() {
+            return Err(HiddenError::NotALevel {
+                index,
+                depth: h.depth,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Whether `hidden` is well formed for a `width`-texel-wide texture of depth levels
+/// `depth`: laid out right ([`check_hidden_layout`]), each texel covered, each step in
+/// from it inside the texture, each depth behind the texel's own.
+pub fn check_hidden(
+    hidden: &[Hidden],
+    width: u32,
+    depth: &[u16],
+    bits: DepthBits,
+) -> std::result::Result<(), HiddenError> {
+    check_hidden_layout(hidden, depth.len(), bits)?;
+    let height = (depth.len() / width.max(1) as usize) as u32;
+    for (index, h) in hidden.iter().enumerate() {
+        if h.behind(width, height).is_none() {
+            return Err(HiddenError::Outside {
+                index,
+                inward: h.inward,
+            });
+        }
+        let own = depth[h.texel as usize];
+        if own == bits.empty() {
+            return Err(HiddenError::Empty {
+                index,
+                texel: h.texel,
+            });
+        }
+        if h.depth <= own {
+            return Err(HiddenError::NotBehind {
+                index,
+                depth: h.depth,
+                own,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The four sides of a texel, as steps `(di, dj)` to its neighbour: left, right, up,
+/// down. A rim texel's open sides and [`Hidden::side`] count in this order.
+pub const TEXEL_SIDES: [(i32, i32); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
+
+/// A surface a texture's rim hides: what a turn of the eye uncovers beside the rim,
+/// which the texture's planes cannot show — the far legs of an animal seen from the
+/// side, hidden behind the near ones. Found behind the texel [`Hidden::inward`] texels
+/// in from a rim texel (covered, beside an uncovered neighbour on [`Hidden::side`]):
+/// the nearest surface there that faces the texture's rays, behind the texel's own.
+/// The client predicts how far a turn brings it out past the rim, as it predicts the
+/// gap between two neighbours of very different depths
+/// (`relief_render::validity::critical`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Hidden {
+    /// The rim texel, `j * width + i`.
+    pub texel: u32,
+    /// The rim's open side ([`TEXEL_SIDES`] index): outwards.
+    pub side: u8,
+    /// How many texels in from the rim texel (away from `side`) the hidden surface lies.
+    pub inward: u8,
+    /// The hidden surface's depth level (behind the rim texel's own).
+    pub depth: u16,
+}
+
+impl Hidden {
+    /// The order [`ReliefTexture::hidden`] is kept in: by texel, then side.
+    pub fn key(&self) -> u64 {
+        u64::from(self.texel) << 8 | u64::from(self.side)
+    }
+
+    /// The texel the hidden surface lies behind, `(i, j)`, in a texture `width` ×
+    /// `height`; `None` when its steps in from the rim leave the texture.
+    pub fn behind(&self, width: u32, height: u32) -> Option<(u32, u32)> {
+        let (di, dj) = *TEXEL_SIDES.get(self.side as usize)?;
+        let step = |at: u32, d: i32| at.checked_add_signed(-d * i32::from(self.inward));
+        let (i, j) = (step(self.texel % width, di)?, step(self.texel / width, dj)?);
+        (i < width && j < height).then_some((i, j))
+    }
 }
 
 /// Encodes a unit normal as RGB8 (`n·0.5 + 0.5`).
@@ -413,6 +543,9 @@ pub struct TextureMeta {
     /// A perspective texture's centre of projection; absent for an orthographic one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub centre: Option<[f64; 3]>,
+    /// [`ReliefTexture::hidden`]; absent when there is none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hidden: Vec<Hidden>,
 }
 
 fn to_f64(v: Vec3) -> [f64; 3] {
@@ -434,6 +567,7 @@ impl ReliefTexture {
             albedo: vec![[0; 3]; n],
             normal: vec![[0; 3]; n],
             depth: vec![depth_bits.empty(); n],
+            hidden: Vec::new(),
         }
     }
 
@@ -463,6 +597,11 @@ impl ReliefTexture {
         })
     }
 
+    /// Whether [`ReliefTexture::hidden`] is well formed ([`check_hidden`]).
+    pub fn check_hidden(&self) -> std::result::Result<(), HiddenError> {
+        check_hidden(&self.hidden, self.camera.width, &self.depth, self.depth_bits)
+    }
+
     /// The `texture.json` record.
     pub fn meta(&self) -> TextureMeta {
         let c = &self.camera;
@@ -479,6 +618,7 @@ impl ReliefTexture {
             empty: self.depth_bits.empty() as u32,
             eye: to_f64(self.eye),
             centre: c.centre.map(to_f64),
+            hidden: self.hidden.clone(),
         }
     }
 
@@ -600,14 +740,19 @@ impl ReliefTexture {
                 )));
             }
         };
-        Ok(ReliefTexture {
+        let texture = ReliefTexture {
             camera,
             depth_bits,
             eye: from_f64(meta.eye),
             albedo,
             normal,
             depth,
-        })
+            hidden: meta.hidden,
+        };
+        texture
+            .check_hidden()
+            .map_err(|e| bad(format!("texture.json: {e}")))?;
+        Ok(texture)
     }
 }
 
@@ -812,10 +957,22 @@ mod tests {
             t.depth[4] = 7;
             t.albedo[4] = [1, 2, 3];
             t.normal[4] = encode_normal_rgb8(Vec3::Z);
+            t.hidden = vec![Hidden {
+                texel: 4,
+                side: 1,
+                inward: 2,
+                depth: 9,
+            }];
             t.write_dir(&dir).unwrap();
             let back = ReliefTexture::read_dir(&dir).unwrap();
             assert_eq!(back, t);
         }
+        // What the rim hides is checked against the planes read.
+        let mut t = ReliefTexture::read_dir(&dir).unwrap();
+        t.hidden[0].depth = 3;
+        t.write_dir(&dir).unwrap();
+        let e = ReliefTexture::read_dir(&dir).unwrap_err().to_string();
+        assert!(e.contains("hidden[0]") && e.contains("not behind"), "{e}");
         std::fs::write(dir.join("texture.json"), "{").unwrap();
         assert!(
             ReliefTexture::read_dir(&dir)

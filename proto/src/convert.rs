@@ -7,7 +7,10 @@ use glam::Vec3;
 use tonic::Status;
 
 use relief_core::hash::ContentHash;
-use relief_core::relief::{DepthBits, MAX_TEXTURE_SIZE, ReliefTexture, SourceCamera, SourceProjection};
+use relief_core::relief::{
+    DepthBits, Hidden, MAX_TEXTURE_SIZE, ReliefTexture, SourceCamera, SourceProjection, check_hidden,
+    check_hidden_layout,
+};
 
 use crate::pb;
 use crate::planes::{PlaneLayout, Planes, ReadsPlanes, planes};
@@ -107,6 +110,10 @@ pub fn texture_to_pb(t: &ReliefTexture) -> pb::ReliefTexture {
         normal: t.normal.iter().flatten().copied().collect(),
         depth,
         encoding: pb::PlaneEncoding::Raw.into(),
+        hidden_texels: t.hidden.iter().map(|h| h.texel).collect(),
+        hidden_sides: t.hidden.iter().map(|h| u32::from(h.side)).collect(),
+        hidden_inward: t.hidden.iter().map(|h| u32::from(h.inward)).collect(),
+        hidden_depths: t.hidden.iter().map(|h| u32::from(h.depth)).collect(),
     }
 }
 
@@ -118,15 +125,10 @@ pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTextu
         camera,
         depth_bits,
         eye,
-        planes: [albedo, normal, depth],
+        planes: [albedo, normal, _],
+        depth,
+        hidden,
     } = checked(field, t, Planes::Raw)?;
-    let depth: Vec<u16> = match depth_bits {
-        DepthBits::Eight => depth.iter().map(|&q| q as u16).collect(),
-        DepthBits::Sixteen => depth
-            .chunks_exact(2)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]))
-            .collect(),
-    };
     let triples = |bytes: &[u8]| bytes.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     Ok(ReliefTexture {
         camera,
@@ -135,6 +137,7 @@ pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTextu
         albedo: triples(&albedo),
         normal: triples(&normal),
         depth,
+        hidden,
     })
 }
 
@@ -162,6 +165,10 @@ pub(crate) struct Checked<'a> {
     /// Albedo, normal and depth as `wanted` ([`Planes`]): borrowed where they came raw,
     /// decompressed where they came compressed.
     pub(crate) planes: [Cow<'a, [u8]>; 3],
+    /// The depth plane's levels ([`Planes::Raw`] only; empty otherwise).
+    pub(crate) depth: Vec<u16>,
+    /// What the rim hides, checked against the depth plane.
+    pub(crate) hidden: Vec<Hidden>,
 }
 
 /// Every field of `t` checked, its planes as `wanted`.
@@ -173,12 +180,74 @@ pub(crate) fn checked<'a>(
     let (camera, depth_bits, eye) = check_header(field, t)?;
     let layout = PlaneLayout::new(camera.width, camera.height, depth_bits);
     let planes = planes(field, t, layout, wanted)?;
+    // (Checked only, the depth plane may still be predicted: what the rim hides is then
+    // checked for its layout alone; whoever reads the texture checks the rest.)
+    let depth: Vec<u16> = match (wanted, depth_bits) {
+        (Planes::Checked, _) => Vec::new(),
+        (Planes::Raw, DepthBits::Eight) => planes[2].iter().map(|&q| u16::from(q)).collect(),
+        (Planes::Raw, DepthBits::Sixteen) => planes[2]
+            .chunks_exact(2)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]))
+            .collect(),
+    };
+    let known = (wanted == Planes::Raw).then_some(depth.as_slice());
+    let hidden = hidden_from_pb(field, t, known, depth_bits)?;
     Ok(Checked {
         camera,
         depth_bits,
         eye,
         planes,
+        depth,
+        hidden,
     })
+}
+
+/// A texture's `hidden_*` lists, paired and checked against its depth levels
+/// ([`check_hidden`]), or for their layout alone ([`check_hidden_layout`]) without
+/// them.
+fn hidden_from_pb(
+    field: &str,
+    t: &pb::ReliefTexture,
+    depth: Option<&[u16]>,
+    bits: DepthBits,
+) -> Result<Vec<Hidden>, Status> {
+    let n = t.hidden_texels.len();
+    for (list, len) in [
+        ("hidden_sides", t.hidden_sides.len()),
+        ("hidden_inward", t.hidden_inward.len()),
+        ("hidden_depths", t.hidden_depths.len()),
+    ] {
+        if len != n {
+            return Err(invalid(
+                &format!("{field}.{list}"),
+                format_args!("{len} entries for {n} hidden_texels"),
+            ));
+        }
+    }
+    fn narrow<T: TryFrom<u32>>(field: &str, list: &str, k: usize, value: u32) -> Result<T, Status> {
+        T::try_from(value).map_err(|_| {
+            invalid(
+                &format!("{field}.{list}[{k}]"),
+                format_args!("{value} is out of range"),
+            )
+        })
+    }
+    let hidden = (0..n)
+        .map(|k| {
+            Ok(Hidden {
+                texel: t.hidden_texels[k],
+                side: narrow(field, "hidden_sides", k, t.hidden_sides[k])?,
+                inward: narrow(field, "hidden_inward", k, t.hidden_inward[k])?,
+                depth: narrow(field, "hidden_depths", k, t.hidden_depths[k])?,
+            })
+        })
+        .collect::<Result<Vec<_>, Status>>()?;
+    let checked = match depth {
+        Some(depth) => check_hidden(&hidden, t.width, depth, bits),
+        None => check_hidden_layout(&hidden, t.width as usize * t.height as usize, bits),
+    };
+    checked.map_err(|e| invalid(&format!("{field}.hidden_texels"), e))?;
+    Ok(hidden)
 }
 
 /// A texture's fields but its planes, checked: its camera, depth bits and eye.
@@ -383,6 +452,106 @@ mod tests {
                     .message()
                     .contains("texture.origin.y")
             );
+        }
+    }
+
+    /// What a rim hides travels with its texture, compressed planes or not; each way
+    /// the lists can be wrong is refused, naming the list (a server that only checks
+    /// layout refuses what it can tell without the depth plane).
+    #[test]
+    fn hidden_surfaces_round_trip_and_bad_lists_are_named() {
+        let bounds = Aabb {
+            min: Vec3::splat(-1.0),
+            max: Vec3::splat(1.0),
+        };
+        let eye = Vec3::new(0.5, 1.0, 4.0);
+        let camera = SourceCamera::facing(eye, &bounds, 6, 4, SourceProjection::Orthographic).unwrap();
+        let mut t = ReliefTexture::empty(camera, DepthBits::Sixteen, eye);
+        for k in [7, 8, 9, 10, 13, 14, 15, 16] {
+            t.depth[k] = 300;
+        }
+        t.hidden = vec![
+            Hidden {
+                texel: 7,
+                side: 0,
+                inward: 2,
+                depth: 900,
+            },
+            Hidden {
+                texel: 7,
+                side: 2,
+                inward: 1,
+                depth: 800,
+            },
+            Hidden {
+                texel: 10,
+                side: 1,
+                inward: 3,
+                depth: 700,
+            },
+        ];
+        t.check_hidden().unwrap();
+        let wire = texture_to_pb(&t);
+        assert_eq!(texture_from_pb("texture", &wire).unwrap(), t);
+        let small = crate::planes::compressed(wire.clone());
+        assert_eq!(texture_from_pb("texture", &small).unwrap(), t);
+        assert!(check_texture_pb("texture", &small).is_ok());
+        // (Each bad message, the list its error names, and whether a check of the
+        // layout alone catches it.)
+        type Spoil = fn(&mut pb::ReliefTexture);
+        let cases: [(&str, Spoil, &str, bool); 7] = [
+            (
+                "a list short",
+                |w| {
+                    w.hidden_sides.pop();
+                },
+                "texture.hidden_sides",
+                true,
+            ),
+            (
+                "out of order",
+                |w| w.hidden_texels.swap(0, 2),
+                "texture.hidden_texels",
+                true,
+            ),
+            (
+                "past the last texel",
+                |w| w.hidden_texels[2] = 24,
+                "texture.hidden_texels",
+                true,
+            ),
+            (
+                "a fifth side",
+                |w| w.hidden_sides[0] = 4,
+                "texture.hidden_texels",
+                true,
+            ),
+            (
+                "a depth past 16 bits",
+                |w| w.hidden_depths[0] = 70_000,
+                "texture.hidden_depths[0]",
+                true,
+            ),
+            (
+                "in front of the rim",
+                |w| w.hidden_depths[1] = 300,
+                "texture.hidden_texels",
+                false,
+            ),
+            (
+                "stepping off the texture",
+                |w| w.hidden_inward[0] = 2 + 6,
+                "texture.hidden_texels",
+                false,
+            ),
+        ];
+        for (what, spoil, field, by_layout) in cases {
+            let mut bad = wire.clone();
+            spoil(&mut bad);
+            let e = texture_from_pb("texture", &bad).unwrap_err();
+            assert_eq!(e.code(), tonic::Code::InvalidArgument, "{what}");
+            assert!(e.message().contains(field), "{what}: {}", e.message());
+            assert_eq!(check_texture_pb("texture", &bad).is_err(), by_layout, "{what}");
         }
     }
 

@@ -176,6 +176,10 @@ fn tiny_texture() -> pb::ReliefTexture {
         depth: vec![0].into(),
         centre: None,
         encoding: pb::PlaneEncoding::Raw.into(),
+        hidden_texels: vec![],
+        hidden_sides: vec![],
+        hidden_inward: vec![],
+        hidden_depths: vec![],
     }
 }
 

@@ -1,7 +1,8 @@
 //! Baking a relief texture: cast one ray per texel (parallel, or from the eye — see
 //! [`SourceProjection`]) and record the first surface's albedo, shading normal and quantised
 //! depth. The rays are cast a block at a time as one beam ([`PlaneRays`]). Texels on the
-//! object's outline then take the depth where their surface meets it ([`crate::rim`]).
+//! object's outline then take the depth where their surface meets it ([`crate::rim`]),
+//! and look past it for what it hides ([`crate::hidden`]).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -15,6 +16,7 @@ use relief_core::relief::{
 use relief_core::shading::to_rgb8;
 
 use crate::bvh::{Bvh, Hit, PlaneRays};
+use crate::hidden::find_hidden;
 use crate::prefetch::prefetch_lines;
 use crate::rim::deepen_rims;
 use crate::tiles::{Block, TILE, band_blocks};
@@ -116,7 +118,9 @@ pub fn bake_unless_cancelled(
     if cancelled.load(Ordering::Relaxed) {
         return Ok(None);
     }
-    deepen_rims(&mut texture, target, rays.t_range, size > SEQUENTIAL_MAX_EDGE);
+    let parallel = size > SEQUENTIAL_MAX_EDGE;
+    deepen_rims(&mut texture, target, rays.t_range, parallel);
+    find_hidden(&mut texture, target, rays.t_range, projection, parallel);
     Ok(Some(texture))
 }
 

@@ -41,10 +41,12 @@
 //! - [`tiles`] — the one way images are split across threads.
 //! - [`bake`](mod@bake) — the relief texture of one object for an eye.
 //! - [`rim`] — its outline's texels, given the depth where their surface meets it.
+//! - [`hidden`] — what those texels hide: the surface behind them a turn uncovers.
 //! - [`reference`](mod@reference) — a full perspective frame of the whole scene, Phong-lit.
 
 pub mod bake;
 pub mod bvh;
+pub mod hidden;
 pub mod placements;
 mod prefetch;
 pub mod reference;

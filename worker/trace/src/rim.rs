@@ -27,7 +27,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use relief_core::joins::{join_reach, slope_along};
-use relief_core::relief::{ReliefTexture, SourceCamera, decode_normal_rgb8};
+use relief_core::relief::{ReliefTexture, SourceCamera, TEXEL_SIDES, decode_normal_rgb8};
 
 use crate::bvh::{Hit, Ray};
 use crate::tracer::ObjectTracer;
@@ -69,13 +69,13 @@ fn deepest_joined(
 }
 
 /// The four neighbours' steps `(di, dj)`, in the order of [`open_sides`]'s bits.
-const SIDES: [(f32, f32); 4] = [(-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0)];
+const SIDES: [(i32, i32); 4] = TEXEL_SIDES;
 
 /// The rim texels of a `w × h` texture of depths `depth`: each covered texel with an
 /// uncovered neighbour (or the texture's edge) on some side, and those sides as bits (bit
 /// `s` for [`SIDES`]`[s]`). (Over a bordered mask, a row at a time, so that the test
 /// runs on whole vectors: texel by texel, it cost as much as tracing the rim rays.)
-fn open_sides(depth: &[u16], w: usize, h: usize, empty: u16) -> Vec<(usize, u8)> {
+pub(crate) fn open_sides(depth: &[u16], w: usize, h: usize, empty: u16) -> Vec<(usize, u8)> {
     let stride = w + 2;
     let mut covered = vec![0u8; stride * (h + 2)];
     for (row, depths) in covered[stride..].chunks_mut(stride).zip(depth.chunks(w)) {
@@ -147,7 +147,7 @@ pub(crate) fn deepen_rims(
         .map(|(texel, side)| {
             // (Along the side's own axis, as the impostor joins: a texture's texels
             // need not be square.)
-            let across = if SIDES[side].0 != 0.0 { camera.a } else { camera.b };
+            let across = if SIDES[side].0 != 0 { camera.a } else { camera.b };
             let width = across.length();
             let normal = decode_normal_rgb8(texture.normal[texel]);
             RimSide {
@@ -169,8 +169,8 @@ pub(crate) fn deepen_rims(
             .map(|(s, &deepest)| {
                 let (di, dj) = SIDES[s.side];
                 let (u, v) = (
-                    (s.texel % w) as f32 + 0.5 + di * offset,
-                    (s.texel / w) as f32 + 0.5 + dj * offset,
+                    (s.texel % w) as f32 + 0.5 + di as f32 * offset,
+                    (s.texel / w) as f32 + 0.5 + dj as f32 * offset,
                 );
                 let origin = camera.point(u, v, camera.depth_near);
                 // (`point` is linear in depth: one unit of it along the texel's ray.)
