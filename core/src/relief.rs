@@ -381,8 +381,9 @@ pub struct ReliefTexture {
     /// Depth levels; `depth_bits.empty()` marks an empty texel.
     pub depth: Vec<u16>,
     /// What the texture's rim hides ([`Hidden`]), in [`Hidden::key`] order. Empty where
-    /// nothing was looked for (a texture's coarser levels, a perspective texture, one
-    /// read from disk without it).
+    /// nothing was looked for: a texture's coarser levels, a perspective texture or one
+    /// of sheets, one under 64² (see `relief_trace::hidden`), one read from disk
+    /// without it.
     pub hidden: Vec<Hidden>,
 }
 
@@ -405,14 +406,17 @@ pub enum HiddenError {
     Outside { index: usize, inward: u8 },
 }
 
-/// Whether `hidden` is laid out right for a texture of `texels` texels in `bits`: in
-/// increasing [`Hidden::key`] order, each texel one of the texture's, each side one of
-/// [`TEXEL_SIDES`], each depth a level (what can be checked without the depth plane).
-pub fn check_hidden_layout(
+/// Whether `hidden` is well formed for a `width`-texel-wide texture of depth levels
+/// `depth` (in `bits`): in increasing [`Hidden::key`] order, each texel a covered one
+/// of the texture, each side one of [`TEXEL_SIDES`], each step in from it inside the
+/// texture, each depth a level behind the texel's own.
+pub fn check_hidden(
     hidden: &[Hidden],
-    texels: usize,
+    width: u32,
+    depth: &[u16],
     bits: DepthBits,
 ) -> std::result::Result<(), HiddenError> {
+    let height = (depth.len() / width.max(1) as usize) as u32;
     let mut last = None;
     for (index, h) in hidden.iter().enumerate() {
         let texel = h.texel;
@@ -420,45 +424,25 @@ pub fn check_hidden_layout(
             return Err(HiddenError::Unordered { index, texel });
         }
         last = Some(h.key());
-        if texel as usize >= texels {
+        let Some(&own) = depth.get(texel as usize) else {
             return Err(HiddenError::PastTheEnd { index, texel });
-        }
+        };
         if h.side as usize >= TEXEL_SIDES.len() {
             return Err(HiddenError::NoSuchSide { index, side: h.side });
         }
-        if h.depth > bits.max_level() {
-            return Err(HiddenError::NotALevel {
-                index,
-                depth: h.depth,
-            });
-        }
-    }
-    Ok(())
-}
-
-/// Whether `hidden` is well formed for a `width`-texel-wide texture of depth levels
-/// `depth`: laid out right ([`check_hidden_layout`]), each texel covered, each step in
-/// from it inside the texture, each depth behind the texel's own.
-pub fn check_hidden(
-    hidden: &[Hidden],
-    width: u32,
-    depth: &[u16],
-    bits: DepthBits,
-) -> std::result::Result<(), HiddenError> {
-    check_hidden_layout(hidden, depth.len(), bits)?;
-    let height = (depth.len() / width.max(1) as usize) as u32;
-    for (index, h) in hidden.iter().enumerate() {
         if h.behind(width, height).is_none() {
             return Err(HiddenError::Outside {
                 index,
                 inward: h.inward,
             });
         }
-        let own = depth[h.texel as usize];
         if own == bits.empty() {
-            return Err(HiddenError::Empty {
+            return Err(HiddenError::Empty { index, texel });
+        }
+        if h.depth > bits.max_level() {
+            return Err(HiddenError::NotALevel {
                 index,
-                texel: h.texel,
+                depth: h.depth,
             });
         }
         if h.depth <= own {

@@ -8,8 +8,8 @@ use tonic::Status;
 
 use relief_core::hash::ContentHash;
 use relief_core::relief::{
-    DepthBits, Hidden, MAX_TEXTURE_SIZE, ReliefTexture, SourceCamera, SourceProjection, check_hidden,
-    check_hidden_layout,
+    DepthBits, Hidden, HiddenError, MAX_TEXTURE_SIZE, ReliefTexture, SourceCamera, SourceProjection,
+    TEXEL_SIDES, check_hidden,
 };
 
 use crate::pb;
@@ -180,18 +180,18 @@ pub(crate) fn checked<'a>(
     let (camera, depth_bits, eye) = check_header(field, t)?;
     let layout = PlaneLayout::new(camera.width, camera.height, depth_bits);
     let planes = planes(field, t, layout, wanted)?;
-    // (Checked only, the depth plane may still be predicted: what the rim hides is then
-    // checked for its layout alone; whoever reads the texture checks the rest.)
-    let depth: Vec<u16> = match (wanted, depth_bits) {
-        (Planes::Checked, _) => Vec::new(),
-        (Planes::Raw, DepthBits::Eight) => planes[2].iter().map(|&q| u16::from(q)).collect(),
-        (Planes::Raw, DepthBits::Sixteen) => planes[2]
+    // (Checked only, the depth levels are needed for what the rim hides alone: `planes`
+    // left that plane raw for it.)
+    let levels = wanted == Planes::Raw || !t.hidden_texels.is_empty();
+    let depth: Vec<u16> = match (levels, depth_bits) {
+        (false, _) => Vec::new(),
+        (true, DepthBits::Eight) => planes[2].iter().map(|&q| u16::from(q)).collect(),
+        (true, DepthBits::Sixteen) => planes[2]
             .chunks_exact(2)
             .map(|b| u16::from_le_bytes([b[0], b[1]]))
             .collect(),
     };
-    let known = (wanted == Planes::Raw).then_some(depth.as_slice());
-    let hidden = hidden_from_pb(field, t, known, depth_bits)?;
+    let hidden = hidden_from_pb(field, t, camera.width, &depth, depth_bits)?;
     Ok(Checked {
         camera,
         depth_bits,
@@ -203,15 +203,24 @@ pub(crate) fn checked<'a>(
 }
 
 /// A texture's `hidden_*` lists, paired and checked against its depth levels
-/// ([`check_hidden`]), or for their layout alone ([`check_hidden_layout`]) without
-/// them.
+/// ([`check_hidden`]; `width` texels a row).
 fn hidden_from_pb(
     field: &str,
     t: &pb::ReliefTexture,
-    depth: Option<&[u16]>,
+    width: u32,
+    depth: &[u16],
     bits: DepthBits,
 ) -> Result<Vec<Hidden>, Status> {
     let n = t.hidden_texels.len();
+    // (At most one a side of each texel, in order: a longer list is refused before
+    // anything is made of it.)
+    let most = TEXEL_SIDES.len() * depth.len();
+    if n > most {
+        return Err(invalid(
+            &format!("{field}.hidden_texels"),
+            format_args!("{n} entries for {} texels, at most {most}", depth.len()),
+        ));
+    }
     for (list, len) in [
         ("hidden_sides", t.hidden_sides.len()),
         ("hidden_inward", t.hidden_inward.len()),
@@ -242,11 +251,20 @@ fn hidden_from_pb(
             })
         })
         .collect::<Result<Vec<_>, Status>>()?;
-    let checked = match depth {
-        Some(depth) => check_hidden(&hidden, t.width, depth, bits),
-        None => check_hidden_layout(&hidden, t.width as usize * t.height as usize, bits),
-    };
-    checked.map_err(|e| invalid(&format!("{field}.hidden_texels"), e))?;
+    check_hidden(&hidden, width, depth, bits).map_err(|e| {
+        // (Each fault named by the list it is in.)
+        let (list, index) = match e {
+            HiddenError::Unordered { index, .. }
+            | HiddenError::PastTheEnd { index, .. }
+            | HiddenError::Empty { index, .. } => ("hidden_texels", index),
+            HiddenError::NoSuchSide { index, .. } => ("hidden_sides", index),
+            HiddenError::Outside { index, .. } => ("hidden_inward", index),
+            HiddenError::NotBehind { index, .. } | HiddenError::NotALevel { index, .. } => {
+                ("hidden_depths", index)
+            }
+        };
+        invalid(&format!("{field}.{list}[{index}]"), e)
+    })?;
     Ok(hidden)
 }
 
@@ -456,8 +474,9 @@ mod tests {
     }
 
     /// What a rim hides travels with its texture, compressed planes or not; each way
-    /// the lists can be wrong is refused, naming the list (a server that only checks
-    /// layout refuses what it can tell without the depth plane).
+    /// the lists can be wrong is refused, naming the list and entry at fault, by the
+    /// client and by a server that only checks what it passes on (its depth plane
+    /// predicted, as a worker sends a smooth one).
     #[test]
     fn hidden_surfaces_round_trip_and_bad_lists_are_named() {
         let bounds = Aabb {
@@ -467,91 +486,87 @@ mod tests {
         let eye = Vec3::new(0.5, 1.0, 4.0);
         let camera = SourceCamera::facing(eye, &bounds, 6, 4, SourceProjection::Orthographic).unwrap();
         let mut t = ReliefTexture::empty(camera, DepthBits::Sixteen, eye);
-        for k in [7, 8, 9, 10, 13, 14, 15, 16] {
-            t.depth[k] = 300;
+        for (k, depth) in t.depth.iter_mut().enumerate() {
+            *depth = 300 + k as u16;
         }
-        t.hidden = vec![
-            Hidden {
-                texel: 7,
-                side: 0,
-                inward: 2,
-                depth: 900,
-            },
-            Hidden {
-                texel: 7,
-                side: 2,
-                inward: 1,
-                depth: 800,
-            },
-            Hidden {
-                texel: 10,
-                side: 1,
-                inward: 3,
-                depth: 700,
-            },
-        ];
+        let hidden = |texel, side, inward, depth| Hidden {
+            texel,
+            side,
+            inward,
+            depth,
+        };
+        t.hidden = vec![hidden(7, 0, 2, 900), hidden(7, 2, 1, 800), hidden(10, 1, 3, 700)];
         t.check_hidden().unwrap();
         let wire = texture_to_pb(&t);
         assert_eq!(texture_from_pb("texture", &wire).unwrap(), t);
         let small = crate::planes::compressed(wire.clone());
+        assert_eq!(
+            small.encoding,
+            pb::PlaneEncoding::ZstdDelta as i32,
+            "a ramp predicts well"
+        );
         assert_eq!(texture_from_pb("texture", &small).unwrap(), t);
         assert!(check_texture_pb("texture", &small).is_ok());
-        // (Each bad message, the list its error names, and whether a check of the
-        // layout alone catches it.)
+        // (Each bad message, and the list and entry its error names.)
         type Spoil = fn(&mut pb::ReliefTexture);
-        let cases: [(&str, Spoil, &str, bool); 7] = [
+        let cases: [(&str, Spoil, &str); 8] = [
             (
                 "a list short",
-                |w| {
-                    w.hidden_sides.pop();
-                },
+                |w| w.hidden_sides.truncate(2),
                 "texture.hidden_sides",
-                true,
+            ),
+            (
+                "too many",
+                |w| {
+                    let n = 4 * 24 + 1;
+                    w.hidden_texels = (0..n).collect();
+                    w.hidden_sides = vec![0; n as usize];
+                    w.hidden_inward = vec![0; n as usize];
+                    w.hidden_depths = vec![0; n as usize];
+                },
+                "texture.hidden_texels",
             ),
             (
                 "out of order",
-                |w| w.hidden_texels.swap(0, 2),
-                "texture.hidden_texels",
-                true,
+                |w| w.hidden_texels.swap(1, 2),
+                "texture.hidden_texels[2]",
             ),
             (
                 "past the last texel",
                 |w| w.hidden_texels[2] = 24,
-                "texture.hidden_texels",
-                true,
+                "texture.hidden_texels[2]",
             ),
             (
                 "a fifth side",
                 |w| w.hidden_sides[0] = 4,
-                "texture.hidden_texels",
-                true,
+                "texture.hidden_sides[0]",
             ),
             (
                 "a depth past 16 bits",
                 |w| w.hidden_depths[0] = 70_000,
                 "texture.hidden_depths[0]",
-                true,
             ),
             (
                 "in front of the rim",
                 |w| w.hidden_depths[1] = 300,
-                "texture.hidden_texels",
-                false,
+                "texture.hidden_depths[1]",
             ),
             (
                 "stepping off the texture",
                 |w| w.hidden_inward[0] = 2 + 6,
-                "texture.hidden_texels",
-                false,
+                "texture.hidden_inward[0]",
             ),
         ];
-        for (what, spoil, field, by_layout) in cases {
-            let mut bad = wire.clone();
-            spoil(&mut bad);
-            let e = texture_from_pb("texture", &bad).unwrap_err();
-            assert_eq!(e.code(), tonic::Code::InvalidArgument, "{what}");
-            assert!(e.message().contains(field), "{what}: {}", e.message());
-            assert_eq!(check_texture_pb("texture", &bad).is_err(), by_layout, "{what}");
+        for (what, spoil, field) in cases {
+            for (encoding, message) in [("raw", &wire), ("predicted", &small)] {
+                let mut bad = message.clone();
+                spoil(&mut bad);
+                let e = texture_from_pb("texture", &bad).unwrap_err();
+                assert_eq!(e.code(), tonic::Code::InvalidArgument, "{what}, {encoding}");
+                assert!(e.message().contains(field), "{what}, {encoding}: {}", e.message());
+                let e = check_texture_pb("texture", &bad).unwrap_err();
+                assert!(e.message().contains(field), "{what}, {encoding}: {}", e.message());
+            }
         }
     }
 

@@ -178,7 +178,8 @@ pub(crate) enum Planes {
 }
 
 /// The planes of `texture` as raw bytes (borrowed when they came raw; with
-/// [`Planes::Checked`], still predicted if they came so), each checked to be its
+/// [`Planes::Checked`], still predicted if they came so, but for the depth plane of a
+/// texture that lists what its rim hides), each checked to be its
 /// `layout`'s size: a compressed plane is decompressed into no more than its size, so a
 /// small message cannot claim a huge one.
 pub(crate) fn planes<'a>(
@@ -212,7 +213,10 @@ pub(crate) fn planes<'a>(
         if bytes.len() != size {
             return Err(invalid(f, format!("{} bytes, expected {size}", bytes.len())));
         }
-        Ok(if predicted && wanted == Planes::Raw {
+        // (Checked only, the depth plane of a texture listing what its rim hides is
+        // still raw: the list is checked against it.)
+        let hides = k == 2 && !texture.hidden_texels.is_empty();
+        Ok(if predicted && (wanted == Planes::Raw || hides) {
             Cow::Owned(undelta(&bytes, layout.width, layout.texel_bytes[k]))
         } else {
             bytes

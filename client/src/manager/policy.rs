@@ -141,10 +141,10 @@ pub fn lone_max_turn(object: &SceneObject) -> f32 {
     }
 }
 
-/// Whether `object` is taken for leaves or sheets: more than [`SHEET_RIM_SHARE`] of its
-/// edges bound one triangle only.
+/// Whether `object` is taken for leaves or sheets
+/// ([`EdgeCensus::is_sheets`](relief_core::mesh::EdgeCensus::is_sheets)).
 pub fn is_sheets(object: &SceneObject) -> bool {
-    object.edge_census().rim_share > SHEET_RIM_SHARE
+    object.edge_census().is_sheets()
 }
 
 /// A texture drawn without a partner counts as stale once the band past its rim it
@@ -255,7 +255,7 @@ pub fn largest_edge(projection: SourceProjection) -> u32 {
 pub const REQUESTED_DEPTH_BITS: DepthBits = DepthBits::Sixteen;
 
 /// The projection a texture of `object` is asked in for `eye`. From the eye itself
-/// for open surfaces (leaves, sheets — [`SHEET_RIM_SHARE`]): it holds the leaves that
+/// for open surfaces (leaves, sheets — [`SHEET_RIM_SHARE`](relief_core::mesh::SHEET_RIM_SHARE)): it holds the leaves that
 /// parallel rays graze edge-on (the tree at its texture's own eye: 24–25 dB against
 /// exact geometry's 26–29, where an orthographic texture scores 12–16; from an eye
 /// moved by 3–10 % of its distance, 15–20 dB against 11.5–16). Orthographic for closed
@@ -266,7 +266,7 @@ pub const REQUESTED_DEPTH_BITS: DepthBits = DepthBits::Sixteen;
 /// the demo left the knot 1 dB and the rock 0.5 dB further below geometry.)
 /// Orthographic too where the eye is too near the bounds for a perspective texture
 /// ([`MAX_PERSPECTIVE_TANGENT`](relief_core::relief::MAX_PERSPECTIVE_TANGENT)), and for
-/// a solid with a few holes, whose rim is under [`SHEET_RIM_SHARE`] of its edges.
+/// a solid with a few holes, whose rim is under [`SHEET_RIM_SHARE`](relief_core::mesh::SHEET_RIM_SHARE) of its edges.
 ///
 /// `eye`, here and in the other functions of an object and a camera below, is in the
 /// object's frame ([`SceneObject::local_camera`]).
@@ -279,15 +279,6 @@ pub fn projection_for(object: &SceneObject, eye: Vec3) -> SourceProjection {
         SourceProjection::Orthographic
     }
 }
-
-/// An open mesh is taken for leaves or sheets, and its textures asked in perspective
-/// ([`projection_for`]), when more than this share of its edges bound one triangle
-/// only. The tree's rim is 67 % of its edges; the rock's (its seams unwelded) 0.5 %,
-/// the scanned bunny's (a few holes) 0.2 %: orthographic, they came 0.7–1.2 dB and
-/// 0.6 dB nearer geometry's median in the demo than in perspective, and their worst
-/// frames 2.5–3 dB and 5 dB nearer. A sheet of N × N cells has a rim of about 4/(3N)
-/// of its edges: one cut finer than about 27 × 27 cells counts as a solid here.
-pub const SHEET_RIM_SHARE: f32 = 0.05;
 
 /// The texel, in pixels' angles, asked for and shown where the texture stays within
 /// [`FINE_TEXEL_MAX_EDGE`]: a texel of a pixel

@@ -273,7 +273,9 @@ impl State {
                 JobState::Running { started, .. } => Some(started),
                 JobState::Queued(_) => None,
             };
-            let bytes = texture.albedo.len() + texture.normal.len() + texture.depth.len();
+            // (What the rim hides: four lists of `u32`s.)
+            let hidden = 4 * size_of::<u32>() * texture.hidden_texels.len();
+            let bytes = texture.albedo.len() + texture.normal.len() + texture.depth.len() + hidden;
             let key = job.key.clone();
             if let Some(started) = started
                 && !job.loaded_scene

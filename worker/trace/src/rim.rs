@@ -68,12 +68,9 @@ fn deepest_joined(
     }
 }
 
-/// The four neighbours' steps `(di, dj)`, in the order of [`open_sides`]'s bits.
-const SIDES: [(i32, i32); 4] = TEXEL_SIDES;
-
 /// The rim texels of a `w × h` texture of depths `depth`: each covered texel with an
 /// uncovered neighbour (or the texture's edge) on some side, and those sides as bits (bit
-/// `s` for [`SIDES`]`[s]`). (Over a bordered mask, a row at a time, so that the test
+/// `s` for [`TEXEL_SIDES`]`[s]`). (Over a bordered mask, a row at a time, so that the test
 /// runs on whole vectors: texel by texel, it cost as much as tracing the rim rays.)
 pub(crate) fn open_sides(depth: &[u16], w: usize, h: usize, empty: u16) -> Vec<(usize, u8)> {
     let stride = w + 2;
@@ -106,7 +103,23 @@ pub(crate) fn open_sides(depth: &[u16], w: usize, h: usize, empty: u16) -> Vec<(
 /// thread, where they need no hand-over.
 const RAYS_PER_TASK: usize = 512;
 
-/// One open side of a rim texel, as its rays need it: the texel, the side (a [`SIDES`]
+/// The closest hit of each of `rays` against `target`, in chunks of [`RAYS_PER_TASK`]
+/// on the thread pool when `parallel` and there are more than one chunk's (the rim's
+/// rays and [`crate::hidden`]'s).
+pub(crate) fn cast_rays(target: &ObjectTracer, rays: &[Ray], parallel: bool) -> Vec<Option<Hit>> {
+    let mut hits: Vec<Option<Hit>> = vec![None; rays.len()];
+    if parallel && rays.len() > RAYS_PER_TASK {
+        (rays
+            .par_chunks(RAYS_PER_TASK)
+            .zip(hits.par_chunks_mut(RAYS_PER_TASK)))
+        .for_each(|(rays, hits)| target.bvh.intersect_batch(rays, hits));
+    } else {
+        target.bvh.intersect_batch(rays, &mut hits);
+    }
+    hits
+}
+
+/// One open side of a rim texel, as its rays need it: the texel, the side (a [`TEXEL_SIDES`]
 /// index), the texel's depth and normal, and its surface's slope and its texels' width
 /// that way.
 #[derive(Clone, Copy)]
@@ -140,14 +153,18 @@ pub(crate) fn deepen_rims(
     let mut pending: Vec<RimSide> = open_sides(&texture.depth, w, h, bits.empty())
         .into_iter()
         .flat_map(|(k, open)| {
-            (0..SIDES.len())
+            (0..TEXEL_SIDES.len())
                 .filter(move |s| open & (1 << s) != 0)
                 .map(move |s| (k, s))
         })
         .map(|(texel, side)| {
             // (Along the side's own axis, as the impostor joins: a texture's texels
             // need not be square.)
-            let across = if SIDES[side].0 != 0 { camera.a } else { camera.b };
+            let across = if TEXEL_SIDES[side].0 != 0 {
+                camera.a
+            } else {
+                camera.b
+            };
             let width = across.length();
             let normal = decode_normal_rgb8(texture.normal[texel]);
             RimSide {
@@ -167,7 +184,7 @@ pub(crate) fn deepen_rims(
             .collect();
         let rays: Vec<Ray> = (pending.iter().zip(&deepest))
             .map(|(s, &deepest)| {
-                let (di, dj) = SIDES[s.side];
+                let (di, dj) = TEXEL_SIDES[s.side];
                 let (u, v) = (
                     (s.texel % w) as f32 + 0.5 + di as f32 * offset,
                     (s.texel / w) as f32 + 0.5 + dj as f32 * offset,
@@ -186,15 +203,7 @@ pub(crate) fn deepen_rims(
                 }
             })
             .collect();
-        let mut hits: Vec<Option<Hit>> = vec![None; rays.len()];
-        if parallel && rays.len() > RAYS_PER_TASK {
-            (rays
-                .par_chunks(RAYS_PER_TASK)
-                .zip(hits.par_chunks_mut(RAYS_PER_TASK)))
-            .for_each(|(rays, hits)| target.bvh.intersect_batch(rays, hits));
-        } else {
-            target.bvh.intersect_batch(&rays, &mut hits);
-        }
+        let hits = cast_rays(target, &rays, parallel);
         let mut missed = Vec::new();
         for ((s, &deepest), hit) in pending.iter().zip(&deepest).zip(&hits) {
             let own = hit
