@@ -306,9 +306,10 @@ impl Manager {
             let held = &self.objects[k].held;
             let best = shown_texture(&grades, tolerance, |i| angle_between(centre, held[i].eye, eye));
             let within = |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= tolerance);
-            // Valid: some texture is within tolerance (when only one too coarse to be
-            // shown is, a finer one is asked for if it can be had: `want_finer`), and the one
-            // shown is not too far from its eye for it to be shown alone or with the
+            // Valid: the texture shown is within tolerance (where only one too coarse to
+            // be shown is, the frame is not valid: a finer one is asked for if it can be
+            // had, `want_finer`, and meanwhile the object stands in as geometry or is
+            // stale), and not too far from its eye for it to be shown alone or with the
             // partner it has: alone, a texture misses the side the eye has turned to see
             // (`may_show`).
             let shown_turn = best.map(|(i, _)| angle_between(centre, held[i].eye, eye));
@@ -316,8 +317,7 @@ impl Manager {
             let too_far = best.zip(shown_turn).is_some_and(|((_, g), turn)| {
                 !may_show(g.unshown, turn, g.lone_turn, partner.is_some(), 1.0, tolerance)
             });
-            let within_any = grades.iter().any(|g| g.growth <= tolerance);
-            let valid = within_any && !too_far;
+            let valid = within(best) && !too_far;
             // Without a valid texture, drawn exactly as geometry where it still fits in
             // the frame's triangles to spare for that (`Config::stand_in_triangles`):
             // not stale.
