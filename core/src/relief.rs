@@ -382,8 +382,8 @@ pub struct ReliefTexture {
     pub depth: Vec<u16>,
     /// What the texture's rim hides ([`Hidden`]), in [`Hidden::key`] order. Empty where
     /// nothing was looked for: a texture's coarser levels, a perspective texture or one
-    /// of sheets, one under 64² (see `relief_trace::hidden`), one read from disk
-    /// without it.
+    /// of sheets, one whose larger edge is under 64 texels (see `relief_trace::hidden`),
+    /// one read from disk without it.
     pub hidden: Vec<Hidden>,
 }
 
@@ -409,7 +409,8 @@ pub enum HiddenError {
 /// Whether `hidden` is well formed for a `width`-texel-wide texture of depth levels
 /// `depth` (in `bits`): in increasing [`Hidden::key`] order, each texel a covered one
 /// of the texture, each side one of [`TEXEL_SIDES`], each step in from it inside the
-/// texture, each depth a level behind the texel's own.
+/// texture, each depth a level behind the texel's own. (What is wrong with an entry is
+/// told in that order.)
 pub fn check_hidden(
     hidden: &[Hidden],
     width: u32,
@@ -427,6 +428,9 @@ pub fn check_hidden(
         let Some(&own) = depth.get(texel as usize) else {
             return Err(HiddenError::PastTheEnd { index, texel });
         };
+        if own == bits.empty() {
+            return Err(HiddenError::Empty { index, texel });
+        }
         if h.side as usize >= TEXEL_SIDES.len() {
             return Err(HiddenError::NoSuchSide { index, side: h.side });
         }
@@ -435,9 +439,6 @@ pub fn check_hidden(
                 index,
                 inward: h.inward,
             });
-        }
-        if own == bits.empty() {
-            return Err(HiddenError::Empty { index, texel });
         }
         if h.depth > bits.max_level() {
             return Err(HiddenError::NotALevel {
@@ -488,10 +489,15 @@ impl Hidden {
 
     /// The texel the hidden surface lies behind, `(i, j)`, in a texture `width` ×
     /// `height`; `None` when its steps in from the rim leave the texture.
+    /// `None` too when the rim texel is not one of the texture's.
     pub fn behind(&self, width: u32, height: u32) -> Option<(u32, u32)> {
         let (di, dj) = *TEXEL_SIDES.get(self.side as usize)?;
+        let (i, j) = (self.texel.checked_rem(width)?, self.texel / width);
+        if j >= height {
+            return None;
+        }
         let step = |at: u32, d: i32| at.checked_add_signed(-d * i32::from(self.inward));
-        let (i, j) = (step(self.texel % width, di)?, step(self.texel / width, dj)?);
+        let (i, j) = (step(i, di)?, step(j, dj)?);
         (i < width && j < height).then_some((i, j))
     }
 }
@@ -927,6 +933,36 @@ mod tests {
         for n in [Vec3::X, -Vec3::Y, Vec3::new(0.3, -0.5, 0.8).normalize()] {
             assert!(decode_normal_rgb8(encode_normal_rgb8(n)).angle_between(n) < 1f32.to_radians());
         }
+    }
+
+    /// Where a hidden surface lies: steps in against its side, `None` off the texture
+    /// (the rim texel's own row past the last, too) or for a side that is not one.
+    #[test]
+    fn a_hidden_surface_lies_in_from_its_rim_texel() {
+        let at = |texel, side, inward| {
+            Hidden {
+                texel,
+                side,
+                inward,
+                depth: 0,
+            }
+            .behind(6, 4)
+        };
+        // Texel 7 is (1, 1) of 6 × 4.
+        assert_eq!(at(7, 0, 2), Some((3, 1)), "open to the left: in is to the right");
+        assert_eq!(at(7, 1, 1), Some((0, 1)));
+        assert_eq!(at(7, 2, 2), Some((1, 3)), "open upwards: in is down");
+        assert_eq!(at(7, 3, 1), Some((1, 0)));
+        assert_eq!(at(7, 1, 2), None, "past the left edge");
+        assert_eq!(at(26, 3, 1), None, "the rim texel on a fifth row of four");
+        assert_eq!(at(7, 4, 1), None, "a fifth side");
+        let nowhere = Hidden {
+            texel: 0,
+            side: 0,
+            inward: 0,
+            depth: 0,
+        };
+        assert_eq!(nowhere.behind(0, 0), None, "no texture");
     }
 
     #[test]

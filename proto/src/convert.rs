@@ -165,7 +165,8 @@ pub(crate) struct Checked<'a> {
     /// Albedo, normal and depth as `wanted` ([`Planes`]): borrowed where they came raw,
     /// decompressed where they came compressed.
     pub(crate) planes: [Cow<'a, [u8]>; 3],
-    /// The depth plane's levels ([`Planes::Raw`] only; empty otherwise).
+    /// The depth plane's levels ([`Planes::Raw`], or a texture that lists what its rim
+    /// hides; empty otherwise).
     pub(crate) depth: Vec<u16>,
     /// What the rim hides, checked against the depth plane.
     pub(crate) hidden: Vec<Hidden>,

@@ -8,6 +8,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use anyhow::{Result, anyhow};
+use rayon::prelude::*;
 use tokio::sync::{mpsc, watch};
 use tokio::task::JoinSet;
 use tokio_stream::wrappers::UnboundedReceiverStream;
@@ -65,13 +66,18 @@ struct Loaded {
 
 impl Loaded {
     /// Builds every object's tracer, in parallel: each mesh's BVH once, shared by its
-    /// placements.
+    /// placements; and counts each mesh's edges, which a bake asks for (whether it may
+    /// look past its rims: `relief_trace::hidden`), so that no job pays for it.
     fn new(scene: Scene) -> Loaded {
         let names = scene.object_names();
-        let tracers = ObjectTracer::all(scene.objects)
+        let tracers: HashMap<String, Arc<ObjectTracer>> = ObjectTracer::all(scene.objects)
             .into_iter()
             .map(|t| (t.object.name.clone(), Arc::new(t)))
             .collect();
+        // (A mesh's census is shared by its placements: the first to ask counts.)
+        tracers.par_iter().for_each(|(_, t)| {
+            t.object.edge_census();
+        });
         Loaded {
             name: scene.name,
             names,

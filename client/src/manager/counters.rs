@@ -104,7 +104,7 @@ pub struct StaleCauses {
     /// round the object (past [`MAX_TURN`](super::policy::MAX_TURN)) or at too
     /// different a distance.
     pub missing: u64,
-    /// Some can, but none within the tolerance.
+    /// Some can, but none that may be shown (not too coarse) within the tolerance.
     pub beyond_tolerance: u64,
     /// One within tolerance, but shown too far from its eye: alone, with no partner held
     /// to fill the side it misses, or past what even a partner can mend (see

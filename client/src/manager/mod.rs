@@ -216,7 +216,8 @@ impl Manager {
             for (k, camera) in cameras.iter().enumerate() {
                 self.plan(scene, camera, 0.0, self.config.predict && k == 0);
             }
-            // Previews make a frame valid before the final textures are in; a final
+            // Previews fine enough to be shown make a frame valid before the final
+            // textures are in; a final
             // arriving after the flight started would count its cold-start round trip
             // as the flight's and make the predictor plan for it.
             if self.counters.stale_frames == before && self.pending.is_empty() {
@@ -307,9 +308,9 @@ impl Manager {
             let best = shown_texture(&grades, tolerance, |i| angle_between(centre, held[i].eye, eye));
             let within = |g: Option<(usize, Grade)>| g.is_some_and(|(_, g)| g.growth <= tolerance);
             // Valid: the texture shown is within tolerance (where only one too coarse to
-            // be shown is, the frame is not valid: a finer one is asked for if it can be
-            // had, `want_finer`, and meanwhile the object stands in as geometry or is
-            // stale), and not too far from its eye for it to be shown alone or with the
+            // be shown is, the frame is not valid: a finer one is asked for, `want_finer`,
+            // and meanwhile the object stands in as geometry or is stale — unless none
+            // finer can be had, below), and not too far from its eye for it to be shown alone or with the
             // partner it has: alone, a texture misses the side the eye has turned to see
             // (`may_show`).
             let shown_turn = best.map(|(i, _)| angle_between(centre, held[i].eye, eye));
@@ -317,7 +318,15 @@ impl Manager {
             let too_far = best.zip(shown_turn).is_some_and(|((_, g), turn)| {
                 !may_show(g.unshown, turn, g.lone_turn, partner.is_some(), 1.0, tolerance)
             });
-            let valid = within(best) && !too_far;
+            // Where the one within tolerance is too coarse to be shown and nothing
+            // finer can be had (the largest texture, the eye near), geometry is drawn
+            // while the eye stays that near (`policy::COARSEST_SHOWN`): valid, as asking
+            // again would bring the same.
+            let none_finer = !within(best)
+                && grades
+                    .iter()
+                    .any(|g| g.growth <= tolerance && g.too_coarse && !g.finer_available);
+            let valid = (within(best) && !too_far) || none_finer;
             // Without a valid texture, drawn exactly as geometry where it still fits in
             // the frame's triangles to spare for that (`Config::stand_in_triangles`):
             // not stale.
@@ -401,7 +410,7 @@ impl Manager {
             }
             self.predict_for(scene, k, camera, prediction);
             shows[k] = match best {
-                Some((i, g)) if !stands_in && g.growth <= SHOWN_STALE * tolerance => {
+                Some((i, g)) if !stands_in && !none_finer && g.growth <= SHOWN_STALE * tolerance => {
                     let held = &mut self.objects[k].held;
                     for j in std::iter::once(i).chain(partner.map(|(p, _)| p)) {
                         held[j].last_shown = shown_at;

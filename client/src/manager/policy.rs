@@ -174,8 +174,10 @@ pub const LONE_UNSEEN: f32 = 0.03;
 pub const PARTNERED_BAND: f32 = 4.0;
 
 /// A texture whose texels would cover more than this many pixels' angle is not shown:
-/// geometry is drawn instead while a finer texture is on its way (or, near an object
-/// where even the largest texture is that coarse, while the eye stays that near).
+/// while a finer texture is on its way the object stands in as geometry, or counts as
+/// stale where it cannot (the frame is not valid); near an object where even the
+/// largest texture is that coarse, geometry is drawn while the eye stays that near, and
+/// the frame is valid.
 pub const COARSEST_SHOWN: f32 = 2.0 * MAX_TEXEL_PIXELS;
 
 /// A texture whose texels cover more than this many pixels' angle at the eye is

@@ -11,7 +11,7 @@
 //! open side, at every [`INWARD_STRIDE`]th texel up to [`inward_reach`] over the
 //! object's covered texels: it casts that texel's ray on past its own surface, through
 //! the faces turned away from the rays it meets (its own surface's far side), to the
-//! first face turned towards them ([`hidden_depths`]).
+//! first face turned towards them.
 //!
 //! Not every step is cast. The deepest goes first, then, where it finds nothing, the
 //! middle one; a step that finds a surface is followed by the next towards the rim,
