@@ -217,9 +217,8 @@ impl Manager {
                 self.plan(scene, camera, 0.0, self.config.predict && k == 0);
             }
             // Previews fine enough to be shown make a frame valid before the final
-            // textures are in; a final
-            // arriving after the flight started would count its cold-start round trip
-            // as the flight's and make the predictor plan for it.
+            // textures are in; a final arriving after the flight started would count its
+            // cold-start round trip as the flight's and make the predictor plan for it.
             if self.counters.stale_frames == before && self.pending.is_empty() {
                 break true;
             }
@@ -310,9 +309,9 @@ impl Manager {
             // Valid: the texture shown is within tolerance (where only one too coarse to
             // be shown is, the frame is not valid: a finer one is asked for, `want_finer`,
             // and meanwhile the object stands in as geometry or is stale — unless none
-            // finer can be had, below), and not too far from its eye for it to be shown alone or with the
-            // partner it has: alone, a texture misses the side the eye has turned to see
-            // (`may_show`).
+            // finer can be had, below), and not too far from its eye for it to be shown
+            // alone or with the partner it has: alone, a texture misses the side the eye
+            // has turned to see (`may_show`).
             let shown_turn = best.map(|(i, _)| angle_between(centre, held[i].eye, eye));
             let partner = best.and_then(|(i, _)| self.partner(k, i, centre, camera, &grades));
             let too_far = best.zip(shown_turn).is_some_and(|((_, g), turn)| {
