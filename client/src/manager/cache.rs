@@ -30,7 +30,8 @@ use super::{Manager, TextureLifetimes};
 pub(crate) struct Prepared {
     pub(super) pyramid: Pyramid,
     pub(super) critical: CriticalPoints,
-    /// The regions' gaps at the texture's own eye: what it shows at best.
+    /// The regions' pairs' gaps at the texture's own eye: what it shows at best (the
+    /// growth counts from them, `CriticalPoints::worst_growth`).
     pub(super) baseline: Vec<f32>,
     /// Its rim's curvature: the band past the outline it cannot show from a turned eye.
     pub(super) rim: Rim,
@@ -62,7 +63,7 @@ impl ReadyTexture {
         let critical = CriticalPoints::find(&texture, CRITICAL_REGIONS, CRITICAL_REGIONS);
         let baseline = WarpParams::without_tables(&texture, texture.eye).map_or_else(
             |_| vec![0.0; critical.pairs.len()],
-            |params| critical.region_gaps(&params),
+            |params| critical.pair_gaps(&params),
         );
         let pyramid = Pyramid::new(texture, MIN_LEVEL_EDGE).with_faces(faces);
         let prepared = Prepared {
@@ -203,9 +204,14 @@ impl Manager {
                     if is_final {
                         let angle = probe_valid_angle(&held, centre, &local, tolerance);
                         state.valid_angle = Some(angle);
+                        let texture = &held.prepared.pyramid.levels[0].texture;
                         tracing::debug!(
                             object = p.object,
                             valid_deg = angle.to_degrees(),
+                            eye = ?texture.eye,
+                            edge = texture.camera.width,
+                            perspective = texture.camera.centre.is_some(),
+                            hidden = texture.hidden.len(),
                             "texture arrived; its valid angle probed"
                         );
                         self.share(scene, camera, p.object, &held, angle);
