@@ -9,14 +9,18 @@
 //! CAD part's side, a plinth — and the texture alone shows a hole there.
 //!
 //! The census keeps, per bin of normal direction ([`NORMAL_CELLS`] a side of each cube
-//! face), the summed area and the area-weighted normal: a flat face's triangles share
-//! their normal, and its bin holds it exactly. It is a census of facing, not of
-//! visibility: occlusion is left out (a face behind another counts as seen by a view
-//! that faces it), and so is the spread of a near eye's rays. It trusts the mesh's
+//! face), the summed area, the area-weighted normal and the area-weighted centre: a
+//! flat face's triangles share their normal, and its bin holds it exactly. An eye
+//! sees each bin along the line to its centre, so a near eye's spread of rays counts:
+//! an off-centre face edge-on to the texture's parallel rays (the fandisk's fin) is
+//! seen face-on enough from the eye, where a convex outline turns away from it. (The
+//! faces of one bin facing one way from opposite sides of the mesh are seen along the
+//! line to their mean.) It is a census of facing, not of visibility: occlusion is left
+//! out (a face behind another counts as seen by an eye it faces). It trusts the mesh's
 //! winding (counter-clockwise seen from outside, as the shading's front faces); a mesh
 //! wound the other way counts its seen faces as unseen.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use wide::f32x8;
 
 use crate::mesh::Mesh;
@@ -38,19 +42,20 @@ pub struct NormalCensus {
 }
 
 /// Eight bins of a [`NormalCensus`]: their summed areas, and the components of their
-/// area-weighted mean normals (unit length).
+/// area-weighted mean normals (unit length) and centres.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Bins {
     area: f32x8,
     normal: [f32x8; 3],
+    centre: [f32x8; 3],
 }
 
 impl NormalCensus {
     /// The census of `mesh`'s triangles (degenerate ones left out); `mesh` is valid
     /// ([`Mesh::validate`]).
     pub fn of(mesh: &Mesh) -> NormalCensus {
-        // Per bin: area, area × normal.
-        let mut sums = vec![(0.0f64, Vec3::ZERO); 6 * NORMAL_CELLS * NORMAL_CELLS];
+        // Per bin: area, area × normal, area × centre.
+        let mut sums = vec![(0.0f64, Vec3::ZERO, DVec3::ZERO); 6 * NORMAL_CELLS * NORMAL_CELLS];
         for t in 0..mesh.triangle_count() {
             let [a, b, c] = mesh.corners(t);
             let cross = (b - a).cross(c - a);
@@ -62,39 +67,52 @@ impl NormalCensus {
             let sum = &mut sums[direction_cell(normal)];
             sum.0 += f64::from(area);
             sum.1 += normal * area;
+            sum.2 += ((a + b + c) / 3.0).as_dvec3() * f64::from(area);
         }
-        let bins: Vec<(f32, Vec3)> = sums
+        let bins: Vec<(f32, Vec3, Vec3)> = sums
             .into_iter()
             .filter(|s| s.0 > 0.0)
-            .filter_map(|(area, normal)| Some((area as f32, normal.try_normalize()?)))
+            .filter_map(|(area, normal, centre)| {
+                Some((area as f32, normal.try_normalize()?, (centre / area).as_vec3()))
+            })
             .collect();
         let blocks = bins
             .chunks(8)
             .map(|chunk| {
-                let lane = |k: usize| chunk.get(k).copied().unwrap_or((0.0, Vec3::Z));
-                let component = |axis: usize| f32x8::new(std::array::from_fn(|k| lane(k).1[axis]));
+                let lane = |k: usize| chunk.get(k).copied().unwrap_or((0.0, Vec3::Z, Vec3::ZERO));
+                let normal = |axis: usize| f32x8::new(std::array::from_fn(|k| lane(k).1[axis]));
+                let centre = |axis: usize| f32x8::new(std::array::from_fn(|k| lane(k).2[axis]));
                 Bins {
                     area: f32x8::new(std::array::from_fn(|k| lane(k).0)),
-                    normal: [component(0), component(1), component(2)],
+                    normal: [normal(0), normal(1), normal(2)],
+                    centre: [centre(0), centre(1), centre(2)],
                 }
             })
             .collect();
         NormalCensus { blocks }
     }
 
-    /// Of the surface a view along unit `view` sees face-on (its projected area,
-    /// occlusion left out: each bin weighted by how squarely it faces the view), the
+    /// Of the surface `eye` sees face-on (its projected area, occlusion left out: each
+    /// bin weighted by how squarely it faces the line from `eye` to its centre), the
     /// share that faces away from every one of `rays` (the unit directions parallel
     /// texture rays travel in) or lies edge-on to them: what no such texture holds. 0
-    /// when the view sees nothing. (A face the rays meet nearly edge-on counts as seen:
+    /// when the eye sees nothing. (A face the rays meet nearly edge-on counts as seen:
     /// its few samples stretch as the view turns to it, which costs little on a flat
     /// face of one shade — counted as unseen until 4 times its size on screen, such
     /// faces flagged the fandisk's frames where its impostor matched geometry.)
-    pub fn unseen_share(&self, rays: &[Vec3], view: Vec3) -> f32 {
+    pub fn unseen_share(&self, rays: &[Vec3], eye: Vec3) -> f32 {
         let dot = |n: &[f32x8; 3], d: Vec3| n[0] * d.x + n[1] * d.y + n[2] * d.z;
         let (mut facing, mut unseen) = (f32x8::ZERO, f32x8::ZERO);
         for block in &self.blocks {
-            let projected = block.area * (-dot(&block.normal, view)).max(f32x8::ZERO);
+            // (The line from the eye to each bin's centre, unit: a bin at the eye is
+            // seen by none.)
+            let [x, y, z] = block.centre;
+            let view = [x - eye.x, y - eye.y, z - eye.z];
+            let length = (view[0] * view[0] + view[1] * view[1] + view[2] * view[2]).sqrt();
+            let towards =
+                -(block.normal[0] * view[0] + block.normal[1] * view[1] + block.normal[2] * view[2]);
+            let squarely = (towards / length.max(f32x8::splat(f32::MIN_POSITIVE))).max(f32x8::ZERO);
+            let projected = block.area * squarely;
             let away = (rays.iter()).fold(f32x8::splat(f32::from_bits(u32::MAX)), |away, &f| {
                 away & dot(&block.normal, f).simd_ge(f32x8::ZERO)
             });
@@ -129,6 +147,11 @@ mod tests {
     use super::*;
     use crate::generators::Generator;
 
+    /// An eye far off along `-view`: one that sees every bin along `view`.
+    fn far(view: Vec3) -> Vec3 {
+        -view * 1e4
+    }
+
     #[test]
     fn the_cuboid_faces_outwards() {
         let m = Mesh::cuboid(Vec3::ONE, Vec3::ZERO);
@@ -144,18 +167,18 @@ mod tests {
         // A flat slab, 4 × 1 × 4: its top face edge-on to rays along −z.
         let census = NormalCensus::of(&Mesh::cuboid(Vec3::new(4.0, 1.0, 4.0), Vec3::ZERO));
         let rays = [Vec3::NEG_Z];
-        assert_eq!(census.unseen_share(&rays, Vec3::NEG_Z), 0.0);
+        assert_eq!(census.unseen_share(&rays, far(Vec3::NEG_Z)), 0.0);
         for degrees in [5.0f32, 10.0, 20.0] {
             let t = degrees.to_radians();
             let view = -Vec3::new(0.0, t.sin(), t.cos());
             // Seen: the front face (4 × 1) at cos t; not: the top (4 × 4) at sin t.
             let (front, top) = (4.0 * t.cos(), 16.0 * t.sin());
-            let share = census.unseen_share(&rays, view);
+            let share = census.unseen_share(&rays, far(view));
             assert!((share - top / (front + top)).abs() < 1e-3, "{degrees}°: {share}");
         }
         // Turned the other way, the bottom shows: as unseen as the top.
         let view = -Vec3::new(0.0, -0.2f32.sin(), 0.2f32.cos());
-        assert!(census.unseen_share(&rays, view) > 0.4);
+        assert!(census.unseen_share(&rays, far(view)) > 0.4);
     }
 
     #[test]
@@ -167,7 +190,7 @@ mod tests {
         let axis = ray.any_orthonormal_vector();
         let at = |degrees: f32| {
             let turn = glam::Quat::from_axis_angle(axis, degrees.to_radians());
-            census.unseen_share(&[ray], turn * ray)
+            census.unseen_share(&[ray], far(turn * ray))
         };
         // Exactly: the unseen lune's projection (a half-disc less a half-ellipse of
         // semi-axes 1 and cos t), over the disc's π: (1 − cos t)/2. Binned: within
@@ -185,7 +208,48 @@ mod tests {
         // normals the view between the two rays: a check of "every ray", not "any").
         let partner = glam::Quat::from_axis_angle(axis, 20f32.to_radians()) * ray;
         let between = glam::Quat::from_axis_angle(axis, 10f32.to_radians()) * ray;
-        assert_eq!(census.unseen_share(&[ray, partner], between), 0.0);
-        assert!(census.unseen_share(&[ray], between) > 0.0);
+        assert_eq!(census.unseen_share(&[ray, partner], far(between)), 0.0);
+        assert!(census.unseen_share(&[ray], far(between)) > 0.0);
+    }
+
+    /// A near eye sees a face beside the object's centre that is edge-on to the
+    /// texture's rays, along the line to it: a slab 1 × 1 × 1 three to the left of the
+    /// eye's axis, rays along −z. From 10 away its right side shows, as unseen as its
+    /// share of what the eye sees face-on (each face by the cosine at its centre); from
+    /// far off along the same axis it does not show at all. And a sphere seen from
+    /// near turns its outline away from the eye: turned 15°, less is unseen than from
+    /// far.
+    #[test]
+    fn a_near_eye_sees_each_face_along_the_line_to_it() {
+        let census = NormalCensus::of(&Mesh::cuboid(Vec3::ONE, Vec3::new(-3.0, 0.0, 0.0)));
+        let (rays, eye) = ([Vec3::NEG_Z], Vec3::new(0.0, 0.0, 10.0));
+        let seen = |centre: Vec3, normal: Vec3| (-normal.dot((centre - eye).normalize())).max(0.0);
+        // (Faces of 1 × 1; the left, the back, the top and the bottom face away from
+        // the eye or lie edge-on to it.)
+        let (right, front) = (
+            seen(Vec3::new(-2.5, 0.0, 0.0), Vec3::X),
+            seen(Vec3::new(-3.0, 0.0, 0.5), Vec3::Z),
+        );
+        let (top, bottom) = (
+            seen(Vec3::new(-3.0, 0.5, 0.0), Vec3::Y),
+            seen(Vec3::new(-3.0, -0.5, 0.0), Vec3::NEG_Y),
+        );
+        let expected = (right + top + bottom) / (right + top + bottom + front);
+        let share = census.unseen_share(&rays, eye);
+        assert!(
+            expected > 0.15 && (share - expected).abs() < 1e-4,
+            "{share} against {expected}"
+        );
+        let from_far = census.unseen_share(&rays, far(Vec3::NEG_Z));
+        assert!(from_far < 1e-3, "{from_far}");
+
+        let sphere = NormalCensus::of(&Generator::Sphere { subdivisions: 5 }.build());
+        let ray = Vec3::new(0.3, 0.2, -1.0).normalize();
+        let turned = glam::Quat::from_axis_angle(ray.any_orthonormal_vector(), 15f32.to_radians()) * ray;
+        let (near, from_far) = (
+            sphere.unseen_share(&[ray], -turned * 5.0),
+            sphere.unseen_share(&[ray], far(turned)),
+        );
+        assert!(near < 0.5 * from_far, "{near} against {from_far}");
     }
 }

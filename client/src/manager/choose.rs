@@ -94,7 +94,7 @@ impl Unshown {
     pub(super) fn at(held: &Held, object: &SceneObject, centre: Vec3, eye: Vec3, camera: &Camera) -> Unshown {
         Unshown {
             band: band(held, centre, eye, camera),
-            unseen: unseen(held, object, centre, eye),
+            unseen: unseen(held, object, eye),
         }
     }
 }
@@ -129,20 +129,19 @@ pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32
     held.prepared.rim.band(texture, centre, eye) * focal / centre.distance(eye).max(f32::MIN_POSITIVE)
 }
 
-/// Of the surface of `object` that `eye` sees face-on, looking at its `centre`, the
-/// share `held`'s rays never met
+/// Of the surface of `object` that `eye` sees face-on, each part along the line to it,
+/// the share `held`'s rays never met
 /// ([`NormalCensus::unseen_share`](relief_core::normals::NormalCensus::unseen_share)):
-/// what turned into view past a sharp edge. 0 for leaves or sheets (two-sided: every
-/// face is seen from one side or the other), and so for perspective textures, asked
-/// for those only ([`projection_for`](super::policy::projection_for)), whose rays
-/// part.
-pub(super) fn unseen(held: &Held, object: &SceneObject, centre: Vec3, eye: Vec3) -> f32 {
+/// what turned into view past a sharp edge, or what a near eye sees beside the object's
+/// centre edge-on to the texture. 0 for leaves or sheets (two-sided: every face is seen
+/// from one side or the other), and so for perspective textures, asked for those only
+/// ([`projection_for`](super::policy::projection_for)), whose rays part.
+pub(super) fn unseen(held: &Held, object: &SceneObject, eye: Vec3) -> f32 {
     let c = &held.prepared.pyramid.levels[0].texture.camera;
     if c.centre.is_some() || is_sheets(object) {
         return 0.0;
     }
-    let view = (centre - eye).normalize_or_zero();
-    object.normal_census().unseen_share(&[c.f], view)
+    object.normal_census().unseen_share(&[c.f], eye)
 }
 
 /// How far round from `held`'s eye an eye may turn about `axis` through `object`'s
@@ -381,7 +380,7 @@ impl Manager {
             level,
             growth_pixels: growth(shown, eye, camera),
             band_pixels: band(shown, centre, eye, camera),
-            unseen_percent: 100.0 * unseen(shown, object, centre, eye),
+            unseen_percent: 100.0 * unseen(shown, object, eye),
             partner_turn_deg: partner.and_then(|(i, _)| turn(i)),
         })
     }

@@ -156,15 +156,18 @@ pub const LONE_BAND: f32 = 2.0;
 
 /// A texture drawn without a partner counts as stale once more than this share of the
 /// surface the eye sees face-on was turned away from or edge-on to its rays
-/// ([`NormalCensus::unseen_share`](relief_core::normals::NormalCensus::unseen_share)):
-/// past a sharp edge a flat face comes into view at once, and the texture shows a hole
-/// the rim's band does not foresee. A smooth surface turns into view slowly, as
-/// `(1 − cos φ)/2` on a sphere: 1.7 % at [`LONE_MAX_TURN`], which its rim's band and
-/// the turn bound (at 2 % here, the orbit's small sphere went stale at 15°, a degree
-/// before its lone turn, in the manager's tests); the scanned fandisk's side came into
-/// view as 7.1 % at 8.7° and 15.8 % at 11.6° (the object 11 and 14.5 dB below geometry
-/// in those frames). (A partner, from the far side of the eye, holds what turned into
-/// view: with one, the rim's band and the turn bound the texture.)
+/// ([`NormalCensus::unseen_share`](relief_core::normals::NormalCensus::unseen_share),
+/// each part seen along the line from the eye to it): past a sharp edge a flat face
+/// comes into view at once, and the texture shows a hole the rim's band does not
+/// foresee. The scanned fandisk's side came into view as 7.1 % at 8.7° and 15.8 % at
+/// 11.6° (the object 11 and 14.5 dB below geometry in those frames; seen along one
+/// line, the census's first way), its fin's narrow side as 2.0 % at 4° (−7.3 dB; 1.1 %
+/// along one line, under this share until the lines were each part's own). A smooth
+/// convex surface turns into view slowly, `(1 − cos φ)/2` on a sphere seen from far
+/// (1.7 % at [`LONE_MAX_TURN`]), and less round its outline from near (0.1 % at 15°
+/// from 5 radii): its rim's band and the turn bound it. (A partner, from the far side
+/// of the eye, holds what turned into view: with one, the rim's band and the turn bound
+/// the texture.)
 pub const LONE_UNSEEN: f32 = 0.03;
 
 /// With a partner filling the band past its rim, a texture counts as stale once that

@@ -299,28 +299,41 @@ mod tests {
         )
     }
 
-    /// A hidden surface's gap is how far past its rim texel the eye sees it, worked
-    /// out by projecting both points: none at the texture's own eye or turned the
-    /// other way, growing with the turn towards the rim's open side.
-    #[test]
-    fn a_hidden_surface_comes_out_past_the_rim_as_the_eye_turns_to_it() {
-        // A square (texels 8..24 of 32) over nothing: its left rim texels hide a
-        // surface a texel in, 230 levels (of 254 over the depth span, 2) deeper.
-        let mut texture = square_over_plane(32, 8..24, ([9; 3], 20));
-        for k in 0..texture.depth.len() {
-            if (k % 32) < 8 || (k % 32) >= 24 || k / 32 < 8 || k / 32 >= 24 {
-                texture.depth[k] = texture.depth_bits.empty();
+    /// A square of `square` texels a side (of 32) over nothing, whose texels in column
+    /// `rim` list, behind the texel in from their open `side`, a surface at depth level
+    /// 250: 1.8 deeper than the square's 20 (of 254 over the depth span, 2).
+    fn square_hiding(square: std::ops::Range<u32>, rim: u32, side: u8) -> ReliefTexture {
+        let mut texture = square_over_plane(32, square.clone(), ([9; 3], 20));
+        for (k, depth) in (0u32..).zip(texture.depth.iter_mut()) {
+            if !(square.contains(&(k % 32)) && square.contains(&(k / 32))) {
+                *depth = texture.depth_bits.empty();
             }
         }
-        texture.hidden = (8..24)
+        texture.hidden = (square.clone())
             .map(|j| Hidden {
-                texel: j * 32 + 8,
-                side: 0,
+                texel: j * 32 + rim,
+                side,
                 inward: 1,
                 depth: 250,
             })
             .collect();
         texture.check_hidden().expect("well formed");
+        texture
+    }
+
+    /// The world point at texel centre `t` and depth level `level` of `texture`.
+    fn world(texture: &ReliefTexture, t: Vec2, level: u16) -> Vec3 {
+        let c = &texture.camera;
+        c.point(t.x, t.y, c.depth_of_level(level, texture.depth_bits))
+    }
+
+    /// A hidden surface's gap is how far past its rim texel the eye sees it, worked
+    /// out by projecting both points: none at the texture's own eye or turned the
+    /// other way, growing with the turn towards the rim's open side.
+    #[test]
+    fn a_hidden_surface_comes_out_past_the_rim_as_the_eye_turns_to_it() {
+        // (The square's left rim texels hide a surface a texel in.)
+        let texture = square_hiding(8..24, 8, 0);
         let critical = CriticalPoints::find(&texture, 4, 4);
         // (Column 8, rows 8 to 23: two regions of the 4 × 4.)
         assert_eq!(
@@ -337,15 +350,13 @@ mod tests {
             );
             assert_eq!(pair.outward, Some(Vec2::new(-1.0, 0.0)));
         }
-        let c = texture.camera;
-        let world = |t: Vec2, level: u16| c.point(t.x, t.y, c.depth_of_level(level, texture.depth_bits));
         let mut last = 0.0;
         for degrees in [-10.0f32, 0.0, 8.0, 12.0, 16.0] {
             let eye = glam::Quat::from_rotation_y(-degrees.to_radians()) * EYE;
             let params = WarpParams::without_tables(&texture, eye).expect("in front");
             for pair in critical.hidden.iter().flatten() {
-                let out =
-                    seen_at(&texture, eye, world(pair.t2, 250)) - seen_at(&texture, eye, world(pair.t1, 20));
+                let out = seen_at(&texture, eye, world(&texture, pair.t2, 250))
+                    - seen_at(&texture, eye, world(&texture, pair.t1, 20));
                 let expected = out.dot(Vec2::new(-1.0, 0.0)).max(0.0);
                 let gap = pair.gap(&params);
                 assert!(
@@ -384,21 +395,7 @@ mod tests {
     /// the neighbours' gaps count only what they grew.
     #[test]
     fn a_hidden_surface_out_at_the_textures_own_eye_counts_whole() {
-        let mut texture = square_over_plane(32, 1..5, ([9; 3], 20));
-        for k in 0..texture.depth.len() {
-            if !((1..5).contains(&(k % 32)) && (1..5).contains(&(k / 32))) {
-                texture.depth[k] = texture.depth_bits.empty();
-            }
-        }
-        texture.hidden = (1..5)
-            .map(|j| Hidden {
-                texel: j * 32 + 4,
-                side: 1,
-                inward: 1,
-                depth: 250,
-            })
-            .collect();
-        texture.check_hidden().expect("well formed");
+        let texture = square_hiding(1..5, 4, 1);
         let critical = CriticalPoints::find(&texture, 4, 4);
         let own = WarpParams::without_tables(&texture, EYE).expect("in front");
         let out = critical
@@ -407,14 +404,12 @@ mod tests {
             .flatten()
             .map(|p| p.gap(&own))
             .fold(0.0, f32::max);
-        // (The rim 11.5 texels left of the centre, the surface a texel further out and
-        // 1.8 deeper, the eye 9 from the texture's plane: it lands about a texel right
-        // of the rim. Worked out again from the points themselves.)
-        let c = texture.camera;
-        let world = |t: Vec2, level: u16| c.point(t.x, t.y, c.depth_of_level(level, texture.depth_bits));
+        // (The rim 11.5 texels left of the centre, the surface a texel further from it
+        // and 1.8 deeper, the eye 9 from the texture's plane: it lands about a texel
+        // right of the rim. Worked out again from the points themselves.)
         let pair = critical.hidden.iter().flatten().next().expect("a hidden pair");
-        let expected = (seen_at(&texture, EYE, world(pair.t2, 250))
-            - seen_at(&texture, EYE, world(pair.t1, 20)))
+        let expected = (seen_at(&texture, EYE, world(&texture, pair.t2, 250))
+            - seen_at(&texture, EYE, world(&texture, pair.t1, 20)))
         .dot(Vec2::X)
         .max(0.0);
         assert!(
