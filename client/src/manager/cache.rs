@@ -24,14 +24,14 @@ use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, SHED_QUIET, growth_weight}
 use super::{Manager, TextureLifetimes};
 
 /// What making a texture ready builds: its pyramid (with texel connectivity), critical
-/// points, the gaps it shows at its own eye, its rim and the weight of its gaps'
+/// points, its neighbours' gaps at its own eye, its rim and the weight of its gaps'
 /// growth. One per texture, shared by every placement and every client in a process
 /// that holds it (see [`Manager::share`], [`crate::intake`]).
 pub(crate) struct Prepared {
     pub(super) pyramid: Pyramid,
     pub(super) critical: CriticalPoints,
-    /// The regions' pairs' gaps at the texture's own eye: what it shows at best (the
-    /// growth counts from them, `CriticalPoints::worst_growth`).
+    /// The regions' pairs' gaps at the texture's own eye, from which their growth counts
+    /// (`CriticalPoints::worst_growth`; the hidden surfaces' counts whole).
     pub(super) baseline: Vec<f32>,
     /// Its rim's curvature: the band past the outline it cannot show from a turned eye.
     pub(super) rim: Rim,
@@ -40,7 +40,7 @@ pub(crate) struct Prepared {
 }
 
 /// A texture made ready for the frame loop — its pyramid (with texel connectivity),
-/// critical points, the gaps it shows at its own eye, its rim and the weight of its
+/// critical points, its neighbours' gaps at its own eye, its rim and the weight of its
 /// gaps' growth, shared by every client in a process given the same texture (see
 /// [`crate::intake`]) — and when it reached the client. Building it takes milliseconds
 /// for big textures, so the texture sources do it on their own threads.
@@ -209,7 +209,7 @@ impl Manager {
                             object = p.object,
                             valid_deg = angle.to_degrees(),
                             eye = ?texture.eye,
-                            edge = texture.camera.width,
+                            edge = texture.camera.width.max(texture.camera.height),
                             perspective = texture.camera.centre.is_some(),
                             hidden = texture.hidden.len(),
                             "texture arrived; its valid angle probed"

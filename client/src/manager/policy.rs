@@ -27,8 +27,9 @@ pub use relief_render::validity::critical::CRITICAL_REGIONS;
 #[derive(Debug, Clone)]
 pub struct Config {
     /// Largest growth of the predicted gap (worst of [`CRITICAL_REGIONS`]² regions, eq.
-    /// 5-5…5-7, over the gaps at the texture's own eye), in screen pixels, before a
-    /// texture counts as stale and a new one is needed: the impostor-lifetime knob.
+    /// 5-5…5-7: neighbours' gaps over theirs at the texture's own eye, hidden surfaces
+    /// whole), in screen pixels, before a texture counts as stale and a new one is
+    /// needed: the impostor-lifetime knob.
     pub tolerance: f32,
     /// Ask for predicted textures (off: only when needed now).
     pub predict: bool,
@@ -161,13 +162,14 @@ pub const LONE_BAND: f32 = 2.0;
 /// comes into view at once, and the texture shows a hole the rim's band does not
 /// foresee. The scanned fandisk's side came into view as 7.1 % at 8.7° and 15.8 % at
 /// 11.6° (the object 11 and 14.5 dB below geometry in those frames; seen along one
-/// line, the census's first way), its fin's narrow side as 2.0 % at 4° (−7.3 dB; 1.1 %
-/// along one line, under this share until the lines were each part's own). A smooth
-/// convex surface turns into view slowly, `(1 − cos φ)/2` on a sphere seen from far
-/// (1.7 % at [`LONE_MAX_TURN`]), and less round its outline from near (0.1 % at 15°
-/// from 5 radii): its rim's band and the turn bound it. (A partner, from the far side
-/// of the eye, holds what turned into view: with one, the rim's band and the turn bound
-/// the texture.)
+/// line, the census's first way), its fin's narrow side as 2.0 % at 4° and 3.5 % at 7°
+/// (−7.3 dB at 4°; 1.1 % and 2.5 % along one line): still under this share at 4°,
+/// over it by 7° now. A smooth convex surface turns into view slowly, `(1 − cos φ)/2`
+/// on a sphere seen from far (1.7 % at [`LONE_MAX_TURN`]; at 2 % here, the orbit's
+/// small sphere went stale at 15°, a degree before its lone turn, seen along one line),
+/// and less round its outline from near (0.1 % at 15° from 5 radii): its rim's band and
+/// the turn bound it. (A partner, from the far side of the eye, holds what turned into
+/// view: with one, the rim's band and the turn bound the texture.)
 pub const LONE_UNSEEN: f32 = 0.03;
 
 /// With a partner filling the band past its rim, a texture counts as stale once that

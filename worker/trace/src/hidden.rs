@@ -16,14 +16,16 @@
 //! Not every step is cast. The deepest goes first, then, where it finds nothing, the
 //! middle one; a step that finds a surface is followed by the next towards the rim,
 //! until one finds none, and from the nearest that found it on a texel at a time, until
-//! one finds none. The walk records the nearest step of that run: where the hidden
-//! surface lies and how deep, what the client needs to predict how far a turn brings it
-//! out (a surface found a stride late is predicted to come out as much later: past the
-//! bunny's near ear, its far ear 5.2 texels out where by texels it is 7.3). A rim that
-//! hides nothing (most of an outline) costs two rays or four, and the bake 7–17 % more
-//! (every step of every rim texel, from the rim out, cost 2–3 times the bake). So a
-//! surface that reaches neither the deepest step nor the middle one (a thin one just
-//! behind the rim) is missed.
+//! one finds none (at worst the stride that found nothing, cast again). The walk
+//! records the nearest step of that run: where the hidden surface lies and how deep,
+//! what the client needs to predict how far a turn brings it out (a surface found a
+//! stride late is predicted to come out as much later: past the bunny's near ear, its
+//! far ear 5.2 texels out where by texels it is 7.3). A rim that hides nothing (most of
+//! an outline) costs one step or two (each up to [`MAX_CROSSINGS`] + 1 casts), and the
+//! bake 7–17 % more, the steps texel by texel up to 5 % on that (every step of every
+//! rim texel, from the rim out, cost 2–3 times the bake). So a surface that reaches
+//! neither the deepest step nor the middle one (a thin one just behind the rim) is
+//! missed.
 //!
 //! What the walk steps over is taken as the rim's own surface: a nearer surface seen
 //! beside it would be a step in depth the client measures apart.
@@ -46,8 +48,10 @@ pub const MAX_CROSSINGS: usize = 2;
 
 /// Texels between the steps looked at inwards from a rim texel, and from the rim to
 /// the first, before the walk goes on a texel at a time: a rim that hides nothing
-/// costs a ray or two. None is cast at the rim texel itself: a surface behind it that
-/// reached past it would cover its open neighbour, which would then not be open.
+/// costs one step or two whatever the reach, one that hides something a step a stride
+/// and up to 3 more to find its nearest texel. None is cast at the rim texel itself: a
+/// surface behind it that reached past it would cover its open neighbour, which would
+/// then not be open.
 pub const INWARD_STRIDE: u8 = 4;
 
 /// How far in from the rim a texture looks for what it hides: a sixteenth of its
