@@ -321,9 +321,10 @@ pub(super) fn can_partner(centre: Vec3, shown: Vec3, eye: Vec3, other: Vec3) -> 
 impl Manager {
     /// How each held texture of `object` would do warped to `eye` (in its frame, as
     /// `camera` is): the growth of its widest predicted gap (neighbours' gaps over
-    /// theirs at its own eye, hidden surfaces whole), in screen pixels (`INFINITY` when it cannot be warped there), whether it
-    /// is too coarse to be shown, and whether a finer one can be had (eq. 4-1) — of the
-    /// edge an eye there asks for ([`Manager::size_for`]). `None` where the object costs
+    /// theirs at its own eye, hidden surfaces whole), in screen pixels (`INFINITY` when
+    /// it cannot be warped there), whether it is too coarse to be shown, and whether a
+    /// finer one can be had (eq. 4-1) — of the edge an eye there asks for
+    /// ([`Manager::size_for`]). `None` where the object costs
     /// no more drawn as geometry than that texture warped
     /// ([`cheaper_as_geometry`](super::policy::cheaper_as_geometry)).
     pub(super) fn grades(
