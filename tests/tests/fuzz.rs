@@ -144,7 +144,7 @@ proptest! {
 
     #[test]
     fn edited_textures_convert_or_refuse(edits in edits()) {
-        let texture = relief_core::relief::ReliefTexture::empty(
+        let mut texture = relief_core::relief::ReliefTexture::empty(
             relief_core::relief::SourceCamera::facing(
                 glam::Vec3::new(0.0, 0.0, 5.0),
                 &relief_core::bounds::Aabb::from_points([glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0)]),
@@ -155,12 +155,31 @@ proptest! {
             relief_core::relief::DepthBits::Sixteen,
             glam::Vec3::new(0.0, 0.0, 5.0),
         );
+        // (A square of texels whose left rim lists a surface hidden behind it: the
+        // lists' fields are edited too, and checked against the depth plane.)
+        for j in 2..6 {
+            for i in 2..6 {
+                let k = texture.index(i, j);
+                texture.depth[k] = 1000;
+            }
+        }
+        texture.hidden = (2..6)
+            .map(|j| relief_core::relief::Hidden { texel: j * 8 + 2, side: 0, inward: 1, depth: 30_000 })
+            .collect();
+        texture.check_hidden().expect("a well-formed seed");
         let raw = texture_to_pb(&texture);
+        let compressed = relief_proto::planes::compressed(raw.clone());
+        // (Unedited, sent raw or compressed as a worker would, the seed carries its list
+        // whole.)
+        for seed in [&raw, &compressed] {
+            let back = texture_from_pb("texture", seed).expect("the seed converts");
+            prop_assert_eq!(&back.hidden, &texture.hidden);
+        }
         // (And compressed, marked predicted whichever the worker would pick: every
         // decoding path.)
         let predicted = pb::ReliefTexture {
             encoding: pb::PlaneEncoding::ZstdDelta.into(),
-            ..relief_proto::planes::compressed(raw.clone())
+            ..compressed
         };
         for valid in [raw.encode_to_vec(), predicted.encode_to_vec()] {
             if let Ok(texture) = pb::ReliefTexture::decode(edited(&valid, &edits).as_slice()) {
