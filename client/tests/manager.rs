@@ -824,7 +824,7 @@ fn a_lone_texture_goes_stale_when_a_flat_face_turns_into_view() {
         ..without_stand_ins()
     };
     let mut manager = served_locally(&scene, config);
-    // From +x, level with the top but for `around`'s height: the faces ±z edge-on.
+    // From +x, a little above the middle: the faces ±z edge-on.
     let first = camera_round(centre, 0.0);
     assert!(manager.warm_up(&scene, &[first], Duration::from_secs(60)));
     assert!(

@@ -90,6 +90,64 @@ static GLTFS: LazyLock<Vec<(&str, Vec<u8>)>> = LazyLock::new(|| {
         .collect()
 });
 
+/// The texture the wire's fuzzing edits: 8 × 8, a square of texels whose left rim lists
+/// a surface hidden behind the texel one in (the lists' fields are edited too, and
+/// checked against the depth plane).
+fn seed_texture() -> relief_core::relief::ReliefTexture {
+    let eye = glam::Vec3::new(0.0, 0.0, 5.0);
+    let bounds = relief_core::bounds::Aabb::from_points([glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0)]);
+    let camera =
+        relief_core::relief::SourceCamera::facing(eye, &bounds, 8, 8, SourceProjection::Orthographic)
+            .expect("camera");
+    let mut texture =
+        relief_core::relief::ReliefTexture::empty(camera, relief_core::relief::DepthBits::Sixteen, eye);
+    for j in 2..6 {
+        for i in 2..6 {
+            let k = texture.index(i, j);
+            texture.depth[k] = 1000;
+        }
+    }
+    texture.hidden = (2..6)
+        .map(|j| relief_core::relief::Hidden {
+            texel: j * 8 + 2,
+            side: 0,
+            inward: 1,
+            depth: 30_000,
+        })
+        .collect();
+    texture.check_hidden().expect("a well-formed seed");
+    texture
+}
+
+/// The seed texture's messages, encoded: raw; compressed as a worker would; and, when
+/// the worker did not predict its planes, the same marked predicted, so that every
+/// decoding path is reached (its depths then garbled, and its list refused unedited).
+static TEXTURE_MESSAGES: LazyLock<Vec<Vec<u8>>> = LazyLock::new(|| {
+    let raw = texture_to_pb(&seed_texture());
+    let compressed = relief_proto::planes::compressed(raw.clone());
+    let predicted = pb::ReliefTexture {
+        encoding: pb::PlaneEncoding::ZstdDelta.into(),
+        ..compressed.clone()
+    };
+    let mut messages = vec![raw, compressed];
+    if messages[1].encoding != predicted.encoding {
+        messages.push(predicted);
+    }
+    messages.iter().map(Message::encode_to_vec).collect()
+});
+
+/// Unedited, the seed texture converts with its list whole, sent raw and compressed as
+/// a worker would.
+#[test]
+fn the_seed_texture_converts_with_its_hidden_list() {
+    let texture = seed_texture();
+    let raw = texture_to_pb(&texture);
+    for message in [raw.clone(), relief_proto::planes::compressed(raw)] {
+        let back = texture_from_pb("texture", &message).expect("the seed converts");
+        assert_eq!(back.hidden, texture.hidden);
+    }
+}
+
 /// The contents of the corpus files whose names end in `extension`.
 fn corpus(extension: &str) -> Vec<Vec<u8>> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz-corpus");
@@ -144,45 +202,8 @@ proptest! {
 
     #[test]
     fn edited_textures_convert_or_refuse(edits in edits()) {
-        let mut texture = relief_core::relief::ReliefTexture::empty(
-            relief_core::relief::SourceCamera::facing(
-                glam::Vec3::new(0.0, 0.0, 5.0),
-                &relief_core::bounds::Aabb::from_points([glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0)]),
-                8,
-                8, SourceProjection::Orthographic,
-            )
-            .expect("camera"),
-            relief_core::relief::DepthBits::Sixteen,
-            glam::Vec3::new(0.0, 0.0, 5.0),
-        );
-        // (A square of texels whose left rim lists a surface hidden behind it: the
-        // lists' fields are edited too, and checked against the depth plane.)
-        for j in 2..6 {
-            for i in 2..6 {
-                let k = texture.index(i, j);
-                texture.depth[k] = 1000;
-            }
-        }
-        texture.hidden = (2..6)
-            .map(|j| relief_core::relief::Hidden { texel: j * 8 + 2, side: 0, inward: 1, depth: 30_000 })
-            .collect();
-        texture.check_hidden().expect("a well-formed seed");
-        let raw = texture_to_pb(&texture);
-        let compressed = relief_proto::planes::compressed(raw.clone());
-        // (Unedited, sent raw or compressed as a worker would, the seed carries its list
-        // whole.)
-        for seed in [&raw, &compressed] {
-            let back = texture_from_pb("texture", seed).expect("the seed converts");
-            prop_assert_eq!(&back.hidden, &texture.hidden);
-        }
-        // (And compressed, marked predicted whichever the worker would pick: every
-        // decoding path.)
-        let predicted = pb::ReliefTexture {
-            encoding: pb::PlaneEncoding::ZstdDelta.into(),
-            ..compressed
-        };
-        for valid in [raw.encode_to_vec(), predicted.encode_to_vec()] {
-            if let Ok(texture) = pb::ReliefTexture::decode(edited(&valid, &edits).as_slice()) {
+        for valid in TEXTURE_MESSAGES.iter() {
+            if let Ok(texture) = pb::ReliefTexture::decode(edited(valid, &edits).as_slice()) {
                 let _ = texture_from_pb("texture", &texture);
                 let _ = check_texture_pb("texture", &texture);
             }

@@ -324,9 +324,8 @@ impl Manager {
     /// theirs at its own eye, hidden surfaces whole), in screen pixels (`INFINITY` when
     /// it cannot be warped there), whether it is too coarse to be shown, and whether a
     /// finer one can be had (eq. 4-1) — of the edge an eye there asks for
-    /// ([`Manager::size_for`]). `None` where the object costs
-    /// no more drawn as geometry than that texture warped
-    /// ([`cheaper_as_geometry`](super::policy::cheaper_as_geometry)).
+    /// ([`Manager::size_for`]). `None` where the object costs no more drawn as geometry
+    /// than that texture warped ([`cheaper_as_geometry`](super::policy::cheaper_as_geometry)).
     pub(super) fn grades(
         &self,
         scene: &Scene,

@@ -49,7 +49,8 @@ pub const MAX_CROSSINGS: usize = 2;
 /// Texels between the steps looked at inwards from a rim texel, and from the rim to
 /// the first, before the walk goes on a texel at a time: a rim that hides nothing
 /// costs one step or two whatever the reach, one that hides something a step a stride
-/// and up to 3 more to find its nearest texel. None is cast at the rim texel itself: a
+/// and up to 4 more to find its nearest texel (the last the stride that found nothing,
+/// cast again). None is cast at the rim texel itself: a
 /// surface behind it that reached past it would cover its open neighbour, which would
 /// then not be open.
 pub const INWARD_STRIDE: u8 = 4;
