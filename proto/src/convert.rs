@@ -125,10 +125,12 @@ pub fn texture_from_pb(field: &str, t: &pb::ReliefTexture) -> Result<ReliefTextu
         camera,
         depth_bits,
         eye,
-        planes: [albedo, normal, _],
+        planes: [albedo, normal, depth_plane],
         depth,
         hidden,
     } = checked(field, t, Planes::Raw)?;
+    // (Decoded once: by the check when a list of what the rim hides came with it.)
+    let depth = depth.unwrap_or_else(|| depth_levels(&depth_plane, depth_bits));
     let triples = |bytes: &[u8]| bytes.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
     Ok(ReliefTexture {
         camera,
@@ -165,9 +167,10 @@ pub(crate) struct Checked<'a> {
     /// Albedo, normal and depth as `wanted` ([`Planes`]): borrowed where they came raw,
     /// decompressed where they came compressed.
     pub(crate) planes: [Cow<'a, [u8]>; 3],
-    /// The depth plane's levels ([`Planes::Raw`], or a texture that lists what its rim
-    /// hides; empty otherwise).
-    pub(crate) depth: Vec<u16>,
+    /// The depth plane's levels, where a list of what the rim hides was checked against
+    /// them (`planes` left that plane raw for it); `None` otherwise, as a server passing
+    /// planes on has no use for them.
+    pub(crate) depth: Option<Vec<u16>>,
     /// What the rim hides, checked against the depth plane.
     pub(crate) hidden: Vec<Hidden>,
 }
@@ -181,18 +184,11 @@ pub(crate) fn checked<'a>(
     let (camera, depth_bits, eye) = check_header(field, t)?;
     let layout = PlaneLayout::new(camera.width, camera.height, depth_bits);
     let planes = planes(field, t, layout, wanted)?;
-    // (Checked only, the depth levels are needed for what the rim hides alone: `planes`
-    // left that plane raw for it.)
-    let levels = wanted == Planes::Raw || !t.hidden_texels.is_empty();
-    let depth: Vec<u16> = match (levels, depth_bits) {
-        (false, _) => Vec::new(),
-        (true, DepthBits::Eight) => planes[2].iter().map(|&q| u16::from(q)).collect(),
-        (true, DepthBits::Sixteen) => planes[2]
-            .chunks_exact(2)
-            .map(|b| u16::from_le_bytes([b[0], b[1]]))
-            .collect(),
-    };
-    let hidden = hidden_from_pb(field, t, camera.width, &depth, depth_bits)?;
+    // (Without texels, the lists need no levels: any other list not empty is refused
+    // for its length.)
+    let depth = (!t.hidden_texels.is_empty()).then(|| depth_levels(&planes[2], depth_bits));
+    let levels = depth.as_deref().unwrap_or_default();
+    let hidden = hidden_from_pb(field, t, camera.width, levels, depth_bits)?;
     Ok(Checked {
         camera,
         depth_bits,
@@ -201,6 +197,17 @@ pub(crate) fn checked<'a>(
         depth,
         hidden,
     })
+}
+
+/// The levels of a raw depth plane of `bits`.
+fn depth_levels(plane: &[u8], bits: DepthBits) -> Vec<u16> {
+    match bits {
+        DepthBits::Eight => plane.iter().map(|&q| u16::from(q)).collect(),
+        DepthBits::Sixteen => plane
+            .chunks_exact(2)
+            .map(|b| u16::from_le_bytes([b[0], b[1]]))
+            .collect(),
+    }
 }
 
 /// A texture's `hidden_*` lists, paired and checked against its depth levels
@@ -510,10 +517,15 @@ mod tests {
         assert!(check_texture_pb("texture", &small).is_ok());
         // (Each bad message, and the list and entry its error names.)
         type Spoil = fn(&mut pb::ReliefTexture);
-        let cases: [(&str, Spoil, &str); 8] = [
+        let cases: [(&str, Spoil, &str); 9] = [
             (
                 "a list short",
                 |w| w.hidden_sides.truncate(2),
+                "texture.hidden_sides",
+            ),
+            (
+                "lists without texels",
+                |w| w.hidden_texels.clear(),
                 "texture.hidden_sides",
             ),
             (
