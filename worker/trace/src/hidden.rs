@@ -191,13 +191,12 @@ pub(crate) fn find_hidden(
     while !walks.is_empty() {
         // (Every step a walk takes lies over covered texels: its deepest did, and
         // every one nearer the rim.)
-        let stepped: Vec<(Walk, usize)> = (walks.iter())
+        let (stepped, texels): (Vec<Walk>, Vec<usize>) = (walks.iter())
             .filter_map(|walk| Some((*walk, behind(walk.at(walk.inward))?)))
-            .collect();
-        let texels: Vec<usize> = stepped.iter().map(|(_, k)| *k).collect();
+            .unzip();
         let hits = hidden_depths(texture, target, t_range, &texels, parallel);
         walks = Vec::new();
-        for ((walk, _), hit) in stepped.into_iter().zip(hits) {
+        for (walk, hit) in stepped.into_iter().zip(hits) {
             let hit = hit.filter(|&depth| depth > texture.depth[walk.texel]);
             match walk.next(hit) {
                 Ok(onwards) => walks.push(onwards),
