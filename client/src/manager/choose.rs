@@ -16,7 +16,7 @@ use super::cache::Held;
 use super::policy::{
     COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_TURN_CAP, LONE_UNSEEN,
     MAX_TEXEL_PIXELS, MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND,
-    PLANNING_MARGIN, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, is_sheets, lone_max_turn,
+    PLANNING_MARGIN, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, lone_max_turn,
 };
 
 /// How an object is drawn this frame.
@@ -138,7 +138,7 @@ pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32
 /// ([`projection_for`](super::policy::projection_for)), whose rays part.
 pub(super) fn unseen(held: &Held, object: &SceneObject, eye: Vec3) -> f32 {
     let c = &held.prepared.pyramid.levels[0].texture.camera;
-    if c.centre.is_some() || is_sheets(object) {
+    if c.centre.is_some() || object.edge_census().is_sheets() {
         return 0.0;
     }
     object.normal_census().unseen_share(&[c.f], eye)

@@ -122,30 +122,27 @@ pub const MAX_DISTANCE_RATIO: f32 = 1.5;
 pub const LONE_MAX_TURN: f32 = 15.0 * PI / 180.0;
 
 /// The farthest any texture is shown alone, whatever the tolerance, and how far a
-/// texture of leaves or sheets ([`is_sheets`]) is at the default one: it has no rim of
-/// grazed texels, and trees near the eye turn fast (at 15° the forest at 1280×720 over
-/// a 100 ms round trip went stale in 16–20 % of its frames in 2 runs, against 7–9 % at
-/// this, asking 900–920 predictions where it asked 700–740). At 40°, the scanned bunny
-/// flown at a 100 ms round trip was shown 29° from its only texture early in the
-/// flight, its turned side stepped, 3.10–3.16 dB below geometry's worst frame in 4 runs
-/// of 5; at 30°, 1.05–1.08 in 3.
+/// texture of leaves or sheets
+/// ([`EdgeCensus::is_sheets`](relief_core::mesh::EdgeCensus::is_sheets)) is at the
+/// default one: it has no rim of grazed texels, and trees near the eye turn fast (at
+/// 15° the forest at 1280×720 over a 100 ms round trip went stale in 16–20 % of its
+/// frames in 2 runs, against 7–9 % at this, asking 900–920 predictions where it asked
+/// 700–740). At 40°, the scanned bunny flown at a 100 ms round trip was shown 29° from
+/// its only texture early in the flight, its turned side stepped, 3.10–3.16 dB below
+/// geometry's worst frame in 4 runs of 5; at 30°, 1.05–1.08 in 3.
 pub const LONE_TURN_CAP: f32 = 30.0 * PI / 180.0;
 
 /// The turn past which a texture of `object` counts as stale drawn alone at the default
-/// tolerance: [`LONE_TURN_CAP`] for leaves or sheets ([`is_sheets`], whichever way its
-/// textures' rays go: near the eye they are asked orthographic), else [`LONE_MAX_TURN`].
+/// tolerance: [`LONE_TURN_CAP`] for leaves or sheets
+/// ([`EdgeCensus::is_sheets`](relief_core::mesh::EdgeCensus::is_sheets), whichever way
+/// its textures' rays go: near the eye they are asked orthographic), else
+/// [`LONE_MAX_TURN`].
 pub fn lone_max_turn(object: &SceneObject) -> f32 {
-    if is_sheets(object) {
+    if object.edge_census().is_sheets() {
         LONE_TURN_CAP
     } else {
         LONE_MAX_TURN
     }
-}
-
-/// Whether `object` is taken for leaves or sheets
-/// ([`EdgeCensus::is_sheets`](relief_core::mesh::EdgeCensus::is_sheets)).
-pub fn is_sheets(object: &SceneObject) -> bool {
-    object.edge_census().is_sheets()
 }
 
 /// A texture drawn without a partner counts as stale once the band past its rim it
@@ -278,7 +275,7 @@ pub const REQUESTED_DEPTH_BITS: DepthBits = DepthBits::Sixteen;
 /// `eye`, here and in the other functions of an object and a camera below, is in the
 /// object's frame ([`SceneObject::local_camera`]).
 pub fn projection_for(object: &SceneObject, eye: Vec3) -> SourceProjection {
-    if is_sheets(object)
+    if object.edge_census().is_sheets()
         && SourceCamera::facing(eye, &object.local_bounds, 1, 1, SourceProjection::Perspective).is_ok()
     {
         SourceProjection::Perspective
