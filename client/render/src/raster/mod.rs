@@ -22,6 +22,14 @@ use crate::gbuffer::{GBuffer, GPixel, Rows, Stored};
 /// Rows per parallel band.
 pub const BAND: usize = 16;
 
+/// A triangle's box more than this many groups of [`LANES`] pixels wide is walked row
+/// by row within the triangle's [`RowSpans`]; a narrower one tests its every group of
+/// each row: a row's span costs about what two groups' tests do. (With spans from one
+/// group wide on, the trees the forest's flight draws as geometry at 1280×720 took
+/// 27.2–27.6 ms a frame on one core where they take 25.2–25.5, the same images;
+/// `relief bench raster --scene forest --as-client`.)
+const SPANNED_GROUPS: usize = 2;
+
 /// A triangle in screen space: pixel positions, view depth, and for each corner its
 /// barycentric position in the original mesh triangle (which differs after clipping).
 #[derive(Debug, Clone, Copy)]
@@ -32,6 +40,9 @@ struct ScreenTriangle {
     xy: [Vec2; 3],
     depth: [f32; 3],
     bary: [Vec2; 3],
+    /// The pixels whose centres its bounding box holds ([`pixel_box`]), as `(x0, y0,
+    /// x1, y1)`: found as it is set up, read by every band it reaches.
+    pixels: [u32; 4],
 }
 
 /// Draws `objects` (pairs of scene index and object) into `gbuffer` as seen by
@@ -80,13 +91,16 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
             .flat_map_iter(|(t, v)| {
                 clip::clip_and_project(&projection, near, v)
                     .into_iter()
-                    .filter(|(xy, ..)| pixel_box(*xy, w, h).is_some())
-                    .map(move |(xy, depth, bary)| ScreenTriangle {
-                        slot: slot as u32,
-                        triangle: t as u32,
-                        xy,
-                        depth,
-                        bary,
+                    .filter_map(move |(xy, depth, bary)| {
+                        let (x0, y0, x1, y1) = pixel_box(xy, w, h)?;
+                        Some(ScreenTriangle {
+                            slot: slot as u32,
+                            triangle: t as u32,
+                            xy,
+                            depth,
+                            bary,
+                            pixels: [x0, y0, x1, y1].map(|p| p as u32),
+                        })
                     })
             })
             .collect();
@@ -99,10 +113,9 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
             || vec![Vec::new(); bands],
             |mut bins: Vec<Vec<u32>>, (k, s)| {
                 // (Every triangle kept has pixels: the set-up culled the others.)
-                if let Some((_, first, _, last)) = pixel_box(s.xy, w, h) {
-                    for bin in &mut bins[first / BAND..=last / BAND] {
-                        bin.push(k as u32);
-                    }
+                let [_, first, _, last] = s.pixels.map(|p| p as usize);
+                for bin in &mut bins[first / BAND..=last / BAND] {
+                    bin.push(k as u32);
                 }
                 bins
             },
@@ -129,7 +142,7 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
             for &k in bin {
                 let s = &triangles[k as usize];
                 let (index, object) = objects[s.slot as usize];
-                draw(s, index, object, &mut rows, (w, h));
+                draw(s, index, object, &mut rows, w);
             }
         });
 }
@@ -253,7 +266,7 @@ fn pixel_box(xy: [Vec2; 3], w: usize, h: usize) -> Option<(usize, usize, usize, 
 }
 
 /// Scan-converts one triangle into the band `rows` of the `w × h` screen.
-fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (w, h): (usize, usize)) {
+fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, w: usize) {
     let (y0, rows_here) = (rows.y0() as usize, rows.rows());
     let [a, b, c] = s.xy;
     // Edge functions, each evaluated with its edge's endpoints in a fixed order so that
@@ -265,9 +278,7 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
     }
     let sign = area.signum();
     let inv_area = 1.0 / area.abs();
-    let Some((x_start, first_row, x_end, last_row)) = pixel_box(s.xy, w, h) else {
-        return;
-    };
+    let [x_start, first_row, x_end, last_row] = s.pixels.map(|p| p as usize);
     // Its rows in this band.
     let (y_start, y_end) = (first_row.max(y0), last_row.min(y0 + rows_here - 1));
     let inv_depth = s.depth.map(|d| 1.0 / d);
@@ -285,9 +296,7 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, (
     let edges = [(b, c), (c, a), (a, b)].map(|(p, q)| OrderedEdge::new(p, q, sign));
     let inv_area = f32x8::splat(inv_area);
     let inv_depth = inv_depth.map(f32x8::splat);
-    // (A box one group of lanes wide is tested whole, without spans: one would spare at
-    // most that group's test, and cost about as much to work out.)
-    let spans = (x_end - x_start >= LANES).then(|| RowSpans::new([a, b, c], sign));
+    let spans = (x_end - x_start >= SPANNED_GROUPS * LANES).then(|| RowSpans::new([a, b, c], sign));
     for y in y_start..=y_end {
         let py = y as f32 + 0.5;
         let span = match &spans {
