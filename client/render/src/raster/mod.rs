@@ -24,10 +24,10 @@ pub const BAND: usize = 16;
 
 /// A triangle's box more than this many groups of [`LANES`] pixels wide is walked row
 /// by row within the triangle's [`RowSpans`]; a narrower one tests its every group of
-/// each row: a row's span costs about what two groups' tests do. (With spans from one
-/// group wide on, the trees the forest's flight draws as geometry at 1280×720 took
-/// 27.2–27.6 ms a frame on one core where they take 25.2–25.5, the same images;
-/// `relief bench raster --scene forest --as-client`.)
+/// each row: a row's span costs about what two groups' tests do. (With spans for boxes
+/// more than one group wide, the trees the forest's flight draws as geometry took
+/// 27.2–27.6 ms a frame where they take 25.2–25.5, the same images: `RAYON_NUM_THREADS=1
+/// relief bench raster --scene forest --as-client --size 1280x720`.)
 const SPANNED_GROUPS: usize = 2;
 
 /// A triangle in screen space: pixel positions, view depth, and for each corner its
@@ -40,8 +40,8 @@ struct ScreenTriangle {
     xy: [Vec2; 3],
     depth: [f32; 3],
     bary: [Vec2; 3],
-    /// The pixels whose centres its bounding box holds ([`pixel_box`]), as `(x0, y0,
-    /// x1, y1)`: found as it is set up, read by every band it reaches.
+    /// The pixels whose centres its bounding box holds ([`pixel_box`]), as `[x0, y0,
+    /// x1, y1]`, inclusive: found as it is set up, read by every band it reaches.
     pixels: [u32; 4],
 }
 
@@ -112,7 +112,7 @@ pub fn rasterize(objects: &[(u32, &SceneObject)], camera: &Camera, near: f32, gb
         .fold(
             || vec![Vec::new(); bands],
             |mut bins: Vec<Vec<u32>>, (k, s)| {
-                // (Every triangle kept has pixels: the set-up culled the others.)
+                // (`pixels` is on screen: every band it names is one of `bands`.)
                 let [_, first, _, last] = s.pixels.map(|p| p as usize);
                 for bin in &mut bins[first / BAND..=last / BAND] {
                     bin.push(k as u32);
@@ -265,7 +265,7 @@ fn pixel_box(xy: [Vec2; 3], w: usize, h: usize) -> Option<(usize, usize, usize, 
     ))
 }
 
-/// Scan-converts one triangle into the band `rows` of the `w × h` screen.
+/// Scan-converts one triangle into the band `rows` of the screen, `w` pixels wide.
 fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, w: usize) {
     let (y0, rows_here) = (rows.y0() as usize, rows.rows());
     let [a, b, c] = s.xy;
