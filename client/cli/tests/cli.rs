@@ -275,6 +275,37 @@ fn bench_raytrace_prints_the_promised_json() {
     assert_eq!(v["triangles"].as_u64(), Some(20480));
 }
 
+/// `relief bench raster` draws the same buffers on one thread as on two (the bands are
+/// rasterized in parallel, each pixel seeing its triangles in one order), and says so
+/// by its digest, which tells two images apart.
+#[test]
+fn bench_raster_draws_the_same_buffers_on_one_thread_as_on_two() {
+    let run = |threads: &str, size: &str| {
+        let out = Command::new(env!("CARGO_BIN_EXE_relief"))
+            .args([
+                "bench", "raster", "--every", "30", "--runs", "1", "--size", size, "--json",
+            ])
+            .env("RAYON_NUM_THREADS", threads)
+            .output()
+            .expect("running relief");
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON object");
+        let missing = not_positive(
+            &v,
+            &["raster_ms", "shade_ms", "covered_px", "triangles_per_frame"],
+        );
+        assert!(missing.is_empty(), "{missing:?} in {stdout}");
+        assert_eq!(v["threads"].as_u64(), threads.parse().ok(), "{stdout}");
+        let digest = v["gbuffer_digest"].as_str().expect("gbuffer_digest").to_owned();
+        assert_eq!(digest.len(), 16, "{stdout}");
+        digest
+    };
+    let one = run("1", "96x54");
+    assert_eq!(run("2", "96x54"), one);
+    assert_ne!(run("2", "97x54"), one);
+}
+
 /// The keys of `v` that are not positive numbers, among `keys`.
 fn not_positive<'a>(v: &serde_json::Value, keys: &[&'a str]) -> Vec<&'a str> {
     keys.iter()

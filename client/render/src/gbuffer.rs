@@ -427,6 +427,22 @@ impl GBuffer {
         self.depth.iter().filter(|&&d| d < EMPTY_DEPTH).count()
     }
 
+    /// Feeds `state` every pixel with a surface: where it is, and its depth, object,
+    /// albedo and normal to the bit (what a pixel without one holds means nothing). Two
+    /// buffers that feed a hasher alike hold the same image: how a writer made faster
+    /// shows it draws what it did.
+    pub fn hash_surfaces(&self, state: &mut impl std::hash::Hasher) {
+        for (i, depth) in self.depth.iter().enumerate().filter(|(_, d)| **d < EMPTY_DEPTH) {
+            state.write_usize(i);
+            state.write_u32(depth.to_bits());
+            state.write_u32(self.object[i]);
+            state.write_u32(self.albedo[i]);
+            for plane in &self.normal {
+                state.write_i16(plane[i]);
+            }
+        }
+    }
+
     /// Writes `pixel` at `(x, y)` if it is nearer than what is there. Returns whether it
     /// was written. Out-of-range coordinates and non-finite or non-positive depths are
     /// ignored, so a caller can never write outside the buffer or poison it with NaN.

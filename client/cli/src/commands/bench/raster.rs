@@ -2,6 +2,7 @@
 //! scene's camera path, against the frame's shading pass over the same pixels (the
 //! one full-frame pass every frame pays).
 
+use std::hash::{DefaultHasher, Hasher};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow, bail};
@@ -77,6 +78,11 @@ struct RasterReport {
     /// `raster_ms` per triangle, nanoseconds.
     ns_per_triangle: f64,
     threads: usize,
+    /// A hash of every frame's buffer as rasterized, each pixel with a surface to the bit
+    /// ([`GBuffer::hash_surfaces`]), 16 hex digits: equal between two builds (or thread
+    /// counts), the same images. (Made by the untimed first sweep, with the standard
+    /// library's `DefaultHasher`, whose algorithm may change between Rust releases.)
+    gbuffer_digest: String,
 }
 
 pub fn run(args: RasterArgs) -> Result<()> {
@@ -122,7 +128,7 @@ pub fn run(args: RasterArgs) -> Result<()> {
     // timed; a sweep's sums, best of the runs.
     let mut gbuffer = GBuffer::new(width, height);
     bar.set_message("rasterizing and shading");
-    let mut sweep = || {
+    let mut sweep = |mut digest: Option<&mut DefaultHasher>| {
         let (mut raster, mut shade, mut covered) = (Duration::ZERO, Duration::ZERO, 0);
         for (camera, objects) in cameras.iter().zip(&drawn) {
             let start = Instant::now();
@@ -132,13 +138,17 @@ pub fn run(args: RasterArgs) -> Result<()> {
             drop(gbuffer.shade(&scene, camera));
             (raster, shade) = (raster + (rasterized - start), shade + rasterized.elapsed());
             covered += gbuffer.covered();
+            if let Some(digest) = digest.as_deref_mut() {
+                gbuffer.hash_surfaces(digest);
+            }
         }
         (raster.as_secs_f64() * 1e3, shade.as_secs_f64() * 1e3, covered)
     };
-    sweep();
+    let mut digest = DefaultHasher::new();
+    sweep(Some(&mut digest));
     let (mut raster_ms, mut shade_ms, mut covered) = (f64::INFINITY, f64::INFINITY, 0);
     for _ in 0..args.runs {
-        let (raster, shade, seen) = sweep();
+        let (raster, shade, seen) = sweep(None);
         (raster_ms, shade_ms, covered) = (raster_ms.min(raster), shade_ms.min(shade), seen);
     }
     bar.finish_and_clear();
@@ -166,6 +176,7 @@ pub fn run(args: RasterArgs) -> Result<()> {
         raster_to_shade: raster_ms / shade_ms,
         ns_per_triangle: raster_ms * 1e6 * frames / triangles.max(1) as f64,
         threads: rayon::current_num_threads(),
+        gbuffer_digest: format!("{:016x}", digest.finish()),
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
@@ -177,7 +188,7 @@ pub fn run(args: RasterArgs) -> Result<()> {
         println!(
             "{}: {}{}, {} path frames at {}x{}: {:.0} triangles and {:.0} px covered a frame, \
              rasterized in {:.3} ms a frame ({:.0} ns a triangle, {} threads), \
-             {:.2}x the shading pass ({:.3} ms)",
+             {:.2}x the shading pass ({:.3} ms); buffers' digest {}",
             report.scene,
             objects,
             if args.as_client {
@@ -195,6 +206,7 @@ pub fn run(args: RasterArgs) -> Result<()> {
             report.threads,
             report.raster_to_shade,
             report.shade_ms,
+            report.gbuffer_digest,
         );
     }
     Ok(())
