@@ -298,7 +298,7 @@ fn bench_raster_draws_the_same_buffers_on_one_thread_as_on_two() {
         assert!(missing.is_empty(), "{missing:?} in {stdout}");
         assert_eq!(v["threads"].as_u64(), threads.parse().ok(), "{stdout}");
         let digest = v["gbuffer_digest"].as_str().expect("gbuffer_digest").to_owned();
-        assert_eq!(digest.len(), 16, "{stdout}");
+        assert_eq!(digest.len(), 64, "{stdout}");
         digest
     };
     let one = run("1", "96x54");

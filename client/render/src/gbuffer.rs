@@ -19,6 +19,7 @@ use wide::{f32x8, i16x8, i32x8, u32x8};
 use crate::EMPTY_DEPTH;
 use relief_core::camera::Camera;
 use relief_core::frame::{Frame, NO_OBJECT};
+use relief_core::hash::ContentHash;
 use relief_core::scene::Scene;
 use relief_core::shading::{
     LANE_INDEX, LANES, Specular, SurfaceLanes, SurfacePoint, Vec3x8, lane_mask, to_rgb8, to_rgb8_lanes,
@@ -427,22 +428,6 @@ impl GBuffer {
         self.depth.iter().filter(|&&d| d < EMPTY_DEPTH).count()
     }
 
-    /// Feeds `state` every pixel with a surface: where it is, and its depth, object,
-    /// albedo and normal to the bit (what a pixel without one holds means nothing). Two
-    /// buffers that feed a hasher alike hold the same image: how a writer made faster
-    /// shows it draws what it did.
-    pub fn hash_surfaces(&self, state: &mut impl std::hash::Hasher) {
-        for (i, depth) in self.depth.iter().enumerate().filter(|(_, d)| **d < EMPTY_DEPTH) {
-            state.write_usize(i);
-            state.write_u32(depth.to_bits());
-            state.write_u32(self.object[i]);
-            state.write_u32(self.albedo[i]);
-            for plane in &self.normal {
-                state.write_i16(plane[i]);
-            }
-        }
-    }
-
     /// Writes `pixel` at `(x, y)` if it is nearer than what is there. Returns whether it
     /// was written. Out-of-range coordinates and non-finite or non-positive depths are
     /// ignored, so a caller can never write outside the buffer or poison it with NaN.
@@ -783,6 +768,53 @@ impl<'a> Rows<'a> {
     }
 }
 
+/// A digest of the surfaces buffers hold, to the bit: for each buffer
+/// [`added`](SurfaceDigest::add), how many pixels have a surface, then each one's index,
+/// depth, object, albedo and normal, as little-endian words (what a pixel without a
+/// surface holds means nothing, and is left out). Two runs whose digests are equal drew
+/// the same surfaces: how a writer made faster shows that it draws what it did
+/// (`relief bench raster`'s `gbuffer_digest`). Fragments are left out: the rasterizer,
+/// which this serves, writes none.
+#[derive(Default)]
+pub struct SurfaceDigest(blake3::Hasher);
+
+/// Bytes [`SurfaceDigest`] gathers before it hashes them (a call to the hasher for each
+/// pixel's 26 bytes would be one call per pixel).
+const DIGEST_CHUNK: usize = 1 << 16;
+
+impl SurfaceDigest {
+    pub fn new() -> SurfaceDigest {
+        SurfaceDigest::default()
+    }
+
+    /// Adds `gbuffer`'s surfaces.
+    pub fn add(&mut self, gbuffer: &GBuffer) {
+        let g = gbuffer;
+        let surfaces = || (0..g.depth.len()).filter(|&i| g.depth[i] < EMPTY_DEPTH);
+        self.0.update(&(surfaces().count() as u64).to_le_bytes());
+        let mut bytes = Vec::with_capacity(DIGEST_CHUNK);
+        for i in surfaces() {
+            bytes.extend_from_slice(&(i as u64).to_le_bytes());
+            bytes.extend_from_slice(&g.depth[i].to_bits().to_le_bytes());
+            bytes.extend_from_slice(&g.object[i].to_le_bytes());
+            bytes.extend_from_slice(&g.albedo[i].to_le_bytes());
+            for plane in &g.normal {
+                bytes.extend_from_slice(&plane[i].to_le_bytes());
+            }
+            if bytes.len() >= DIGEST_CHUNK {
+                self.0.update(&bytes);
+                bytes.clear();
+            }
+        }
+        self.0.update(&bytes);
+    }
+
+    /// The digest of the buffers added so far.
+    pub fn finish(&self) -> ContentHash {
+        ContentHash(*self.0.finalize().as_bytes())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1059,5 +1091,55 @@ mod tests {
         for x in 1..9 {
             assert_eq!(g.stored(x, 0), Some((2.0, stored)), "pixel {x}");
         }
+    }
+
+    /// The digest tells surfaces apart by any bit of any attribute and by where they
+    /// are, and leaves out what an emptied pixel still holds.
+    #[test]
+    fn the_surface_digest_sees_every_bit_and_no_empty_pixel() {
+        let digest = |g: &GBuffer| {
+            let mut d = SurfaceDigest::new();
+            d.add(g);
+            d.finish()
+        };
+        let p = GPixel {
+            depth: 2.0,
+            object: 3,
+            albedo: [10, 20, 30],
+            normal: Vec3::new(0.6, -0.8, 0.0),
+        };
+        let drawn = |p: GPixel, x: i64| drawn_at(p, x, 2);
+        let once = digest(&drawn(p, 1));
+        assert_eq!(digest(&drawn(p, 1)), once);
+        for other in [
+            GPixel {
+                depth: f32::from_bits(2.0f32.to_bits() + 1),
+                ..p
+            },
+            GPixel { object: 4, ..p },
+            GPixel {
+                albedo: [10, 20, 31],
+                ..p
+            },
+            GPixel {
+                normal: Vec3::new(0.6, -0.8, 1e-4),
+                ..p
+            },
+        ] {
+            assert_ne!(digest(&drawn(other, 1)), once, "{other:?}");
+        }
+        assert_ne!(digest(&drawn(p, 2)), once, "moved");
+        // A pixel drawn, then cleared, and another drawn: as if the first never was.
+        let mut cleared = drawn(GPixel { object: 9, ..p }, 1);
+        cleared.clear();
+        assert!(cleared.write(3, 0, p));
+        assert_eq!(digest(&cleared), digest(&drawn_at(p, 3, 0)));
+    }
+
+    /// A 4 × 3 buffer holding `p` at `(x, y)`.
+    fn drawn_at(p: GPixel, x: i64, y: i64) -> GBuffer {
+        let mut g = GBuffer::new(4, 3);
+        assert!(g.write(x, y, p));
+        g
     }
 }

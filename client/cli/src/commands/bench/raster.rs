@@ -2,7 +2,6 @@
 //! scene's camera path, against the frame's shading pass over the same pixels (the
 //! one full-frame pass every frame pays).
 
-use std::hash::{DefaultHasher, Hasher};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, anyhow, bail};
@@ -12,7 +11,7 @@ use serde::Serialize;
 use relief_client::manager::Manager;
 use relief_core::camera::Camera;
 use relief_core::scene::SceneObject;
-use relief_render::gbuffer::GBuffer;
+use relief_render::gbuffer::{GBuffer, SurfaceDigest};
 use relief_render::geometry::near_plane;
 use relief_render::raster::rasterize;
 
@@ -78,10 +77,9 @@ struct RasterReport {
     /// `raster_ms` per triangle, nanoseconds.
     ns_per_triangle: f64,
     threads: usize,
-    /// A hash of every frame's buffer as rasterized, each pixel with a surface to the bit
-    /// ([`GBuffer::hash_surfaces`]), 16 hex digits: equal between two builds (or thread
-    /// counts), the same images. (Made by the untimed first sweep, with the standard
-    /// library's `DefaultHasher`, whose algorithm may change between Rust releases.)
+    /// The digest of every frame's buffer as rasterized ([`SurfaceDigest`]), in the
+    /// untimed first sweep: equal between two builds (or thread counts), the same
+    /// images.
     gbuffer_digest: String,
 }
 
@@ -128,7 +126,7 @@ pub fn run(args: RasterArgs) -> Result<()> {
     // timed; a sweep's sums, best of the runs.
     let mut gbuffer = GBuffer::new(width, height);
     bar.set_message("rasterizing and shading");
-    let mut sweep = |mut digest: Option<&mut DefaultHasher>| {
+    let mut sweep = |mut digest: Option<&mut SurfaceDigest>| {
         let (mut raster, mut shade, mut covered) = (Duration::ZERO, Duration::ZERO, 0);
         for (camera, objects) in cameras.iter().zip(&drawn) {
             let start = Instant::now();
@@ -139,12 +137,12 @@ pub fn run(args: RasterArgs) -> Result<()> {
             (raster, shade) = (raster + (rasterized - start), shade + rasterized.elapsed());
             covered += gbuffer.covered();
             if let Some(digest) = digest.as_deref_mut() {
-                gbuffer.hash_surfaces(digest);
+                digest.add(&gbuffer);
             }
         }
         (raster.as_secs_f64() * 1e3, shade.as_secs_f64() * 1e3, covered)
     };
-    let mut digest = DefaultHasher::new();
+    let mut digest = SurfaceDigest::new();
     sweep(Some(&mut digest));
     let (mut raster_ms, mut shade_ms, mut covered) = (f64::INFINITY, f64::INFINITY, 0);
     for _ in 0..args.runs {
@@ -176,7 +174,7 @@ pub fn run(args: RasterArgs) -> Result<()> {
         raster_to_shade: raster_ms / shade_ms,
         ns_per_triangle: raster_ms * 1e6 * frames / triangles.max(1) as f64,
         threads: rayon::current_num_threads(),
-        gbuffer_digest: format!("{:016x}", digest.finish()),
+        gbuffer_digest: digest.finish().to_string(),
     };
     if args.json {
         println!("{}", serde_json::to_string(&report)?);
