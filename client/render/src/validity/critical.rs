@@ -331,6 +331,25 @@ mod tests {
         c.point(t.x, t.y, c.depth_of_level(level, texture.depth_bits))
     }
 
+    /// How far past its rim texel `eye` sees `pair`'s hidden surface of
+    /// [`square_hiding`], texels: both points projected, against the rim's outward step.
+    fn projected_gap(texture: &ReliefTexture, eye: Vec3, pair: &CriticalPair) -> f32 {
+        let out = seen_at(texture, eye, world(texture, pair.t2, 250))
+            - seen_at(texture, eye, world(texture, pair.t1, 20));
+        out.dot(pair.outward.expect("a hidden pair")).max(0.0)
+    }
+
+    /// The widest gap of `critical`'s hidden surfaces at the eye of `params`, texels,
+    /// not weighted.
+    fn widest_hidden_gap(critical: &CriticalPoints, params: &WarpParams) -> f32 {
+        critical
+            .hidden
+            .iter()
+            .flatten()
+            .map(|p| p.gap(params))
+            .fold(0.0, f32::max)
+    }
+
     /// A hidden surface's gap is how far past its rim texel the eye sees it, worked
     /// out by projecting both points: none at the texture's own eye or turned the
     /// other way, growing with the turn towards the rim's open side.
@@ -359,9 +378,7 @@ mod tests {
             let eye = glam::Quat::from_rotation_y(-degrees.to_radians()) * EYE;
             let params = WarpParams::without_tables(&texture, eye).expect("in front");
             for pair in critical.hidden.iter().flatten() {
-                let out = seen_at(&texture, eye, world(&texture, pair.t2, 250))
-                    - seen_at(&texture, eye, world(&texture, pair.t1, 20));
-                let expected = out.dot(Vec2::new(-1.0, 0.0)).max(0.0);
+                let expected = projected_gap(&texture, eye, pair);
                 let gap = pair.gap(&params);
                 assert!(
                     (gap - expected).abs() <= 1e-3 * expected.max(1.0),
@@ -370,12 +387,7 @@ mod tests {
             }
             // (The square's neighbours open no gap: the region's is the hidden one's,
             // weighted.)
-            let out = critical
-                .hidden
-                .iter()
-                .flatten()
-                .map(|p| p.gap(&params))
-                .fold(0.0, f32::max);
+            let out = widest_hidden_gap(&critical, &params);
             assert_eq!(
                 critical.worst_region_gap(&params),
                 HIDDEN_WEIGHT * out,
@@ -402,20 +414,12 @@ mod tests {
         let texture = square_hiding(1..5, 4, 1);
         let critical = CriticalPoints::find(&texture, 4, 4);
         let own = WarpParams::without_tables(&texture, EYE).expect("in front");
-        let out = critical
-            .hidden
-            .iter()
-            .flatten()
-            .map(|p| p.gap(&own))
-            .fold(0.0, f32::max);
+        let out = widest_hidden_gap(&critical, &own);
         // (The rim 11.5 texels left of the centre, the surface a texel further from it
         // and 1.8 deeper, the eye 9 from the texture's plane: it lands about a texel
         // right of the rim. Worked out again from the points themselves.)
         let pair = critical.hidden.iter().flatten().next().expect("a hidden pair");
-        let expected = (seen_at(&texture, EYE, world(&texture, pair.t2, 250))
-            - seen_at(&texture, EYE, world(&texture, pair.t1, 20)))
-        .dot(Vec2::X)
-        .max(0.0);
+        let expected = projected_gap(&texture, EYE, pair);
         assert!(
             out > 0.0 && (pair.gap(&own) - expected).abs() <= 1e-3 * expected.max(1.0),
             "{out} against {expected}"
