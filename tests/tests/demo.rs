@@ -16,6 +16,8 @@ fn the_demo_flies_and_summarises() {
         "15",
         "--write-every",
         "15",
+        "--warp-samples",
+        "4",
         "--out",
         out.to_str().unwrap(),
         "--json",
@@ -183,4 +185,46 @@ fn the_demo_flies_and_summarises() {
     // The JSON printed is the summary written.
     let printed: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
     assert_eq!(printed, summary);
+    // Every 4th pre-warp was kept, and replays: each visits the texels it did in the
+    // flight (the bench fails where one does not), and takes some time.
+    let warps = out.join("warps");
+    let kept = std::fs::read_dir(&warps).map_or(0, |d| d.count());
+    let warped = summary["warps"].as_u64().unwrap() + summary["partners"].as_u64().unwrap();
+    // (Give or take one: a partner pre-warped for an object whose first texture failed
+    // is kept but not counted.)
+    assert!(
+        kept > 0 && kept as u64 <= warped / 4 + 2,
+        "{kept} kept: {summary}"
+    );
+    let replay = relief(&[
+        "bench",
+        "replay",
+        warps.to_str().unwrap(),
+        "--runs",
+        "1",
+        "--json",
+    ]);
+    assert!(
+        replay.status.success(),
+        "{}",
+        String::from_utf8_lossy(&replay.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&replay.stdout).unwrap();
+    let replayed = report["warps"].as_array().unwrap();
+    assert_eq!(replayed.len(), kept, "{report}");
+    for warp in replayed {
+        assert!(warp["visited"].as_u64().unwrap() > 0, "{warp}");
+        for key in ["prewarp_ms", "map_ms", "in_frame_ms"] {
+            assert!(warp[key].as_f64().unwrap() > 0.0, "{key}: {warp}");
+        }
+    }
+    // Grouped by kind and projection (`sphere orthographic`, …), and all together.
+    let groups = report["groups"].as_object().unwrap();
+    let count = |name: &String| groups[name]["warps"].as_u64().unwrap();
+    let kinds: u64 = groups.keys().filter(|k| *k != "all").map(count).sum();
+    assert_eq!(
+        (kinds, count(&"all".into())),
+        (kept as u64, kept as u64),
+        "{report}"
+    );
 }

@@ -10,6 +10,7 @@ mod args;
 mod commands;
 mod processes;
 mod progress;
+mod warp_files;
 mod window;
 
 use std::process::ExitCode;

@@ -254,6 +254,48 @@ fn help_works_everywhere() {
 }
 
 #[test]
+fn bench_replay_names_what_is_wrong_with_its_directory() {
+    let dir = scratch("replay");
+    let missing = dir.join("missing");
+    assert_one_line_error(&["bench", "replay", missing.to_str().unwrap()], &["missing"]);
+    assert_one_line_error(
+        &["bench", "replay", dir.to_str().unwrap()],
+        &["no kept pre-warps", "--warp-samples"],
+    );
+    let sample = dir.join("0000-knot");
+    std::fs::create_dir_all(&sample).unwrap();
+    let json = sample.join("warp.json");
+    std::fs::write(&json, "{ not json").unwrap();
+    assert_one_line_error(
+        &["bench", "replay", dir.to_str().unwrap()],
+        &["0000-knot", "warp.json"],
+    );
+    let warp = |faces: &str, fov: f32| {
+        format!(
+            r#"{{"object": "knot", "eye": [0, 0, 5], "forward": [0, 0, -1], "right": [1, 0, 0],
+            "up": [0, 1, 0], "fov_y": {fov}, "width": 64, "height": 64, "faces": "{faces}",
+            "partner": false, "visited": 10, "in_frame_ms": 0.1}}"#
+        )
+    };
+    std::fs::write(&json, warp("sideways", 1.0)).unwrap();
+    assert_one_line_error(
+        &["bench", "replay", dir.to_str().unwrap()],
+        &["warp.json", "sideways"],
+    );
+    std::fs::write(&json, warp("front", 4.0)).unwrap();
+    assert_one_line_error(
+        &["bench", "replay", dir.to_str().unwrap()],
+        &["warp.json", "field of view"],
+    );
+    // A good description, but no texture beside it.
+    std::fs::write(&json, warp("front", 1.0)).unwrap();
+    assert_one_line_error(
+        &["bench", "replay", dir.to_str().unwrap()],
+        &["texture", "0000-knot"],
+    );
+}
+
+#[test]
 fn bench_raytrace_prints_the_promised_json() {
     let (code, stdout, stderr) = relief(&[
         "bench", "raytrace", "--scene", "default", "--object", "sphere", "--size", "32", "--runs", "1",

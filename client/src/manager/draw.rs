@@ -23,6 +23,7 @@ use super::Manager;
 use super::choose::Show;
 use super::counters::RenderStages;
 use super::policy::PARTNER_BEHIND;
+use super::warp_samples::{WarpSample, WarpSampler};
 
 /// The last image of an impostor, kept to be redrawn while the eye stays put.
 pub(super) struct Kept {
@@ -46,6 +47,21 @@ pub(super) fn partner_depth_factor(bounds: &relief_core::bounds::Aabb, eye: Vec3
 }
 
 impl Manager {
+    /// From the next frame on, keeps every `every`-th pre-warp (up to
+    /// [`MAX_WARP_SAMPLES`](super::policy::MAX_WARP_SAMPLES)) to be timed again
+    /// ([`WarpSample`]); `every` 0 keeps none.
+    pub fn sample_warps(&mut self, every: u32) {
+        self.warp_samples = (every > 0).then(|| WarpSampler::new(every));
+    }
+
+    /// The pre-warps kept so far ([`Manager::sample_warps`]), handed over.
+    pub fn take_warp_samples(&mut self) -> Vec<WarpSample> {
+        self.warp_samples
+            .as_mut()
+            .map(|s| std::mem::take(&mut s.kept))
+            .unwrap_or_default()
+    }
+
     /// Draws a frame as [`Manager::frame`] decided: each impostor redrawn as the
     /// sprite it was last frame while Schaufler's test holds (no warp), else warped
     /// (falling back to geometry where a warp is refused); geometry rasterized; one
@@ -105,8 +121,9 @@ impl Manager {
                 _ => false,
             })
             .collect();
-        // The textures to warp: each impostor's, its partner right after it.
-        let mut warps: Vec<(usize, &Impostor, bool)> = Vec::new();
+        // The textures to warp: each impostor's, its partner right after it; and which
+        // texture and level each is (for the samples kept).
+        let mut warps: Vec<(usize, &Impostor, bool, (usize, usize))> = Vec::new();
         for (k, show) in shows.iter().enumerate() {
             if let Show::Impostor {
                 texture,
@@ -127,26 +144,49 @@ impl Manager {
                 let Some(shown) = at((texture, level)) else {
                     continue;
                 };
-                warps.push((k, shown, false));
-                if let Some(partner) = partner.and_then(at) {
-                    warps.push((k, partner, true));
+                warps.push((k, shown, false, (texture, level)));
+                if let Some(partner) = partner
+                    && let Some(impostor) = at(partner)
+                {
+                    warps.push((k, impostor, true, partner));
                 }
             }
         }
         let behind = |k: usize| partner_depth_factor(&scene.objects[k].local_bounds, locals[k].eye_f32());
         let prewarps: Vec<_> = warps
             .par_iter()
-            .map(|&(k, impostor, is_partner)| {
+            .map(|&(k, impostor, is_partner, _)| {
+                let began = Instant::now();
                 let prewarped = Prewarped::new(Variant::Interleaved, impostor, &locals[k])
                     .and_then(|p| p.in_world(scene.objects[k].depth_scale()));
-                if is_partner {
+                let prewarped = if is_partner {
                     prewarped.and_then(|p| p.behind(behind(k)))
                 } else {
                     prewarped
-                }
+                };
+                (prewarped, began.elapsed())
             })
             .collect();
         let prewarps_done = Instant::now();
+        if let Some(sampler) = &mut self.warp_samples {
+            for (&(k, _, partner, (texture, level)), (ready, took)) in warps.iter().zip(&prewarps) {
+                let (Ok(prewarped), Some(held)) = (ready, self.objects[k].held.get(texture)) else {
+                    continue;
+                };
+                if sampler.keeps_next() {
+                    sampler.kept.push(WarpSample {
+                        object: k,
+                        camera: locals[k],
+                        partner,
+                        visited: prewarped.texels_warped(),
+                        in_frame_ms: took.as_secs_f64() * 1e3,
+                        prepared: held.prepared.clone(),
+                        level,
+                    });
+                }
+            }
+        }
+        let prewarps: Vec<_> = prewarps.into_iter().map(|(ready, _)| ready).collect();
         // (Only those pre-warped: an eye in or behind a texture's plane is refused first.)
         self.counters.texels_warped += (prewarps.iter())
             .map(|ready| ready.as_ref().map_or(0, |p| p.texels_warped()) as u64)
@@ -169,7 +209,9 @@ impl Manager {
             // The impostor's warp, then its partner's (whose failure only leaves out
             // what it would have filled in).
             let (mut rect, mut partner_drawn): (Option<(u32, u32, u32, u32)>, bool) = (None, false);
-            while let Some(((_, impostor, is_partner), ready)) = prewarps.next_if(|((j, _, _), _)| *j == k) {
+            while let Some(((_, impostor, is_partner, _), ready)) =
+                prewarps.next_if(|((j, _, _, _), _)| *j == k)
+            {
                 if is_partner && rect.is_none() {
                     continue;
                 }

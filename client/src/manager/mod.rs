@@ -26,7 +26,9 @@
 //! # Counting
 //!
 //! [`Counters`] hold what a run's summary reports: requests, round trips, needs met,
-//! stale frames by cause, draws, and each frame's stage times (`counters.rs`).
+//! stale frames by cause, draws, and each frame's stage times (`counters.rs`). Asked
+//! to ([`Manager::sample_warps`]), it keeps every K-th pre-warp with its texture and
+//! camera, to be timed again on its own (`warp_samples.rs`).
 //!
 //! The [crate's overview](crate) has an example.
 
@@ -39,6 +41,7 @@ mod link_scale;
 mod messages;
 pub mod policy;
 mod requests;
+mod warp_samples;
 
 use std::collections::HashMap;
 use std::time::{Duration, Instant};
@@ -59,6 +62,7 @@ pub use counters::{Counters, RenderStages, StaleCauses, TextureLifetimes, late_f
 pub use messages::{Arrival, Command, Failure, TextureRequest};
 pub use policy::Config;
 pub use requests::texture_ladder;
+pub use warp_samples::WarpSample;
 
 use around::angle_between;
 use cache::ObjectState;
@@ -66,6 +70,7 @@ use choose::{Grade, may_show, shown_texture};
 use draw::Kept;
 use policy::{ASSESSMENTS_PER_TASK, SHOWN_STALE, WARM_UP_POLL, cheaper_as_geometry, texel_pixels};
 use requests::{Asked, Pending};
+use warp_samples::WarpSampler;
 
 /// The manager of one client: what it holds and has asked for per object, where the eye
 /// is going, the channels to its texture source, and what it has counted.
@@ -101,6 +106,8 @@ pub struct Manager {
     warm_up_until: Option<Instant>,
     /// What this run counted.
     pub counters: Counters,
+    /// The pre-warps kept to be timed again, when asked ([`Manager::sample_warps`]).
+    warp_samples: Option<WarpSampler>,
 }
 
 impl Manager {
@@ -129,6 +136,7 @@ impl Manager {
             round_trip_floor: link_scale::RoundTripFloor::default(),
             warm_up_until: None,
             counters: Counters::default(),
+            warp_samples: None,
         }
     }
 

@@ -492,6 +492,11 @@ pub const PROBE_REFINEMENTS: u32 = 4;
 /// than it saves (measured in `docs/targets.md`, "Many impostors").
 pub const ASSESSMENTS_PER_TASK: usize = 16;
 
+/// The most pre-warps a run keeps to time again ([`Manager::sample_warps`](super::Manager::sample_warps)):
+/// each holds its texture past the cache's eviction, a few hundred kB to a few MB, so
+/// a long flight's samples stay within a few hundred MB.
+pub const MAX_WARP_SAMPLES: usize = 256;
+
 // ---- The server's load ------------------------------------------------------------------
 
 /// A server foreseeing that a new job would wait longer than this behind the others

@@ -6,11 +6,13 @@
 //!   in turn.
 //! - [`raster`] — the rasterizer drawing objects along a camera path, against shading.
 //! - [`warp`] — every display method's time against memcpy and a naive pre-warp.
+//! - [`replay`] — the pre-warps a flight kept, timed again each alone.
 //! - [`rpc`] — loopback RPC latency against a bare gRPC call; requests end to end.
 
 mod raster;
 mod raytrace;
 mod reference;
+mod replay;
 mod rpc;
 mod warp;
 
@@ -29,6 +31,9 @@ pub enum BenchCommand {
     Raster(raster::RasterArgs),
     /// Display time of every warp method against memcpy and a naive pre-warp.
     Warp(warp::WarpArgs),
+    /// The pre-warps a flight kept (`relief demo --warp-samples K`), timed again each
+    /// alone, with their texture mappings: per object kind and projection.
+    Replay(replay::ReplayArgs),
     /// Loopback RPC latency against a bare gRPC call, and impostor requests end to end.
     Rpc(rpc::RpcArgs),
 }
@@ -39,6 +44,7 @@ pub fn run(command: BenchCommand) -> Result<()> {
         BenchCommand::Reference(args) => reference::run(args),
         BenchCommand::Raster(args) => raster::run(args),
         BenchCommand::Warp(args) => warp::run(args),
+        BenchCommand::Replay(args) => replay::run(args),
         BenchCommand::Rpc(args) => rpc::run(args),
     }
 }

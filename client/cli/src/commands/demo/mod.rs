@@ -86,6 +86,11 @@ pub struct DemoArgs {
     /// Write every K-th frame as PNG (0: none).
     #[arg(long, default_value = "10")]
     write_every: u32,
+    /// Keep every K-th pre-warp of the flight (up to the client's
+    /// `MAX_WARP_SAMPLES`) and write them to OUT/warps after it, for `relief bench
+    /// replay` to time again (0: none).
+    #[arg(long, default_value = "0")]
+    warp_samples: u32,
     /// Frame size WIDTHxHEIGHT.
     #[arg(long, default_value = "640x360", value_parser = args::frame_size)]
     size: (u32, u32),
@@ -194,6 +199,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         eprintln!("warning: the first textures did not all arrive within {WARM_UP_LIMIT:?}");
     }
     bar.finish_and_clear();
+    manager.sample_warps(args.warp_samples);
     let bar = progress::bar(flight.frames as u64, "flying");
     // Every K-th frame's camera, drawn all as geometry after the flight (see below).
     let mut geometry_cameras = Vec::new();
@@ -244,6 +250,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
         },
     )?;
     bar.finish_and_clear();
+    let samples = manager.take_warp_samples();
+    if !samples.is_empty() {
+        crate::warp_files::write_samples(&args.out.join("warps"), &samples, &scene)?;
+    }
     let judged = judge(&scene, &compared, &args.out)?;
     let counters = &manager.counters;
     let lifetimes = manager.texture_lifetimes();
