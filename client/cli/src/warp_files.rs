@@ -1,6 +1,6 @@
 //! Pre-warps kept from a flight, on disk: `relief demo --warp-samples K` writes each
-//! [`WarpSample`] as a directory, and `relief bench replay` reads them back
-//! ([`SavedWarp`]) to time the flight's own pre-warps again, alone.
+//! [`WarpSample`] as a directory, and `relief bench replay` reads them back one at a
+//! time ([`SavedWarp`]) to time the flight's own pre-warps again, alone.
 //!
 //! A directory holds the texture level the pre-warp warped
 //! ([`ReliefTexture::write_dir`]: `albedo.png`, `normal.png`, `depth.png`,
@@ -14,6 +14,7 @@ use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 
 use relief_client::manager::WarpSample;
+use relief_client::manager::policy::MAX_WARP_SAMPLES;
 use relief_core::camera::{Camera, MAX_FRAME_SIZE};
 use relief_core::relief::ReliefTexture;
 use relief_core::scene::Scene;
@@ -21,6 +22,9 @@ use relief_render::impostor::{Faces, Impostor};
 
 /// The name of each sample's description in its directory.
 const WARP_JSON: &str = "warp.json";
+
+/// How far from unit length and right angles a saved camera's axes may be.
+const AXIS_TOLERANCE: f32 = 1e-4;
 
 /// `warp.json`: all a pre-warp was given but the texture, and what it cost in the
 /// flight.
@@ -60,27 +64,21 @@ pub struct SavedWarp {
     pub in_frame_ms: f64,
 }
 
-/// Writes `samples` into `dir` (created), one directory each, `NNNN-object`; returns
-/// how many.
-pub fn write_samples(dir: &Path, samples: &[WarpSample], scene: &Scene) -> Result<usize> {
+/// Writes `samples` into `dir`, one directory each, `NNNN-object`: `dir` is made anew
+/// (a run's own output: what an earlier run kept there would be replayed as this
+/// one's).
+pub fn write_samples(dir: &Path, samples: &[WarpSample], scene: &Scene) -> Result<()> {
+    if dir.exists() {
+        std::fs::remove_dir_all(dir).with_context(|| format!("clearing {}", dir.display()))?;
+    }
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     for (n, sample) in samples.iter().enumerate() {
+        // (A scene's names are fit for file names: `check_object_name`.)
         let object = scene
             .objects
             .get(sample.object)
             .map_or_else(|| format!("object{}", sample.object), |o| o.name.clone());
-        // (Names are the scene's: keep only what is safe in a file name.)
-        let safe: String = object
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || c == '.' || c == '-' {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect();
-        let at = dir.join(format!("{n:04}-{safe}"));
+        let at = dir.join(format!("{n:04}-{object}"));
         let impostor = sample.impostor();
         impostor
             .texture
@@ -109,11 +107,13 @@ pub fn write_samples(dir: &Path, samples: &[WarpSample], scene: &Scene) -> Resul
         std::fs::write(&path, serde_json::to_string_pretty(&file)? + "\n")
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    Ok(samples.len())
+    Ok(())
 }
 
-/// Reads every sample directory in `dir` (those holding a `warp.json`), in name order.
-pub fn read_samples(dir: &Path) -> Result<Vec<SavedWarp>> {
+/// The sample directories in `dir` (those holding a `warp.json`), in name order, each
+/// to be read with [`read_sample`]: at most [`MAX_WARP_SAMPLES`], as many as a run
+/// keeps.
+pub fn sample_dirs(dir: &Path) -> Result<Vec<PathBuf>> {
     let entries = std::fs::read_dir(dir).with_context(|| format!("reading {}", dir.display()))?;
     let mut dirs = Vec::new();
     for entry in entries {
@@ -130,12 +130,19 @@ pub fn read_samples(dir: &Path) -> Result<Vec<SavedWarp>> {
             dir.display()
         );
     }
+    if dirs.len() > MAX_WARP_SAMPLES {
+        bail!(
+            "{}: {} kept pre-warps, more than a run keeps ({MAX_WARP_SAMPLES})",
+            dir.display(),
+            dirs.len()
+        );
+    }
     dirs.sort();
-    dirs.into_iter().map(|d| read_sample(&d)).collect()
+    Ok(dirs)
 }
 
-/// One sample directory; errors name the file and what is wrong.
-fn read_sample(dir: &Path) -> Result<SavedWarp> {
+/// The sample in `dir`; errors name the file and what is wrong.
+pub fn read_sample(dir: &Path) -> Result<SavedWarp> {
     let path = dir.join(WARP_JSON);
     let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
     let file: WarpFile = serde_json::from_str(&text).with_context(|| format!("{}", path.display()))?;
@@ -147,17 +154,20 @@ fn read_sample(dir: &Path) -> Result<SavedWarp> {
             path.display()
         ),
     };
-    let finite = file.eye.iter().all(|v| v.is_finite())
-        && [file.forward, file.right, file.up]
-            .iter()
-            .flatten()
-            .all(|v| v.is_finite())
-        && file.fov_y.is_finite();
+    let [forward, right, up] = [file.forward, file.right, file.up].map(Vec3::from_array);
+    // (A camera's axes are unit vectors at right angles, to f32's rounding.)
+    let unit = |v: Vec3| (v.length() - 1.0).abs() < AXIS_TOLERANCE;
+    let square = |a: Vec3, b: Vec3| a.dot(b).abs() < AXIS_TOLERANCE;
+    let axes = [forward, right, up].into_iter().all(unit)
+        && square(forward, right)
+        && square(forward, up)
+        && square(right, up);
+    let finite = file.eye.iter().all(|v| v.is_finite()) && file.fov_y.is_finite();
     let sized = (1..=MAX_FRAME_SIZE).contains(&file.width) && (1..=MAX_FRAME_SIZE).contains(&file.height);
     let opens = file.fov_y > 0.0 && file.fov_y < std::f32::consts::PI;
-    if !(finite && sized && opens) {
+    if !(finite && axes && sized && opens) {
         bail!(
-            "{}: the camera is not one a frame can have (non-finite, a field of view outside (0, π), or a size outside 1..={MAX_FRAME_SIZE})",
+            "{}: the camera is not one a frame can have (a non-finite eye, axes not unit and square, a field of view outside (0, π), or a size outside 1..={MAX_FRAME_SIZE})",
             path.display()
         );
     }
@@ -169,9 +179,9 @@ fn read_sample(dir: &Path) -> Result<SavedWarp> {
         impostor: Impostor::new(texture).with_faces(faces),
         camera: Camera {
             eye: DVec3::from_array(file.eye),
-            forward: Vec3::from_array(file.forward),
-            right: Vec3::from_array(file.right),
-            up: Vec3::from_array(file.up),
+            forward,
+            right,
+            up,
             fov_y: file.fov_y,
             width: file.width,
             height: file.height,

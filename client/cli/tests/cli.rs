@@ -287,11 +287,31 @@ fn bench_replay_names_what_is_wrong_with_its_directory() {
         &["bench", "replay", dir.to_str().unwrap()],
         &["warp.json", "field of view"],
     );
+    std::fs::write(
+        &json,
+        warp("front", 1.0).replace(r#""up": [0, 1, 0]"#, r#""up": [0, 2, 0]"#),
+    )
+    .unwrap();
+    assert_one_line_error(
+        &["bench", "replay", dir.to_str().unwrap()],
+        &["warp.json", "axes"],
+    );
     // A good description, but no texture beside it.
     std::fs::write(&json, warp("front", 1.0)).unwrap();
     assert_one_line_error(
         &["bench", "replay", dir.to_str().unwrap()],
         &["texture", "0000-knot"],
+    );
+    // More samples than a run keeps.
+    let many = dir.join("many");
+    for n in 0..=relief_client::manager::policy::MAX_WARP_SAMPLES {
+        let sample = many.join(format!("{n:04}-knot"));
+        std::fs::create_dir_all(&sample).unwrap();
+        std::fs::write(sample.join("warp.json"), "{}").unwrap();
+    }
+    assert_one_line_error(
+        &["bench", "replay", many.to_str().unwrap()],
+        &["more than a run keeps"],
     );
 }
 

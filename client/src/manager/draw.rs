@@ -47,18 +47,20 @@ pub(super) fn partner_depth_factor(bounds: &relief_core::bounds::Aabb, eye: Vec3
 }
 
 impl Manager {
-    /// From the next frame on, keeps every `every`-th pre-warp (up to
-    /// [`MAX_WARP_SAMPLES`](super::policy::MAX_WARP_SAMPLES)) to be timed again
-    /// ([`WarpSample`]); `every` 0 keeps none.
+    /// From the next frame on, keeps about one in `every` successful pre-warps (within
+    /// [`MAX_WARP_SAMPLES`](super::policy::MAX_WARP_SAMPLES) and
+    /// [`MAX_WARP_SAMPLE_TEXELS`](super::policy::MAX_WARP_SAMPLE_TEXELS)) to be timed
+    /// again ([`WarpSample`]); `every` 0 keeps none.
     pub fn sample_warps(&mut self, every: u32) {
         self.warp_samples = (every > 0).then(|| WarpSampler::new(every));
     }
 
-    /// The pre-warps kept so far ([`Manager::sample_warps`]), handed over.
-    pub fn take_warp_samples(&mut self) -> Vec<WarpSample> {
+    /// The pre-warps kept ([`Manager::sample_warps`]), handed over, and how many more
+    /// were chosen but left out, the limits reached.
+    pub fn take_warp_samples(&mut self) -> (Vec<WarpSample>, usize) {
         self.warp_samples
-            .as_mut()
-            .map(|s| std::mem::take(&mut s.kept))
+            .take()
+            .map(|s| (s.kept, s.left_out))
             .unwrap_or_default()
     }
 
@@ -173,7 +175,7 @@ impl Manager {
                 let (Ok(prewarped), Some(held)) = (ready, self.objects[k].held.get(texture)) else {
                     continue;
                 };
-                if sampler.keeps_next() {
+                if sampler.keeps(&held.prepared) {
                     sampler.kept.push(WarpSample {
                         object: k,
                         camera: locals[k],

@@ -26,9 +26,11 @@
 //! # Counting
 //!
 //! [`Counters`] hold what a run's summary reports: requests, round trips, needs met,
-//! stale frames by cause, draws, and each frame's stage times (`counters.rs`). Asked
-//! to ([`Manager::sample_warps`]), it keeps every K-th pre-warp with its texture and
-//! camera, to be timed again on its own (`warp_samples.rs`).
+//! stale frames by cause, draws, and each frame's stage times (`counters.rs`).
+//!
+//! Asked to ([`Manager::sample_warps`]), the manager also keeps about one in K of its
+//! pre-warps with their textures and cameras, to be timed again on their own
+//! (`warp_samples.rs`).
 //!
 //! The [crate's overview](crate) has an example.
 

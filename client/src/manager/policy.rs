@@ -492,10 +492,15 @@ pub const PROBE_REFINEMENTS: u32 = 4;
 /// than it saves (measured in `docs/targets.md`, "Many impostors").
 pub const ASSESSMENTS_PER_TASK: usize = 16;
 
-/// The most pre-warps a run keeps to time again ([`Manager::sample_warps`](super::Manager::sample_warps)):
-/// each holds its texture past the cache's eviction, a few hundred kB to a few MB, so
-/// a long flight's samples stay within a few hundred MB.
+/// The most pre-warps a run keeps to time again ([`Manager::sample_warps`](super::Manager::sample_warps)),
+/// and the most `relief bench replay` reads: enough for every kind of object a flight
+/// warps, a second or two of replay each.
 pub const MAX_WARP_SAMPLES: usize = 256;
+
+/// The texels of the textures the kept pre-warps hold past the cache's eviction (each
+/// texture counted once, at its full size): a texture made ready, its pyramid,
+/// connectivity and critical points, takes about 24 bytes a texel, so about 400 MB.
+pub const MAX_WARP_SAMPLE_TEXELS: usize = 16 << 20;
 
 // ---- The server's load ------------------------------------------------------------------
 

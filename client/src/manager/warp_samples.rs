@@ -1,19 +1,26 @@
-//! Pre-warps a flight made, kept to be timed again on their own: every K-th, with the
-//! texture level it warped and the camera (in the object's frame) it warped it for.
+//! Pre-warps a flight made, kept to be timed again on their own: about one in K, with
+//! the texture level each warped and the camera (in the object's frame) it warped it
+//! for.
 //!
 //! A bench's one texture seen a few degrees from its eye flatters the pre-warp: a
 //! flight shows leaves, rough rocks and textures turned further, which take their
 //! passes' scalar steps. `relief demo --warp-samples K` writes what this keeps, and
 //! `relief bench replay` times each again, alone: the flight's own work, to compare
 //! builds on, apart from what else the flight's frames did.
+//!
+//! The textures are shared, not copied, so keeping a sample costs its frame nothing;
+//! but a kept texture stays alive past the cache's eviction, and one that arrives
+//! again is then not made ready anew (see [`crate::intake`]): a sampled flight's
+//! intake differs that little from another's.
 
+use std::collections::HashSet;
 use std::sync::Arc;
 
 use relief_core::camera::Camera;
 use relief_render::impostor::Impostor;
 
 use super::Prepared;
-use super::policy::MAX_WARP_SAMPLES;
+use super::policy::{MAX_WARP_SAMPLE_TEXELS, MAX_WARP_SAMPLES};
 
 /// One pre-warp of a frame, as [`Manager::render`](super::Manager::render) made it.
 #[derive(Clone)]
@@ -26,8 +33,9 @@ pub struct WarpSample {
     pub partner: bool,
     /// Texels the pre-warp visited ([`Prewarped::texels_warped`](relief_render::warp::Prewarped::texels_warped)).
     pub visited: usize,
-    /// The frame's pre-warp time for it, ms: beside the frame's other pre-warps,
-    /// on the frame's threads.
+    /// Its wall time in the frame, ms. On one thread, the pre-warp's own; on more, a
+    /// pre-warp waiting at its halves' join runs other work meanwhile, and this counts
+    /// it.
     pub in_frame_ms: f64,
     /// The texture (shared, not copied: keeping a sample costs the frame nothing) and
     /// the level of its pyramid warped.
@@ -42,27 +50,91 @@ impl WarpSample {
     }
 }
 
-/// Which pre-warps are kept: every `every`-th, up to [`MAX_WARP_SAMPLES`].
+/// Which pre-warps are kept: about one in `every`, chosen by a hash of the count (a
+/// frame warps its objects in one order, so every K-th alone could keep meeting the
+/// same object), while the samples stay within [`MAX_WARP_SAMPLES`] and their textures
+/// within [`MAX_WARP_SAMPLE_TEXELS`].
 pub(super) struct WarpSampler {
     every: u64,
     seen: u64,
     pub(super) kept: Vec<WarpSample>,
+    /// The textures the samples hold, by address (unique while they are held), and
+    /// their texels.
+    held: HashSet<usize>,
+    held_texels: usize,
+    /// Pre-warps chosen but not kept, the limits reached.
+    pub(super) left_out: usize,
 }
 
 impl WarpSampler {
-    /// Keeps every `every`-th pre-warp from the next on (`every` ≥ 1).
+    /// Keeps about one in `every` pre-warps from the next on (`every` ≥ 1).
     pub(super) fn new(every: u32) -> WarpSampler {
         WarpSampler {
             every: u64::from(every.max(1)),
             seen: 0,
             kept: Vec::new(),
+            held: HashSet::new(),
+            held_texels: 0,
+            left_out: 0,
         }
     }
 
-    /// Counts one pre-warp: whether it is kept.
-    pub(super) fn keeps_next(&mut self) -> bool {
-        let keep = self.seen.is_multiple_of(self.every) && self.kept.len() < MAX_WARP_SAMPLES;
+    /// Counts one pre-warp of `prepared`: whether it is kept (then the caller pushes
+    /// its sample).
+    pub(super) fn keeps(&mut self, prepared: &Arc<Prepared>) -> bool {
         self.seen += 1;
-        keep
+        if !splitmix(self.seen).is_multiple_of(self.every) {
+            return false;
+        }
+        let address = Arc::as_ptr(prepared) as usize;
+        let texels = match self.held.contains(&address) {
+            true => 0,
+            false => prepared.pyramid.levels[0].texture.depth.len(),
+        };
+        if self.kept.len() >= MAX_WARP_SAMPLES || self.held_texels + texels > MAX_WARP_SAMPLE_TEXELS {
+            self.left_out += 1;
+            return false;
+        }
+        self.held.insert(address);
+        self.held_texels += texels;
+        true
+    }
+}
+
+/// SplitMix64's finaliser: a well-mixed hash of `x`, so that its remainders by any
+/// `every` fall evenly.
+fn splitmix(x: u64) -> u64 {
+    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::splitmix;
+
+    /// About one in K is kept, for a K that divides a frame's count of pre-warps as
+    /// well as one that does not; and the choice falls on every position in a frame.
+    #[test]
+    fn about_one_in_k_is_kept_from_every_position() {
+        for every in [1u64, 3, 4, 10] {
+            let kept: Vec<u64> = (1..=30_000)
+                .filter(|&n| splitmix(n).is_multiple_of(every))
+                .collect();
+            let expected = 30_000 / every as usize;
+            assert!(
+                kept.len().abs_diff(expected) * 20 < expected,
+                "one in {every}: {}",
+                kept.len()
+            );
+            // Frames of 3 pre-warps: each position is kept.
+            for position in 0..3 {
+                assert!(
+                    kept.iter().any(|n| n % 3 == position),
+                    "one in {every}, position {position}"
+                );
+            }
+        }
     }
 }

@@ -18,7 +18,7 @@ use relief_render::gbuffer::GBuffer;
 use relief_render::warp::{Prewarped, Variant};
 
 use crate::progress;
-use crate::warp_files::{SavedWarp, read_samples};
+use crate::warp_files::{SavedWarp, read_sample, sample_dirs};
 
 #[derive(Args)]
 pub struct ReplayArgs {
@@ -49,7 +49,8 @@ struct Replayed {
     prewarp_ms: f64,
     /// Its texture mapping into a frame of the flight's size, ms.
     map_ms: f64,
-    /// What the pre-warp took in the flight's frame, ms.
+    /// What the pre-warp took in the flight's frame, ms (see `WarpSample::in_frame_ms`:
+    /// its own time only when the flight drew on one thread).
     in_frame_ms: f64,
 }
 
@@ -58,7 +59,7 @@ struct Replayed {
 #[derive(Serialize, Default)]
 struct Group {
     warps: usize,
-    texels: usize,
+    visited: usize,
     prewarp_ms: f64,
     map_ms: f64,
     in_frame_ms: f64,
@@ -71,11 +72,11 @@ struct Group {
 impl Group {
     fn add(&mut self, r: &Replayed) {
         self.warps += 1;
-        self.texels += r.visited;
+        self.visited += r.visited;
         self.prewarp_ms += r.prewarp_ms;
         self.map_ms += r.map_ms;
         self.in_frame_ms += r.in_frame_ms;
-        let per_texel = |ms: f64| ms * 1e6 / self.texels.max(1) as f64;
+        let per_texel = |ms: f64| ms * 1e6 / self.visited.max(1) as f64;
         self.prewarp_ns_per_texel = per_texel(self.prewarp_ms);
         self.in_frame_ns_per_texel = per_texel(self.in_frame_ms);
     }
@@ -114,7 +115,7 @@ fn replay(warp: &SavedWarp, runs: usize) -> Result<Replayed> {
     }
     let prewarp_ms = median_ms(runs, || drop(std::hint::black_box(warped())));
     // (The mapping takes its pre-warp: each run's is made, untimed, before it.)
-    let mut state = (GBuffer::new(camera.width, camera.height), Some(first));
+    let mut state = (GBuffer::new(camera.width, camera.height), None);
     let map_ms = median_ms_after(
         runs,
         &mut state,
@@ -147,13 +148,18 @@ fn replay(warp: &SavedWarp, runs: usize) -> Result<Replayed> {
 }
 
 pub fn run(args: ReplayArgs) -> Result<()> {
-    let saved = read_samples(&args.dir)?;
-    let bar = progress::bar(saved.len() as u64, "replaying pre-warps");
+    let dirs = sample_dirs(&args.dir)?;
+    let bar = progress::bar(dirs.len() as u64, "replaying pre-warps");
     let mut warps = Vec::new();
-    for warp in &saved {
-        warps.push(replay(warp, args.runs as usize)?);
-        bar.inc(1);
-    }
+    // One at a time: a sample is a texture of up to many MB. Inside the pool, as a
+    // frame draws (`Manager::render`): its halves' join forks there.
+    rayon::scope(|_| -> Result<()> {
+        for dir in &dirs {
+            warps.push(replay(&read_sample(dir)?, args.runs as usize)?);
+            bar.inc(1);
+        }
+        Ok(())
+    })?;
     bar.finish_and_clear();
     let mut groups: BTreeMap<String, Group> = BTreeMap::new();
     for r in &warps {
@@ -188,12 +194,12 @@ pub fn run(args: ReplayArgs) -> Result<()> {
     );
     println!(
         "{:<26} {:>6} {:>10} {:>12} {:>10} {:>14} {:>16}",
-        "kind", "warps", "texels", "prewarp ms", "map ms", "prewarp ns/tx", "in flight ns/tx"
+        "kind", "warps", "visited", "prewarp ms", "map ms", "prewarp ns/tx", "in frame ns/tx"
     );
     for (name, g) in &report.groups {
         println!(
             "{name:<26} {:>6} {:>10} {:>12.3} {:>10.3} {:>14.1} {:>16.1}",
-            g.warps, g.texels, g.prewarp_ms, g.map_ms, g.prewarp_ns_per_texel, g.in_frame_ns_per_texel
+            g.warps, g.visited, g.prewarp_ms, g.map_ms, g.prewarp_ns_per_texel, g.in_frame_ns_per_texel
         );
     }
     Ok(())

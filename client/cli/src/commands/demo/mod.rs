@@ -42,7 +42,8 @@ pub struct DemoArgs {
     /// follows the clock, so a slow frame skips path frames rather than slowing it.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     frames: Option<u32>,
-    /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, worst_frame*.png, worst_OBJECT.png.
+    /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, worst_frame*.png, worst_OBJECT.png
+    /// (and warps/ with --warp-samples).
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
     /// Workers to start (with --server, the server's own workers serve instead).
@@ -86,9 +87,10 @@ pub struct DemoArgs {
     /// Write every K-th frame as PNG (0: none).
     #[arg(long, default_value = "10")]
     write_every: u32,
-    /// Keep every K-th pre-warp of the flight (up to the client's
-    /// `MAX_WARP_SAMPLES`) and write them to OUT/warps after it, for `relief bench
-    /// replay` to time again (0: none).
+    /// Keep about one in K successful pre-warps of the flight (up to the client's
+    /// `MAX_WARP_SAMPLES`, and `MAX_WARP_SAMPLE_TEXELS` of textures) and write them to
+    /// OUT/warps after it (made anew), for `relief bench replay` to time again (0:
+    /// none).
     #[arg(long, default_value = "0")]
     warp_samples: u32,
     /// Frame size WIDTHxHEIGHT.
@@ -250,9 +252,15 @@ pub fn run(args: DemoArgs) -> Result<()> {
         },
     )?;
     bar.finish_and_clear();
-    let samples = manager.take_warp_samples();
+    let (samples, left_out) = manager.take_warp_samples();
     if !samples.is_empty() {
         crate::warp_files::write_samples(&args.out.join("warps"), &samples, &scene)?;
+    }
+    if left_out > 0 {
+        eprintln!(
+            "warning: kept {} pre-warps and left {left_out} more out, the limits reached (`MAX_WARP_SAMPLES`, `MAX_WARP_SAMPLE_TEXELS`): raise --warp-samples",
+            samples.len()
+        );
     }
     let judged = judge(&scene, &compared, &args.out)?;
     let counters = &manager.counters;
