@@ -155,10 +155,12 @@ impl Manager {
             }
         }
         let behind = |k: usize| partner_depth_factor(&scene.objects[k].local_bounds, locals[k].eye_f32());
+        // (Each timed only for the samples kept: no clock read otherwise.)
+        let timed = self.warp_samples.is_some();
         let prewarps: Vec<_> = warps
             .par_iter()
             .map(|&(k, impostor, is_partner, _)| {
-                let began = Instant::now();
+                let began = timed.then(Instant::now);
                 let prewarped = Prewarped::new(Variant::Interleaved, impostor, &locals[k])
                     .and_then(|p| p.in_world(scene.objects[k].depth_scale()));
                 let prewarped = if is_partner {
@@ -166,7 +168,7 @@ impl Manager {
                 } else {
                     prewarped
                 };
-                (prewarped, began.elapsed())
+                (prewarped, began.map(|b| b.elapsed()))
             })
             .collect();
         let prewarps_done = Instant::now();
@@ -181,7 +183,7 @@ impl Manager {
                         camera: locals[k],
                         partner,
                         visited: prewarped.texels_warped(),
-                        in_frame_ms: took.as_secs_f64() * 1e3,
+                        in_frame_ms: took.map_or(0.0, |t| t.as_secs_f64() * 1e3),
                         prepared: held.prepared.clone(),
                         level,
                     });
