@@ -17,6 +17,7 @@ use std::collections::HashSet;
 use std::sync::Arc;
 
 use relief_core::camera::Camera;
+use relief_core::generators::SplitMix64;
 use relief_render::impostor::Impostor;
 
 use super::Prepared;
@@ -50,13 +51,14 @@ impl WarpSample {
     }
 }
 
-/// Which pre-warps are kept: about one in `every`, chosen by a hash of the count (a
-/// frame warps its objects in one order, so every K-th alone could keep meeting the
-/// same object), while the samples stay within [`MAX_WARP_SAMPLES`] and their textures
+/// Which pre-warps are kept: about one in `every`, chosen by a fixed pseudo-random
+/// sequence (a frame warps its objects in one order, so every K-th alone could keep
+/// meeting the same object), while the samples stay within [`MAX_WARP_SAMPLES`] and their textures
 /// within [`MAX_WARP_SAMPLE_TEXELS`].
 pub(super) struct WarpSampler {
     every: u64,
-    seen: u64,
+    /// One draw a pre-warp: kept where it is a multiple of `every`.
+    draws: SplitMix64,
     pub(super) kept: Vec<WarpSample>,
     /// The textures the samples hold, by address (unique while they are held), and
     /// their texels.
@@ -71,7 +73,7 @@ impl WarpSampler {
     pub(super) fn new(every: u32) -> WarpSampler {
         WarpSampler {
             every: u64::from(every.max(1)),
-            seen: 0,
+            draws: SplitMix64::new(0),
             kept: Vec::new(),
             held: HashSet::new(),
             held_texels: 0,
@@ -82,8 +84,7 @@ impl WarpSampler {
     /// Counts one pre-warp of `prepared`: whether it is kept (then the caller pushes
     /// its sample).
     pub(super) fn keeps(&mut self, prepared: &Arc<Prepared>) -> bool {
-        self.seen += 1;
-        if !splitmix(self.seen).is_multiple_of(self.every) {
+        if !self.draws.next_u64().is_multiple_of(self.every) {
             return false;
         }
         let address = Arc::as_ptr(prepared) as usize;
@@ -101,26 +102,18 @@ impl WarpSampler {
     }
 }
 
-/// SplitMix64's finaliser: a well-mixed hash of `x`, so that its remainders by any
-/// `every` fall evenly.
-fn splitmix(x: u64) -> u64 {
-    let mut z = x.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
-}
-
 #[cfg(test)]
 mod tests {
-    use super::splitmix;
+    use super::SplitMix64;
 
     /// About one in K is kept, for a K that divides a frame's count of pre-warps as
     /// well as one that does not; and the choice falls on every position in a frame.
     #[test]
     fn about_one_in_k_is_kept_from_every_position() {
         for every in [1u64, 3, 4, 10] {
-            let kept: Vec<u64> = (1..=30_000)
-                .filter(|&n| splitmix(n).is_multiple_of(every))
+            let mut draws = SplitMix64::new(0);
+            let kept: Vec<u64> = (0..30_000)
+                .filter(|_| draws.next_u64().is_multiple_of(every))
                 .collect();
             let expected = 30_000 / every as usize;
             assert!(
