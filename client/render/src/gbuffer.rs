@@ -790,10 +790,9 @@ impl SurfaceDigest {
     /// Adds `gbuffer`'s surfaces.
     pub fn add(&mut self, gbuffer: &GBuffer) {
         let g = gbuffer;
-        let surfaces = || (0..g.depth.len()).filter(|&i| g.depth[i] < EMPTY_DEPTH);
-        self.0.update(&(surfaces().count() as u64).to_le_bytes());
+        self.0.update(&(g.covered() as u64).to_le_bytes());
         let mut bytes = Vec::with_capacity(DIGEST_CHUNK);
-        for i in surfaces() {
+        for i in (0..g.depth.len()).filter(|&i| g.depth[i] < EMPTY_DEPTH) {
             bytes.extend_from_slice(&(i as u64).to_le_bytes());
             bytes.extend_from_slice(&g.depth[i].to_bits().to_le_bytes());
             bytes.extend_from_slice(&g.object[i].to_le_bytes());
