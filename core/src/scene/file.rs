@@ -53,7 +53,7 @@ use glam::{Affine3A, DQuat, DVec3, EulerRot, Quat, Vec3};
 use rayon::prelude::*;
 use serde::Deserialize;
 
-use super::{Scene, SceneLimits, SceneObject, default_lighting};
+use super::{Scene, SceneLimits, SceneObject, default_lighting, placement_name};
 use crate::camera::{CameraPath, PathSegment};
 use crate::error::{Error, Result};
 use crate::generators::Generator;
@@ -156,7 +156,7 @@ impl ObjectFile {
     fn placement_names(&self) -> Vec<String> {
         match &self.instances {
             None => vec![self.name.clone()],
-            Some(list) => (1..=list.len()).map(|k| format!("{}.{k}", self.name)).collect(),
+            Some(list) => (1..=list.len()).map(|k| placement_name(&self.name, k)).collect(),
         }
     }
 }

@@ -115,6 +115,21 @@ pub fn check_object_name(name: &str) -> Result<(), BadObjectName> {
     Ok(())
 }
 
+/// The name of placement `k` (from 1) of the object `object` of a scene file
+/// with `instances`: `object.k`.
+pub fn placement_name(object: &str, k: usize) -> String {
+    format!("{object}.{k}")
+}
+
+/// The object a placement is of, by the placement's name ([`placement_name`]
+/// undone): `tree.17` → `tree`; any other name is its own object's.
+pub fn placed_object(name: &str) -> &str {
+    match name.rsplit_once('.') {
+        Some((object, k)) if !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit()) => object,
+        _ => name,
+    }
+}
+
 /// An object name [`check_object_name`] refuses.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
@@ -625,6 +640,16 @@ pub fn default_lighting() -> Lighting {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A placement's name leads back to its object; any other name is its own.
+    #[test]
+    fn a_placement_name_leads_back_to_its_object() {
+        assert_eq!(placed_object(&placement_name("tree", 17)), "tree");
+        assert_eq!(placed_object(&placement_name("statue.v2", 1)), "statue.v2");
+        assert_eq!(placed_object("knot"), "knot");
+        assert_eq!(placed_object("statue.v2"), "statue.v2");
+        assert_eq!(placed_object("rock."), "rock.");
+    }
 
     /// Where an object stands costs no precision: a sphere moved 10⁶ m away is not
     /// warned about. A mesh whose own vertices lie 10⁵ m from its origin (an OBJ file

@@ -13,6 +13,7 @@ use anyhow::{Result, anyhow, bail};
 use clap::Args;
 use serde::Serialize;
 
+use relief_core::scene::placed_object;
 use relief_lab::timing::{median_ms, median_ms_after};
 use relief_render::gbuffer::GBuffer;
 use relief_render::warp::{Prewarped, Variant};
@@ -93,14 +94,6 @@ struct ReplayReport {
     groups: BTreeMap<String, Group>,
 }
 
-/// An object's kind: its name without a placement's number (`tree.17` → `tree`).
-fn kind(object: &str) -> &str {
-    match object.rsplit_once('.') {
-        Some((kind, n)) if !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()) => kind,
-        _ => object,
-    }
-}
-
 fn replay(warp: &SavedWarp, runs: usize) -> Result<Replayed> {
     let (impostor, camera) = (&warp.impostor, &warp.camera);
     let warped = || Prewarped::new(Variant::Interleaved, impostor, camera);
@@ -169,7 +162,7 @@ pub fn run(args: ReplayArgs) -> Result<()> {
             "orthographic"
         };
         groups
-            .entry(format!("{} {projection}", kind(&r.object)))
+            .entry(format!("{} {projection}", placed_object(&r.object)))
             .or_default()
             .add(r);
         groups.entry("all".into()).or_default().add(r);
@@ -203,17 +196,4 @@ pub fn run(args: ReplayArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::kind;
-
-    #[test]
-    fn a_kind_is_the_name_without_a_placement_number() {
-        assert_eq!(kind("tree.17"), "tree");
-        assert_eq!(kind("knot"), "knot");
-        assert_eq!(kind("statue.v2"), "statue.v2");
-        assert_eq!(kind("rock."), "rock.");
-    }
 }
