@@ -2,6 +2,7 @@
 //! sprite while Schaufler's test holds, else warped (all the frame's pre-warps at once),
 //! its partner behind it; geometry rasterized; one shading pass.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -19,11 +20,27 @@ use relief_render::warp::sprite::Sprite;
 use relief_render::warp::texmap::volume_rect;
 use relief_render::warp::{Prewarped, Variant};
 
-use super::Manager;
 use super::choose::Show;
 use super::counters::RenderStages;
 use super::policy::PARTNER_BEHIND;
 use super::warp_samples::{WarpSample, WarpSampler};
+use super::{Manager, Prepared};
+
+/// One texture a frame warps: an object's shown texture, or its partner, drawn behind.
+struct Warp<'a> {
+    /// The object's index in the scene.
+    object: usize,
+    texture: &'a Arc<Prepared>,
+    /// The level of its pyramid warped (one it has).
+    level: usize,
+    partner: bool,
+}
+
+impl Warp<'_> {
+    fn impostor(&self) -> &Impostor {
+        &self.texture.pyramid.levels[self.level]
+    }
+}
 
 /// The last image of an impostor, kept to be redrawn while the eye stays put.
 pub(super) struct Kept {
@@ -123,9 +140,8 @@ impl Manager {
                 _ => false,
             })
             .collect();
-        // The textures to warp: each impostor's, its partner right after it; and which
-        // texture and level each is (for the samples kept).
-        let mut warps: Vec<(usize, &Impostor, bool, (usize, usize))> = Vec::new();
+        // The textures to warp: each impostor's, its partner right after it.
+        let mut warps: Vec<Warp> = Vec::new();
         for (k, show) in shows.iter().enumerate() {
             if let Show::Impostor {
                 texture,
@@ -134,24 +150,21 @@ impl Manager {
             } = *show
                 && !sprite_holds[k]
             {
-                let at = |(texture, level): (usize, usize)| {
-                    self.objects[k]
-                        .held
-                        .get(texture)?
-                        .prepared
-                        .pyramid
-                        .levels
-                        .get(level)
+                let warp = |(texture, level): (usize, usize), partner: bool| {
+                    let held = self.objects[k].held.get(texture)?;
+                    held.prepared.pyramid.levels.get(level)?;
+                    Some(Warp {
+                        object: k,
+                        texture: &held.prepared,
+                        level,
+                        partner,
+                    })
                 };
-                let Some(shown) = at((texture, level)) else {
+                let Some(shown) = warp((texture, level), false) else {
                     continue;
                 };
-                warps.push((k, shown, false, (texture, level)));
-                if let Some(partner) = partner
-                    && let Some(impostor) = at(partner)
-                {
-                    warps.push((k, impostor, true, partner));
-                }
+                warps.push(shown);
+                warps.extend(partner.and_then(|p| warp(p, true)));
             }
         }
         let behind = |k: usize| partner_depth_factor(&scene.objects[k].local_bounds, locals[k].eye_f32());
@@ -159,11 +172,12 @@ impl Manager {
         let timed = self.warp_samples.is_some();
         let prewarps: Vec<_> = warps
             .par_iter()
-            .map(|&(k, impostor, is_partner, _)| {
+            .map(|warp| {
+                let k = warp.object;
                 let began = timed.then(Instant::now);
-                let prewarped = Prewarped::new(Variant::Interleaved, impostor, &locals[k])
+                let prewarped = Prewarped::new(Variant::Interleaved, warp.impostor(), &locals[k])
                     .and_then(|p| p.in_world(scene.objects[k].depth_scale()));
-                let prewarped = if is_partner {
+                let prewarped = if warp.partner {
                     prewarped.and_then(|p| p.behind(behind(k)))
                 } else {
                     prewarped
@@ -173,19 +187,18 @@ impl Manager {
             .collect();
         let prewarps_done = Instant::now();
         if let Some(sampler) = &mut self.warp_samples {
-            for (&(k, _, partner, (texture, level)), (ready, took)) in warps.iter().zip(&prewarps) {
-                let (Ok(prewarped), Some(held)) = (ready, self.objects[k].held.get(texture)) else {
-                    continue;
-                };
-                if sampler.keeps(&held.prepared) {
+            for (warp, (ready, took)) in warps.iter().zip(&prewarps) {
+                if let Ok(prewarped) = ready
+                    && sampler.keeps(warp.texture)
+                {
                     sampler.kept.push(WarpSample {
-                        object: k,
-                        camera: locals[k],
-                        partner,
+                        object: warp.object,
+                        camera: locals[warp.object],
+                        partner: warp.partner,
                         visited: prewarped.texels_warped(),
                         in_frame_ms: took.map_or(0.0, |t| t.as_secs_f64() * 1e3),
-                        prepared: held.prepared.clone(),
-                        level,
+                        prepared: warp.texture.clone(),
+                        level: warp.level,
                     });
                 }
             }
@@ -213,9 +226,8 @@ impl Manager {
             // The impostor's warp, then its partner's (whose failure only leaves out
             // what it would have filled in).
             let (mut rect, mut partner_drawn): (Option<(u32, u32, u32, u32)>, bool) = (None, false);
-            while let Some(((_, impostor, is_partner, _), ready)) =
-                prewarps.next_if(|((j, _, _, _), _)| *j == k)
-            {
+            while let Some((warp, ready)) = prewarps.next_if(|(warp, _)| warp.object == k) {
+                let (impostor, is_partner) = (warp.impostor(), warp.partner);
                 if is_partner && rect.is_none() {
                     continue;
                 }
