@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use relief_client::manager::WarpSample;
 use relief_client::manager::policy::MAX_WARP_SAMPLES;
-use relief_core::camera::{Camera, MAX_FRAME_SIZE};
+use relief_core::camera::Camera;
 use relief_core::relief::ReliefTexture;
 use relief_core::scene::Scene;
 use relief_render::impostor::{Faces, Impostor};
@@ -23,7 +23,7 @@ use relief_render::impostor::{Faces, Impostor};
 /// The name of each sample's description in its directory.
 const WARP_JSON: &str = "warp.json";
 
-/// How far from unit length and right angles a saved camera's axes may be.
+/// How far a saved camera's axes may lie from those `Camera::look_at` makes of them.
 const AXIS_TOLERANCE: f32 = 1e-4;
 
 /// `warp.json`: all a pre-warp was given but the texture, and what it cost in the
@@ -154,20 +154,26 @@ pub fn read_sample(dir: &Path) -> Result<SavedWarp> {
             path.display()
         ),
     };
-    let [forward, right, up] = [file.forward, file.right, file.up].map(Vec3::from_array);
-    // (A camera's axes are unit vectors at right angles, to f32's rounding.)
-    let unit = |v: Vec3| (v.length() - 1.0).abs() < AXIS_TOLERANCE;
-    let square = |a: Vec3, b: Vec3| a.dot(b).abs() < AXIS_TOLERANCE;
-    let axes = [forward, right, up].into_iter().all(unit)
-        && square(forward, right)
-        && square(forward, up)
-        && square(right, up);
-    let finite = file.eye.iter().all(|v| v.is_finite()) && file.fov_y.is_finite();
-    let sized = (1..=MAX_FRAME_SIZE).contains(&file.width) && (1..=MAX_FRAME_SIZE).contains(&file.height);
-    let opens = file.fov_y > 0.0 && file.fov_y < std::f32::consts::PI;
-    if !(finite && axes && sized && opens) {
+    let (eye, [forward, right, up]) = (
+        DVec3::from_array(file.eye),
+        [file.forward, file.right, file.up].map(Vec3::from_array),
+    );
+    // A camera as `Camera::look_at` makes one from the saved eye, forward, up, field of
+    // view and size (its checks, its errors), whose axes the saved ones are to rounding:
+    // unit, square and right-handed. (The saved ones are kept, as the flight had them.)
+    let made = Camera::look_at(
+        eye,
+        eye + forward.as_dvec3(),
+        up,
+        file.fov_y.to_degrees(),
+        file.width,
+        file.height,
+    )
+    .with_context(|| format!("{}: the camera", path.display()))?;
+    let near = |a: Vec3, b: Vec3| a.distance(b) < AXIS_TOLERANCE;
+    if !(near(made.forward, forward) && near(made.right, right) && near(made.up, up)) {
         bail!(
-            "{}: the camera is not one a frame can have (a non-finite eye, axes not unit and square, a field of view outside (0, π), or a size outside 1..={MAX_FRAME_SIZE})",
+            "{}: the camera's axes are not unit, square and right-handed (not those of a camera looking along its forward with its up)",
             path.display()
         );
     }
@@ -178,7 +184,7 @@ pub fn read_sample(dir: &Path) -> Result<SavedWarp> {
         object: file.object,
         impostor: Impostor::new(texture).with_faces(faces),
         camera: Camera {
-            eye: DVec3::from_array(file.eye),
+            eye,
             forward,
             right,
             up,
