@@ -21,9 +21,10 @@
 //! whole pixel it lands in grows a silhouette by half a pixel on average where the
 //! pre-warp compresses the surface, at a curved object's rim.) A texel alone produces
 //! the pixel it lands in. Neighbours of different surfaces that part leave a crack
-//! between them, which the deeper of the two fills (`crack`). The column pass does
-//! the same with consecutive samples of a column. The variants differ in what reaches
-//! the column pass (table 8.1):
+//! between them, which the deeper of the two fills (`crack`) — but for the half beside
+//! the nearer where its surface rounds out of sight there (`Job::crack_fillers`). The
+//! column pass does the same with consecutive samples of a column. The variants differ
+//! in what reaches the column pass (table 8.1):
 //!
 //! - [`Variant::OneD`]: the row pass stores interpolated depth; the column pass computes
 //!   each sample's v' from it — interpolating what was already interpolated.
@@ -425,21 +426,23 @@ fn reach_behind<const FORWARDS: bool>(pos: f32, gap: f32, end: i64, mut put: imp
 
 /// Between the end of a run (last sample at `a`, its run's last span `last_gap`, NaN
 /// when alone) and the next sample `b`, of another surface and ahead in the visit:
-/// `put(pixel)` for each pixel neither reaches — centres past `a`'s reach and at least
-/// half a pixel before `b` (a run's first sample reaches at most half a pixel behind
-/// it). Visited as in [`between`], up to `end`. (Once a break: not inlined.)
+/// `put(pixel, beside_a)` for each pixel neither reaches — centres past `a`'s reach and
+/// at least half a pixel before `b` (a run's first sample reaches at most half a pixel
+/// behind it) — `beside_a` when its centre lies in the half of the way from `a` to `b`
+/// beside `a`. Visited as in [`between`], up to `end`. (Once a break: not inlined.)
 ///
 /// What shows there from this eye is what lies behind the nearer surface's edge,
 /// which the texture never saw: the caller draws the deeper of the two surfaces, as if
-/// it went on behind the nearer. Left empty, the sub-pixel parallax between a leaf's
-/// edge and the leaves behind it cracked the tree at every edge (its texture shown
-/// 0.2 % of its distance aside: 3–4 dB lost), and wider openings showed the sky
-/// through it. Filled, at any width — a partner texture, drawn behind, showed less
-/// there (the demo's median gap to geometry, 2–4 runs each: the tree −9.5 dB left
-/// empty, −7.4 to −7.6 filled up to 2 pixels wide, −5.2 to −5.5 up to 16, −4.8 to −5.2
-/// at any width; the knot −0.9 to −1.3, −0.3 to −0.7, −0.2 to −0.5, −0.1 to −0.3).
+/// it went on behind the nearer ([`Job::crack_fillers`]). Left empty, the sub-pixel
+/// parallax between a leaf's edge and the leaves behind it cracked the tree at every
+/// edge (its texture shown 0.2 % of its distance aside: 3–4 dB lost), and wider
+/// openings showed the sky through it. Filled, at any width — a partner texture, drawn
+/// behind, showed less there (the demo's median gap to geometry, 2–4 runs each: the
+/// tree −9.5 dB left empty, −7.4 to −7.6 filled up to 2 pixels wide, −5.2 to −5.5 up
+/// to 16, −4.8 to −5.2 at any width; the knot −0.9 to −1.3, −0.3 to −0.7, −0.2 to
+/// −0.5, −0.1 to −0.3).
 #[inline(never)]
-fn crack<const FORWARDS: bool>(a: f32, last_gap: f32, b: f32, end: i64, mut put: impl FnMut(i64)) {
+fn crack<const FORWARDS: bool>(a: f32, last_gap: f32, b: f32, end: i64, mut put: impl FnMut(i64, bool)) {
     let sign = if FORWARDS { 1.0 } else { -1.0 };
     // A sample alone draws the pixel it lands in; a run's end half its last span.
     let from = if last_gap.is_nan() {
@@ -447,7 +450,30 @@ fn crack<const FORWARDS: bool>(a: f32, last_gap: f32, b: f32, end: i64, mut put:
     } else {
         a + half_gap(last_gap)
     };
-    between::<FORWARDS>(from, b - 0.5 * sign, end, |x, _| put(x));
+    let middle = 0.5 * (a + b);
+    between::<FORWARDS>(from, b - 0.5 * sign, end, |x, _| {
+        put(x, (x as f32 + 0.5 - middle) * sign <= 0.0)
+    });
+}
+
+/// How steeply a sample's surface must run away from the texture's plane, towards a
+/// crack beside it, for the sample to count as lying at its surface's outline (depth per
+/// unit across: 2, the surface turned 63° or more from the texture's rays); see
+/// [`Job::crack_fillers`].
+const OUTLINE_SLOPE: f32 = 2.0;
+
+/// Whether the surface of a sample with `attributes` runs away from the plane of a
+/// texture whose rays go along `f` at [`OUTLINE_SLOPE`] or more towards `toward` (a
+/// unit direction in the plane): rounding out of the texture's sight that way. (Its
+/// depth rises by `(n·toward)/|n·f|` per unit along `toward`, `n` its normal turned to
+/// face the rays: a sheet shows either side.)
+#[inline]
+fn turns_away(attributes: Attributes, toward: Vec3, f: Vec3) -> bool {
+    let [_, _, _, x, y, z, ..] = attributes.0.to_le_bytes();
+    // (The encoded normal, `n·127.5 + 127.5`: its direction is enough.)
+    let n = Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5);
+    let n = if n.dot(f) > 0.0 { -n } else { n };
+    n.dot(toward) >= OUTLINE_SLOPE * -n.dot(f)
 }
 
 /// The crack between a column's last sample and `cell`, of another surface in the next
@@ -459,15 +485,16 @@ fn crack<const FORWARDS: bool>(a: f32, last_gap: f32, b: f32, end: i64, mut put:
 /// the pre-warp: `#[inline]` is a hint, so time both again when the column step grows.)
 #[inline]
 fn fill_column_crack<const DOWN: bool>(
+    job: &Job,
     column: &Column,
     cell: &Cell,
     column_index: usize,
     end: i64,
     out: &mut Output,
 ) {
-    let filler = column.last.deeper(*cell);
-    crack::<DOWN>(column.last.v, column.last_gap, cell.v, end, |y| {
-        out.put(column_index, y, &filler)
+    let fillers = job.crack_fillers(&column.last, cell, if DOWN { job.axes.b } else { -job.axes.b });
+    crack::<DOWN>(column.last.v, column.last_gap, cell.v, end, |y, beside_last| {
+        out.put(column_index, y, &fillers[usize::from(!beside_last)])
     });
 }
 
@@ -686,6 +713,17 @@ struct Job<'a> {
     /// Whether the interleaved variant takes texels eight at a time where it can
     /// ([`lanes`]); off only to test that it makes the same image.
     lanes: bool,
+    /// The texture's axes, to tell which way a sample's surface runs.
+    axes: Axes,
+}
+
+/// A texture's unit axes: `a` along its rows, `b` down its columns, `f` along its rays
+/// (a perspective texture's central one).
+#[derive(Debug, Clone, Copy)]
+struct Axes {
+    a: Vec3,
+    b: Vec3,
+    f: Vec3,
 }
 
 impl Job<'_> {
@@ -707,6 +745,40 @@ impl Job<'_> {
         } else {
             self.row_half::<true>(j, before, interpolate, sink, samples);
             self.row_half::<false>(j, after, interpolate, sink, samples);
+        }
+    }
+
+    /// What fills a crack between `a`, the end of a run, and `b`, the next sample, of
+    /// another surface, the visit going `toward` (a unit direction in the texture's
+    /// plane): the pixels of the half beside `a`, then those of the half beside `b`
+    /// ([`crack`]). The deeper of the two, as a rule. But where the nearer one's surface
+    /// rounds out of the texture's sight towards the other ([`turns_away`]: an outline,
+    /// as where one loop of the knot passes in front of another), that surface goes on
+    /// past its last sample, unsampled, and an eye turned to look round it sees it there
+    /// before what lay behind it: the nearer fills the half beside it. (Where its
+    /// outline lies between the two samples the texture cannot tell; halfway is the
+    /// middle of the guesses. The deeper alone drew the loop in front thinned along its
+    /// outline by up to 3 pixels, and toothed, seen 9.5° from the texture's eye.)
+    #[inline]
+    fn crack_fillers(&self, a: &Cell, b: &Cell, toward: Vec3) -> [Cell; 2] {
+        let deeper = a.deeper(*b);
+        let (nearer, toward) = if b.depth > a.depth {
+            (a, toward)
+        } else {
+            (b, -toward)
+        };
+        if !turns_away(nearer.attributes, toward, self.axes.f) {
+            return [deeper; 2];
+        }
+        let nearer = Cell {
+            down: false,
+            filler: true,
+            ..*nearer
+        };
+        if b.depth > a.depth {
+            [nearer, deeper]
+        } else {
+            [deeper, nearer]
         }
     }
 
@@ -914,8 +986,11 @@ impl Job<'_> {
                     close(&previous, last_gap, sink);
                     // (`in_run`: the previous texel, of another surface or folded
                     // behind this one.)
-                    let filler = previous.cell.deeper(sample.cell);
-                    crack::<RIGHT>(previous.u, last_gap, sample.u, end, |x| sink.emit(x, filler));
+                    let toward = if RIGHT { self.axes.a } else { -self.axes.a };
+                    let fillers = self.crack_fillers(&previous.cell, &sample.cell, toward);
+                    crack::<RIGHT>(previous.u, last_gap, sample.u, end, |x, beside_previous| {
+                        sink.emit(x, fillers[usize::from(!beside_previous)])
+                    });
                 }
                 last_gap = f32::NAN;
             }
@@ -973,7 +1048,7 @@ impl Job<'_> {
         } else {
             column.close::<DOWN>(column_index, out);
             if adjacent {
-                fill_column_crack::<DOWN>(column, &cell, column_index, end, out);
+                fill_column_crack::<DOWN>(self, column, &cell, column_index, end, out);
             }
             f32::NAN
         };
@@ -1250,6 +1325,11 @@ fn prewarp_with(
         columns: width,
         row_halves,
         lanes,
+        axes: Axes {
+            a: c.a.normalize_or_zero(),
+            b: c.b.normalize_or_zero(),
+            f: c.f,
+        },
     };
     // Output rows whose centres lie above the epipole belong to the upper half.
     let split = ((params.epipole.y - 0.5).ceil() as i64 - v0 as i64).clamp(0, height as i64) as usize;
@@ -1404,6 +1484,74 @@ mod tests {
             (holes, smeared),
             (0, 0),
             "holes, square texels outside the square"
+        );
+    }
+
+    /// Where the nearer surface's last samples run out of the texture's sight towards the
+    /// crack — an outline, as of a cylinder standing over the plane — the nearer fills
+    /// the half of the crack beside it, the plane the rest. The square of the test above
+    /// with its left column's normals turned 70° outwards: along that edge, every pixel
+    /// of the crack between the square's last sample and the plane's first shows the
+    /// square in the half beside the square and the plane in the other (fails with the
+    /// deeper filling it all, or the nearer).
+    #[test]
+    fn outline_cracks_show_the_nearer_surface_going_on_round() {
+        use crate::fixtures::{EYE, PLANE, square_over_plane};
+        use relief_core::relief::encode_normal_rgb8;
+        let n = 32;
+        let (plane, square) = (PLANE, ([0, 255, 0], 40));
+        let mut texture = square_over_plane(n, 10..22, square);
+        let c = texture.camera;
+        let outward =
+            (-c.f * 70f32.to_radians().cos() - c.a.normalize() * 70f32.to_radians().sin()).normalize();
+        for j in 10..22 {
+            let k = texture.index(10, j);
+            texture.normal[k] = encode_normal_rgb8(outward);
+        }
+        let impostor = Impostor::new(texture);
+        // The eye moved towards the plane's lower left until the plane parts from the
+        // square's left edge by three pixels or more.
+        let landing = |params: &WarpParams, u: f32, v: f32, level: u16| params.warp(u, v, level as usize).x;
+        let params = (1..200)
+            .map(|step| {
+                let moved = EYE + Vec3::new(-1.0, -1.0, 0.0) * 0.1 * step as f32;
+                WarpParams::new(&impostor.texture, moved).expect("params")
+            })
+            .find(|p| landing(p, 10.5, 16.0, square.1) - landing(p, 9.5, 16.0, plane.1) > 4.0)
+            .expect("an eye that opens a crack");
+        let image = prewarp(&impostor, &params, Variant::Interleaved);
+        let (mut beside_square, mut beside_plane) = (0, 0);
+        for j in 12..20 {
+            let v = j as f32 + 0.5;
+            let (plane_at, square_at) = (
+                landing(&params, 9.5, v, plane.1),
+                landing(&params, 10.5, v, square.1),
+            );
+            let middle = 0.5 * (plane_at + square_at);
+            let y = params.warp(10.5, v, square.1 as usize).y.floor() as i32 - image.v0;
+            for x in 0..image.width as i32 {
+                let centre = (image.u0 + x) as f32 + 0.5;
+                // (Inside the crack, past both samples' reach, and not on the middle.)
+                if centre <= plane_at + 0.5 || centre >= square_at - 0.5 || (centre - middle).abs() < 0.01 {
+                    continue;
+                }
+                let albedo = image.texels[(y * image.width as i32 + x) as usize]
+                    .attributes
+                    .albedo();
+                let want = if centre > middle { square.0 } else { plane.0 };
+                assert_eq!(
+                    albedo, want,
+                    "row {j}, pixel centre {centre}: plane at {plane_at}, square at {square_at}"
+                );
+                match centre > middle {
+                    true => beside_square += 1,
+                    false => beside_plane += 1,
+                }
+            }
+        }
+        assert!(
+            beside_square > 0 && beside_plane > 0,
+            "{beside_square} {beside_plane}"
         );
     }
 
