@@ -21,7 +21,7 @@
 //! whole pixel it lands in grows a silhouette by half a pixel on average where the
 //! pre-warp compresses the surface, at a curved object's rim.) A texel alone produces
 //! the pixel it lands in. Neighbours of different surfaces that part leave a crack
-//! between them, which the deeper of the two fills (`crack`) — but for the half beside
+//! between them, which the deeper of the two fills (`Job::crack`) — but for the half beside
 //! the nearer where its surface rounds out of sight there (`Job::crack_fillers`). The
 //! column pass does the same with consecutive samples of a column. The variants differ
 //! in what reaches the column pass (table 8.1):
@@ -296,7 +296,7 @@ struct RowSample {
 
 /// What the column pass reads of a sample: its v' (final, or where its row is before
 /// the column pass), displacement, attributes and link downwards; and whether the row
-/// pass made it to fill a crack ([`crack`]), linked to no other row.
+/// pass made it to fill a crack ([`Job::crack`]), linked to no other row.
 #[derive(Debug, Clone, Copy)]
 struct Cell {
     v: f32,
@@ -424,38 +424,6 @@ fn reach_behind<const FORWARDS: bool>(pos: f32, gap: f32, end: i64, mut put: imp
     between::<FORWARDS>(pos - half_gap(gap), pos, end, |x, _| put(x));
 }
 
-/// Between the end of a run (last sample at `a`, its run's last span `last_gap`, NaN
-/// when alone) and the next sample `b`, of another surface and ahead in the visit:
-/// `put(pixel, beside_a)` for each pixel neither reaches — centres past `a`'s reach and
-/// at least half a pixel before `b` (a run's first sample reaches at most half a pixel
-/// behind it) — `beside_a` when its centre lies in the half of the way from `a` to `b`
-/// beside `a`. Visited as in [`between`], up to `end`. (Once a break: not inlined.)
-///
-/// What shows there from this eye is what lies behind the nearer surface's edge,
-/// which the texture never saw: the caller draws the deeper of the two surfaces, as if
-/// it went on behind the nearer ([`Job::crack_fillers`]). Left empty, the sub-pixel
-/// parallax between a leaf's edge and the leaves behind it cracked the tree at every
-/// edge (its texture shown 0.2 % of its distance aside: 3–4 dB lost), and wider
-/// openings showed the sky through it. Filled, at any width — a partner texture, drawn
-/// behind, showed less there (the demo's median gap to geometry, 2–4 runs each: the
-/// tree −9.5 dB left empty, −7.4 to −7.6 filled up to 2 pixels wide, −5.2 to −5.5 up
-/// to 16, −4.8 to −5.2 at any width; the knot −0.9 to −1.3, −0.3 to −0.7, −0.2 to
-/// −0.5, −0.1 to −0.3).
-#[inline(never)]
-fn crack<const FORWARDS: bool>(a: f32, last_gap: f32, b: f32, end: i64, mut put: impl FnMut(i64, bool)) {
-    let sign = if FORWARDS { 1.0 } else { -1.0 };
-    // A sample alone draws the pixel it lands in; a run's end half its last span.
-    let from = if last_gap.is_nan() {
-        a.floor() + 0.5
-    } else {
-        a + half_gap(last_gap)
-    };
-    let middle = 0.5 * (a + b);
-    between::<FORWARDS>(from, b - 0.5 * sign, end, |x, _| {
-        put(x, (x as f32 + 0.5 - middle) * sign <= 0.0)
-    });
-}
-
 /// How steeply a sample's surface must run away from the texture's plane, towards a
 /// crack beside it, for the sample to count as lying at its surface's outline (depth per
 /// unit across: 2, the surface turned 63° or more from the texture's rays); see
@@ -477,7 +445,7 @@ fn turns_away(attributes: Attributes, toward: Vec3, f: Vec3) -> bool {
 }
 
 /// The crack between a column's last sample and `cell`, of another surface in the next
-/// row, filled with the deeper ([`crack`], itself out of line). (Inlined into the
+/// row ([`Job::crack`], itself out of line). (Inlined into the
 /// column step, though it runs as often as `crack`: called, it cost the pre-warp 4–20 %
 /// of its time for about the same instructions — most where surfaces break often, as
 /// leaves do: the tree's 256² texture at 5°, one core, 0.99 → 0.88 ms; the knot's 0.62
@@ -492,10 +460,15 @@ fn fill_column_crack<const DOWN: bool>(
     end: i64,
     out: &mut Output,
 ) {
-    let fillers = job.crack_fillers(&column.last, cell, if DOWN { job.axes.b } else { -job.axes.b });
-    crack::<DOWN>(column.last.v, column.last_gap, cell.v, end, |y, beside_last| {
-        out.put(column_index, y, &fillers[usize::from(!beside_last)])
-    });
+    let last = (&column.last, column.last.v);
+    job.crack::<DOWN>(
+        job.axes.b,
+        last,
+        column.last_gap,
+        (cell, cell.v),
+        end,
+        |y, filler| out.put(column_index, y, filler),
+    );
 }
 
 /// The last pixel of `pixels` met visiting forwards (`FORWARDS`) or backwards, in
@@ -715,6 +688,9 @@ struct Job<'a> {
     lanes: bool,
     /// The texture's axes, to tell which way a sample's surface runs.
     axes: Axes,
+    /// Whether its surfaces are closed ([`Faces::Front`]), going on round past their
+    /// outlines ([`Job::crack_fillers`]): a sheet's edge, a leaf's, may be where it ends.
+    closed: bool,
 }
 
 /// A texture's unit axes: `a` along its rows, `b` down its columns, `f` along its rays
@@ -748,12 +724,62 @@ impl Job<'_> {
         }
     }
 
+    /// Between the end of a run (last sample `a`, landed at `a_at`, its run's last span
+    /// `last_gap`, NaN when alone) and the next sample `b`, of another surface and ahead in
+    /// the visit along `axis` (the texture's unit axis the visit runs along, forwards when
+    /// `FORWARDS`): `put(pixel, filler)` for each pixel neither reaches — centres past `a`'s
+    /// reach and at least half a pixel before `b` (a run's first sample reaches at most half
+    /// a pixel behind it). Visited as in [`between`], up to `end`. (Once a break: not
+    /// inlined.)
+    ///
+    /// What shows there from this eye is what lies behind the nearer surface's edge,
+    /// which the texture never saw: it is drawn with the deeper of the two surfaces, as if
+    /// that went on behind the nearer, or in part with the nearer going on round past its
+    /// outline ([`Job::crack_fillers`]). Left empty, the sub-pixel parallax between a
+    /// leaf's edge and the leaves behind it cracked the tree at every edge (its texture
+    /// shown 0.2 % of its distance aside: 3–4 dB lost), and wider openings showed the sky
+    /// through it. Filled, at any width — a partner texture, drawn
+    /// behind, showed less there (the demo's median gap to geometry, 2–4 runs each: the
+    /// tree −9.5 dB left empty, −7.4 to −7.6 filled up to 2 pixels wide, −5.2 to −5.5 up
+    /// to 16, −4.8 to −5.2 at any width; the knot −0.9 to −1.3, −0.3 to −0.7, −0.2 to
+    /// −0.5, −0.1 to −0.3).
+    #[inline(never)]
+    fn crack<const FORWARDS: bool>(
+        &self,
+        axis: Vec3,
+        (a, a_at): (&Cell, f32),
+        last_gap: f32,
+        (b, b_at): (&Cell, f32),
+        end: i64,
+        mut put: impl FnMut(i64, &Cell),
+    ) {
+        let sign = if FORWARDS { 1.0 } else { -1.0 };
+        // A sample alone draws the pixel it lands in; a run's end half its last span.
+        let from = if last_gap.is_nan() {
+            a_at.floor() + 0.5
+        } else {
+            a_at + half_gap(last_gap)
+        };
+        let middle = 0.5 * (a_at + b_at);
+        // (Worked out once a pixel needs them: most cracks have none.)
+        let mut fillers = None;
+        between::<FORWARDS>(from, b_at - 0.5 * sign, end, |x, _| {
+            let [beside_a, beside_b] = fillers.get_or_insert_with(|| self.crack_fillers(a, b, axis * sign));
+            let beside = if (x as f32 + 0.5 - middle) * sign <= 0.0 {
+                beside_a
+            } else {
+                beside_b
+            };
+            put(x, beside)
+        });
+    }
+
     /// What fills a crack between `a`, the end of a run, and `b`, the next sample, of
     /// another surface, the visit going `toward` (a unit direction in the texture's
     /// plane): the pixels of the half beside `a`, then those of the half beside `b`
-    /// ([`crack`]). The deeper of the two, as a rule. But where the nearer one's surface
-    /// rounds out of the texture's sight towards the other ([`turns_away`]: an outline,
-    /// as where one loop of the knot passes in front of another), that surface goes on
+    /// ([`Job::crack`]). The deeper of the two, as a rule. But where the nearer one's surface,
+    /// closed, rounds out of the texture's sight towards the other ([`turns_away`]: an
+    /// outline, as where one loop of the knot passes in front of another), it goes on
     /// past its last sample, unsampled, and an eye turned to look round it sees it there
     /// before what lay behind it: the nearer fills the half beside it. (Where its
     /// outline lies between the two samples the texture cannot tell; halfway is the
@@ -767,12 +793,15 @@ impl Job<'_> {
         } else {
             (b, -toward)
         };
-        if !turns_away(nearer.attributes, toward, self.axes.f) {
+        if !self.closed || !turns_away(nearer.attributes, toward, self.axes.f) {
             return [deeper; 2];
         }
+        // (At the deeper one's height, as the rest of the crack: at the nearer's own, a
+        // crack's pixels parted from their columns' others and left holes.)
         let nearer = Cell {
             down: false,
             filler: true,
+            v: deeper.v,
             ..*nearer
         };
         if b.depth > a.depth {
@@ -986,10 +1015,9 @@ impl Job<'_> {
                     close(&previous, last_gap, sink);
                     // (`in_run`: the previous texel, of another surface or folded
                     // behind this one.)
-                    let toward = if RIGHT { self.axes.a } else { -self.axes.a };
-                    let fillers = self.crack_fillers(&previous.cell, &sample.cell, toward);
-                    crack::<RIGHT>(previous.u, last_gap, sample.u, end, |x, beside_previous| {
-                        sink.emit(x, fillers[usize::from(!beside_previous)])
+                    let (a, b) = ((&previous.cell, previous.u), (&sample.cell, sample.u));
+                    self.crack::<RIGHT>(self.axes.a, a, last_gap, b, end, |x, filler| {
+                        sink.emit(x, *filler)
                     });
                 }
                 last_gap = f32::NAN;
@@ -1330,6 +1358,7 @@ fn prewarp_with(
             b: c.b.normalize_or_zero(),
             f: c.f,
         },
+        closed: impostor.faces == Faces::Front,
     };
     // Output rows whose centres lie above the epipole belong to the upper half.
     let split = ((params.epipole.y - 0.5).ceil() as i64 - v0 as i64).clamp(0, height as i64) as usize;
@@ -1487,15 +1516,16 @@ mod tests {
         );
     }
 
-    /// Where the nearer surface's last samples run out of the texture's sight towards the
+    /// Where a closed surface's last samples run out of the texture's sight towards the
     /// crack — an outline, as of a cylinder standing over the plane — the nearer fills
-    /// the half of the crack beside it, the plane the rest. The square of the test above
-    /// with its left column's normals turned 70° outwards: along that edge, every pixel
-    /// of the crack between the square's last sample and the plane's first shows the
-    /// square in the half beside the square and the plane in the other (fails with the
-    /// deeper filling it all, or the nearer).
+    /// the half of the crack beside it, the plane the rest; a sheet's edge may be where
+    /// it ends, and the plane fills it all. The square of the test above with its left
+    /// column's normals turned 70° outwards: along that edge, every pixel of the crack
+    /// between the square's last sample and the plane's first shows the square in the
+    /// half beside the square (closed) and the plane in the other (fails with the
+    /// deeper filling it all, or the nearer), and the plane throughout as a sheet.
     #[test]
-    fn outline_cracks_show_the_nearer_surface_going_on_round() {
+    fn outline_cracks_show_a_closed_surface_going_on_round() {
         use crate::fixtures::{EYE, PLANE, square_over_plane};
         use relief_core::relief::encode_normal_rgb8;
         let n = 32;
@@ -1508,51 +1538,61 @@ mod tests {
             let k = texture.index(10, j);
             texture.normal[k] = encode_normal_rgb8(outward);
         }
-        let impostor = Impostor::new(texture);
+        let sheet = Impostor::new(texture);
         // The eye moved towards the plane's lower left until the plane parts from the
         // square's left edge by three pixels or more.
         let landing = |params: &WarpParams, u: f32, v: f32, level: u16| params.warp(u, v, level as usize).x;
         let params = (1..200)
             .map(|step| {
                 let moved = EYE + Vec3::new(-1.0, -1.0, 0.0) * 0.1 * step as f32;
-                WarpParams::new(&impostor.texture, moved).expect("params")
+                WarpParams::new(&sheet.texture, moved).expect("params")
             })
             .find(|p| landing(p, 10.5, 16.0, square.1) - landing(p, 9.5, 16.0, plane.1) > 4.0)
             .expect("an eye that opens a crack");
-        let image = prewarp(&impostor, &params, Variant::Interleaved);
-        let (mut beside_square, mut beside_plane) = (0, 0);
-        for j in 12..20 {
-            let v = j as f32 + 0.5;
-            let (plane_at, square_at) = (
-                landing(&params, 9.5, v, plane.1),
-                landing(&params, 10.5, v, square.1),
-            );
-            let middle = 0.5 * (plane_at + square_at);
-            let y = params.warp(10.5, v, square.1 as usize).y.floor() as i32 - image.v0;
-            for x in 0..image.width as i32 {
-                let centre = (image.u0 + x) as f32 + 0.5;
-                // (Inside the crack, past both samples' reach, and not on the middle.)
-                if centre <= plane_at + 0.5 || centre >= square_at - 0.5 || (centre - middle).abs() < 0.01 {
-                    continue;
-                }
-                let albedo = image.texels[(y * image.width as i32 + x) as usize]
-                    .attributes
-                    .albedo();
-                let want = if centre > middle { square.0 } else { plane.0 };
-                assert_eq!(
-                    albedo, want,
-                    "row {j}, pixel centre {centre}: plane at {plane_at}, square at {square_at}"
+        for closed in [true, false] {
+            let impostor = match closed {
+                true => sheet.clone().with_faces(Faces::Front),
+                false => sheet.clone(),
+            };
+            let image = prewarp(&impostor, &params, Variant::Interleaved);
+            let (mut beside_square, mut beside_plane) = (0, 0);
+            for j in 12..20 {
+                let v = j as f32 + 0.5;
+                let (plane_at, square_at) = (
+                    landing(&params, 9.5, v, plane.1),
+                    landing(&params, 10.5, v, square.1),
                 );
-                match centre > middle {
-                    true => beside_square += 1,
-                    false => beside_plane += 1,
+                let middle = 0.5 * (plane_at + square_at);
+                // (A crack's pixels land at the deeper one's height.)
+                let y = params.warp(9.5, v, plane.1 as usize).y.floor() as i32 - image.v0;
+                for x in 0..image.width as i32 {
+                    let centre = (image.u0 + x) as f32 + 0.5;
+                    // (Inside the crack, past both samples' reach, and not on the middle.)
+                    if centre <= plane_at + 0.5 || centre >= square_at - 0.5 || (centre - middle).abs() < 0.01
+                    {
+                        continue;
+                    }
+                    let albedo = image.texels[(y * image.width as i32 + x) as usize]
+                        .attributes
+                        .albedo();
+                    let want = if closed && centre > middle {
+                        square.0
+                    } else {
+                        plane.0
+                    };
+                    let at = format!("closed {closed}, row {j}, pixel centre {centre}");
+                    assert_eq!(albedo, want, "{at}: plane at {plane_at}, square at {square_at}");
+                    match centre > middle {
+                        true => beside_square += 1,
+                        false => beside_plane += 1,
+                    }
                 }
             }
+            assert!(
+                beside_square > 0 && beside_plane > 0,
+                "{beside_square} {beside_plane}"
+            );
         }
-        assert!(
-            beside_square > 0 && beside_plane > 0,
-            "{beside_square} {beside_plane}"
-        );
     }
 
     /// A packed texel gives back its table entry, its links and its attribute bytes,
