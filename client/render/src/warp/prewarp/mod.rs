@@ -21,10 +21,10 @@
 //! whole pixel it lands in grows a silhouette by half a pixel on average where the
 //! pre-warp compresses the surface, at a curved object's rim.) A texel alone produces
 //! the pixel it lands in. Neighbours of different surfaces that part leave a crack
-//! between them, which the deeper of the two fills (`Job::crack`) — but for the half beside
-//! the nearer where its surface rounds out of sight there (`Job::crack_fillers`). The
-//! column pass does the same with consecutive samples of a column. The variants differ
-//! in what reaches the column pass (table 8.1):
+//! between them, which the deeper of the two fills (`Job::crack`) — but for the half
+//! beside the nearer where its surface, closed, rounds out of sight there
+//! (`Job::crack_fillers`). The column pass does the same with consecutive samples of a
+//! column. The variants differ in what reaches the column pass (table 8.1):
 //!
 //! - [`Variant::OneD`]: the row pass stores interpolated depth; the column pass computes
 //!   each sample's v' from it — interpolating what was already interpolated.
@@ -283,6 +283,14 @@ impl Attributes {
         let [_, _, _, x, y, z, ..] = self.0.to_le_bytes();
         [x, y, z]
     }
+
+    /// The encoded normal's direction, not of unit length: encoded `n·127.5 + 127.5`, it
+    /// is `n·127.5`, and the direction is all its tests need.
+    #[inline(always)]
+    fn normal_direction(self) -> Vec3 {
+        let [x, y, z] = self.normal();
+        Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5)
+    }
 }
 
 /// A texel in the row pass: its source u, where it lands along the row (u'), and what
@@ -425,8 +433,10 @@ fn reach_behind<const FORWARDS: bool>(pos: f32, gap: f32, end: i64, mut put: imp
 }
 
 /// How steeply a sample's surface must run away from the texture's plane, towards a
-/// crack beside it, for the sample to count as lying at its surface's outline (depth per
-/// unit across: 2, the surface turned 63° or more from the texture's rays); see
+/// crack beside it, for the sample to count as lying at its surface's outline: depth per
+/// unit across, 2 — its normal 63° or more from the texture's rays. (The knot's last
+/// samples before an outline lie 10–15° short of grazing; a surface seen more nearly
+/// face-on ends at an edge, where what goes on round is another face.) See
 /// [`Job::crack_fillers`].
 const OUTLINE_SLOPE: f32 = 2.0;
 
@@ -434,19 +444,19 @@ const OUTLINE_SLOPE: f32 = 2.0;
 /// texture whose rays go along `f` at [`OUTLINE_SLOPE`] or more towards `toward` (a
 /// unit direction in the plane): rounding out of the texture's sight that way. (Its
 /// depth rises by `(n·toward)/|n·f|` per unit along `toward`, `n` its normal turned to
-/// face the rays: a sheet shows either side.)
+/// face the rays, as an encoded normal at a rim, rounded, may not. `f` is the rays'
+/// direction of an orthographic texture, a closed surface's kind: a perspective one's
+/// part from it.)
 #[inline]
 fn turns_away(attributes: Attributes, toward: Vec3, f: Vec3) -> bool {
-    let [_, _, _, x, y, z, ..] = attributes.0.to_le_bytes();
-    // (The encoded normal, `n·127.5 + 127.5`: its direction is enough.)
-    let n = Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5);
+    let n = attributes.normal_direction();
     let n = if n.dot(f) > 0.0 { -n } else { n };
     n.dot(toward) >= OUTLINE_SLOPE * -n.dot(f)
 }
 
 /// The crack between a column's last sample and `cell`, of another surface in the next
-/// row ([`Job::crack`], itself out of line). (Inlined into the
-/// column step, though it runs as often as `crack`: called, it cost the pre-warp 4–20 %
+/// row ([`Job::crack`], itself out of line). (Inlined into the column step, though it
+/// runs as often as [`Job::crack`]: called, it cost the pre-warp 4–20 %
 /// of its time for about the same instructions — most where surfaces break often, as
 /// leaves do: the tree's 256² texture at 5°, one core, 0.99 → 0.88 ms; the knot's 0.62
 /// → 0.58. Once, inlined, it made the row pass's span step a call instead and slowed
@@ -788,11 +798,8 @@ impl Job<'_> {
     #[inline]
     fn crack_fillers(&self, a: &Cell, b: &Cell, toward: Vec3) -> [Cell; 2] {
         let deeper = a.deeper(*b);
-        let (nearer, toward) = if b.depth > a.depth {
-            (a, toward)
-        } else {
-            (b, -toward)
-        };
+        let a_nearer = b.depth > a.depth;
+        let (nearer, toward) = if a_nearer { (a, toward) } else { (b, -toward) };
         if !self.closed || !turns_away(nearer.attributes, toward, self.axes.f) {
             return [deeper; 2];
         }
@@ -804,7 +811,7 @@ impl Job<'_> {
             v: deeper.v,
             ..*nearer
         };
-        if b.depth > a.depth {
+        if a_nearer {
             [nearer, deeper]
         } else {
             [deeper, nearer]
@@ -862,10 +869,7 @@ impl Job<'_> {
             facing.is_some_and(|f| {
                 let u = i as f32 + 0.5;
                 let to_eye = f.row_eye - f.a * u - (f.ray + f.ray_step * u) * p.depth[q];
-                let [_, _, _, x, y, z, ..] = texel.to_le_bytes();
-                // (The encoded normal, `n·127.5 + 127.5`: its direction is enough.)
-                let n = Vec3::new(x as f32, y as f32, z as f32) - Vec3::splat(127.5);
-                n.dot(to_eye) < 0.0
+                Attributes(texel).normal_direction().dot(to_eye) < 0.0
             })
         };
         let n = texels.len();
@@ -1155,8 +1159,11 @@ impl Job<'_> {
                 let Some(cell) = intermediate[seq * self.columns + xi] else {
                     continue;
                 };
+                // (A crack's filler lands where the row pass put it, at the height of the
+                // surface behind: a nearer one's own depth would not give it.)
                 let v = match self.variant {
                     Variant::Asymmetric => cell.v,
+                    _ if cell.filler => cell.v,
                     _ => self.params.warp_v(j as f32 + 0.5, cell.depth),
                 };
                 let x = xi as i64 + self.u0;
@@ -1517,81 +1524,114 @@ mod tests {
     }
 
     /// Where a closed surface's last samples run out of the texture's sight towards the
-    /// crack — an outline, as of a cylinder standing over the plane — the nearer fills
-    /// the half of the crack beside it, the plane the rest; a sheet's edge may be where
-    /// it ends, and the plane fills it all. The square of the test above with its left
-    /// column's normals turned 70° outwards: along that edge, every pixel of the crack
-    /// between the square's last sample and the plane's first shows the square in the
-    /// half beside the square (closed) and the plane in the other (fails with the
-    /// deeper filling it all, or the nearer), and the plane throughout as a sheet.
+    /// crack — an outline, as of a box with rounded edges standing over the plane — the
+    /// nearer fills the half of the crack beside it, the plane the rest; a sheet's edge
+    /// may be where it ends, and the plane fills it all. The square of the test above
+    /// with one edge's normals turned 70° outwards, each edge in turn (the row pass's
+    /// cracks either way, the column pass's either way), the eye moved until the plane
+    /// parts from that edge by 5 pixels or more: every pixel of the crack between the
+    /// square's last sample and the plane's first shows the square in the half beside
+    /// the square (closed) and the plane in the other, and the plane throughout as a
+    /// sheet (fails with the deeper filling it all, the nearer, or a crack's pixels at
+    /// the nearer's height) — interleaved, and with the column pass apart (`OneD`).
     #[test]
     fn outline_cracks_show_a_closed_surface_going_on_round() {
         use crate::fixtures::{EYE, PLANE, square_over_plane};
         use relief_core::relief::encode_normal_rgb8;
-        let n = 32;
         let (plane, square) = (PLANE, ([0, 255, 0], 40));
-        let mut texture = square_over_plane(n, 10..22, square);
-        let c = texture.camera;
-        let outward =
-            (-c.f * 70f32.to_radians().cos() - c.a.normalize() * 70f32.to_radians().sin()).normalize();
-        for j in 10..22 {
-            let k = texture.index(10, j);
-            texture.normal[k] = encode_normal_rgb8(outward);
-        }
-        let sheet = Impostor::new(texture);
-        // The eye moved towards the plane's lower left until the plane parts from the
-        // square's left edge by three pixels or more.
-        let landing = |params: &WarpParams, u: f32, v: f32, level: u16| params.warp(u, v, level as usize).x;
-        let params = (1..200)
-            .map(|step| {
-                let moved = EYE + Vec3::new(-1.0, -1.0, 0.0) * 0.1 * step as f32;
-                WarpParams::new(&sheet.texture, moved).expect("params")
-            })
-            .find(|p| landing(p, 10.5, 16.0, square.1) - landing(p, 9.5, 16.0, plane.1) > 4.0)
-            .expect("an eye that opens a crack");
-        for closed in [true, false] {
-            let impostor = match closed {
-                true => sheet.clone().with_faces(Faces::Front),
-                false => sheet.clone(),
+        // Each edge: a texel of it at `along` = 16, the step outwards to the plane.
+        for (edge, out) in [
+            ("left", (-1, 0)),
+            ("right", (1, 0)),
+            ("top", (0, -1)),
+            ("bottom", (0, 1)),
+        ] {
+            let mut texture = square_over_plane(32, 10..22, square);
+            let c = texture.camera;
+            let outwards = (c.a.normalize() * out.0 as f32 + c.b.normalize() * out.1 as f32).normalize();
+            let turned = (-c.f * 70f32.to_radians().cos() + outwards * 70f32.to_radians().sin()).normalize();
+            // The edge's texel `along` its length (clear of the corners).
+            let texel = |along: i32| match out {
+                (0, dj) => (along, if dj < 0 { 10 } else { 21 }),
+                (di, _) => (if di < 0 { 10 } else { 21 }, along),
             };
-            let image = prewarp(&impostor, &params, Variant::Interleaved);
-            let (mut beside_square, mut beside_plane) = (0, 0);
-            for j in 12..20 {
-                let v = j as f32 + 0.5;
-                let (plane_at, square_at) = (
-                    landing(&params, 9.5, v, plane.1),
-                    landing(&params, 10.5, v, square.1),
-                );
-                let middle = 0.5 * (plane_at + square_at);
-                // (A crack's pixels land at the deeper one's height.)
-                let y = params.warp(9.5, v, plane.1 as usize).y.floor() as i32 - image.v0;
-                for x in 0..image.width as i32 {
-                    let centre = (image.u0 + x) as f32 + 0.5;
-                    // (Inside the crack, past both samples' reach, and not on the middle.)
-                    if centre <= plane_at + 0.5 || centre >= square_at - 0.5 || (centre - middle).abs() < 0.01
-                    {
-                        continue;
-                    }
-                    let albedo = image.texels[(y * image.width as i32 + x) as usize]
-                        .attributes
-                        .albedo();
-                    let want = if closed && centre > middle {
-                        square.0
-                    } else {
-                        plane.0
+            for along in 12..20 {
+                let (i, j) = texel(along);
+                let k = texture.index(i as u32, j as u32);
+                texture.normal[k] = encode_normal_rgb8(turned);
+            }
+            let sheet = Impostor::new(texture);
+            // Where the edge's texel `along` and the plane's beyond it land.
+            let landings = |params: &WarpParams, along: i32| {
+                let (i, j) = texel(along);
+                let centre =
+                    |i: i32, j: i32, level: u16| params.warp(i as f32 + 0.5, j as f32 + 0.5, level as usize);
+                (centre(i, j, square.1), centre(i + out.0, j + out.1, plane.1))
+            };
+            let outward = Vec2::new(out.0 as f32, out.1 as f32);
+            // The eye moved outwards, to see round the edge; past a side edge also down its
+            // length, so that a row's crack parts the plane's height from the square's
+            // (past a top or bottom edge, that would slide the plane's columns past the
+            // square's, and a column's samples come from both).
+            let aside = if out.1 == 0 { c.b.normalize() } else { Vec3::ZERO };
+            let params = (1..200)
+                .map(|step| EYE + (outwards + aside) * 0.1 * step as f32)
+                .map(|eye| WarpParams::new(&sheet.texture, eye).expect("params"))
+                .find(|params| {
+                    let (square_at, plane_at) = landings(params, 16);
+                    (plane_at - square_at).dot(outward) > 5.0
+                })
+                .expect("an eye that opens a crack");
+            for variant in [Variant::Interleaved, Variant::OneD] {
+                for closed in [true, false] {
+                    let impostor = match closed {
+                        true => sheet.clone().with_faces(Faces::Front),
+                        false => sheet.clone(),
                     };
-                    let at = format!("closed {closed}, row {j}, pixel centre {centre}");
-                    assert_eq!(albedo, want, "{at}: plane at {plane_at}, square at {square_at}");
-                    match centre > middle {
-                        true => beside_square += 1,
-                        false => beside_plane += 1,
+                    let image = prewarp(&impostor, &params, variant);
+                    let (mut beside_square, mut beside_plane) = (0, 0);
+                    for along in 13..19 {
+                        let (square_at, plane_at) = landings(&params, along);
+                        // Along the crack (x for a row's, y for a column's) and across it:
+                        // a row's crack lands at the plane's height, a column's in the
+                        // column between the two.
+                        let (lengthwise, (from, to), across) = match out {
+                            (_, 0) => (true, (square_at.x, plane_at.x), plane_at.y.floor() as i32),
+                            _ => (false, (square_at.y, plane_at.y), square_at.x.floor() as i32),
+                        };
+                        let middle = 0.5 * (from + to);
+                        let (lo, hi) = (from.min(to) + 0.75, from.max(to) - 0.75);
+                        for at in (lo.ceil() as i32 - 1)..=(hi.floor() as i32) {
+                            let centre = at as f32 + 0.5;
+                            if centre < lo || centre > hi || (centre - middle).abs() < 0.25 {
+                                continue;
+                            }
+                            let (x, y) = if lengthwise { (at, across) } else { (across, at) };
+                            let (x, y) = (x - image.u0, y - image.v0);
+                            let albedo = image.texels[(y * image.width as i32 + x) as usize]
+                                .attributes
+                                .albedo();
+                            let beside = (centre - middle).abs()
+                                < (centre - to).abs().max((centre - from).abs())
+                                && (centre - from).abs() < (centre - to).abs();
+                            let want = if closed && beside { square.0 } else { plane.0 };
+                            let what = format!("{edge} edge, {variant:?}, closed {closed}, texel {along}");
+                            assert_eq!(
+                                albedo, want,
+                                "{what}: centre {centre}, square at {from}, plane at {to}"
+                            );
+                            match beside {
+                                true => beside_square += 1,
+                                false => beside_plane += 1,
+                            }
+                        }
                     }
+                    assert!(
+                        beside_square > 0 && beside_plane > 0,
+                        "{edge}, {variant:?}: {beside_square} {beside_plane}"
+                    );
                 }
             }
-            assert!(
-                beside_square > 0 && beside_plane > 0,
-                "{beside_square} {beside_plane}"
-            );
         }
     }
 
