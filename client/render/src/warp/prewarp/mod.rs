@@ -456,11 +456,11 @@ fn turns_away(attributes: Attributes, toward: Vec3, f: Vec3) -> bool {
 
 /// The crack between a column's last sample and `cell`, of another surface in the next
 /// row ([`Job::crack`], itself out of line). (Inlined into the column step, though it
-/// runs as often as [`Job::crack`]: called, it cost the pre-warp 4–20 %
-/// of its time for about the same instructions — most where surfaces break often, as
-/// leaves do: the tree's 256² texture at 5°, one core, 0.99 → 0.88 ms; the knot's 0.62
-/// → 0.58. Once, inlined, it made the row pass's span step a call instead and slowed
-/// the pre-warp: `#[inline]` is a hint, so time both again when the column step grows.)
+/// runs as often as [`Job::crack`]: called, it cost the pre-warp 4–20 % of its time for
+/// about the same instructions — most where surfaces break often, as leaves do: the
+/// tree's 256² texture at 5°, one core, 0.99 → 0.88 ms; the knot's 0.62 → 0.58. Once,
+/// inlined, it made the row pass's span step a call instead and slowed the pre-warp:
+/// `#[inline]` is a hint, so time both again when the column step grows.)
 #[inline]
 fn fill_column_crack<const DOWN: bool>(
     job: &Job,
@@ -734,13 +734,13 @@ impl Job<'_> {
         }
     }
 
-    /// Between the end of a run (last sample `a`, landed at `a_at`, its run's last span
-    /// `last_gap`, NaN when alone) and the next sample `b`, of another surface and ahead in
-    /// the visit along `axis` (the texture's unit axis the visit runs along, forwards when
-    /// `FORWARDS`): `put(pixel, filler)` for each pixel neither reaches — centres past `a`'s
-    /// reach and at least half a pixel before `b` (a run's first sample reaches at most half
-    /// a pixel behind it). Visited as in [`between`], up to `end`. (Once a break: not
-    /// inlined.)
+    /// Between the end of a run (last sample `a`, landed at `a_at`, its run's last
+    /// span `last_gap`, NaN when alone) and the next sample `b`, of another surface and
+    /// ahead in the visit along `axis` (the texture's unit axis the visit runs along,
+    /// forwards when `FORWARDS`): `put(pixel, filler)` for each pixel neither reaches —
+    /// centres past `a`'s reach and at least half a pixel before `b` (a run's first
+    /// sample reaches at most half a pixel behind it). Visited as in [`between`], up to
+    /// `end`. (Once a break: not inlined.)
     ///
     /// What shows there from this eye is what lies behind the nearer surface's edge,
     /// which the texture never saw: it is drawn with the deeper of the two surfaces, as if
@@ -748,11 +748,11 @@ impl Job<'_> {
     /// outline ([`Job::crack_fillers`]). Left empty, the sub-pixel parallax between a
     /// leaf's edge and the leaves behind it cracked the tree at every edge (its texture
     /// shown 0.2 % of its distance aside: 3–4 dB lost), and wider openings showed the sky
-    /// through it. Filled, at any width — a partner texture, drawn
-    /// behind, showed less there (the demo's median gap to geometry, 2–4 runs each: the
-    /// tree −9.5 dB left empty, −7.4 to −7.6 filled up to 2 pixels wide, −5.2 to −5.5 up
-    /// to 16, −4.8 to −5.2 at any width; the knot −0.9 to −1.3, −0.3 to −0.7, −0.2 to
-    /// −0.5, −0.1 to −0.3).
+    /// through it. Filled, at any width — a partner texture, drawn behind, showed less
+    /// there (the demo's median gap to geometry, 2–4 runs each: the tree −9.5 dB left
+    /// empty, −7.4 to −7.6 filled up to 2 pixels wide, −5.2 to −5.5 up to 16, −4.8 to
+    /// −5.2 at any width; the knot −0.9 to −1.3, −0.3 to −0.7, −0.2 to −0.5, −0.1 to
+    /// −0.3).
     #[inline(never)]
     fn crack<const FORWARDS: bool>(
         &self,
@@ -787,14 +787,15 @@ impl Job<'_> {
     /// What fills a crack between `a`, the end of a run, and `b`, the next sample, of
     /// another surface, the visit going `toward` (a unit direction in the texture's
     /// plane): the pixels of the half beside `a`, then those of the half beside `b`
-    /// ([`Job::crack`]). The deeper of the two, as a rule. But where the nearer one's surface,
-    /// closed, rounds out of the texture's sight towards the other ([`turns_away`]: an
-    /// outline, as where one loop of the knot passes in front of another), it goes on
-    /// past its last sample, unsampled, and an eye turned to look round it sees it there
-    /// before what lay behind it: the nearer fills the half beside it. (Where its
-    /// outline lies between the two samples the texture cannot tell; halfway is the
-    /// middle of the guesses. The deeper alone drew the loop in front thinned along its
-    /// outline by up to 3 pixels, and toothed, seen 9.5° from the texture's eye.)
+    /// ([`Job::crack`]). The deeper of the two, as a rule. But where the nearer one's
+    /// surface, closed, rounds out of the texture's sight towards the other
+    /// ([`turns_away`]: an outline, as where one loop of the knot passes in front of
+    /// another), it goes on past its last sample, unsampled, and an eye turned to look
+    /// round it sees it there before what lay behind it: the nearer fills the half
+    /// beside it. (Where its outline lies between the two samples the texture cannot
+    /// tell; halfway is the middle of the guesses. The deeper alone drew the loop in
+    /// front thinned along its outline by up to 3 pixels, and toothed, seen 9.5° from
+    /// the texture's eye.)
     #[inline]
     fn crack_fillers(&self, a: &Cell, b: &Cell, toward: Vec3) -> [Cell; 2] {
         let deeper = a.deeper(*b);
