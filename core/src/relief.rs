@@ -37,7 +37,7 @@
 //! exactly what the eye sees; its pre-warp keeps eq. 3-1's form (see the render crate's
 //! `warp::params`).
 //!
-//! On disk (`relief bake --out DIR`): `albedo.png` (RGB8), `normal.png` (RGB8, world
+//! On disk (`relief bake --out DIR`): `albedo.png` (RGB8), `normal.png` (RGB8, the
 //! normal `n·0.5 + 0.5`), `depth.png` (Gray8 or Gray16) and `texture.json`
 //! ([`TextureMeta`]). PNG pixel `(x, y)` is texel `(i = x, j = y)`.
 
@@ -376,7 +376,8 @@ pub struct ReliefTexture {
     pub eye: Vec3,
     /// Linear albedo quantised to 8 bits.
     pub albedo: Vec<[u8; 3]>,
-    /// World-space unit normals, encoded `n·0.5 + 0.5` to 8 bits.
+    /// Unit normals, in the object's frame as the rest of the texture, encoded
+    /// `n·0.5 + 0.5` to 8 bits.
     pub normal: Vec<[u8; 3]>,
     /// Depth levels; `depth_bits.empty()` marks an empty texel.
     pub depth: Vec<u16>,
