@@ -264,12 +264,6 @@ fn bench_replay_names_what_is_wrong_with_its_directory() {
     );
     let sample = dir.join("0000-knot");
     std::fs::create_dir_all(&sample).unwrap();
-    let json = sample.join("warp.json");
-    std::fs::write(&json, "{ not json").unwrap();
-    assert_one_line_error(
-        &["bench", "replay", dir.to_str().unwrap()],
-        &["0000-knot", "warp.json"],
-    );
     let warp = |faces: &str, fov: f32| {
         format!(
             r#"{{"object": "knot", "eye": [0, 0, 5], "forward": [0, 0, -1], "right": [1, 0, 0],
@@ -277,31 +271,21 @@ fn bench_replay_names_what_is_wrong_with_its_directory() {
             "partner": false, "visited": 10, "in_frame_ms": 0.1}}"#
         )
     };
-    std::fs::write(&json, warp("sideways", 1.0)).unwrap();
-    assert_one_line_error(
-        &["bench", "replay", dir.to_str().unwrap()],
-        &["warp.json", "sideways"],
-    );
-    std::fs::write(&json, warp("front", 4.0)).unwrap();
-    assert_one_line_error(
-        &["bench", "replay", dir.to_str().unwrap()],
-        &["warp.json", "field of view"],
-    );
-    std::fs::write(
-        &json,
-        warp("front", 1.0).replace(r#""up": [0, 1, 0]"#, r#""up": [0, 2, 0]"#),
-    )
-    .unwrap();
-    assert_one_line_error(
-        &["bench", "replay", dir.to_str().unwrap()],
-        &["warp.json", "axes"],
-    );
-    // A good description, but no texture beside it.
-    std::fs::write(&json, warp("front", 1.0)).unwrap();
-    assert_one_line_error(
-        &["bench", "replay", dir.to_str().unwrap()],
-        &["texture", "0000-knot"],
-    );
+    // Each `warp.json` in turn, and the words its error must name.
+    for (json, words) in [
+        ("{ not json".to_string(), ["0000-knot", "warp.json"]),
+        (warp("sideways", 1.0), ["warp.json", "sideways"]),
+        (warp("front", 4.0), ["warp.json", "field of view"]),
+        (
+            warp("front", 1.0).replace(r#""up": [0, 1, 0]"#, r#""up": [0, 2, 0]"#),
+            ["warp.json", "axes"],
+        ),
+        // A good description, but no texture beside it.
+        (warp("front", 1.0), ["texture", "0000-knot"]),
+    ] {
+        std::fs::write(sample.join("warp.json"), json).unwrap();
+        assert_one_line_error(&["bench", "replay", dir.to_str().unwrap()], &words);
+    }
     // More samples than a run keeps.
     let many = dir.join("many");
     for n in 0..=relief_client::manager::policy::MAX_WARP_SAMPLES {
