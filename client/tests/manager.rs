@@ -1072,6 +1072,67 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
     );
 }
 
+/// A texture never shown counts as superseded when its object was shown from another
+/// of its textures after it came, and not when the object was not shown again (here:
+/// drawn as geometry, the eye too near).
+#[test]
+fn never_shown_textures_count_whether_their_object_was_shown_after() {
+    use relief_core::relief::{DepthBits, SourceProjection};
+    use relief_trace::bake;
+    use relief_trace::tracer::ObjectTracer;
+
+    let scene = Arc::new(Scene::load("orbit-sphere").unwrap());
+    let (mut manager, mut commands, arrivals) = wired(&scene, without_stand_ins());
+    let sphere = index(&scene, "sphere");
+    let centre = scene.objects[sphere].world_bounds().center();
+    let tracer = ObjectTracer::new(&scene.objects[sphere]);
+    let camera_at = |eye: Vec3| Camera::look_at(eye, centre, Vec3::Y, 60.0, 160, 90).unwrap();
+    // Each frame's request for now, answered with a texture from that frame's eye.
+    let mut answer_now = |manager: &mut Manager, t: f64, eye: Vec3| {
+        manager.frame(&scene, &camera_at(eye), t);
+        let request = std::iter::from_fn(|| commands.try_recv().ok())
+            .find_map(|c| match c {
+                Command::Request(r) if r.needed_in_ms.is_none() => Some(r),
+                _ => None,
+            })
+            .expect("a request for now");
+        let texture = bake(&tracer, eye, 64, DepthBits::Eight, SourceProjection::Perspective).unwrap();
+        arrive(
+            &arrivals,
+            request.id,
+            ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
+        );
+    };
+    let front = centre + Vec3::new(0.0, 1.0, 4.5);
+    let side = centre + Vec3::new(4.5, 1.0, 0.0);
+    let back = centre + Vec3::new(0.0, 1.0, -4.5);
+    answer_now(&mut manager, 0.0, front);
+    assert!(matches!(
+        manager.frame(&scene, &camera_at(front), 0.1)[sphere],
+        Show::Impostor { .. }
+    ));
+    // The side's texture comes, but the eye is back in front: shown from the front's.
+    answer_now(&mut manager, 0.2, side);
+    assert!(matches!(
+        manager.frame(&scene, &camera_at(front), 0.3)[sphere],
+        Show::Impostor { .. }
+    ));
+    // The back's comes, and the sphere is drawn as geometry from then on.
+    answer_now(&mut manager, 0.4, back);
+    let near = Camera::look_at(centre + Vec3::new(0.0, 0.0, 1.1), centre, Vec3::Y, 60.0, 160, 90).unwrap();
+    assert_eq!(manager.frame(&scene, &near, 0.5)[sphere], Show::Geometry);
+    let lifetimes = manager.texture_lifetimes();
+    assert_eq!(
+        (
+            lifetimes.seconds.len(),
+            lifetimes.never_shown,
+            lifetimes.superseded
+        ),
+        (1, 2, 1),
+        "{lifetimes:?}"
+    );
+}
+
 /// A request that ends without its texture is counted by how it ended — refused, or
 /// timed out — and is open no more; the end of one the manager did not ask for (or
 /// already heard the end of) counts nothing. Needed still, it is asked for again.

@@ -56,6 +56,9 @@ fn the_demo_flies_and_summarises() {
     }
     let lifetime = summary["texture_lifetime_s_p50"].as_f64().unwrap();
     assert!(lifetime > 0.1, "{summary}");
+    let never_shown = summary["textures_never_shown"].as_u64().unwrap();
+    let superseded = summary["textures_never_shown_superseded"].as_u64().unwrap();
+    assert!(superseded <= never_shown, "{summary}");
     // Where the frame time goes: each stage measured, none above the slowest frame;
     // the ground is drawn as geometry in every frame.
     let stages = summary["frame_stages_ms_p50"].as_object().unwrap();

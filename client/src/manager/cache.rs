@@ -129,6 +129,8 @@ pub(super) struct ObjectState {
     pub(super) recent_latencies: Vec<f64>,
     /// Final textures of this object received.
     pub(super) received: u64,
+    /// The last frame it was shown in, from any of its textures.
+    pub(super) last_shown: Option<Instant>,
     /// No new prediction of it is asked for before this (see [`SHED_QUIET`]).
     pub(super) quiet_until: Option<Instant>,
 }
@@ -188,7 +190,7 @@ impl Manager {
                         });
                     state.held = kept;
                     for h in &replaced {
-                        self.counters.retired.retire(h);
+                        self.counters.retired.retire(h, state.last_shown);
                     }
                     let object = &scene.objects[p.object];
                     let held = Held {
@@ -282,7 +284,7 @@ impl Manager {
                 a_old.cmp(&b_old).then_with(|| away(a).total_cmp(&away(b)))
             });
             for retired in state.held.split_off(self.config.keep) {
-                self.counters.retired.retire(&retired);
+                self.counters.retired.retire(&retired, state.last_shown);
             }
         }
     }
@@ -320,8 +322,10 @@ impl Manager {
     /// those held now.
     pub fn texture_lifetimes(&self) -> TextureLifetimes {
         let mut lifetimes = self.counters.retired.clone();
-        for held in self.objects.iter().flat_map(|o| &o.held) {
-            lifetimes.retire(held);
+        for object in &self.objects {
+            for held in &object.held {
+                lifetimes.retire(held, object.last_shown);
+            }
         }
         lifetimes
     }

@@ -1,6 +1,8 @@
 //! What the manager counts for a run's summary: requests, latencies, needs met,
 //! stale frames and why, draws, and where each frame's time went.
 
+use std::time::Instant;
+
 /// What a run counted: the demo's summary and the load test's rows are made of these.
 #[derive(Debug, Clone, Default)]
 pub struct Counters {
@@ -79,12 +81,17 @@ pub fn late_fraction(lateness_ms: &[f64]) -> f64 {
 pub struct TextureLifetimes {
     pub seconds: Vec<f64>,
     pub never_shown: u64,
+    /// Of those never shown, how many whose object was shown from its other textures
+    /// after they came: a nearer or finer one kept being chosen. The rest were asked
+    /// for views that did not come (or came with the object drawn as geometry).
+    pub superseded: u64,
 }
 
 impl TextureLifetimes {
     /// Counts the lifetime of `held`, a texture no longer held or counted as such
-    /// (previews are not counted).
-    pub(super) fn retire(&mut self, held: &super::cache::Held) {
+    /// (previews are not counted), of an object last shown (from any texture) at
+    /// `object_shown`.
+    pub(super) fn retire(&mut self, held: &super::cache::Held, object_shown: Option<Instant>) {
         if !held.is_final || held.shared {
             return;
         }
@@ -92,7 +99,10 @@ impl TextureLifetimes {
             Some(shown) => self
                 .seconds
                 .push(shown.saturating_duration_since(held.arrived).as_secs_f64()),
-            None => self.never_shown += 1,
+            None => {
+                self.never_shown += 1;
+                self.superseded += u64::from(object_shown.is_some_and(|shown| shown > held.arrived));
+            }
         }
     }
 }

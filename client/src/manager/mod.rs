@@ -420,6 +420,7 @@ impl Manager {
             self.predict_for(scene, k, camera, prediction);
             shows[k] = match best {
                 Some((i, g)) if !stands_in && !none_finer && g.growth <= SHOWN_STALE * tolerance => {
+                    self.objects[k].last_shown = shown_at;
                     let held = &mut self.objects[k].held;
                     for j in std::iter::once(i).chain(partner.map(|(p, _)| p)) {
                         held[j].last_shown = shown_at;

@@ -293,6 +293,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         texture_lifetime_s_p10: percentile(&lifetimes.seconds, 0.1),
         texture_lifetime_s_p50: percentile(&lifetimes.seconds, 0.5),
         textures_never_shown: lifetimes.never_shown,
+        textures_never_shown_superseded: lifetimes.superseded,
         prediction_hits: counters.prediction_hits,
         needs: counters.needs,
         stale_frames: counters.stale_frames,

@@ -86,8 +86,10 @@ pub(super) struct Summary {
     /// Seconds from a final texture's arrival to the last frame it was shown in.
     pub(super) texture_lifetime_s_p10: f64,
     pub(super) texture_lifetime_s_p50: f64,
-    /// Final textures never shown.
+    /// Final textures never shown, and of those, how many whose object was shown from
+    /// its other textures after they came (the rest: asked for views that did not come).
     pub(super) textures_never_shown: u64,
+    pub(super) textures_never_shown_superseded: u64,
     /// Needed textures already there or in flight, and the needs counted.
     pub(super) prediction_hits: u64,
     pub(super) needs: u64,
