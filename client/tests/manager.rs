@@ -1073,8 +1073,8 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
 }
 
 /// A texture never shown counts as superseded when its object was shown from another
-/// of its textures after it came, and not when the object was not shown again (here:
-/// drawn as geometry, the eye too near).
+/// of its textures after a frame took it in, and not when the object was not shown
+/// again (here: drawn as geometry, the eye too near).
 #[test]
 fn never_shown_textures_count_whether_their_object_was_shown_after() {
     use relief_core::relief::{DepthBits, SourceProjection};
@@ -1087,8 +1087,9 @@ fn never_shown_textures_count_whether_their_object_was_shown_after() {
     let centre = scene.objects[sphere].world_bounds().center();
     let tracer = ObjectTracer::new(&scene.objects[sphere]);
     let camera_at = |eye: Vec3| Camera::look_at(eye, centre, Vec3::Y, 60.0, 160, 90).unwrap();
-    // Each frame's request for now, answered with a texture from that frame's eye.
-    let mut answer_now = |manager: &mut Manager, t: f64, eye: Vec3| {
+    // A frame's request for now, and its texture from that frame's eye, received now
+    // (to be handed over by `arrive`).
+    let mut ask_now = |manager: &mut Manager, t: f64, eye: Vec3| {
         manager.frame(&scene, &camera_at(eye), t);
         let request = std::iter::from_fn(|| commands.try_recv().ok())
             .find_map(|c| match c {
@@ -1097,28 +1098,35 @@ fn never_shown_textures_count_whether_their_object_was_shown_after() {
             })
             .expect("a request for now");
         let texture = bake(&tracer, eye, 64, DepthBits::Eight, SourceProjection::Perspective).unwrap();
-        arrive(
-            &arrivals,
+        (
             request.id,
             ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
-        );
+        )
     };
     let front = centre + Vec3::new(0.0, 1.0, 4.5);
     let side = centre + Vec3::new(4.5, 1.0, 0.0);
     let back = centre + Vec3::new(0.0, 1.0, -4.5);
-    answer_now(&mut manager, 0.0, front);
+    let (id, ready) = ask_now(&mut manager, 0.0, front);
+    arrive(&arrivals, id, ready);
     assert!(matches!(
         manager.frame(&scene, &camera_at(front), 0.1)[sphere],
         Show::Impostor { .. }
     ));
     // The side's texture comes, but the eye is back in front: shown from the front's.
-    answer_now(&mut manager, 0.2, side);
+    let (id, ready) = ask_now(&mut manager, 0.2, side);
+    arrive(&arrivals, id, ready);
     assert!(matches!(
         manager.frame(&scene, &camera_at(front), 0.3)[sphere],
         Show::Impostor { .. }
     ));
-    // The back's comes, and the sphere is drawn as geometry from then on.
-    answer_now(&mut manager, 0.4, back);
+    // The back's is received while a frame still shows the front's, but taken in only
+    // by the next, from where the sphere is drawn as geometry: it never had a chance.
+    let (id, ready) = ask_now(&mut manager, 0.4, back);
+    assert!(matches!(
+        manager.frame(&scene, &camera_at(front), 0.45)[sphere],
+        Show::Impostor { .. }
+    ));
+    arrive(&arrivals, id, ready);
     let near = Camera::look_at(centre + Vec3::new(0.0, 0.0, 1.1), centre, Vec3::Y, 60.0, 160, 90).unwrap();
     assert_eq!(manager.frame(&scene, &near, 0.5)[sphere], Show::Geometry);
     let lifetimes = manager.texture_lifetimes();

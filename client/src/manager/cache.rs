@@ -110,6 +110,8 @@ pub(super) struct Held {
     /// texture or a partner): its lifetime.
     pub(super) arrived: Instant,
     pub(super) last_shown: Option<Instant>,
+    /// When a frame took it in (after its decoding): the first frame that could show it.
+    pub(super) taken_in: Instant,
     /// When the manager last relied on it: took it in, showed it, or counted it (or a
     /// partner it needs) as covering where the eye is going (a prediction's future
     /// eye). What the last frame relied on is kept first (see
@@ -199,6 +201,7 @@ impl Manager {
                         is_final,
                         arrived,
                         last_shown: None,
+                        taken_in: Instant::now(),
                         relied_on: Instant::now(),
                         shared: false,
                     };

@@ -82,8 +82,9 @@ pub struct TextureLifetimes {
     pub seconds: Vec<f64>,
     pub never_shown: u64,
     /// Of those never shown, how many whose object was shown from its other textures
-    /// after they came: a nearer or finer one kept being chosen. The rest were asked
-    /// for views that did not come (or came with the object drawn as geometry).
+    /// after a frame took them in: another was chosen. The rest were not chosen because
+    /// the object was not shown as an impostor again: off screen, drawn as geometry,
+    /// or the run ended first (a view asked for that did not come).
     pub superseded: u64,
 }
 
@@ -101,7 +102,7 @@ impl TextureLifetimes {
                 .push(shown.saturating_duration_since(held.arrived).as_secs_f64()),
             None => {
                 self.never_shown += 1;
-                self.superseded += u64::from(object_shown.is_some_and(|shown| shown > held.arrived));
+                self.superseded += u64::from(object_shown.is_some_and(|shown| shown > held.taken_in));
             }
         }
     }

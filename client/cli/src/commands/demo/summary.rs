@@ -87,7 +87,7 @@ pub(super) struct Summary {
     pub(super) texture_lifetime_s_p10: f64,
     pub(super) texture_lifetime_s_p50: f64,
     /// Final textures never shown, and of those, how many whose object was shown from
-    /// its other textures after they came (the rest: asked for views that did not come).
+    /// its other textures after a frame took them in (`TextureLifetimes::superseded`).
     pub(super) textures_never_shown: u64,
     pub(super) textures_never_shown_superseded: u64,
     /// Needed textures already there or in flight, and the needs counted.
