@@ -195,14 +195,15 @@ impl Manager {
                         self.counters.retired.retire(h, state.last_shown);
                     }
                     let object = &scene.objects[p.object];
+                    let taken_in = Instant::now();
                     let held = Held {
                         eye,
                         prepared,
                         is_final,
                         arrived,
                         last_shown: None,
-                        taken_in: Instant::now(),
-                        relied_on: Instant::now(),
+                        taken_in,
+                        relied_on: taken_in,
                         shared: false,
                     };
                     let (local, centre) = (object.local_camera(camera), object.local_bounds.center());
