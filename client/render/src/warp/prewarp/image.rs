@@ -21,8 +21,9 @@ pub struct PrewarpImage {
     pub width: u32,
     pub height: u32,
     pub texels: Vec<PTexel>,
-    /// Source texels visited: each row's occupied ones ([`Impostor::occupied`](crate::impostor::Impostor::occupied)), or
-    /// those of them that can reach a [`PlaneWindow`].
+    /// Source texels visited: each row's occupied ones
+    /// ([`Impostor::occupied`](crate::impostor::Impostor::occupied)), or those of them
+    /// that can reach a [`PlaneWindow`].
     pub visited: usize,
 }
 

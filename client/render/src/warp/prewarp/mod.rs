@@ -36,17 +36,18 @@
 //! - [`Variant::Interleaved`]: one pass; each row sample goes straight into its column.
 //!   Where a surface is smooth it takes eight texels at a time (module `lanes`), to the bit
 //!   the same image.
-
 //!
 //! # Layout
 //!
 //! This module holds the passes (`Job`) and their entry points; beside it:
 //! - `texel`: a pre-warped texel ([`PTexel`]) and the packed attribute bytes the
 //!   passes blend;
-//! - `image`: the pre-warped image ([`PrewarpImage`]), how far it reaches, and the part
-//!   of it the screen sees ([`PlaneWindow`]);
-//! - `spans`: the pixels between two samples, visited either way, and a run's reach
-//!   past its ends;
+//! - `image`: the pre-warped image ([`PrewarpImage`]), how far it reaches, and the
+//!   rectangle of the source plane the screen sees ([`PlaneWindow`]) with the texels
+//!   that can land in it;
+//! - `spans`: the order of the visit (each half of an axis from the border towards
+//!   the epipole, or outwards), the pixels between two samples visited either way, and
+//!   a run's reach past its ends;
 //! - `cracks`: what fills the cracks between surfaces that part;
 //! - `lanes`: the row and column passes eight texels at a time.
 
@@ -65,7 +66,7 @@ use self::lanes::{Columns, Emitted, LANES, RIGHT_LINK, RowSamples, VALID, first,
 use self::spans::{between, reach_ahead, reach_behind, signed_end, split_at, visited};
 pub use self::texel::PTexel;
 pub(crate) use self::texel::{Attributes, pack_texel};
-use self::texel::{ENTRY_MASK, ENTRY_SHIFT, NORMAL_SHIFT, entry_of, links_of};
+use self::texel::{entry_of, links_of};
 use super::params::WarpParams;
 use crate::impostor::{Faces, Impostor};
 

@@ -1,5 +1,7 @@
-//! The pixels between two samples along an axis, visited either way ([`between`]), and
-//! how far a run of samples reaches past its ends ([`reach_ahead`], [`reach_behind`]).
+//! The order of the pre-warp's visit — each half of an axis ([`split_at`]) from the
+//! border towards the epipole, or outwards ([`visited`], [`signed_end`]) — the pixels
+//! between two samples along an axis, visited either way ([`between`]), and how far a
+//! run of samples reaches past its ends ([`reach_ahead`], [`reach_behind`]).
 
 /// Along an axis visited forwards (`FORWARDS`: increasing coordinates) or backwards:
 /// when `b` is not behind `a`, calls `each(pixel, t)` for every pixel up to `end` whose

@@ -35,7 +35,7 @@ impl PTexel {
 /// bytes are not read; a source texel keeps its depth's table entry and links there
 /// (see [`pack_texel`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Attributes(pub(crate) u64);
+pub(crate) struct Attributes(pub(super) u64);
 
 /// Where a packed texel's encoded normal starts ([`pack_texel`]): its three bytes follow
 /// the albedo's.
@@ -55,10 +55,12 @@ const _: () = assert!(1 << crate::warp::params::WARP_LEVEL_BITS <= ENTRY_MASK);
 const _: () = assert!(ENTRY_SHIFT + ENTRY_MASK.count_ones() <= LINKS_SHIFT + RIGHT_LINK.trailing_zeros());
 const _: () = assert!(LINKS_SHIFT + DOWN_LINK.ilog2() < 64);
 
-/// A texel as the pre-warp reads it ([`Impostor::packed`](crate::impostor::Impostor::packed)): albedo and encoded normal in
-/// the low six bytes, as [`Attributes`]; above them the table entry of its depth level
-/// ([`WarpLevels::entry`](crate::warp::params::WarpLevels::entry)), and its links to the
-/// right and downwards — all the row pass reads of a texel, in one load.
+/// A texel as the pre-warp reads it
+/// ([`Impostor::packed`](crate::impostor::Impostor::packed)): albedo and encoded
+/// normal in the low six bytes, as [`Attributes`]; above them the table entry of its
+/// depth level ([`WarpLevels::entry`](crate::warp::params::WarpLevels::entry)), and
+/// its links to the right and downwards — all the row pass reads of a texel, in one
+/// load.
 pub(crate) fn pack_texel(albedo: [u8; 3], normal: [u8; 3], entry: u16, right: bool, down: bool) -> u64 {
     let ([r, g, b], [x, y, z]) = (albedo, normal);
     let links = u8::from(right) * RIGHT_LINK + u8::from(down) * DOWN_LINK;

@@ -5,7 +5,8 @@ use wide::{f32x8, u32x8};
 
 use super::vectors::{eight, field, gather, lane_bits, lane_mask, lerp_attributes, load, permute};
 use super::{DOWN_LINK, EXACT, LANES, RIGHT_LINK, VALID, first};
-use crate::warp::prewarp::{Cell, ENTRY_MASK, ENTRY_SHIFT, Facing, NORMAL_SHIFT, Tables, links_of};
+use crate::warp::prewarp::texel::{ENTRY_MASK, ENTRY_SHIFT, NORMAL_SHIFT, links_of};
+use crate::warp::prewarp::{Cell, Facing, Tables};
 
 /// One half-row's texels in visiting order, as the row pass reads them: where each
 /// lands and what it carries, laid out by field so eight load as one vector. (Kept
