@@ -118,6 +118,16 @@ fn arrive(arrivals: &UnboundedSender<Arrival>, id: u64, ready: ReadyTexture) {
         .unwrap();
 }
 
+/// The first request for now among the commands sent so far (the others are dropped).
+fn request_now(commands: &mut UnboundedReceiver<Command>) -> TextureRequest {
+    std::iter::from_fn(|| commands.try_recv().ok())
+        .find_map(|c| match c {
+            Command::Request(r) if r.needed_in_ms.is_none() => Some(r),
+            _ => None,
+        })
+        .expect("a request for now")
+}
+
 /// The eye 6 m from `centre`, `angle` radians round it, 0.5 m above.
 fn around(centre: Vec3, angle: f32) -> Vec3 {
     centre + Vec3::new(6.0 * angle.cos(), 0.5, 6.0 * angle.sin())
@@ -1024,12 +1034,7 @@ fn latency_pickup_and_lifetime_are_counted_from_arrival() {
     .unwrap();
     manager.frame(&scene, &camera, 0.0);
     // The request for now the first frame made, answered by hand.
-    let request = std::iter::from_fn(|| commands.try_recv().ok())
-        .find_map(|c| match c {
-            Command::Request(r) if r.needed_in_ms.is_none() => Some(r),
-            _ => None,
-        })
-        .expect("a request for now");
+    let request = request_now(&mut commands);
     let ms = |d: Duration| d.as_secs_f64() * 1e3;
     let (to_arrival, to_pickup, shown_for) = (
         Duration::from_millis(60),
@@ -1091,12 +1096,7 @@ fn never_shown_textures_count_whether_their_object_was_shown_after() {
     // (to be handed over by `arrive`).
     let mut ask_now = |manager: &mut Manager, t: f64, eye: Vec3| {
         manager.frame(&scene, &camera_at(eye), t);
-        let request = std::iter::from_fn(|| commands.try_recv().ok())
-            .find_map(|c| match c {
-                Command::Request(r) if r.needed_in_ms.is_none() => Some(r),
-                _ => None,
-            })
-            .expect("a request for now");
+        let request = request_now(&mut commands);
         let texture = bake(&tracer, eye, 64, DepthBits::Eight, SourceProjection::Perspective).unwrap();
         (
             request.id,
@@ -1415,12 +1415,7 @@ fn a_texture_for_a_nearby_eye_is_held_under_its_own_eye() {
     };
     let camera = camera_at(0.0);
     manager.frame(&scene, &camera, 0.0);
-    let first = std::iter::from_fn(|| commands.try_recv().ok())
-        .find_map(|c| match c {
-            Command::Request(r) if r.needed_in_ms.is_none() => Some(r),
-            _ => None,
-        })
-        .expect("a request for now");
+    let first = request_now(&mut commands);
     // Nothing held: the reach is the valid angle's share.
     let distance = first.eye.distance(local_centre);
     assert!(
