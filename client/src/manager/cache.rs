@@ -20,6 +20,7 @@ use relief_render::warp::params::WarpParams;
 use super::around::{angle_between, similar_distance};
 use super::choose::{growth, widest_within};
 use super::messages::{Arrival, Failure};
+use super::perspective::ShortTextures;
 use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, SHED_QUIET, growth_weight};
 use super::{Manager, TextureLifetimes};
 
@@ -120,6 +121,10 @@ pub(super) struct Held {
     /// Asked for by another placement of the mesh, and shared with this one: counted
     /// in that placement's lifetimes, not here.
     pub(super) shared: bool,
+    /// An orthographic texture that falls short of what its own eye sees
+    /// ([`OWN_EYE_GROWTH`](super::policy::OWN_EYE_GROWTH)): let go once its object's textures are asked in perspective
+    /// (`perspective.rs`).
+    pub(super) falls_short: bool,
 }
 
 #[derive(Default)]
@@ -135,6 +140,11 @@ pub(super) struct ObjectState {
     pub(super) last_shown: Option<Instant>,
     /// No new prediction of it is asked for before this (see [`SHED_QUIET`]).
     pub(super) quiet_until: Option<Instant>,
+    /// Its textures are asked in perspective: orthographic ones fell short of what
+    /// their own eye sees (`perspective.rs`).
+    pub(super) in_perspective: bool,
+    /// Which of its last orthographic textures fell short so.
+    pub(super) short_textures: ShortTextures,
 }
 
 /// How far (radians) around `centre`, turning the texture's eye about the vertical,
@@ -196,7 +206,7 @@ impl Manager {
                     }
                     let object = &scene.objects[p.object];
                     let taken_in = Instant::now();
-                    let held = Held {
+                    let mut held = Held {
                         eye,
                         prepared,
                         is_final,
@@ -205,8 +215,13 @@ impl Manager {
                         taken_in,
                         relied_on: taken_in,
                         shared: false,
+                        falls_short: false,
                     };
                     let (local, centre) = (object.local_camera(camera), object.local_bounds.center());
+                    if !self.weigh_own_eye(p.object, object, &mut held, &local) {
+                        continue;
+                    }
+                    let state = &mut self.objects[p.object];
                     if is_final {
                         let angle = probe_valid_angle(&held, centre, &local, tolerance);
                         state.valid_angle = Some(angle);

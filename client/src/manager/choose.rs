@@ -162,7 +162,7 @@ pub(super) fn probe_lone_reach(
     tolerance: f32,
 ) -> f32 {
     let from = (held.eye - centre).normalize_or_zero() * distance;
-    let lone_turn = lone_max_turn(object);
+    let lone_turn = lone_max_turn(object, &held.prepared.pyramid.levels[0].texture.camera);
     let within = |angle: f32| {
         [angle, -angle].iter().all(|&a| {
             let eye = centre + Quat::from_axis_angle(axis, a) * from;
@@ -334,8 +334,8 @@ impl Manager {
         camera: &Camera,
     ) -> Option<Vec<Grade>> {
         let o = &scene.objects[object];
-        let wanted = Self::warped_edge(o, eye, camera)?;
-        let (centre, lone_turn) = (o.local_bounds.center(), lone_max_turn(o));
+        let wanted = Self::warped_edge(o, eye, camera, self.objects[object].in_perspective)?;
+        let centre = o.local_bounds.center();
         let at_eye = Camera {
             eye: eye.as_dvec3(),
             ..*camera
@@ -348,7 +348,7 @@ impl Manager {
                 unshown: Unshown::at(h, o, centre, eye, camera),
                 too_coarse: texel > COARSEST_SHOWN,
                 finer_available: texel > REFINE_TEXEL && texture.width < wanted,
-                lone_turn,
+                lone_turn: lone_max_turn(o, texture),
             }
         };
         Some(self.objects[object].held.iter().map(grade).collect())

@@ -13,7 +13,9 @@
 //! screen, the one whose eye is nearest (`choose.rs`) — with, once the eye has turned far
 //! enough from it, a *partner* drawn behind it: a texture from the far side of the eye
 //! that fills in the side of the object the first cannot show. It asks for a texture
-//! for now when none is valid, and for the textures the eye will need (`requests.rs`).
+//! for now when none is valid, and for the textures the eye will need (`requests.rs`):
+//! orthographic for solids, unless theirs fell short of what their own eye sees
+//! (`perspective.rs`).
 //! [`Manager::render`] then draws the frame as decided (`draw.rs`).
 //!
 //! # Textures in and out
@@ -41,6 +43,7 @@ mod counters;
 mod draw;
 mod link_scale;
 mod messages;
+mod perspective;
 pub mod policy;
 mod requests;
 mod warp_samples;
@@ -421,6 +424,7 @@ impl Manager {
             shows[k] = match best {
                 Some((i, g)) if !stands_in && !none_finer && g.growth <= SHOWN_STALE * tolerance => {
                     self.objects[k].last_shown = shown_at;
+                    let in_perspective = self.objects[k].in_perspective;
                     let held = &mut self.objects[k].held;
                     for j in std::iter::once(i).chain(partner.map(|(p, _)| p)) {
                         held[j].last_shown = shown_at;
@@ -429,7 +433,7 @@ impl Manager {
                     let level = held[i]
                         .prepared
                         .pyramid
-                        .level_for(camera, texel_pixels(&scene.objects[k], camera));
+                        .level_for(camera, texel_pixels(&scene.objects[k], camera, in_perspective));
                     Show::Impostor {
                         texture: i,
                         level,
@@ -470,14 +474,21 @@ impl Manager {
             return true;
         }
         let camera = object.local_camera(world_camera);
-        Self::warped_edge(object, camera.eye_f32(), &camera).is_none()
+        // (As for an object whose textures are asked orthographic: the edge differs
+        // little either way.)
+        Self::warped_edge(object, camera.eye_f32(), &camera, false).is_none()
     }
 
     /// The edge of the texture an `eye` (in `object`'s frame, as `camera` is) asks for,
     /// where warping it costs more than drawing `object` as geometry
     /// ([`cheaper_as_geometry`]); `None` where it does not.
-    pub(super) fn warped_edge(object: &SceneObject, eye: glam::Vec3, camera: &Camera) -> Option<u32> {
-        let (wanted, _) = Self::size_for(object, eye, camera);
+    pub(super) fn warped_edge(
+        object: &SceneObject,
+        eye: glam::Vec3,
+        camera: &Camera,
+        in_perspective: bool,
+    ) -> Option<u32> {
+        let (wanted, _) = Self::size_for(object, eye, camera, in_perspective);
         (!cheaper_as_geometry(object, wanted)).then_some(wanted)
     }
 

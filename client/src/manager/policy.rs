@@ -132,14 +132,28 @@ pub const LONE_MAX_TURN: f32 = 15.0 * PI / 180.0;
 /// geometry's worst frame in 4 runs of 5; at 30°, 1.05–1.08 in 3.
 pub const LONE_TURN_CAP: f32 = 30.0 * PI / 180.0;
 
-/// The turn past which a texture of `object` counts as stale drawn alone at the default
-/// tolerance: [`LONE_TURN_CAP`] for leaves or sheets
+/// How far a solid's perspective texture ([`OWN_EYE_GROWTH`]) is shown alone at the
+/// default tolerance: its rays graze the outline its own eye sees, nearer than the one
+/// parallel rays graze, so a turn uncovers surface past its rim sooner than the rim's
+/// band foresees. The scanned bunny, every texture in perspective (then at the sheets'
+/// texel; every frame judged, 2–3 runs each): alone up to [`LONE_MAX_TURN`], its worst frame 5.1 dB below
+/// geometry's worst (a texture 10° round, the far side of its body short of its
+/// outline); up to 8°, 2.8–3.6 below; up to 6°, 2.8 in both runs. With the switch as
+/// kept, up to 5°: 1.3–4.3 below (1 run of 4 over 3), 41 textures asked where 6°
+/// asked 32–33.
+pub const PERSPECTIVE_LONE_TURN: f32 = 6.0 * PI / 180.0;
+
+/// The turn past which a texture of `object` made by `texture`'s camera counts as
+/// stale drawn alone at the default tolerance: [`LONE_TURN_CAP`] for leaves or sheets
 /// ([`EdgeCensus::is_sheets`](relief_core::mesh::EdgeCensus::is_sheets), whichever way
-/// its textures' rays go: near the eye they are asked orthographic), else
+/// its textures' rays go: near the eye they are asked orthographic),
+/// [`PERSPECTIVE_LONE_TURN`] for a solid's perspective texture, else
 /// [`LONE_MAX_TURN`].
-pub fn lone_max_turn(object: &SceneObject) -> f32 {
+pub fn lone_max_turn(object: &SceneObject, texture: &SourceCamera) -> f32 {
     if object.edge_census().is_sheets() {
         LONE_TURN_CAP
+    } else if texture.centre.is_some() {
+        PERSPECTIVE_LONE_TURN
     } else {
         LONE_MAX_TURN
     }
@@ -241,14 +255,22 @@ pub const TEXTURE_LADDER: [u32; 11] = [32, 48, 64, 88, 128, 184, 256, 360, 512, 
 /// one; the frame's median speed was unchanged, 2.8–3.1× geometry's against 2.4–3.3×).
 pub const SOLID_MAX_EDGE: u32 = 1024;
 
-/// The largest texture edge asked for in `projection`: [`SHEET_MAX_EDGE`] for the
-/// perspective textures of leaves and sheets ([`projection_for`]), else
-/// [`SOLID_MAX_EDGE`].
-pub fn largest_edge(projection: SourceProjection) -> u32 {
-    match projection {
-        SourceProjection::Perspective => SHEET_MAX_EDGE,
-        SourceProjection::Orthographic => SOLID_MAX_EDGE,
+/// The largest texture edge asked for a texture of `object` in `projection`:
+/// [`SHEET_MAX_EDGE`] for the perspective textures of leaves and sheets
+/// ([`projection_for`]), else [`SOLID_MAX_EDGE`].
+pub fn largest_edge(object: &SceneObject, projection: SourceProjection) -> u32 {
+    match sheet_texels(object, projection) {
+        true => SHEET_MAX_EDGE,
+        false => SOLID_MAX_EDGE,
     }
+}
+
+/// Whether a texture of `object` in `projection` is one of leaves or sheets, seen as
+/// they are from the eye itself: asked for and shown at [`SHEET_TEXEL_PIXELS`], up to
+/// [`SHEET_MAX_EDGE`]. (A solid's perspective texture keeps a solid's texel and edges:
+/// at 720 a side, the knot near the eye showed texels of 1.5 pixels.)
+fn sheet_texels(object: &SceneObject, projection: SourceProjection) -> bool {
+    projection == SourceProjection::Perspective && object.edge_census().is_sheets()
 }
 
 /// Depth precision asked for: 16 bits, not the thesis' 8. Near an object, where the
@@ -271,11 +293,13 @@ pub const REQUESTED_DEPTH_BITS: DepthBits = DepthBits::Sixteen;
 /// Orthographic too where the eye is too near the bounds for a perspective texture
 /// ([`MAX_PERSPECTIVE_TANGENT`](relief_core::relief::MAX_PERSPECTIVE_TANGENT)), and for
 /// a solid with a few holes, whose rim is under [`SHEET_RIM_SHARE`](relief_core::mesh::SHEET_RIM_SHARE) of its edges.
+/// But from the eye itself, when `in_perspective`, for a solid whose orthographic
+/// textures fall short of what their own eye sees ([`OWN_EYE_GROWTH`]).
 ///
 /// `eye`, here and in the other functions of an object and a camera below, is in the
 /// object's frame ([`SceneObject::local_camera`]).
-pub fn projection_for(object: &SceneObject, eye: Vec3) -> SourceProjection {
-    if object.edge_census().is_sheets()
+pub fn projection_for(object: &SceneObject, eye: Vec3, in_perspective: bool) -> SourceProjection {
+    if (in_perspective || object.edge_census().is_sheets())
         && SourceCamera::facing(eye, &object.local_bounds, 1, 1, SourceProjection::Perspective).is_ok()
     {
         SourceProjection::Perspective
@@ -283,6 +307,30 @@ pub fn projection_for(object: &SceneObject, eye: Vec3) -> SourceProjection {
         SourceProjection::Orthographic
     }
 }
+
+/// A solid's orthographic texture falls short of what its own eye sees when it opens
+/// gaps this wide (screen pixels, weighted as against the tolerance) seen from that
+/// eye: half the default tolerance spent before the eye has moved. The scanned bunny's
+/// fell short from the front (12.7–13.5 px) and from behind (7.5–9.9), and its worst
+/// frames were theirs: 3.6–7 dB below geometry's, at turns of 0.2–5.6°, the ears'
+/// undersides missing. The default scene's sphere never opens any; its knot and rock,
+/// of about 30 textures a run, two each (the knot 8.2 and 9.6 px, the rock 15.7–17.5),
+/// and the rock others at 4.3–5.8 (at 4 px, 2 of them in 3 textures turned it to
+/// perspective in 3 runs of 4, its median 0.6 dB lower, still 2.2–2.5 above
+/// geometry's). See
+/// `manager/perspective.rs`.
+pub const OWN_EYE_GROWTH: f32 = 0.5 * DEFAULT_TOLERANCE;
+
+/// An object's textures are asked in perspective once this many of its last
+/// [`SHORT_WINDOW`] final orthographic ones fell short ([`OWN_EYE_GROWTH`]): the
+/// object's shape, not one view's. The bunny's fall short several in a row, the
+/// knot's and the rock's one at a time. (Turned by the knot's one, its worst frame fell
+/// 4.0 and 7.3 dB below geometry's worst in 2 runs of 3, on its near pass.)
+pub const SHORT_NEEDED: u32 = 2;
+
+/// How many of an object's latest final orthographic textures [`SHORT_NEEDED`] counts
+/// among.
+pub const SHORT_WINDOW: u32 = 3;
 
 /// The texel, in pixels' angles, asked for and shown where the texture stays within
 /// [`FINE_TEXEL_MAX_EDGE`]: a texel of a pixel
@@ -366,12 +414,13 @@ pub fn cheaper_as_geometry(object: &SceneObject, edge: u32) -> bool {
 pub const STAND_IN_TRIANGLES: usize = 2_000_000;
 
 /// The texel, in pixels' angles, a texture of `object` is asked for and shown at from
-/// `camera`: [`SHEET_TEXEL_PIXELS`] for leaves and sheets; for solids
+/// `camera` (`in_perspective` as [`projection_for`] takes it): [`SHEET_TEXEL_PIXELS`]
+/// for the perspective textures of leaves and sheets; for the others
 /// [`FINE_TEXEL_PIXELS`] while that keeps within [`FINE_TEXEL_MAX_EDGE`], else
 /// [`MAX_TEXEL_PIXELS`].
-pub fn texel_pixels(object: &SceneObject, camera: &Camera) -> f32 {
-    let projection = projection_for(object, camera.eye_f32());
-    if projection == SourceProjection::Perspective {
+pub fn texel_pixels(object: &SceneObject, camera: &Camera, in_perspective: bool) -> f32 {
+    let projection = projection_for(object, camera.eye_f32(), in_perspective);
+    if sheet_texels(object, projection) {
         return SHEET_TEXEL_PIXELS;
     }
     match fine_edge(object, camera, projection) {
@@ -381,17 +430,19 @@ pub fn texel_pixels(object: &SceneObject, camera: &Camera) -> f32 {
 }
 
 /// What a texture of `object` is asked for in from `camera`: its projection
-/// ([`projection_for`]) and the fewest texels per edge at its texel
-/// ([`texel_pixels`], eq. 5-1: [`resolution_for`]); no edge when no texture faces the
-/// eye.
-pub fn asked_for(object: &SceneObject, camera: &Camera) -> (SourceProjection, Option<u32>) {
+/// ([`projection_for`], with `in_perspective`) and the fewest texels per edge at its
+/// texel ([`texel_pixels`], eq. 5-1: [`resolution_for`]); no edge when no texture faces
+/// the eye.
+pub fn asked_for(
+    object: &SceneObject,
+    camera: &Camera,
+    in_perspective: bool,
+) -> (SourceProjection, Option<u32>) {
     let eye = camera.eye_f32();
-    let projection = projection_for(object, eye);
-    let edge = match projection {
-        SourceProjection::Perspective => {
-            resolution_for(&object.local_bounds, eye, projection, camera, SHEET_TEXEL_PIXELS)
-        }
-        SourceProjection::Orthographic => fine_edge(object, camera, projection)
+    let projection = projection_for(object, eye, in_perspective);
+    let edge = match sheet_texels(object, projection) {
+        true => resolution_for(&object.local_bounds, eye, projection, camera, SHEET_TEXEL_PIXELS),
+        false => fine_edge(object, camera, projection)
             .or_else(|| resolution_for(&object.local_bounds, eye, projection, camera, MAX_TEXEL_PIXELS)),
     };
     (projection, edge)
@@ -648,15 +699,12 @@ mod tests {
             o.local_bounds.center() + Vec3::new(0.3, 0.2, 1.0) * 4.0 * o.local_bounds.extent().length()
         };
         assert!(!holed.is_closed());
-        assert_eq!(projection_for(&tree, far(&tree)), SourceProjection::Perspective);
-        assert_eq!(
-            projection_for(&sphere, far(&sphere)),
-            SourceProjection::Orthographic
-        );
-        assert_eq!(
-            projection_for(&holed, far(&holed)),
-            SourceProjection::Orthographic
-        );
+        let (orthographic, perspective) = (SourceProjection::Orthographic, SourceProjection::Perspective);
+        assert_eq!(projection_for(&tree, far(&tree), false), perspective);
+        assert_eq!(projection_for(&sphere, far(&sphere), false), orthographic);
+        assert_eq!(projection_for(&holed, far(&holed), false), orthographic);
+        // Asked so, a solid's textures are in perspective too.
+        assert_eq!(projection_for(&sphere, far(&sphere), true), perspective);
     }
 
     /// A texture's gap growth counts more where its surfaces part often and differ
@@ -678,7 +726,7 @@ mod tests {
                 eye,
                 256,
                 REQUESTED_DEPTH_BITS,
-                projection_for(object, eye),
+                projection_for(object, eye, false),
             )
             .expect("bake");
             growth_weight(EdgeError::of(&Impostor::new(texture)))
@@ -714,28 +762,30 @@ mod tests {
             sphere.local_bounds.center() + Vec3::new(0.0, 1.0, 12.0),
             sphere.local_bounds.center(),
         );
-        assert_eq!(texel_pixels(sphere, &far), FINE_TEXEL_PIXELS);
+        assert_eq!(texel_pixels(sphere, &far, false), FINE_TEXEL_PIXELS);
+        assert_eq!(texel_pixels(sphere, &far, true), FINE_TEXEL_PIXELS);
         let near = look(
             tree.local_bounds.center() + Vec3::new(0.0, 1.0, 5.0),
             tree.local_bounds.center(),
         );
-        assert_eq!(texel_pixels(tree, &near), SHEET_TEXEL_PIXELS);
-        let (projection, edge) = asked_for(tree, &near);
+        assert_eq!(texel_pixels(tree, &near, false), SHEET_TEXEL_PIXELS);
+        let (projection, edge) = asked_for(tree, &near, false);
         assert_eq!(projection, SourceProjection::Perspective);
         assert!(edge.is_some_and(|e| e > SHEET_MAX_EDGE), "{edge:?}");
-        assert_eq!(largest_edge(projection), SHEET_MAX_EDGE);
+        assert_eq!(largest_edge(tree, projection), SHEET_MAX_EDGE);
+        assert_eq!(largest_edge(sphere, projection), SOLID_MAX_EDGE);
         let near_sphere = look(
             sphere.local_bounds.center() + Vec3::new(0.0, 0.0, 2.0),
             sphere.local_bounds.center(),
         );
         assert_eq!(
-            texel_pixels(sphere, &near_sphere),
+            texel_pixels(sphere, &near_sphere, false),
             relief_render::pyramid::MAX_TEXEL_PIXELS
         );
         // Inside the bounds no texture is asked for: the coarser texel, no panic.
         let inside = look(sphere.local_bounds.center(), Vec3::new(10.0, 0.0, 0.0));
         assert_eq!(
-            texel_pixels(sphere, &inside),
+            texel_pixels(sphere, &inside, false),
             relief_render::pyramid::MAX_TEXEL_PIXELS
         );
     }

@@ -238,15 +238,21 @@ impl Manager {
     /// The texture to ask for from `eye`: its edge — what the screen can show of the
     /// object ([`asked_for`]), rounded up to the [`texture_ladder`], at most the
     /// projection's [`largest_edge`] — and its projection.
-    pub(super) fn size_for(object: &SceneObject, eye: Vec3, camera: &Camera) -> (u32, SourceProjection) {
+    pub(super) fn size_for(
+        object: &SceneObject,
+        eye: Vec3,
+        camera: &Camera,
+        in_perspective: bool,
+    ) -> (u32, SourceProjection) {
         let (projection, edge) = asked_for(
             object,
             &Camera {
                 eye: eye.as_dvec3(),
                 ..*camera
             },
+            in_perspective,
         );
-        let edge = texture_ladder(edge.unwrap_or(u32::MAX)).min(largest_edge(projection));
+        let edge = texture_ladder(edge.unwrap_or(u32::MAX)).min(largest_edge(object, projection));
         (edge, projection)
     }
 
@@ -259,7 +265,7 @@ impl Manager {
         needed_in_ms: Option<u64>,
     ) {
         let o = &scene.objects[object];
-        let (size, projection) = Self::size_for(o, eye, camera);
+        let (size, projection) = Self::size_for(o, eye, camera, self.objects[object].in_perspective);
         let id = self.next_id;
         self.next_id += 1;
         let request = TextureRequest {

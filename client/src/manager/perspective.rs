@@ -1,0 +1,93 @@
+//! Which objects' textures are asked in perspective, from the eye itself, though they
+//! are solids ([`projection_for`](super::policy::projection_for)).
+//!
+//! An orthographic texture's parallel rays see a closed surface's whole outline for
+//! their direction; an eye's own rays lean out from its central one towards the
+//! outline, and near an object they meet surface the parallel rays pass by — the
+//! undersides of the scanned bunny's ears, seen from a little below them. The texture
+//! then shows gaps at its own eye, which its critical points measure
+//! ([`growth`](super::choose::growth) seen from that eye). When
+//! [`SHORT_NEEDED`] of an object's last [`SHORT_WINDOW`] final orthographic textures
+//! fall short by more than [`OWN_EYE_GROWTH`], its later textures are asked in
+//! perspective, and those that fell short are let go: drawn as geometry, or stale,
+//! until perspective ones come. A perspective texture sees less of the outline as the
+//! eye turns, and is shown alone less far round
+//! ([`PERSPECTIVE_LONE_TURN`](super::policy::PERSPECTIVE_LONE_TURN)).
+
+use relief_core::camera::Camera;
+use relief_core::scene::SceneObject;
+
+use super::Manager;
+use super::cache::Held;
+use super::choose::growth;
+use super::policy::{OWN_EYE_GROWTH, SHORT_NEEDED, SHORT_WINDOW};
+
+/// Which of an object's last [`SHORT_WINDOW`] final orthographic textures fell short of
+/// what their own eye sees: a bit each, the newest lowest.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct ShortTextures(u32);
+
+impl ShortTextures {
+    /// Records the newest texture.
+    fn record(&mut self, short: bool) {
+        self.0 = ((self.0 << 1) | u32::from(short)) & ((1 << SHORT_WINDOW) - 1);
+    }
+
+    /// Whether [`SHORT_NEEDED`] of them fell short: the object's shape, not one view's.
+    fn often(self) -> bool {
+        self.0.count_ones() >= SHORT_NEEDED
+    }
+}
+
+/// The growth (screen pixels) of the gaps `held` opens seen from its own eye, if it is
+/// an orthographic texture of a solid `object` (`camera`, in its frame, giving the
+/// pixels' size).
+fn own_eye_growth(held: &Held, object: &SceneObject, camera: &Camera) -> Option<f32> {
+    let orthographic = held.prepared.pyramid.levels[0].texture.camera.centre.is_none();
+    (orthographic && !object.edge_census().is_sheets()).then(|| growth(held, held.eye, camera))
+}
+
+impl Manager {
+    /// Weighs `held`, just arrived for object `k` (`object`, seen by `camera` in its
+    /// frame), at its own eye: marks it if it falls short, counts it (a final one)
+    /// towards asking `k`'s textures in perspective — letting go of those held that
+    /// fell short when it does — and returns whether to hold it: not if it falls short
+    /// and `k`'s textures are asked in perspective.
+    pub(super) fn weigh_own_eye(
+        &mut self,
+        k: usize,
+        object: &SceneObject,
+        held: &mut Held,
+        camera: &Camera,
+    ) -> bool {
+        let Some(growth) = own_eye_growth(held, object, camera) else {
+            return true;
+        };
+        held.falls_short = growth > OWN_EYE_GROWTH;
+        tracing::debug!(
+            object = k,
+            own_eye_growth = growth,
+            "orthographic texture arrived"
+        );
+        let state = &mut self.objects[k];
+        if held.is_final && !state.in_perspective {
+            state.short_textures.record(held.falls_short);
+            if state.short_textures.often() {
+                tracing::debug!(object = k, "its textures asked in perspective from now on");
+                state.in_perspective = true;
+                let (short, kept) = std::mem::take(&mut state.held)
+                    .into_iter()
+                    .partition(|h: &Held| h.falls_short);
+                state.held = kept;
+                for h in &short {
+                    self.counters.retired.retire(h, state.last_shown);
+                }
+            }
+        }
+        if state.in_perspective && held.falls_short {
+            self.counters.retired.retire(held, state.last_shown);
+            return false;
+        }
+        true
+    }
+}
