@@ -878,16 +878,10 @@ fn a_solid_is_shown_alone_less_far_round_than_a_sheet() {
     use relief_client::manager::policy::{
         LONE_MAX_TURN, LONE_TURN_CAP, PERSPECTIVE_LONE_TURN, lone_max_turn,
     };
-    use relief_core::relief::{SourceCamera, SourceProjection};
+    use relief_core::relief::SourceProjection;
 
     let scene = Scene::load("orbit-sphere").unwrap();
-    let turn = |name: &str, projection| {
-        let object = &scene.objects[index(&scene, name)];
-        let bounds = &object.local_bounds;
-        let eye = bounds.center() + Vec3::new(0.0, 1.0, 3.0) * bounds.extent().length();
-        let texture = SourceCamera::facing(eye, bounds, 64, 64, projection).unwrap();
-        lone_max_turn(object, &texture)
-    };
+    let turn = |name: &str, projection| lone_max_turn(&scene.objects[index(&scene, name)], projection);
     let (orthographic, perspective) = (SourceProjection::Orthographic, SourceProjection::Perspective);
     assert_eq!(turn("sphere", orthographic), LONE_MAX_TURN);
     assert_eq!(turn("sphere", perspective), PERSPECTIVE_LONE_TURN);
@@ -895,18 +889,21 @@ fn a_solid_is_shown_alone_less_far_round_than_a_sheet() {
     assert_eq!(turn("ground", perspective), LONE_TURN_CAP);
 }
 
-/// Orthographic textures that fall short of what their own eye sees turn their
-/// object's later requests to perspective ([`OWN_EYE_GROWTH`], two of the last three:
-/// [`SHORT_NEEDED`]): the scanned bunny seen near, from the front and from behind
-/// (its default path's frames 9 and 84), whose ears' undersides the eye's rays meet and
-/// parallel ones pass by. The sphere's textures show what their eye sees: its requests
-/// stay orthographic. (Fails with the switch left out, made for every solid, or made
-/// on one texture.)
+/// Orthographic textures that fall short of what their own eye sees switch their
+/// object's requests to perspective ([`OWN_EYE_GROWTH`], two of the last three:
+/// [`SHORT_NEEDED`]): the scanned bunny seen near, from the front and from behind (its
+/// default path's frames 9 and 84), whose ears' undersides the eye's rays meet and
+/// parallel ones pass by. The frame that takes in the second lets go of both and asks
+/// again from its eye, in perspective. The sphere's textures, seen as near on its
+/// scene's own orbit (a third of it apart), show what their eye sees: its requests stay
+/// orthographic, and the second, taken in, is shown. (Fails with the switch left out,
+/// made for every solid, or made on one texture.)
 ///
 /// [`OWN_EYE_GROWTH`]: relief_client::manager::policy::OWN_EYE_GROWTH
 /// [`SHORT_NEEDED`]: relief_client::manager::policy::SHORT_NEEDED
 #[test]
 fn an_object_whose_parallel_rays_fall_short_is_asked_in_perspective() {
+    use relief_core::camera::CameraPath;
     use relief_core::relief::SourceProjection;
     use relief_trace::bake;
     use relief_trace::tracer::ObjectTracer;
@@ -918,43 +915,67 @@ fn an_object_whose_parallel_rays_fall_short_is_asked_in_perspective() {
         "{} is missing (CI has ../shared beside the clone)",
         bunny.display()
     );
-    // The projections of the requests for now made from each of `frames` of the
-    // default path in turn, each answered before the next.
-    let asked_in = |scene: Scene, object: usize, frames: [u32; 3]| -> [SourceProjection; 3] {
+    // The projections of the requests for now made from each of `frames` of `path` in
+    // turn, each answered before the next, and of the one (if any) that the frame taking
+    // in the last answer makes.
+    let asked_in = |scene: Scene, object: usize, path: CameraPath, frames: [u32; 2]| {
         let scene = Arc::new(scene);
         let config = Config {
             predict: false,
             ..Config::default()
         };
         let (mut manager, mut commands, arrivals) = wired(&scene, config);
-        let path = scene.default_path();
+        let name = scene.objects[object].name.clone();
         let tracer = ObjectTracer::new(&scene.objects[object]);
-        frames.map(|frame| {
-            let pose = path.pose(frame).unwrap();
-            let camera = pose.camera(scene.fov_y_degrees, 640, 360).unwrap();
+        let mut asked_after = None;
+        let asked = frames.map(|frame| {
+            let camera = path
+                .pose(frame)
+                .unwrap()
+                .camera(scene.fov_y_degrees, 640, 360)
+                .unwrap();
             manager.frame(&scene, &camera, frame as f64);
             let r = request_now(&mut commands);
+            assert_eq!(r.object, name);
             let texture = bake(&tracer, r.eye, r.size, r.depth_bits, r.projection).unwrap();
             arrive(
                 &arrivals,
                 r.id,
                 ReadyTexture::new(texture, relief_render::impostor::Faces::Front),
             );
-            // (Taken in.)
             manager.frame(&scene, &camera, frame as f64 + 0.5);
-            r.projection
-        })
+            asked_after = std::iter::from_fn(|| commands.try_recv().ok()).find_map(|c| match c {
+                Command::Request(r) if r.needed_in_ms.is_none() => Some((r.projection, r.eye)),
+                _ => None,
+            });
+            (r.projection, r.eye)
+        });
+        let projections = asked.map(|(projection, _)| projection);
+        // (From the same eye.)
+        let again = asked_after.map(|(projection, eye)| {
+            assert!(
+                eye.distance(asked[1].1) < 1e-3 * eye.length(),
+                "{eye} {}",
+                asked[1].1
+            );
+            projection
+        });
+        (projections, again)
     };
-    let frames = [9, 84, 40];
     let (orthographic, perspective) = (SourceProjection::Orthographic, SourceProjection::Perspective);
     let bunny = Scene::load(bunny.to_str().unwrap()).unwrap();
+    let path = bunny.default_path();
     assert_eq!(
-        asked_in(bunny, 0, frames),
-        [orthographic, orthographic, perspective]
+        asked_in(bunny, 0, path, [9, 84]),
+        ([orthographic; 2], Some(perspective))
     );
+    // (A third of its orbit apart: the first does not cover the second.)
     let spheres = Scene::load("orbit-sphere").unwrap();
-    let sphere = index(&spheres, "sphere");
-    assert_eq!(asked_in(spheres, sphere, frames), [orthographic; 3]);
+    let (sphere, path) = (index(&spheres, "sphere"), spheres.path.clone());
+    assert_eq!(
+        asked_in(spheres, sphere, path, [0, 80]),
+        ([orthographic; 2], None)
+    );
 }
 
 /// An object wholly off screen is not needed now: no stale frame, no request for now;

@@ -1,6 +1,7 @@
-//! The textures held for each object: arrivals taken in (never waiting), each final
-//! one's valid angle probed, those relied on and then the nearest the eye kept, and
-//! each shared with the other placements of its mesh that can show it.
+//! The textures held for each object: arrivals taken in (never waiting), each weighed
+//! at its own eye (`perspective.rs`), each final one's valid angle probed, those
+//! relied on and then the nearest the eye kept, and each shared with the other
+//! placements of its mesh that can show it.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -122,8 +123,8 @@ pub(super) struct Held {
     /// in that placement's lifetimes, not here.
     pub(super) shared: bool,
     /// An orthographic texture that falls short of what its own eye sees
-    /// ([`OWN_EYE_GROWTH`](super::policy::OWN_EYE_GROWTH)): let go once its object's textures are asked in perspective
-    /// (`perspective.rs`).
+    /// ([`OWN_EYE_GROWTH`](super::policy::OWN_EYE_GROWTH)): let go once its object's
+    /// textures are asked in perspective (`perspective.rs`).
     pub(super) falls_short: bool,
 }
 
@@ -194,16 +195,6 @@ impl Manager {
                         held.relied_on = Instant::now();
                         continue;
                     }
-                    // A final texture replaces its own preview, and a coarser one from its
-                    // eye (a finer one asked for as the texels grew: `REFINE_TEXEL`).
-                    let (replaced, kept): (Vec<Held>, Vec<Held>) =
-                        std::mem::take(&mut state.held).into_iter().partition(|h| {
-                            h.eye == eye && (!h.is_final || (is_final && edge(&h.prepared) < new_edge))
-                        });
-                    state.held = kept;
-                    for h in &replaced {
-                        self.counters.retired.retire(h, state.last_shown);
-                    }
                     let object = &scene.objects[p.object];
                     let taken_in = Instant::now();
                     let mut held = Held {
@@ -218,10 +209,22 @@ impl Manager {
                         falls_short: false,
                     };
                     let (local, centre) = (object.local_camera(camera), object.local_bounds.center());
+                    // (Before it replaces anything: one let go leaves what it would have
+                    // replaced in place.)
                     if !self.weigh_own_eye(p.object, object, &mut held, &local) {
                         continue;
                     }
                     let state = &mut self.objects[p.object];
+                    // A final texture replaces its own preview, and a coarser one from its
+                    // eye (a finer one asked for as the texels grew: `REFINE_TEXEL`).
+                    let (replaced, kept): (Vec<Held>, Vec<Held>) =
+                        std::mem::take(&mut state.held).into_iter().partition(|h| {
+                            h.eye == eye && (!h.is_final || (is_final && edge(&h.prepared) < new_edge))
+                        });
+                    state.held = kept;
+                    for h in &replaced {
+                        self.counters.retired.retire(h, state.last_shown);
+                    }
                     if is_final {
                         let angle = probe_valid_angle(&held, centre, &local, tolerance);
                         state.valid_angle = Some(angle);

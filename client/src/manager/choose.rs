@@ -6,6 +6,7 @@
 use glam::{Quat, Vec3};
 
 use relief_core::camera::Camera;
+use relief_core::relief::SourceProjection;
 use relief_core::scene::{Scene, SceneObject};
 use relief_render::validity::schaufler::{magnification, texel_angle, volume_centre};
 use relief_render::warp::params::WarpParams;
@@ -75,7 +76,7 @@ pub(super) struct Grade {
     /// had (the edge asked for now, [`Manager::size_for`], is larger).
     pub(super) finer_available: bool,
     /// The turn past which it counts as stale shown alone, at the default tolerance
-    /// ([`lone_max_turn`](super::policy::lone_max_turn) of its object).
+    /// ([`lone_max_turn`](super::policy::lone_max_turn) of its object and projection).
     pub(super) lone_turn: f32,
 }
 
@@ -134,8 +135,10 @@ pub(super) fn band(held: &Held, centre: Vec3, eye: Vec3, camera: &Camera) -> f32
 /// ([`NormalCensus::unseen_share`](relief_core::normals::NormalCensus::unseen_share)):
 /// what turned into view past a sharp edge, or what a near eye sees beside the object's
 /// centre edge-on to the texture. 0 for leaves or sheets (two-sided: every face is seen
-/// from one side or the other), and so for perspective textures, asked for those only
-/// ([`projection_for`](super::policy::projection_for)), whose rays part.
+/// from one side or the other), and for perspective textures, whose rays part (a
+/// solid's, asked where its parallel rays fall short,
+/// [`projection_for`](super::policy::projection_for), is bounded by its short lone turn
+/// instead, [`PERSPECTIVE_LONE_TURN`](super::policy::PERSPECTIVE_LONE_TURN)).
 pub(super) fn unseen(held: &Held, object: &SceneObject, eye: Vec3) -> f32 {
     let c = &held.prepared.pyramid.levels[0].texture.camera;
     if c.centre.is_some() || object.edge_census().is_sheets() {
@@ -146,15 +149,16 @@ pub(super) fn unseen(held: &Held, object: &SceneObject, eye: Vec3) -> f32 {
 
 /// How far round from `held`'s eye an eye may turn about `axis` through `object`'s
 /// `centre`, at `distance` from it, with `held` still planned to be shown there alone:
-/// the band past its rim, the surface its rays never met, and the turn (the object's
-/// [`lone_max_turn`]) within the planning margin of theirs ([`may_show`]), its gaps'
+/// the band past its rim, the surface its rays never met, and the turn (the
+/// [`lone_max_turn`] of `object` in `projection`, the one of the texture to be made)
+/// within the planning margin of theirs ([`may_show`]), its gaps'
 /// growth within [`LEAD`] of the tolerance — either way, as a texture made ahead of the
 /// eye is first seen behind its own eye ([`widest_within`]). (The band and the surface
 /// come from the object's shape, much the same for a texture made nearby; the growth,
 /// measured on another texture than the one to be made, is where the margin is kept.)
 pub(super) fn probe_lone_reach(
     held: &Held,
-    object: &SceneObject,
+    (object, projection): (&SceneObject, SourceProjection),
     centre: Vec3,
     axis: Vec3,
     distance: f32,
@@ -162,7 +166,7 @@ pub(super) fn probe_lone_reach(
     tolerance: f32,
 ) -> f32 {
     let from = (held.eye - centre).normalize_or_zero() * distance;
-    let lone_turn = lone_max_turn(object, &held.prepared.pyramid.levels[0].texture.camera);
+    let lone_turn = lone_max_turn(object, projection);
     let within = |angle: f32| {
         [angle, -angle].iter().all(|&a| {
             let eye = centre + Quat::from_axis_angle(axis, a) * from;
@@ -348,7 +352,7 @@ impl Manager {
                 unshown: Unshown::at(h, o, centre, eye, camera),
                 too_coarse: texel > COARSEST_SHOWN,
                 finer_available: texel > REFINE_TEXEL && texture.width < wanted,
-                lone_turn: lone_max_turn(o, texture),
+                lone_turn: lone_max_turn(o, texture.projection()),
             }
         };
         Some(self.objects[object].held.iter().map(grade).collect())

@@ -15,12 +15,13 @@
 //! ([`PERSPECTIVE_LONE_TURN`](super::policy::PERSPECTIVE_LONE_TURN)).
 
 use relief_core::camera::Camera;
+use relief_core::relief::SourceProjection;
 use relief_core::scene::SceneObject;
 
 use super::Manager;
 use super::cache::Held;
 use super::choose::growth;
-use super::policy::{OWN_EYE_GROWTH, SHORT_NEEDED, SHORT_WINDOW};
+use super::policy::{OWN_EYE_GROWTH, SHORT_NEEDED, SHORT_WINDOW, projection_for};
 
 /// Which of an object's last [`SHORT_WINDOW`] final orthographic textures fell short of
 /// what their own eye sees: a bit each, the newest lowest.
@@ -50,9 +51,10 @@ fn own_eye_growth(held: &Held, object: &SceneObject, camera: &Camera) -> Option<
 impl Manager {
     /// Weighs `held`, just arrived for object `k` (`object`, seen by `camera` in its
     /// frame), at its own eye: marks it if it falls short, counts it (a final one)
-    /// towards asking `k`'s textures in perspective — letting go of those held that
-    /// fell short when it does — and returns whether to hold it: not if it falls short
-    /// and `k`'s textures are asked in perspective.
+    /// towards asking `k`'s textures in perspective — letting go, when it does, of
+    /// those held that fell short and withdrawing `k`'s predictions — and returns
+    /// whether to hold it: not if it falls short, `k`'s textures are asked in
+    /// perspective, and one could be asked from its eye.
     pub(super) fn weigh_own_eye(
         &mut self,
         k: usize,
@@ -69,6 +71,10 @@ impl Manager {
             own_eye_growth = growth,
             "orthographic texture arrived"
         );
+        // (Where the eye is too near for a perspective texture, an orthographic one is
+        // asked all the same: one that falls short there is still the best to be had.)
+        let replaceable =
+            |h: &Held| h.falls_short && projection_for(object, h.eye, true) == SourceProjection::Perspective;
         let state = &mut self.objects[k];
         if held.is_final && !state.in_perspective {
             state.short_textures.record(held.falls_short);
@@ -77,17 +83,44 @@ impl Manager {
                 state.in_perspective = true;
                 let (short, kept) = std::mem::take(&mut state.held)
                     .into_iter()
-                    .partition(|h: &Held| h.falls_short);
+                    .partition(|h: &Held| replaceable(h));
                 state.held = kept;
                 for h in &short {
                     self.counters.retired.retire(h, state.last_shown);
                 }
+                // (Orthographic predictions still on their way would count as
+                // covering the eye's future; asked again, they come in perspective.)
+                self.withdraw_predictions(k, |_| true);
             }
         }
-        if state.in_perspective && held.falls_short {
-            self.counters.retired.retire(held, state.last_shown);
+        if self.objects[k].in_perspective && replaceable(held) {
+            self.counters.retired.retire(held, self.objects[k].last_shown);
             return false;
         }
         true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two short textures among the last three switch; one alone, or two with three
+    /// others after them, do not.
+    #[test]
+    fn two_of_the_last_three_short_textures_switch() {
+        let after = |shorts: &[bool]| {
+            let mut recent = ShortTextures::default();
+            for &short in shorts {
+                recent.record(short);
+            }
+            recent.often()
+        };
+        assert!(!after(&[true]));
+        assert!(after(&[true, true]));
+        assert!(after(&[true, false, true]));
+        assert!(!after(&[true, false, false, true]));
+        assert!(!after(&[true, true, false, false, false]));
+        assert_eq!((SHORT_NEEDED, SHORT_WINDOW), (2, 3));
     }
 }

@@ -143,16 +143,16 @@ pub const LONE_TURN_CAP: f32 = 30.0 * PI / 180.0;
 /// asked 32–33.
 pub const PERSPECTIVE_LONE_TURN: f32 = 6.0 * PI / 180.0;
 
-/// The turn past which a texture of `object` made by `texture`'s camera counts as
-/// stale drawn alone at the default tolerance: [`LONE_TURN_CAP`] for leaves or sheets
+/// The turn past which a texture of `object` in `projection` counts as stale drawn
+/// alone at the default tolerance: [`LONE_TURN_CAP`] for leaves or sheets
 /// ([`EdgeCensus::is_sheets`](relief_core::mesh::EdgeCensus::is_sheets), whichever way
 /// its textures' rays go: near the eye they are asked orthographic),
 /// [`PERSPECTIVE_LONE_TURN`] for a solid's perspective texture, else
 /// [`LONE_MAX_TURN`].
-pub fn lone_max_turn(object: &SceneObject, texture: &SourceCamera) -> f32 {
+pub fn lone_max_turn(object: &SceneObject, projection: SourceProjection) -> f32 {
     if object.edge_census().is_sheets() {
         LONE_TURN_CAP
-    } else if texture.centre.is_some() {
+    } else if projection == SourceProjection::Perspective {
         PERSPECTIVE_LONE_TURN
     } else {
         LONE_MAX_TURN

@@ -23,7 +23,7 @@ use super::policy::{
     GLIMPSE_LATENCY_PERCENTILE, HORIZON_FALLBACK_STEPS, HORIZON_MARGIN_S, HORIZON_SPARE, LATENCY_PERCENTILE,
     LATENCY_WINDOW, LEAD, LEAD_DISTANCE_SLACK, LEAD_PATH_STEPS, MAX_HORIZON_S, MIN_LEAD, OWN_LATENCIES,
     PENDING_DISTANCE_SLACK, PENDING_REACH, PREDICTED_VIEW_MARGIN, REQUESTED_DEPTH_BITS, SERVE_REACH,
-    TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge,
+    TEXTURE_LADDER, WITHDRAW_REACH, asked_for, largest_edge, projection_for,
 };
 
 #[derive(Debug, Clone, Copy)]
@@ -485,14 +485,26 @@ impl Manager {
         let probed = nearest.and_then(|held| {
             let axis = (held.eye - centre).cross(future - now).normalize_or_zero();
             let distance = centre.distance(future);
-            (axis != Vec3::ZERO)
-                .then(|| probe_lone_reach(held, object, centre, axis, distance, camera, self.tolerance()))
+            (axis != Vec3::ZERO).then(|| {
+                // (The lone turn of the texture to be asked, not of the one held:
+                // after a switch to perspective they differ.)
+                let projection = projection_for(object, future, self.objects[k].in_perspective);
+                probe_lone_reach(
+                    held,
+                    (object, projection),
+                    centre,
+                    axis,
+                    distance,
+                    camera,
+                    self.tolerance(),
+                )
+            })
         });
         probed.unwrap_or(LEAD * valid).min(PENDING_REACH * valid)
     }
 
     /// Withdraws object `k`'s predicted requests that are `stale`.
-    fn withdraw_predictions(&mut self, k: usize, stale: impl Fn(&Pending) -> bool) {
+    pub(super) fn withdraw_predictions(&mut self, k: usize, stale: impl Fn(&Pending) -> bool) {
         self.withdraw_predicted(|p| p.object == k && stale(p));
     }
 
