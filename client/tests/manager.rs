@@ -896,8 +896,8 @@ fn a_solid_is_shown_alone_less_far_round_than_a_sheet() {
 /// parallel ones pass by. The frame that takes in the second lets go of both and asks
 /// again from its eye, in perspective. The sphere's textures, seen as near on its
 /// scene's own orbit (a third of it apart), show what their eye sees: its requests stay
-/// orthographic, and the second, taken in, is shown. (Fails with the switch left out,
-/// made for every solid, or made on one texture.)
+/// orthographic, and once the second is taken in none is asked for. (Fails with the
+/// switch left out, made for every solid, or made on one texture.)
 ///
 /// [`OWN_EYE_GROWTH`]: relief_client::manager::policy::OWN_EYE_GROWTH
 /// [`SHORT_NEEDED`]: relief_client::manager::policy::SHORT_NEEDED

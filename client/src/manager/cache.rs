@@ -1,5 +1,5 @@
-//! The textures held for each object: arrivals taken in (never waiting), each weighed
-//! at its own eye (`perspective.rs`), each final one's valid angle probed, those
+//! The textures held for each object: arrivals taken in (never waiting), a solid's
+//! orthographic ones weighed at their own eye (`perspective.rs`), each final one's valid angle probed, those
 //! relied on and then the nearest the eye kept, and each shared with the other
 //! placements of its mesh that can show it.
 
@@ -124,7 +124,8 @@ pub(super) struct Held {
     pub(super) shared: bool,
     /// An orthographic texture that falls short of what its own eye sees
     /// ([`OWN_EYE_GROWTH`](super::policy::OWN_EYE_GROWTH)): let go once its object's
-    /// textures are asked in perspective (`perspective.rs`).
+    /// textures are asked in perspective, where one can be asked from its eye
+    /// (`perspective.rs`).
     pub(super) falls_short: bool,
 }
 
@@ -211,7 +212,7 @@ impl Manager {
                     let (local, centre) = (object.local_camera(camera), object.local_bounds.center());
                     // (Before it replaces anything: one let go leaves what it would have
                     // replaced in place.)
-                    if !self.weigh_own_eye(p.object, object, &mut held, &local) {
+                    if !self.weigh_own_eye((p.object, p.eye), object, &mut held, &local) {
                         continue;
                     }
                     let state = &mut self.objects[p.object];

@@ -9,10 +9,13 @@
 //! ([`growth`](super::choose::growth) seen from that eye). When
 //! [`SHORT_NEEDED`] of an object's last [`SHORT_WINDOW`] final orthographic textures
 //! fall short by more than [`OWN_EYE_GROWTH`], its later textures are asked in
-//! perspective, and those that fell short are let go: drawn as geometry, or stale,
+//! perspective, and those that fell short are let go where a perspective texture can
+//! be asked from their eye (not too near the object): drawn as geometry, or stale,
 //! until perspective ones come. A perspective texture sees less of the outline as the
 //! eye turns, and is shown alone less far round
 //! ([`PERSPECTIVE_LONE_TURN`](super::policy::PERSPECTIVE_LONE_TURN)).
+
+use glam::Vec3;
 
 use relief_core::camera::Camera;
 use relief_core::relief::SourceProjection;
@@ -50,14 +53,15 @@ fn own_eye_growth(held: &Held, object: &SceneObject, camera: &Camera) -> Option<
 
 impl Manager {
     /// Weighs `held`, just arrived for object `k` (`object`, seen by `camera` in its
-    /// frame), at its own eye: marks it if it falls short, counts it (a final one)
-    /// towards asking `k`'s textures in perspective — letting go, when it does, of
-    /// those held that fell short and withdrawing `k`'s predictions — and returns
-    /// whether to hold it: not if it falls short, `k`'s textures are asked in
-    /// perspective, and one could be asked from its eye.
+    /// frame) as asked from `asked_from`, at its own eye: marks it if it falls short,
+    /// counts it (a final one) towards asking `k`'s textures in perspective — letting
+    /// go, when it does, of those held that fell short where a perspective texture could
+    /// be asked from their eye, and withdrawing `k`'s predictions — and returns whether
+    /// to hold it: not if it falls short, `k`'s textures are asked in perspective, and
+    /// one would be asked from `asked_from`.
     pub(super) fn weigh_own_eye(
         &mut self,
-        k: usize,
+        (k, asked_from): (usize, Vec3),
         object: &SceneObject,
         held: &mut Held,
         camera: &Camera,
@@ -72,9 +76,12 @@ impl Manager {
             "orthographic texture arrived"
         );
         // (Where the eye is too near for a perspective texture, an orthographic one is
-        // asked all the same: one that falls short there is still the best to be had.)
-        let replaceable =
-            |h: &Held| h.falls_short && projection_for(object, h.eye, true) == SourceProjection::Perspective;
+        // asked all the same: one that falls short there is still the best to be had.
+        // An arrival is judged by the eye it was asked from: the server may serve one
+        // made for an eye nearby.)
+        let replaceable = |h: &Held, eye: Vec3| {
+            h.falls_short && projection_for(object, eye, true) == SourceProjection::Perspective
+        };
         let state = &mut self.objects[k];
         if held.is_final && !state.in_perspective {
             state.short_textures.record(held.falls_short);
@@ -83,17 +90,18 @@ impl Manager {
                 state.in_perspective = true;
                 let (short, kept) = std::mem::take(&mut state.held)
                     .into_iter()
-                    .partition(|h: &Held| replaceable(h));
+                    .partition(|h: &Held| replaceable(h, h.eye));
                 state.held = kept;
                 for h in &short {
                     self.counters.retired.retire(h, state.last_shown);
                 }
                 // (Orthographic predictions still on their way would count as
-                // covering the eye's future; asked again, they come in perspective.)
+                // covering the eye's future; asked again, they come in perspective
+                // where they can. A request for now on its way is let come.)
                 self.withdraw_predictions(k, |_| true);
             }
         }
-        if self.objects[k].in_perspective && replaceable(held) {
+        if self.objects[k].in_perspective && replaceable(held, asked_from) {
             self.counters.retired.retire(held, self.objects[k].last_shown);
             return false;
         }
@@ -105,10 +113,15 @@ impl Manager {
 mod tests {
     use super::*;
 
-    /// Two short textures among the last three switch; one alone, or two with three
-    /// others after them, do not.
+    /// Two short textures among the last three switch; one alone, two three apart, or
+    /// two with three others after them, do not.
     #[test]
     fn two_of_the_last_three_short_textures_switch() {
+        assert_eq!(
+            (SHORT_NEEDED, SHORT_WINDOW),
+            (2, 3),
+            "the cases below are for these"
+        );
         let after = |shorts: &[bool]| {
             let mut recent = ShortTextures::default();
             for &short in shorts {
@@ -121,6 +134,5 @@ mod tests {
         assert!(after(&[true, false, true]));
         assert!(!after(&[true, false, false, true]));
         assert!(!after(&[true, true, false, false, false]));
-        assert_eq!((SHORT_NEEDED, SHORT_WINDOW), (2, 3));
     }
 }

@@ -139,8 +139,10 @@ pub const LONE_TURN_CAP: f32 = 30.0 * PI / 180.0;
 /// texel; every frame judged, 2–3 runs each): alone up to [`LONE_MAX_TURN`], its worst frame 5.1 dB below
 /// geometry's worst (a texture 10° round, the far side of its body short of its
 /// outline); up to 8°, 2.8–3.6 below; up to 6°, 2.8 in both runs. With the switch as
-/// kept, up to 5°: 1.3–4.3 below (1 run of 4 over 3), 41 textures asked where 6°
-/// asked 32–33.
+/// kept, up to 5°: 1.3–4.3 below (1 run of 4 over 3), 37–41 textures asked where 6°
+/// asked 32–33. (Once an object has switched, its orthographic textures shown alone
+/// no farther round either: at rtt 0 the bunny then showed a coarse preview instead,
+/// 3.8 dB below geometry's worst in 3 runs of 3.)
 pub const PERSPECTIVE_LONE_TURN: f32 = 6.0 * PI / 180.0;
 
 /// The turn past which a texture of `object` in `projection` counts as stale drawn
@@ -311,21 +313,20 @@ pub fn projection_for(object: &SceneObject, eye: Vec3, in_perspective: bool) -> 
 /// A solid's orthographic texture falls short of what its own eye sees when it opens
 /// gaps this wide (screen pixels, weighted as against the tolerance) seen from that
 /// eye: half the default tolerance spent before the eye has moved. The scanned bunny's
-/// fell short from the front (12.7–13.5 px) and from behind (7.5–9.9), and its worst
-/// frames were theirs: 3.6–7 dB below geometry's, at turns of 0.2–5.6°, the ears'
-/// undersides missing. The default scene's sphere never opens any; its knot and rock,
-/// of about 30 textures a run, two each (the knot 8.2 and 9.6 px, the rock 15.7–17.5),
-/// and the rock others at 4.3–5.8 (at 4 px, 2 of them in 3 textures turned it to
-/// perspective in 3 runs of 4, its median 0.6 dB lower, still 2.2–2.5 above
-/// geometry's). See
+/// fell short from the front and from behind (by 6.5–13.8 px), and its worst frames
+/// were theirs: 3–7 dB below geometry's same frame, at turns of 0.2–5.6°, the ears'
+/// undersides missing. The default scene's sphere never opens any; its knot one or two
+/// of its 39–43 textures a run (8.1–9.6 px), its rock up to two of 26–30 (8.3–19.6 px;
+/// others 4.3–5.8: at 4 px, 2 of them in 3 textures switched it in 3 runs of 4, its
+/// median 0.5–0.8 dB lower, still 2.2–2.5 above geometry's). See
 /// `manager/perspective.rs`.
 pub const OWN_EYE_GROWTH: f32 = 0.5 * DEFAULT_TOLERANCE;
 
 /// An object's textures are asked in perspective once this many of its last
 /// [`SHORT_WINDOW`] final orthographic ones fell short ([`OWN_EYE_GROWTH`]): the
 /// object's shape, not one view's. The bunny's fall short several in a row, the
-/// knot's and the rock's one at a time. (Turned by the knot's one, its worst frame fell
-/// 4.0 and 7.3 dB below geometry's worst in 2 runs of 3, on its near pass.)
+/// knot's and the rock's one at a time. (Switched by its one, the knot's worst frame
+/// fell 4.0 and 7.3 dB below geometry's worst in 2 runs of 3, on its near pass.)
 pub const SHORT_NEEDED: u32 = 2;
 
 /// How many of an object's latest final orthographic textures [`SHORT_NEEDED`] counts
