@@ -1,7 +1,7 @@
 //! The textures held for each object: arrivals taken in (never waiting), a solid's
-//! orthographic ones weighed at their own eye (`perspective.rs`), each final one's valid angle probed, those
-//! relied on and then the nearest the eye kept, and each shared with the other
-//! placements of its mesh that can show it.
+//! orthographic ones weighed at their own eye (`perspective.rs`), each final one's
+//! valid angle probed, those relied on and then the nearest the eye kept, and each
+//! shared with the other placements of its mesh that can show it.
 
 use std::sync::Arc;
 use std::time::Instant;
