@@ -16,8 +16,9 @@ use super::around::{angle_between, similar_distance};
 use super::cache::Held;
 use super::policy::{
     COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_TURN_CAP, LONE_UNSEEN,
-    MAX_TEXEL_PIXELS, MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND,
-    PLANNING_MARGIN, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, lone_max_turn,
+    MAX_TEXEL_PIXELS, MAX_TURN, OWN_EYE_GROWTH, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN,
+    PARTNERED_BAND, PLANNING_MARGIN, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL,
+    lone_max_turn,
 };
 
 /// How an object is drawn this frame.
@@ -344,11 +345,17 @@ impl Manager {
             eye: eye.as_dvec3(),
             ..*camera
         };
+        let in_perspective = self.objects[object].in_perspective;
         let grade = |h: &Held| {
             let texture = &h.prepared.pyramid.levels[0].texture.camera;
             let texel = magnification(texture, &at_eye);
+            let grown = growth(h, eye, camera);
+            // (Once the object's textures are asked in perspective, an orthographic one
+            // that falls short here as much as a short one does at its own eye is not
+            // shown: perspective.rs.)
+            let short_here = in_perspective && texture.centre.is_none() && grown > OWN_EYE_GROWTH;
             Grade {
-                growth: growth(h, eye, camera),
+                growth: if short_here { f32::INFINITY } else { grown },
                 unshown: Unshown::at(h, o, centre, eye, camera),
                 too_coarse: texel > COARSEST_SHOWN,
                 finer_available: texel > REFINE_TEXEL && texture.width < wanted,

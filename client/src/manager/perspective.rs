@@ -11,8 +11,10 @@
 //! fall short by more than [`OWN_EYE_GROWTH`], its later textures are asked in
 //! perspective, and those that fell short are let go where a perspective texture can
 //! be asked from their eye (not too near the object): drawn as geometry, or stale,
-//! until perspective ones come. A perspective texture sees less of the outline as the
-//! eye turns, and is shown alone less far round
+//! until perspective ones come. So are, from then on, its orthographic textures that
+//! fall short by as much where the eye is now (a side view's, turned towards the
+//! front). A perspective texture sees less of the outline as the eye turns, and is
+//! shown alone less far round
 //! ([`PERSPECTIVE_LONE_TURN`](super::policy::PERSPECTIVE_LONE_TURN)).
 
 use glam::Vec3;
