@@ -14,11 +14,11 @@ use relief_render::warp::params::WarpParams;
 use super::Manager;
 use super::around::{angle_between, similar_distance};
 use super::cache::Held;
+use super::perspective::falls_short;
 use super::policy::{
     COARSEST_SHOWN, DEFAULT_TOLERANCE, DEFAULT_VALID_ANGLE, LEAD, LONE_BAND, LONE_TURN_CAP, LONE_UNSEEN,
-    MAX_TEXEL_PIXELS, MAX_TURN, OWN_EYE_GROWTH, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN,
-    PARTNERED_BAND, PLANNING_MARGIN, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL,
-    lone_max_turn,
+    MAX_TEXEL_PIXELS, MAX_TURN, PARTNER_FROM, PARTNER_LEVELS_COARSER, PARTNER_MAX_TURN, PARTNERED_BAND,
+    PLANNING_MARGIN, PROBE_LIMIT, PROBE_REFINEMENTS, PROBE_START, REFINE_TEXEL, lone_max_turn,
 };
 
 /// How an object is drawn this frame.
@@ -339,21 +339,20 @@ impl Manager {
         camera: &Camera,
     ) -> Option<Vec<Grade>> {
         let o = &scene.objects[object];
-        let wanted = Self::warped_edge(o, eye, camera, self.objects[object].in_perspective)?;
+        let in_perspective = self.objects[object].in_perspective;
+        let wanted = Self::warped_edge(o, eye, camera, in_perspective)?;
         let centre = o.local_bounds.center();
         let at_eye = Camera {
             eye: eye.as_dvec3(),
             ..*camera
         };
-        let in_perspective = self.objects[object].in_perspective;
         let grade = |h: &Held| {
             let texture = &h.prepared.pyramid.levels[0].texture.camera;
             let texel = magnification(texture, &at_eye);
             let grown = growth(h, eye, camera);
-            // (Once the object's textures are asked in perspective, an orthographic one
-            // that falls short here as much as a short one does at its own eye is not
-            // shown: perspective.rs.)
-            let short_here = in_perspective && texture.centre.is_none() && grown > OWN_EYE_GROWTH;
+            // (Once the object's textures are asked in perspective, one that falls short
+            // here is not shown: perspective.rs.)
+            let short_here = in_perspective && falls_short(h, o, grown);
             Grade {
                 growth: if short_here { f32::INFINITY } else { grown },
                 unshown: Unshown::at(h, o, centre, eye, camera),

@@ -45,12 +45,18 @@ impl ShortTextures {
     }
 }
 
-/// The growth (screen pixels) of the gaps `held` opens seen from its own eye, if it is
-/// an orthographic texture of a solid `object` (`camera`, in its frame, giving the
-/// pixels' size).
-fn own_eye_growth(held: &Held, object: &SceneObject, camera: &Camera) -> Option<f32> {
+/// Whether `held` is weighed at all: an orthographic texture of a solid `object`.
+fn weighed(held: &Held, object: &SceneObject) -> bool {
     let orthographic = held.prepared.pyramid.levels[0].texture.camera.centre.is_none();
-    (orthographic && !object.edge_census().is_sheets()).then(|| growth(held, held.eye, camera))
+    orthographic && !object.edge_census().is_sheets()
+}
+
+/// Whether `held`, a texture of `object`, falls short where its gaps grow by `growth`
+/// (screen pixels, [`growth`]): an orthographic texture of a solid, past
+/// [`OWN_EYE_GROWTH`]. Weighed at its own eye as it arrives, and, once its object's
+/// textures are asked in perspective, at the frame's eye ([`Manager::grades`]).
+pub(super) fn falls_short(held: &Held, object: &SceneObject, growth: f32) -> bool {
+    weighed(held, object) && growth > OWN_EYE_GROWTH
 }
 
 impl Manager {
@@ -68,10 +74,11 @@ impl Manager {
         held: &mut Held,
         camera: &Camera,
     ) -> bool {
-        let Some(growth) = own_eye_growth(held, object, camera) else {
+        if !weighed(held, object) {
             return true;
-        };
-        held.falls_short = growth > OWN_EYE_GROWTH;
+        }
+        let growth = growth(held, held.eye, camera);
+        held.falls_short = falls_short(held, object, growth);
         tracing::debug!(
             object = k,
             own_eye_growth = growth,
