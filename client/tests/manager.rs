@@ -978,6 +978,38 @@ fn an_object_whose_parallel_rays_fall_short_is_asked_in_perspective() {
     );
 }
 
+/// The scanned bunny's flight warms up in seconds, its first views' textures all in.
+/// One of them is orthographic and falls short past the tolerance at its own eye: it
+/// cannot be shown even there, and the same texture comes whenever it is asked for
+/// again from that still eye, falling short again each time. (Had that not counted
+/// towards the switch to perspective, the warm-up asked for it again and again and gave
+/// up at [`WARM_UP_LIMIT`].)
+///
+/// [`WARM_UP_LIMIT`]: relief_client::flight::WARM_UP_LIMIT
+#[test]
+fn the_bunny_warms_up_in_seconds() {
+    use relief_client::flight::{Flight, WARM_UP_LIMIT};
+
+    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models");
+    let bunny = models.join("stanford-bunny.obj");
+    let scene = Arc::new(Scene::load(bunny.to_str().unwrap()).unwrap());
+    let mut manager = served_locally(&scene, Config::default());
+    let flight = Flight {
+        scene: &scene,
+        size: (640, 360),
+        fps: 30,
+        frames: scene.path.frame_count(),
+        start: 0,
+        wrap: false,
+    };
+    let began = std::time::Instant::now();
+    assert!(
+        flight.warm_up(&mut manager).unwrap(),
+        "gave up at {WARM_UP_LIMIT:?}"
+    );
+    assert!(began.elapsed() < WARM_UP_LIMIT / 2, "took {:?}", began.elapsed());
+}
+
 /// An object wholly off screen is not needed now: no stale frame, no request for now;
 /// a prediction only where a view turned by up to [`PREDICTED_VIEW_MARGIN`] would show
 /// it, withdrawn once it would not. Turned towards, it is needed and asked for.

@@ -194,6 +194,9 @@ impl Manager {
                     let answered = |h: &Held| h.is_final && h.eye == eye && edge(&h.prepared) >= new_edge;
                     if let Some(held) = state.held.iter_mut().find(|h| answered(h)) {
                         held.relied_on = Instant::now();
+                        if is_final && held.falls_short {
+                            self.count_short(p.object, &scene.objects[p.object], true);
+                        }
                         continue;
                     }
                     let object = &scene.objects[p.object];

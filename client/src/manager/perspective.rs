@@ -8,10 +8,10 @@
 //! then shows gaps at its own eye, which its critical points measure
 //! ([`growth`](super::choose::growth) seen from that eye). When
 //! [`SHORT_NEEDED`] of an object's last [`SHORT_WINDOW`] final orthographic textures
-//! fall short by more than [`OWN_EYE_GROWTH`], its later textures are asked in
-//! perspective, and those that fell short are let go where a perspective texture can
-//! be asked from their eye (not too near the object): drawn as geometry, or stale,
-//! until perspective ones come. So are, from then on, its orthographic textures that
+//! fall short by more than [`OWN_EYE_GROWTH`] (one that comes again, asked again from
+//! its eye, counts again), its later textures are asked in perspective, and those that
+//! fell short are let go where a perspective texture can be asked from their eye (not
+//! too near the object): drawn as geometry, or stale, until perspective ones come. So are, from then on, its orthographic textures that
 //! fall short by as much where the eye is now (a side view's, turned towards the
 //! front). A perspective texture sees less of the outline as the eye turns, and is
 //! shown alone less far round
@@ -59,14 +59,22 @@ pub(super) fn falls_short(held: &Held, object: &SceneObject, growth: f32) -> boo
     weighed(held, object) && growth > OWN_EYE_GROWTH
 }
 
+/// Whether `held`, a texture of `object`, is let go once the object's textures are
+/// asked in perspective, where it serves an eye at `eye`: one that falls short, where a
+/// perspective texture could be asked from there. (Where the eye is too near for a
+/// perspective texture, an orthographic one is asked all the same: one that falls short
+/// there is still the best to be had.)
+fn replaceable(held: &Held, object: &SceneObject, eye: Vec3) -> bool {
+    held.falls_short && projection_for(object, eye, true) == SourceProjection::Perspective
+}
+
 impl Manager {
     /// Weighs `held`, just arrived for object `k` (`object`, seen by `camera` in its
     /// frame) as asked from `asked_from`, at its own eye: marks it if it falls short,
-    /// counts it (a final one) towards asking `k`'s textures in perspective — letting
-    /// go, when it does, of those held that fell short where a perspective texture could
-    /// be asked from their eye, and withdrawing `k`'s predictions — and returns whether
-    /// to hold it: not if it falls short, `k`'s textures are asked in perspective, and
-    /// one would be asked from `asked_from`.
+    /// counts it (a final one: [`Manager::count_short`]), and returns whether to hold
+    /// it: not if it falls short, `k`'s textures are asked in perspective, and one would
+    /// be asked from `asked_from`. (An arrival is judged by the eye it was asked from:
+    /// the server may serve one made for an eye nearby.)
     pub(super) fn weigh_own_eye(
         &mut self,
         (k, asked_from): (usize, Vec3),
@@ -84,37 +92,44 @@ impl Manager {
             own_eye_growth = growth,
             "orthographic texture arrived"
         );
-        // (Where the eye is too near for a perspective texture, an orthographic one is
-        // asked all the same: one that falls short there is still the best to be had.
-        // An arrival is judged by the eye it was asked from: the server may serve one
-        // made for an eye nearby.)
-        let replaceable = |h: &Held, eye: Vec3| {
-            h.falls_short && projection_for(object, eye, true) == SourceProjection::Perspective
-        };
-        let state = &mut self.objects[k];
-        if held.is_final && !state.in_perspective {
-            state.short_textures.record(held.falls_short);
-            if state.short_textures.often() {
-                tracing::debug!(object = k, "its textures asked in perspective from now on");
-                state.in_perspective = true;
-                let (short, kept) = std::mem::take(&mut state.held)
-                    .into_iter()
-                    .partition(|h: &Held| replaceable(h, h.eye));
-                state.held = kept;
-                for h in &short {
-                    self.counters.retired.retire(h, state.last_shown);
-                }
-                // (Orthographic predictions still on their way would count as
-                // covering the eye's future; asked again, they come in perspective
-                // where they can. A request for now on its way is let come.)
-                self.withdraw_predictions(k, |_| true);
-            }
+        if held.is_final {
+            self.count_short(k, object, held.falls_short);
         }
-        if self.objects[k].in_perspective && replaceable(held, asked_from) {
+        if self.objects[k].in_perspective && replaceable(held, object, asked_from) {
             self.counters.retired.retire(held, self.objects[k].last_shown);
             return false;
         }
         true
+    }
+
+    /// Counts a final orthographic texture of object `k` (`object`) that came, whether
+    /// it fell `short`, towards asking `k`'s textures in perspective; when they are
+    /// from now on, lets go of those held that fell short where a perspective texture
+    /// could be asked from their eye, and withdraws `k`'s predictions. One held already
+    /// that came again counts again: asked for again from its eye (a still eye that
+    /// cannot show it asks until something else comes), the same one falls short again.
+    pub(super) fn count_short(&mut self, k: usize, object: &SceneObject, short: bool) {
+        let state = &mut self.objects[k];
+        if state.in_perspective {
+            return;
+        }
+        state.short_textures.record(short);
+        if !state.short_textures.often() {
+            return;
+        }
+        tracing::debug!(object = k, "its textures asked in perspective from now on");
+        state.in_perspective = true;
+        let (short, kept) = std::mem::take(&mut state.held)
+            .into_iter()
+            .partition(|h: &Held| replaceable(h, object, h.eye));
+        state.held = kept;
+        for h in &short {
+            self.counters.retired.retire(h, state.last_shown);
+        }
+        // (Orthographic predictions still on their way would count as covering the
+        // eye's future; asked again, they come in perspective where they can. A request
+        // for now on its way is let come.)
+        self.withdraw_predictions(k, |_| true);
     }
 }
 
