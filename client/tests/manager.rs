@@ -74,6 +74,18 @@ fn served_locally(scene: &Arc<Scene>, config: Config) -> Manager {
     Manager::new(scene, config, commands_tx, arrivals_rx)
 }
 
+/// The scanned bunny of `../shared/models` (CI has `../shared` beside the clone).
+fn shared_bunny() -> std::path::PathBuf {
+    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models");
+    let bunny = models.join("stanford-bunny.obj");
+    assert!(
+        bunny.is_file(),
+        "{} is missing (CI has ../shared beside the clone)",
+        bunny.display()
+    );
+    bunny
+}
+
 /// The index of `name` in `scene`.
 fn index(scene: &Scene, name: &str) -> usize {
     scene.objects.iter().position(|o| o.name == name).unwrap()
@@ -908,13 +920,7 @@ fn an_object_whose_parallel_rays_fall_short_is_asked_in_perspective() {
     use relief_trace::bake;
     use relief_trace::tracer::ObjectTracer;
 
-    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models");
-    let bunny = models.join("stanford-bunny.obj");
-    assert!(
-        bunny.is_file(),
-        "{} is missing (CI has ../shared beside the clone)",
-        bunny.display()
-    );
+    let bunny = shared_bunny();
     // The projections of the requests for now made from each of `frames` of `path` in
     // turn, each answered before the next, and of the one (if any) that the frame taking
     // in the last answer makes.
@@ -978,21 +984,19 @@ fn an_object_whose_parallel_rays_fall_short_is_asked_in_perspective() {
     );
 }
 
-/// The scanned bunny's flight warms up in seconds, its first views' textures all in.
+/// The scanned bunny's flight warm-up ends with its first views' textures all in.
 /// One of them is orthographic and falls short past the tolerance at its own eye: it
 /// cannot be shown even there, and the same texture comes whenever it is asked for
 /// again from that still eye, falling short again each time. (Had that not counted
 /// towards the switch to perspective, the warm-up asked for it again and again and gave
-/// up at [`WARM_UP_LIMIT`].)
+/// up at its limit, [`WARM_UP_LIMIT`].)
 ///
 /// [`WARM_UP_LIMIT`]: relief_client::flight::WARM_UP_LIMIT
 #[test]
-fn the_bunny_warms_up_in_seconds() {
-    use relief_client::flight::{Flight, WARM_UP_LIMIT};
+fn the_bunny_warm_up_ends() {
+    use relief_client::flight::Flight;
 
-    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/models");
-    let bunny = models.join("stanford-bunny.obj");
-    let scene = Arc::new(Scene::load(bunny.to_str().unwrap()).unwrap());
+    let scene = Arc::new(Scene::load(shared_bunny().to_str().unwrap()).unwrap());
     let mut manager = served_locally(&scene, Config::default());
     let flight = Flight {
         scene: &scene,
@@ -1002,12 +1006,71 @@ fn the_bunny_warms_up_in_seconds() {
         start: 0,
         wrap: false,
     };
-    let began = std::time::Instant::now();
-    assert!(
-        flight.warm_up(&mut manager).unwrap(),
-        "gave up at {WARM_UP_LIMIT:?}"
-    );
-    assert!(began.elapsed() < WARM_UP_LIMIT / 2, "took {:?}", began.elapsed());
+    assert!(flight.warm_up(&mut manager).unwrap());
+}
+
+/// An orthographic texture that falls short at its own eye, received again, counts
+/// again towards asking its object's textures in perspective — but only when asked for
+/// again since it came, not when one bake answers two requests at once (a server
+/// merges a request for now into a prediction's job). The scanned bunny seen from its
+/// path's frame 9 (as in `an_object_whose_parallel_rays_fall_short_is_asked_in_perspective`),
+/// at a tolerance of [`OWN_EYE_GROWTH`], so that the texture cannot be shown even at
+/// its own eye. (Fails with every texture received again counted, or none.)
+///
+/// [`OWN_EYE_GROWTH`]: relief_client::manager::policy::OWN_EYE_GROWTH
+#[test]
+fn a_short_texture_received_again_counts_again() {
+    use relief_client::manager::policy::OWN_EYE_GROWTH;
+    use relief_core::relief::SourceProjection;
+    use relief_trace::bake;
+    use relief_trace::tracer::ObjectTracer;
+
+    let scene = Scene::load(shared_bunny().to_str().unwrap()).unwrap();
+    let config = Config {
+        tolerance: OWN_EYE_GROWTH,
+        ..Config::default()
+    };
+    let (mut manager, mut commands, arrivals) = wired(&scene, config);
+    let camera = |frame: u32| {
+        (scene.default_path().pose(frame).unwrap())
+            .camera(scene.fov_y_degrees, 640, 360)
+            .unwrap()
+    };
+    let mut requests = |manager: &mut Manager, frame: u32, t: f64| {
+        manager.frame(&scene, &camera(frame), t);
+        std::iter::from_fn(|| commands.try_recv().ok())
+            .filter_map(|c| match c {
+                Command::Request(r) => Some(r),
+                _ => None,
+            })
+            .collect::<Vec<_>>()
+    };
+    let now = |asked: Vec<TextureRequest>| asked.into_iter().find(|r| r.needed_in_ms.is_none());
+    // Asked for now from frame 9's eye; flown on unanswered until a prediction is out
+    // too (one request for now at a time).
+    let first = now(requests(&mut manager, 9, 0.0)).expect("a request for now");
+    assert_eq!(first.projection, SourceProjection::Orthographic);
+    let predicted = (10..40)
+        .find_map(|frame| {
+            let asked = requests(&mut manager, frame, f64::from(frame - 9) / 30.0);
+            asked.into_iter().find(|r| r.needed_in_ms.is_some())
+        })
+        .expect("a prediction");
+    let tracer = ObjectTracer::new(&scene.objects[0]);
+    let texture = bake(&tracer, first.eye, first.size, first.depth_bits, first.projection).unwrap();
+    let ready = ReadyTexture::new(texture, relief_render::impostor::Faces::Front);
+    // One bake answers both: received once. Back at frame 9's eye, still, it asks again.
+    arrive(&arrivals, first.id, ready.clone());
+    arrive(&arrivals, predicted.id, ready.clone());
+    let again = now(requests(&mut manager, 9, 2.0)).expect("asked again");
+    assert_eq!(again.projection, SourceProjection::Orthographic);
+    assert!(again.eye.distance(first.eye) < 1e-3 * first.eye.length());
+    // The same comes: received twice, and the frame that takes it in asks from the same
+    // eye in perspective.
+    arrive(&arrivals, again.id, ready);
+    let after = now(requests(&mut manager, 9, 2.1)).expect("asked in perspective");
+    assert_eq!(after.projection, SourceProjection::Perspective);
+    assert!(after.eye.distance(first.eye) < 1e-3 * first.eye.length());
 }
 
 /// An object wholly off screen is not needed now: no stale frame, no request for now;

@@ -21,7 +21,7 @@ use relief_render::warp::params::WarpParams;
 use super::around::{angle_between, similar_distance};
 use super::choose::{growth, widest_within};
 use super::messages::{Arrival, Failure};
-use super::perspective::ShortTextures;
+use super::perspective::{ShortTextures, weighed};
 use super::policy::{CRITICAL_REGIONS, MIN_LEVEL_EDGE, SHED_QUIET, growth_weight};
 use super::{Manager, TextureLifetimes};
 
@@ -194,8 +194,13 @@ impl Manager {
                     let answered = |h: &Held| h.is_final && h.eye == eye && edge(&h.prepared) >= new_edge;
                     if let Some(held) = state.held.iter_mut().find(|h| answered(h)) {
                         held.relied_on = Instant::now();
-                        if is_final && held.falls_short {
-                            self.count_short(p.object, &scene.objects[p.object], true);
+                        // (Received again if asked for again since it came, and not when
+                        // one bake answers two requests at once, their jobs merged.)
+                        let object = &scene.objects[p.object];
+                        let again = is_final && p.sent > held.taken_in && weighed(held, object);
+                        let short = held.falls_short;
+                        if again {
+                            self.count_short(p.object, object, short);
                         }
                         continue;
                     }

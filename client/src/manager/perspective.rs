@@ -6,16 +6,20 @@
 //! outline, and near an object they meet surface the parallel rays pass by — the
 //! undersides of the scanned bunny's ears, seen from a little below them. The texture
 //! then shows gaps at its own eye, which its critical points measure
-//! ([`growth`](super::choose::growth) seen from that eye). When
-//! [`SHORT_NEEDED`] of an object's last [`SHORT_WINDOW`] final orthographic textures
-//! fall short by more than [`OWN_EYE_GROWTH`] (one that comes again, asked again from
-//! its eye, counts again), its later textures are asked in perspective, and those that
-//! fell short are let go where a perspective texture can be asked from their eye (not
-//! too near the object): drawn as geometry, or stale, until perspective ones come. So are, from then on, its orthographic textures that
-//! fall short by as much where the eye is now (a side view's, turned towards the
-//! front). A perspective texture sees less of the outline as the eye turns, and is
-//! shown alone less far round
+//! ([`growth`](super::choose::growth) seen from that eye). When [`SHORT_NEEDED`] of
+//! the last [`SHORT_WINDOW`] final orthographic textures an object received fall short
+//! by more than [`OWN_EYE_GROWTH`], its later textures are asked in perspective, and
+//! those that fell short are let go where a perspective texture can be asked from
+//! their eye (not too near the object): drawn as geometry, or stale, until perspective
+//! ones come. So are, from then on, its orthographic textures that fall short by as
+//! much where the eye is now (a side view's, turned towards the front). A perspective
+//! texture sees less of the outline as the eye turns, and is shown alone less far round
 //! ([`PERSPECTIVE_LONE_TURN`](super::policy::PERSPECTIVE_LONE_TURN)).
+//!
+//! A texture held already that comes again, asked for again since it came, is
+//! received again: a still eye that cannot show it (a warm-up's view) asks until
+//! something else comes, and the server's cache answers with the same texture. One
+//! bake answering two requests at once, their jobs merged, is received once.
 
 use glam::Vec3;
 
@@ -28,8 +32,9 @@ use super::cache::Held;
 use super::choose::growth;
 use super::policy::{OWN_EYE_GROWTH, SHORT_NEEDED, SHORT_WINDOW, projection_for};
 
-/// Which of an object's last [`SHORT_WINDOW`] final orthographic textures fell short of
-/// what their own eye sees: a bit each, the newest lowest.
+/// Which of the last [`SHORT_WINDOW`] final orthographic textures an object received
+/// fell short of what their own eye sees: a bit each, the newest lowest. (A texture
+/// received again, asked for again, is counted again: see the module docs.)
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct ShortTextures(u32);
 
@@ -39,14 +44,15 @@ impl ShortTextures {
         self.0 = ((self.0 << 1) | u32::from(short)) & ((1 << SHORT_WINDOW) - 1);
     }
 
-    /// Whether [`SHORT_NEEDED`] of them fell short: the object's shape, not one view's.
+    /// Whether [`SHORT_NEEDED`] of them fell short: the object's shape, or one view whose
+    /// texture cannot be shown even there, asked for again.
     fn often(self) -> bool {
         self.0.count_ones() >= SHORT_NEEDED
     }
 }
 
 /// Whether `held` is weighed at all: an orthographic texture of a solid `object`.
-fn weighed(held: &Held, object: &SceneObject) -> bool {
+pub(super) fn weighed(held: &Held, object: &SceneObject) -> bool {
     let orthographic = held.prepared.pyramid.levels[0].texture.camera.centre.is_none();
     orthographic && !object.edge_census().is_sheets()
 }
@@ -102,12 +108,10 @@ impl Manager {
         true
     }
 
-    /// Counts a final orthographic texture of object `k` (`object`) that came, whether
-    /// it fell `short`, towards asking `k`'s textures in perspective; when they are
-    /// from now on, lets go of those held that fell short where a perspective texture
-    /// could be asked from their eye, and withdraws `k`'s predictions. One held already
-    /// that came again counts again: asked for again from its eye (a still eye that
-    /// cannot show it asks until something else comes), the same one falls short again.
+    /// Counts a final orthographic texture object `k` (`object`) received, whether it
+    /// fell `short`, towards asking `k`'s textures in perspective; when they are from
+    /// now on, lets go of those held that fell short where a perspective texture could
+    /// be asked from their eye, and withdraws `k`'s predictions.
     pub(super) fn count_short(&mut self, k: usize, object: &SceneObject, short: bool) {
         let state = &mut self.objects[k];
         if state.in_perspective {
@@ -119,11 +123,11 @@ impl Manager {
         }
         tracing::debug!(object = k, "its textures asked in perspective from now on");
         state.in_perspective = true;
-        let (short, kept) = std::mem::take(&mut state.held)
+        let (let_go, kept) = std::mem::take(&mut state.held)
             .into_iter()
             .partition(|h: &Held| replaceable(h, object, h.eye));
         state.held = kept;
-        for h in &short {
+        for h in &let_go {
             self.counters.retired.retire(h, state.last_shown);
         }
         // (Orthographic predictions still on their way would count as covering the

@@ -324,9 +324,11 @@ pub const OWN_EYE_GROWTH: f32 = 0.5 * DEFAULT_TOLERANCE;
 
 /// An object's textures are asked in perspective once this many of its last
 /// [`SHORT_WINDOW`] final orthographic ones fell short ([`OWN_EYE_GROWTH`]): the
-/// object's shape, not one view's. The bunny's fall short several in a row, the
-/// knot's and the rock's one at a time. (Switched by its one, the knot's worst frame
-/// fell 4.0 and 7.3 dB below geometry's worst in 2 runs of 3, on its near pass.)
+/// object's shape, not one view's — unless that view cannot show its texture and asks
+/// for it again (each time received counts: `manager/perspective.rs`). The bunny's fall
+/// short several in a row, the knot's and the rock's one at a time. (Switched by its
+/// one, the knot's worst frame fell 4.0 and 7.3 dB below geometry's worst in 2 runs of
+/// 3, on its near pass.)
 pub const SHORT_NEEDED: u32 = 2;
 
 /// How many of an object's latest final orthographic textures [`SHORT_NEEDED`] counts
