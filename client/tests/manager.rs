@@ -832,13 +832,11 @@ fn cube_obj(cells: usize) -> String {
 fn a_lone_texture_goes_stale_when_a_flat_face_turns_into_view() {
     use relief_client::manager::policy::{LONE_MAX_TURN, LONE_UNSEEN};
 
-    let dir = std::env::temp_dir().join(relief_core::scratch::unique_name("relief-cube"));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = relief_core::scratch::PrivateDir::new("relief-cube").unwrap();
     let path = dir.join("cube.obj");
     // (Triangles enough that a texture costs less than drawing them.)
     std::fs::write(&path, cube_obj(24)).unwrap();
     let scene = Arc::new(Scene::load(path.to_str().unwrap()).unwrap());
-    std::fs::remove_dir_all(&dir).ok();
     let cube = index(&scene, "cube");
     let centre = scene.objects[cube].world_bounds().center();
     let config = Config {

@@ -182,10 +182,8 @@ mod tests {
         path
     }
 
-    fn temp_dir(tag: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("relief-obj-{tag}-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
+    fn temp_dir(tag: &str) -> crate::scratch::PrivateDir {
+        crate::scratch::PrivateDir::new(&format!("relief-obj-{tag}")).unwrap()
     }
 
     #[test]

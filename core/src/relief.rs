@@ -968,7 +968,7 @@ mod tests {
 
     #[test]
     fn disk_round_trip() {
-        let dir = std::env::temp_dir().join(format!("relief-tex-{}", std::process::id()));
+        let dir = crate::scratch::PrivateDir::new("relief-tex").unwrap();
         for (bits, projection) in [
             (DepthBits::Eight, SourceProjection::Orthographic),
             (DepthBits::Sixteen, SourceProjection::Perspective),

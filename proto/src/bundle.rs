@@ -8,6 +8,7 @@ use prost::Message;
 use relief_core::hash::ContentHash;
 use relief_core::reach::Reach;
 use relief_core::scene::{Scene, SceneLimits};
+use relief_core::scratch::PrivateDir;
 use relief_core::{Error, Result};
 
 use crate::convert::bundle_hash;
@@ -92,18 +93,10 @@ impl Bundle {
     }
 }
 
-/// A fresh directory for scene bundles under the system's temp dir, readable by this
-/// user only ([`unique_name`](relief_core::scratch::unique_name)): a name nobody could
-/// have prepared (or linked) beforehand, since creating it fails if it exists. Removed,
-/// with the scenes in it, when the returned [`PrivateDir`] is dropped — when the server
-/// or worker exits in good order — so runs do not pile up directories in the temp dir.
+/// A fresh directory for scene bundles, this process's own ([`PrivateDir`]): removed,
+/// with the scenes in it, when the server or worker exits in good order.
 pub fn private_scene_dir(prefix: &str) -> Result<PrivateDir> {
-    let dir = std::env::temp_dir().join(relief_core::scratch::unique_name(prefix));
-    let mut builder = std::fs::DirBuilder::new();
-    #[cfg(unix)]
-    std::os::unix::fs::DirBuilderExt::mode(&mut builder, 0o700);
-    builder.create(&dir).map_err(|e| Error::io(&dir, e))?;
-    Ok(PrivateDir(dir))
+    PrivateDir::new(prefix).map_err(|e| Error::io(std::env::temp_dir(), e))
 }
 
 /// Where a server or worker unpacks scenes: the directory it was given (`--scene-dir`,
@@ -129,24 +122,6 @@ impl SceneDir {
             SceneDir::Given(dir) => dir,
             SceneDir::Own(dir) => dir.path(),
         }
-    }
-}
-
-/// A directory this process made for itself ([`private_scene_dir`]), deleted with its
-/// contents on drop.
-#[derive(Debug)]
-pub struct PrivateDir(PathBuf);
-
-impl PrivateDir {
-    pub fn path(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for PrivateDir {
-    fn drop(&mut self) {
-        // (Nothing to do about a failure on the way out; the name is unique anyway.)
-        let _ = std::fs::remove_dir_all(&self.0);
     }
 }
 

@@ -5,6 +5,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use relief_core::scratch::PrivateDir;
+
 pub mod netns;
 pub mod oracle;
 pub mod relay;
@@ -44,12 +46,10 @@ pub fn relief(args: &[&str]) -> Output {
     command("relief").args(args).output().expect("running relief")
 }
 
-/// A fresh, empty scratch directory under the system's temp dir.
-pub fn scratch(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("relief-test-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("creating scratch dir");
-    dir
+/// A fresh, empty scratch directory under the system's temp dir, removed when dropped
+/// (kept when its test fails: [`PrivateDir`]).
+pub fn scratch(tag: &str) -> PrivateDir {
+    PrivateDir::new(&format!("relief-test-{tag}")).expect("creating a scratch dir")
 }
 
 /// The shared real meshes beside the checkout (`../shared/models`).

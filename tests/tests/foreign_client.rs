@@ -19,10 +19,11 @@ fn a_python_client_generated_from_the_proto_gets_a_texture() {
     let runtime = tokio::runtime::Runtime::new().unwrap();
     let (_, hash) = runtime.block_on(relief_tests::upload_default(&url, None, "setup"));
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let stubs = scratch("python-stubs");
     let out = Command::new(&python)
         .arg(root.join("foreign/client.py"))
         .arg(root.join("../proto"))
-        .arg(scratch("python-stubs"))
+        .arg(stubs.path())
         .arg(&url)
         .arg(&hash)
         .output()

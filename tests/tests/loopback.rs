@@ -399,10 +399,12 @@ fn stopped_processes_remove_their_scene_directories() {
     let temp = scratch("stopping");
     let entries = || std::fs::read_dir(&temp).expect("the scratch temp dir").count();
     let mut server = command("relief-server");
-    server.args(["--listen", "127.0.0.1:0"]).env("TMPDIR", &temp);
+    server
+        .args(["--listen", "127.0.0.1:0"])
+        .env("TMPDIR", temp.path());
     let (mut server, url) = spawn_server(server);
     let worker = worker_command(&url)
-        .env("TMPDIR", &temp)
+        .env("TMPDIR", temp.path())
         .spawn()
         .expect("starting relief-worker");
     let mut worker = Running(worker);

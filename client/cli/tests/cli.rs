@@ -1,8 +1,9 @@
 //! Bad input to the `relief` command line: one line naming the problem, non-zero exit,
 //! never a panic.
 
-use std::path::PathBuf;
 use std::process::Command;
+
+use relief_core::scratch::PrivateDir;
 
 fn relief(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_relief"))
@@ -16,11 +17,9 @@ fn relief(args: &[&str]) -> (i32, String, String) {
     )
 }
 
-fn scratch(tag: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("relief-cli-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+/// A fresh scratch directory, removed when dropped (kept when its test fails).
+fn scratch(tag: &str) -> PrivateDir {
+    PrivateDir::new(&format!("relief-cli-{tag}")).expect("creating a scratch dir")
 }
 
 /// Asserts a failed run whose stderr is one `error:` line containing every `needle`.
@@ -182,7 +181,8 @@ fn bad_sizes() {
         ),
         &["--depth-bits"],
     );
-    let out = scratch("sizes").join("f.png");
+    let dir = scratch("sizes");
+    let out = dir.join("f.png");
     let out = out.to_str().unwrap();
     for size in ["0x10", "10", "9000x10"] {
         assert_one_line_error(

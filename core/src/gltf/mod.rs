@@ -562,6 +562,7 @@ pub fn similarity(transform: &DAffine3) -> Option<(DVec3, DQuat, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scratch::PrivateDir;
 
     /// A unit quad (4 positions, 6 u16 indices) as one buffer's bytes.
     fn quad_bytes() -> Vec<u8> {
@@ -614,10 +615,12 @@ mod tests {
         )
     }
 
-    fn scratch(name: &str) -> PathBuf {
-        let dir = std::env::temp_dir().join(crate::scratch::unique_name("relief-gltf"));
-        std::fs::create_dir_all(&dir).expect("scratch dir");
-        dir.join(name)
+    /// A file `name` in a fresh scratch directory, and the directory (removed when
+    /// dropped).
+    fn scratch(name: &str) -> (PrivateDir, PathBuf) {
+        let dir = PrivateDir::new("relief-gltf").expect("scratch dir");
+        let path = dir.join(name);
+        (dir, path)
     }
 
     /// A .glb: the JSON chunk (padded with spaces) and the binary chunk.
@@ -672,7 +675,7 @@ mod tests {
   ],
   "buffers": [{ "byteLength": 108 }]
 }"#;
-        let path = scratch("normals.glb");
+        let (_dir, path) = scratch("normals.glb");
         std::fs::write(&path, glb(json, &bytes)).expect("write");
         let model = load_gltf(&path, Reach::Anywhere).expect("load");
         let mesh = model.meshes[0].as_ref().expect("mesh built");
@@ -687,12 +690,12 @@ mod tests {
     /// a .gltf with a data: URI, one with the buffer in a file beside it, and a .glb.
     #[test]
     fn nodes_place_one_mesh_as_composed_by_hand() {
-        let gltf = scratch("quad.gltf");
+        let (_gltf_dir, gltf) = scratch("quad.gltf");
         std::fs::write(&gltf, document(Some(&data_uri()), 1, "[1, 2, 1]")).expect("write");
-        let beside = scratch("quad beside.gltf");
+        let (_beside_dir, beside) = scratch("quad beside.gltf");
         std::fs::write(beside.with_file_name("quad data.bin"), quad_bytes()).expect("write");
         std::fs::write(&beside, document(Some("quad%20data.bin"), 1, "[1, 2, 1]")).expect("write");
-        let binary = scratch("quad.glb");
+        let (_binary_dir, binary) = scratch("quad.glb");
         std::fs::write(&binary, glb(&document(None, 1, "[1, 2, 1]"), &quad_bytes())).expect("write");
         for path in [gltf, beside, binary] {
             let counted = census(&path, Reach::Anywhere).expect("census");
@@ -785,7 +788,7 @@ mod tests {
             (document(Some("missing.bin"), 1, "[1, 2, 1]"), "buffer 0"),
         ];
         for (k, (text, named)) in cases.iter().enumerate() {
-            let path = scratch(&format!("bad{k}.gltf"));
+            let (_dir, path) = scratch(&format!("bad{k}.gltf"));
             std::fs::write(&path, text).expect("write");
             let message = load_gltf(&path, Reach::Anywhere)
                 .expect_err("refused")
@@ -802,7 +805,7 @@ mod tests {
             "data:application/octet-stream;base64,{}",
             base64::engine::general_purpose::STANDARD.encode(&bytes)
         );
-        let path = scratch("past.gltf");
+        let (_dir, path) = scratch("past.gltf");
         std::fs::write(&path, document(Some(&uri), 1, "[1, 2, 1]")).expect("write");
         let message = load_gltf(&path, Reach::Anywhere)
             .expect_err("refused")
@@ -811,13 +814,14 @@ mod tests {
             message.contains("index 7") && message.contains("accessor 1"),
             "{message}"
         );
-        assert!(load_gltf(&scratch("none.glb"), Reach::Anywhere).is_err());
+        let (_dir, none) = scratch("none.glb");
+        assert!(load_gltf(&none, Reach::Anywhere).is_err());
         // A second buffer claiming the binary chunk (a copy of it each, once).
         let two = document(None, 1, "[1, 2, 1]").replace(
             r#""buffers": [{ "byteLength": 60 }]"#,
             r#""buffers": [{ "byteLength": 60 }, { "byteLength": 60 }]"#,
         );
-        let path = scratch("two.glb");
+        let (_dir, path) = scratch("two.glb");
         std::fs::write(&path, glb(&two, &quad_bytes())).expect("write");
         let message = load_gltf(&path, Reach::Anywhere)
             .expect_err("refused")
@@ -837,7 +841,7 @@ mod tests {
                 vec![r#"{ "attributes": { "POSITION": 0 }, "indices": 1 }"#; 50].join(", ")
             ),
         );
-        let path = scratch("many.gltf");
+        let (_dir, path) = scratch("many.gltf");
         std::fs::write(&path, &one_triangle_each).expect("write");
         let counted = census(&path, Reach::Anywhere).expect("census");
         // 50 primitives of 2 triangles (6 indices, 4 vertices): 100 a mesh, built once
@@ -852,7 +856,7 @@ mod tests {
         let text = document(Some(&data_uri()), 1, "[1, 1, -1]")
             .replace(r#""name": "turned", "#, r#""name": "moved", "#)
             .replace(r#""name": "stretched", "#, "");
-        let path = scratch("alike.gltf");
+        let (_dir, path) = scratch("alike.gltf");
         std::fs::write(&path, text).expect("write");
         let scene = crate::scene::Scene::load(&path.to_string_lossy()).expect("scene");
         let names: Vec<&str> = scene.objects.iter().map(|o| o.name.as_str()).collect();

@@ -530,8 +530,7 @@ mod tests {
         let four: String = ["a", "b", "c", "d"].iter().map(|n| sphere(n, 0)).collect();
         assert!(within(&four).unwrap_err().to_string().contains("4 objects"));
         // An OBJ file's faces: a triangle and a quad, 3 triangles.
-        let dir = std::env::temp_dir().join(crate::scratch::unique_name("relief-obj-count"));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::scratch::PrivateDir::new("relief-obj-count").unwrap();
         let obj = dir.join("q.obj");
         std::fs::write(
             &obj,
@@ -539,7 +538,6 @@ mod tests {
         )
         .unwrap();
         assert_eq!(crate::obj::count_triangles(&obj, Reach::Anywhere).unwrap(), 3);
-        std::fs::remove_dir_all(&dir).unwrap();
         // 20,001 objects, one name twice: found by a set, not by comparing every pair
         // (which took 30 s at 10⁵ objects).
         let many: String = (0..20_000).map(|k| sphere(&format!("o{k}"), 0)).collect();

@@ -666,8 +666,7 @@ mod tests {
             "{:?}",
             moved.precision_warnings()
         );
-        let dir = std::env::temp_dir().join(crate::scratch::unique_name("relief-far-obj"));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = crate::scratch::PrivateDir::new("relief-far-obj").unwrap();
         let at = |x: f64| {
             let path = dir.join(format!("far{x}.obj"));
             std::fs::write(
@@ -686,7 +685,6 @@ mod tests {
             far[0].contains("`far100000`") && far[0].contains("1.000e5"),
             "{far:?}"
         );
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
