@@ -2,14 +2,18 @@
 //! fresh private directories ([`PrivateDir`]).
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
-/// `prefix-PID-NANOS`: a name no earlier run, and no other process, is likely to have
-/// used.
-pub fn unique_name(prefix: &str) -> String {
+/// `prefix-PID-NANOS-N`: a name no earlier run, and no other process, is likely to
+/// have used, and no other call in this process (`N` counts them: two threads may read
+/// the same nanoseconds).
+fn unique_name(prefix: &str) -> String {
+    static CALLS: AtomicU64 = AtomicU64::new(0);
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.subsec_nanos());
-    format!("{prefix}-{}-{nanos}", std::process::id())
+    let n = CALLS.fetch_add(1, Ordering::Relaxed);
+    format!("{prefix}-{}-{nanos}-{n}", std::process::id())
 }
 
 /// Whether `dir` takes new files: creates a probe of our own there (never an existing
@@ -25,14 +29,15 @@ pub fn probe_writable(dir: &Path) -> std::io::Result<()> {
 
 /// A directory this process made for itself under the system's temp dir, readable by
 /// this user only, and deleted with its contents when dropped: runs do not pile up
-/// directories there. Its name ([`unique_name`]) is one nobody could have prepared (or
-/// linked) beforehand, since creating it fails if it exists. Dropped while the thread
-/// panics (a failing test's, a crash's), it is kept, for a look at what was in it.
+/// directories there. Its name (`prefix-PID-NANOS-N`) is one nobody could have
+/// prepared (or linked) beforehand, since creating it fails if it exists. Dropped while
+/// the thread panics (a failing test's, a crash's), it is kept, for a look at what was
+/// in it.
 #[derive(Debug)]
 pub struct PrivateDir(PathBuf);
 
 impl PrivateDir {
-    /// A fresh directory named `prefix-PID-NANOS`.
+    /// A fresh directory named after `prefix`.
     pub fn new(prefix: &str) -> std::io::Result<PrivateDir> {
         let dir = std::env::temp_dir().join(unique_name(prefix));
         let mut builder = std::fs::DirBuilder::new();

@@ -101,7 +101,7 @@ pub fn private_scene_dir(prefix: &str) -> Result<PrivateDir> {
 
 /// Where a server or worker unpacks scenes: the directory it was given (`--scene-dir`,
 /// kept), or by default one of its own ([`private_scene_dir`], removed when this is
-/// dropped).
+/// dropped, but for a look when dropped during a panic).
 #[derive(Debug)]
 pub enum SceneDir {
     Given(PathBuf),

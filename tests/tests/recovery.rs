@@ -402,8 +402,8 @@ async fn a_flight_over_a_lossy_link_stays_fresh() {
         ],
     );
     let (status, summary, lines) = finish(demo, Duration::from_secs(120));
-    // (Kept beside the summary: with `RUST_LOG=relief_client::manager=debug`, why each
-    // stale frame was.)
+    // (Beside the summary, kept when the test fails: with
+    // `RUST_LOG=relief_client::manager=debug`, why each stale frame was.)
     let log = text(&lines);
     std::fs::write(out.join("stderr.log"), &log).expect("writing the flight's log");
     assert!(status.success(), "{status}: {log}");

@@ -44,6 +44,21 @@ fn bake_args<'a>(scene: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
     args
 }
 
+/// A bake that fails after making its output directory takes it away again.
+#[test]
+fn a_failed_bake_leaves_no_directory() {
+    let dir = scratch("failed-bake");
+    let out = dir.join("out");
+    let out = out.to_str().unwrap();
+    assert_one_line_error(
+        &[
+            "bake", "--scene", "default", "--object", "teapot", "--eye", "0,0,5", "--out", out,
+        ],
+        &["teapot"],
+    );
+    assert!(!std::path::Path::new(out).exists());
+}
+
 #[test]
 fn bad_files() {
     let dir = scratch("files");

@@ -41,8 +41,19 @@ pub struct BakeArgs {
 }
 
 pub fn run(args: BakeArgs) -> Result<()> {
-    // The directory first: a bad --out fails before the bake.
+    // The directory first: a bad --out fails before the bake. One made here is taken
+    // away again (while still empty) when anything else fails.
+    let made = !args.out.exists();
     std::fs::create_dir_all(&args.out).with_context(|| format!("--out {}", args.out.display()))?;
+    let baked = bake_into(&args);
+    if baked.is_err() && made {
+        let _ = std::fs::remove_dir(&args.out);
+    }
+    baked
+}
+
+/// The bake of `run`, its output directory made.
+fn bake_into(args: &BakeArgs) -> Result<()> {
     let scene = crate::args::load_scene(&args.scene)?;
     let object = scene.object_or_only(args.object.as_deref())?;
     let tracer = ObjectTracer::new(object);
