@@ -48,6 +48,56 @@ pub(super) struct Judged {
 /// geometry to set beside it).
 pub(super) const MIN_JUDGED_OBJECT_PIXELS: usize = 400;
 
+/// What the flight keeps to be judged after it, within a memory budget: every
+/// `every`-th frame, from `--reference-every` on. Past the budget, every other kept one
+/// is let go and frames are kept half as often from then on, so that those kept stay
+/// evenly spread (frames `0, 2K, 4K, …`).
+pub(super) struct KeptForJudging<T> {
+    every: u32,
+    budget: usize,
+    item_bytes: usize,
+    kept: Vec<T>,
+}
+
+impl<T> KeptForJudging<T> {
+    /// Every `every`-th (0: none) of items `item_bytes` each, within `budget` bytes.
+    pub(super) fn new(every: u32, item_bytes: usize, budget: usize) -> Self {
+        KeptForJudging {
+            every,
+            budget,
+            item_bytes: item_bytes.max(1),
+            kept: Vec::new(),
+        }
+    }
+
+    /// Whether frame `index` of the flight is to be kept.
+    pub(super) fn wants(&self, index: u32) -> bool {
+        self.every > 0 && index.is_multiple_of(self.every)
+    }
+
+    /// Keeps `item`, a frame [`KeptForJudging::wants`], thinning past the budget.
+    pub(super) fn keep(&mut self, item: T) {
+        self.kept.push(item);
+        if self.kept.len() * self.item_bytes > self.budget {
+            let mut k = 0;
+            self.kept.retain(|_| {
+                k += 1;
+                k % 2 == 1
+            });
+            self.every *= 2;
+        }
+    }
+
+    /// Every how many frames those kept were kept, in the end.
+    pub(super) fn every(&self) -> u32 {
+        self.every
+    }
+
+    pub(super) fn into_kept(self) -> Vec<T> {
+        self.kept
+    }
+}
+
 /// A frame kept to be judged after the flight.
 pub(super) struct Compared {
     pub(super) path_frame: u32,
@@ -194,4 +244,29 @@ pub(super) fn by_object(
         .iter()
         .filter_map(|(name, values)| Some((name.clone(), figure(values)?)))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Past the budget, those kept are thinned to every other one and later frames are
+    /// kept half as often: evenly spread, every `2^n·K`-th, within the budget.
+    #[test]
+    fn frames_kept_for_judging_stay_within_the_budget_evenly_spread() {
+        let mut kept = KeptForJudging::new(3, 10, 45);
+        for index in 0..100 {
+            if kept.wants(index) {
+                kept.keep(index);
+            }
+        }
+        // (0, 3, 6, 9, 12: past 45 bytes, thinned to 0, 6, 12; then 0, 12, 24; 0, 24, 48;
+        // 0, 48, 96.)
+        assert_eq!(kept.every(), 48);
+        assert_eq!(kept.into_kept(), [0, 48, 96]);
+        let mut none = KeptForJudging::new(0, 10, 45);
+        assert!(!(0..10).any(|index| none.wants(index)));
+        none.keep(1);
+        assert_eq!(none.every(), 0);
+    }
 }

@@ -26,7 +26,7 @@ use relief_proto::bundle::bundle_for;
 use relief_render::gbuffer::GBuffer;
 use relief_render::geometry::render_geometry;
 
-use judge::{Compared, by_object, judge};
+use judge::{Compared, KeptForJudging, by_object, judge};
 use summary::{FrameStages, Summary};
 
 use crate::processes::{LocalService, connect_and_upload, sibling};
@@ -118,7 +118,8 @@ pub struct DemoArgs {
 /// round trips included), not one a slow frame or two spoiled.
 const DEFAULT_MAX_STALE_FRAC: f64 = 0.25;
 
-/// Memory the frames kept for comparison after the flight may take.
+/// Memory the frames kept for comparison after the flight may take: the demo's
+/// default flight judged every frame at 640×360 (1.6 MB a frame) would keep 700 MB.
 const MAX_COMPARED_BYTES: usize = 256 << 20;
 
 pub fn run(args: DemoArgs) -> Result<()> {
@@ -205,10 +206,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let bar = progress::bar(flight.frames as u64, "flying");
     // Every K-th frame's camera, drawn all as geometry after the flight (see below).
     let mut geometry_cameras = Vec::new();
-    let mut compared = Vec::new();
-    let mut compare_every = args.reference_every;
     // A kept frame: colour and object id per pixel.
-    let frame_bytes = (w as usize * h as usize * 7).max(1);
+    let frame_bytes = w as usize * h as usize * 7;
+    let mut compared = KeptForJudging::new(args.reference_every, frame_bytes, MAX_COMPARED_BYTES);
     let log = flight.fly(
         &mut manager,
         |_| true,
@@ -225,24 +225,14 @@ pub fn run(args: DemoArgs) -> Result<()> {
             if args.write_every > 0 && index.is_multiple_of(args.write_every) {
                 image.save_png(&args.out.join(format!("frame_{:05}.png", flown.path_frame)))?;
             }
-            if compare_every > 0 && index.is_multiple_of(compare_every) {
-                // Judged after the flight: tracing references here would stall it. A long
-                // flight keeps every other one, comparing half as often, to stay within
-                // the memory budget.
-                compared.push(Compared {
+            if compared.wants(index) {
+                // Judged after the flight: tracing references here would stall it.
+                compared.keep(Compared {
                     path_frame: flown.path_frame,
                     camera: *camera,
                     image,
                     shown: flown.shown,
                 });
-                if compared.len() * frame_bytes > MAX_COMPARED_BYTES {
-                    let mut k = 0;
-                    compared.retain(|_| {
-                        k += 1;
-                        k % 2 == 1
-                    });
-                    compare_every *= 2;
-                }
             }
             if index.is_multiple_of(args.geometry_every) {
                 geometry_cameras.push(*camera);
@@ -262,7 +252,15 @@ pub fn run(args: DemoArgs) -> Result<()> {
             samples.len()
         );
     }
-    let judged = judge(&scene, &compared, &args.out)?;
+    let compared_every = compared.every();
+    if compared_every > args.reference_every {
+        eprintln!(
+            "warning: compared one frame in {compared_every}, not one in {}: more would pass the {} MiB the frames kept for judging may take (the summary's `compared_every`)",
+            args.reference_every,
+            MAX_COMPARED_BYTES >> 20
+        );
+    }
+    let judged = judge(&scene, &compared.into_kept(), &args.out)?;
     let counters = &manager.counters;
     let lifetimes = manager.texture_lifetimes();
     let mut summary = Summary {
@@ -317,6 +315,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         geometry_psnr_aa_db_median_by_object: by_object(&judged.geometry_by_object, finite_median),
         psnr_aa_gap_db_min_by_object: by_object(&judged.gap_by_object, finite_min),
         psnr_aa_gap_db_median_by_object: by_object(&judged.gap_by_object, finite_median),
+        compared_every,
         rtt_ms: args.rtt_ms,
         predict: !args.no_predict,
         tolerance: args.tolerance,

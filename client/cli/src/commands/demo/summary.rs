@@ -138,6 +138,9 @@ pub(super) struct Summary {
     /// worst frame's, and the median.
     pub(super) psnr_aa_gap_db_min_by_object: BTreeMap<String, f64>,
     pub(super) psnr_aa_gap_db_median_by_object: BTreeMap<String, f64>,
+    /// Every how many frames drawn one was compared: `--reference-every`, doubled each
+    /// time the frames kept for it passed their memory budget.
+    pub(super) compared_every: u32,
     pub(super) rtt_ms: u64,
     pub(super) predict: bool,
     pub(super) tolerance: f32,
