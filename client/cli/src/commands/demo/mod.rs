@@ -119,7 +119,7 @@ pub struct DemoArgs {
 const DEFAULT_MAX_STALE_FRAC: f64 = 0.25;
 
 /// Memory the frames kept for comparison after the flight may take: the demo's
-/// default flight judged every frame at 640×360 (1.6 MB a frame) would keep 700 MB.
+/// default flight judged every frame at 640×360 (1.5 MiB a frame) would keep 677 MiB.
 const MAX_COMPARED_BYTES: usize = 256 << 20;
 
 pub fn run(args: DemoArgs) -> Result<()> {
@@ -255,7 +255,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     let compared_every = compared.every();
     if compared_every > args.reference_every {
         eprintln!(
-            "warning: compared one frame in {compared_every}, not one in {}: more would pass the {} MiB the frames kept for judging may take (the summary's `compared_every`)",
+            "warning: compared one frame in {compared_every}, not one in {}: more would pass the {} MiB the frames kept for judging may take (the summary's `compared_every`; a smaller --size or fewer --frames keeps more)",
             args.reference_every,
             MAX_COMPARED_BYTES >> 20
         );
