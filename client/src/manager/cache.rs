@@ -183,6 +183,7 @@ impl Manager {
                         self.record_round_trip(&p, arrived);
                     }
                     let tolerance = self.tolerance();
+                    let object = &scene.objects[p.object];
                     let state = &mut self.objects[p.object];
                     state.received += is_final as u64;
                     // Its own eye: one the server made for a nearby eye serves too (see
@@ -196,7 +197,6 @@ impl Manager {
                         held.relied_on = Instant::now();
                         // (Received again if asked for again since it came, and not when
                         // one bake answers two requests at once, their jobs merged.)
-                        let object = &scene.objects[p.object];
                         let again = is_final && p.sent > held.taken_in && weighed(held, object);
                         let short = held.falls_short;
                         if again {
@@ -204,7 +204,6 @@ impl Manager {
                         }
                         continue;
                     }
-                    let object = &scene.objects[p.object];
                     let taken_in = Instant::now();
                     let mut held = Held {
                         eye,
