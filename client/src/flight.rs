@@ -134,6 +134,8 @@ pub struct Flown<'a> {
 /// server's load was meanwhile.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct FrameRecord {
+    /// The camera path's frame it showed (a slow frame skips some).
+    pub path_frame: u32,
     /// Seconds since the flight started.
     pub at_s: f64,
     /// The manager's decisions and requests, milliseconds.
@@ -273,6 +275,7 @@ impl Flight<'_> {
             // is the frame's arrivals.)
             let arrivals = || manager.counters.latencies_ms.get(arrived_before..).unwrap_or(&[]);
             log.records.push(FrameRecord {
+                path_frame,
                 at_s: t,
                 plan_ms: began.elapsed().as_secs_f64() * 1e3,
                 stale: manager.counters.stale_frames > stale_before,

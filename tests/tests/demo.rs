@@ -176,6 +176,43 @@ fn the_demo_flies_and_summarises() {
         "{:?}",
         (worst.width(), worst.height())
     );
+    // frames.csv: a row per frame flown, its stages and what none of them holds adding
+    // up to its time, and its median the summary's.
+    let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let rows: Vec<Vec<f64>> = lines
+        .map(|line| line.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len() as u64, frames, "{csv}");
+    let at = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    let parts = [
+        "plan_ms",
+        "prewarp_ms",
+        "draw_ms",
+        "geometry_ms",
+        "shade_ms",
+        "unstaged_ms",
+    ]
+    .map(at);
+    let mut times = Vec::new();
+    for row in &rows {
+        assert_eq!(row.len(), header.len());
+        let frame_ms = row[at("frame_ms")];
+        let sum: f64 = parts.iter().map(|&k| row[k]).sum();
+        assert!(
+            (sum - frame_ms).abs() < 0.01 && row[at("prewarp_ms")] >= 0.0,
+            "{row:?}"
+        );
+        times.push(frame_ms);
+    }
+    times.sort_by(f64::total_cmp);
+    let middle = times[(times.len() - 1) / 2]..=times[times.len() / 2];
+    let p50 = summary["frame_ms_p50"].as_f64().unwrap();
+    assert!(
+        *middle.start() - 0.001 <= p50 && p50 <= *middle.end() + 0.001,
+        "{p50} {middle:?}"
+    );
     // Every 15th frame drawn is written, named by its path frame.
     let written = std::fs::read_dir(&out)
         .unwrap()

@@ -4,6 +4,7 @@
 
 mod judge;
 mod summary;
+mod timings;
 mod worst;
 
 use std::ops::ControlFlow;
@@ -42,7 +43,7 @@ pub struct DemoArgs {
     /// follows the clock, so a slow frame skips path frames rather than slowing it.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     frames: Option<u32>,
-    /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, worst_frame*.png, worst_OBJECT.png
+    /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, frames.csv, worst_frame*.png, worst_OBJECT.png
     /// (and warps/ with --warp-samples).
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
@@ -262,6 +263,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     }
     let judged = judge(&scene, &compared.into_kept(), &args.out)?;
     let counters = &manager.counters;
+    timings::write_frames_csv(&args.out, &log, &counters.render_stages)?;
     let lifetimes = manager.texture_lifetimes();
     let mut summary = Summary {
         frames: log.frames,
