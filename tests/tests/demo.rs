@@ -206,6 +206,13 @@ fn the_demo_flies_and_summarises() {
         );
         times.push(frame_ms);
     }
+    // Its texels are the summary's.
+    let texels: f64 = rows.iter().map(|row| row[at("texels_warped")]).sum();
+    let per_frame = summary["texels_warped_per_frame"].as_f64().unwrap();
+    assert!(
+        (texels - per_frame * frames as f64).abs() < 1.0,
+        "{texels} {per_frame}"
+    );
     times.sort_by(f64::total_cmp);
     let middle = times[(times.len() - 1) / 2]..=times[times.len() / 2];
     let p50 = summary["frame_ms_p50"].as_f64().unwrap();

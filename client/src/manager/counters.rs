@@ -134,4 +134,6 @@ pub struct RenderStages {
     pub geometry_ms: f64,
     /// Lighting the G-buffer into the frame.
     pub shade_ms: f64,
+    /// Texels the pre-warps visited.
+    pub texels_warped: u64,
 }

@@ -205,9 +205,10 @@ impl Manager {
         }
         let prewarps: Vec<_> = prewarps.into_iter().map(|(ready, _)| ready).collect();
         // (Only those pre-warped: an eye in or behind a texture's plane is refused first.)
-        self.counters.texels_warped += (prewarps.iter())
+        let texels_warped = (prewarps.iter())
             .map(|ready| ready.as_ref().map_or(0, |p| p.texels_warped()) as u64)
             .sum::<u64>();
+        self.counters.texels_warped += texels_warped;
         let mut prewarps = warps.into_iter().zip(prewarps).peekable();
         let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
         for (k, key) in keys.into_iter().enumerate() {
@@ -276,6 +277,7 @@ impl Manager {
             draw_ms: ms(prewarps_done, impostors_done),
             geometry_ms: ms(impostors_done, geometry_done),
             shade_ms: ms(geometry_done, Instant::now()),
+            texels_warped,
         });
         frame
     }

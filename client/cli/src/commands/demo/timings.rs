@@ -11,7 +11,7 @@ use relief_client::manager::RenderStages;
 
 /// The columns of `frames.csv`, in order.
 const HEADER: &str = "frame,path_frame,at_s,frame_ms,plan_ms,prewarp_ms,draw_ms,geometry_ms,shade_ms,\
-                      unstaged_ms,stale,requests,arrived";
+                      unstaged_ms,texels_warped,stale,requests,arrived";
 
 /// Writes `frames.csv` into `dir`: one row per frame flown, `render` the frames' stages
 /// in the same order (a frame flown but not drawn has empty times).
@@ -27,17 +27,18 @@ pub(super) fn write_frames_csv(dir: &Path, log: &FlightLog, render: &[RenderStag
                 let staged = record.plan_ms + s.prewarp_ms + s.draw_ms + s.geometry_ms + s.shade_ms;
                 let _ = write!(
                     csv,
-                    "{frame:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},",
+                    "{frame:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},",
                     record.plan_ms,
                     s.prewarp_ms,
                     s.draw_ms,
                     s.geometry_ms,
                     s.shade_ms,
-                    frame - staged
+                    frame - staged,
+                    s.texels_warped
                 );
             }
             _ => {
-                let _ = write!(csv, ",{:.3},,,,,,", record.plan_ms);
+                let _ = write!(csv, ",{:.3},,,,,,,", record.plan_ms);
             }
         }
         let _ = writeln!(
