@@ -181,8 +181,9 @@ fn the_demo_flies_and_summarises() {
     let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
     let mut lines = csv.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    // (An empty cell, a frame not timed as geometry, reads as NaN.)
     let rows: Vec<Vec<f64>> = lines
-        .map(|line| line.split(',').map(|v| v.parse().unwrap()).collect())
+        .map(|line| line.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect())
         .collect();
     assert_eq!(rows.len() as u64, frames, "{csv}");
     let at = |name: &str| header.iter().position(|c| *c == name).unwrap();
@@ -206,6 +207,22 @@ fn the_demo_flies_and_summarises() {
         );
         times.push(frame_ms);
     }
+    // Every 10th frame (`--geometry-every`'s default) was timed as geometry too, and
+    // the median of those times is the summary's.
+    let mut geometry: Vec<f64> = (rows.iter().enumerate())
+        .map(|(k, row)| {
+            let ms = row[at("geometry_frame_ms")];
+            assert_eq!(ms.is_nan(), k % 10 != 0, "{row:?}");
+            ms
+        })
+        .filter(|ms| !ms.is_nan())
+        .collect();
+    geometry.sort_by(f64::total_cmp);
+    let p50 = summary["geometry_frame_ms_p50"].as_f64().unwrap();
+    assert!(
+        geometry.iter().any(|&ms| (ms - p50).abs() < 0.001),
+        "{p50} {geometry:?}"
+    );
     // Its texels are the summary's.
     let texels: f64 = rows.iter().map(|row| row[at("texels_warped")]).sum();
     let per_frame = summary["texels_warped_per_frame"].as_f64().unwrap();

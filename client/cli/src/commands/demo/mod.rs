@@ -29,6 +29,7 @@ use relief_render::geometry::render_geometry;
 
 use judge::{Compared, KeptForJudging, by_object, judge};
 use summary::{FrameStages, Summary};
+use timings::Timed;
 
 use crate::processes::{LocalService, connect_and_upload, sibling};
 use crate::window::Viewer;
@@ -263,7 +264,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
     }
     let judged = judge(&scene, &compared.into_kept(), &args.out)?;
     let counters = &manager.counters;
-    timings::write_frames_csv(&args.out, &log, &counters.render_stages)?;
     let lifetimes = manager.texture_lifetimes();
     let mut summary = Summary {
         frames: log.frames,
@@ -328,9 +328,16 @@ pub fn run(args: DemoArgs) -> Result<()> {
     // its bake in hand is done), so that nothing but the geometry frames runs while
     // they are timed.
     let textures_held = manager.textures_held();
+    let render_stages = std::mem::take(&mut manager.counters.render_stages);
     drop(manager);
     drop(service);
-    summary.geometry_frame_ms_p50 = median(time_geometry(&scene, &geometry_cameras, (w, h)));
+    let geometry_ms = time_geometry(&scene, &geometry_cameras, (w, h));
+    summary.geometry_frame_ms_p50 = median(geometry_ms.clone());
+    let geometry_timed = Timed {
+        every: args.geometry_every,
+        ms: &geometry_ms,
+    };
+    timings::write_frames_csv(&args.out, &log, &render_stages, geometry_timed)?;
     let json = serde_json::to_string_pretty(&summary)?;
     std::fs::write(args.out.join("summary.json"), &json).context("writing summary.json")?;
     if args.json {
