@@ -223,6 +223,19 @@ fn the_demo_flies_and_summarises() {
         geometry.iter().any(|&ms| (ms - p50).abs() < 0.001),
         "{p50} {geometry:?}"
     );
+    // The paired ratio: the median of each timed frame's all-geometry time over its own.
+    let mut paired: Vec<f64> = (rows.iter())
+        .map(|row| row[at("geometry_frame_ms")] / row[at("frame_ms")])
+        .filter(|ratio| ratio.is_finite())
+        .collect();
+    paired.sort_by(f64::total_cmp);
+    let paired_p50 = summary["geometry_frame_ratio_paired_p50"].as_f64().unwrap();
+    let middle = paired[(paired.len() - 1) / 2]..=paired[paired.len() / 2];
+    // (Within a hundredth: the file's times are rounded to a microsecond.)
+    assert!(
+        *middle.start() * 0.99 <= paired_p50 && paired_p50 <= *middle.end() * 1.01,
+        "{paired_p50} {middle:?}"
+    );
     // Its texels are the summary's.
     let texels: f64 = rows.iter().map(|row| row[at("texels_warped")]).sum();
     let per_frame = summary["texels_warped_per_frame"].as_f64().unwrap();

@@ -272,6 +272,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         frame_ms_p95: percentile(&log.frame_ms, 0.95),
         // (Timed below, once the service has stopped.)
         geometry_frame_ms_p50: f64::NAN,
+        geometry_frame_ratio_paired_p50: f64::NAN,
         frame_stages_ms_p50: FrameStages::median(&log.records, &counters.render_stages),
         requests_now: counters.requests_now,
         requests_predicted: counters.requests_predicted,
@@ -337,6 +338,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         every: args.geometry_every,
         ms: &geometry_ms,
     };
+    summary.geometry_frame_ratio_paired_p50 = median(geometry_timed.ratios(&log.frame_ms));
     timings::write_frames_csv(&args.out, &log, &render_stages, geometry_timed)?;
     let json = serde_json::to_string_pretty(&summary)?;
     std::fs::write(args.out.join("summary.json"), &json).context("writing summary.json")?;

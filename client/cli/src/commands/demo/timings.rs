@@ -28,6 +28,15 @@ impl Timed<'_> {
             .then(|| self.ms.get(k / every).copied())
             .flatten()
     }
+
+    /// For each frame timed as geometry, its all-geometry time over its time as flown
+    /// (`frame_ms`, one a frame flown).
+    pub(super) fn ratios(&self, frame_ms: &[f64]) -> Vec<f64> {
+        (frame_ms.iter().enumerate())
+            .filter_map(|(k, &flown)| Some(self.of(k)? / flown))
+            .filter(|ratio| ratio.is_finite())
+            .collect()
+    }
 }
 
 /// Writes `frames.csv` into `dir`: one row per frame flown, `render` the frames' stages
@@ -80,7 +89,8 @@ pub(super) fn write_frames_csv(
 mod tests {
     use super::*;
 
-    /// Every `every`-th frame has the next time, and no other frame one.
+    /// Every `every`-th frame has the next time, and no other frame one; the ratios pair
+    /// them with the frames as flown.
     #[test]
     fn the_timed_frames_are_every_kth() {
         let timed = Timed {
@@ -92,5 +102,8 @@ mod tests {
             (Some(1.0), Some(2.0), Some(3.0))
         );
         assert_eq!((timed.of(5), timed.of(30)), (None, None));
+        // Paired with the frames as flown (the third flown in no time: left out).
+        let flown: Vec<f64> = (0..31).map(|k| if k == 20 { 0.0 } else { 0.5 }).collect();
+        assert_eq!(timed.ratios(&flown), [2.0, 4.0]);
     }
 }
