@@ -123,7 +123,8 @@ pub struct StaleCauses {
     pub too_far: u64,
 }
 
-/// Where one [`Manager::render`](super::Manager::render) spent its time, milliseconds.
+/// Where one [`Manager::render`](super::Manager::render) spent its time, milliseconds,
+/// and the texels it warped.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct RenderStages {
     /// Deciding which impostors are warped, and their pre-warps (all at once).
@@ -134,6 +135,7 @@ pub struct RenderStages {
     pub geometry_ms: f64,
     /// Lighting the G-buffer into the frame.
     pub shade_ms: f64,
-    /// Texels the pre-warps visited.
+    /// Texels the pre-warps visited: this frame's share of
+    /// [`Counters::texels_warped`].
     pub texels_warped: u64,
 }

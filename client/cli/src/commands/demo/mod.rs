@@ -29,7 +29,7 @@ use relief_render::geometry::render_geometry;
 
 use judge::{Compared, KeptForJudging, by_object, judge};
 use summary::{FrameStages, Summary};
-use timings::Timed;
+use timings::FrameTimings;
 
 use crate::processes::{LocalService, connect_and_upload, sibling};
 use crate::window::Viewer;
@@ -44,8 +44,8 @@ pub struct DemoArgs {
     /// follows the clock, so a slow frame skips path frames rather than slowing it.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=100_000))]
     frames: Option<u32>,
-    /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, frames.csv, worst_frame*.png, worst_OBJECT.png
-    /// (and warps/ with --warp-samples).
+    /// Output directory: frame_NNNNN.png, summary.json, psnr.csv, frames.csv,
+    /// worst_frame*.png, worst_OBJECT.png (and warps/ with --warp-samples).
     #[arg(long, default_value = "out/demo")]
     out: PathBuf,
     /// Workers to start (with --server, the server's own workers serve instead).
@@ -207,7 +207,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     manager.sample_warps(args.warp_samples);
     let bar = progress::bar(flight.frames as u64, "flying");
     // Every K-th frame's camera, drawn all as geometry after the flight (see below).
-    let mut geometry_cameras = Vec::new();
+    let (mut geometry_cameras, mut geometry_frames) = (Vec::new(), Vec::new());
     // A kept frame: colour and object id per pixel.
     let frame_bytes = w as usize * h as usize * 7;
     let mut compared = KeptForJudging::new(args.reference_every, frame_bytes, MAX_COMPARED_BYTES);
@@ -238,6 +238,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
             }
             if index.is_multiple_of(args.geometry_every) {
                 geometry_cameras.push(*camera);
+                geometry_frames.push(index as usize);
             }
             bar.set_position(flown.path_frame as u64 + 1);
             Ok(ControlFlow::Continue(()))
@@ -272,7 +273,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         frame_ms_p95: percentile(&log.frame_ms, 0.95),
         // (Timed below, once the service has stopped.)
         geometry_frame_ms_p50: f64::NAN,
-        geometry_frame_ratio_paired_p50: f64::NAN,
+        geometry_over_frame_paired_p50: f64::NAN,
         frame_stages_ms_p50: FrameStages::median(&log.records, &counters.render_stages),
         requests_now: counters.requests_now,
         requests_predicted: counters.requests_predicted,
@@ -334,12 +335,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
     drop(service);
     let geometry_ms = time_geometry(&scene, &geometry_cameras, (w, h));
     summary.geometry_frame_ms_p50 = median(geometry_ms.clone());
-    let geometry_timed = Timed {
-        every: args.geometry_every,
-        ms: &geometry_ms,
-    };
-    summary.geometry_frame_ratio_paired_p50 = median(geometry_timed.ratios(&log.frame_ms));
-    timings::write_frames_csv(&args.out, &log, &render_stages, geometry_timed)?;
+    let timings = FrameTimings::new(&log, &render_stages, &geometry_frames, &geometry_ms)?;
+    summary.geometry_over_frame_paired_p50 = median(timings.paired_ratios());
+    timings.write_csv(&args.out)?;
     let json = serde_json::to_string_pretty(&summary)?;
     std::fs::write(args.out.join("summary.json"), &json).context("writing summary.json")?;
     if args.json {

@@ -48,11 +48,11 @@ pub(super) struct Summary {
     pub(super) frame_ms_p50: f64,
     pub(super) frame_ms_p95: f64,
     pub(super) geometry_frame_ms_p50: f64,
-    /// Frame by frame, over the frames timed as geometry, the all-geometry time over the
-    /// same frame's: the median. (`geometry_frame_ms_p50 / frame_ms_p50` divides medians
-    /// of different frames: a flight half of whose frames show few objects has its
-    /// median frame among those that show many.)
-    pub(super) geometry_frame_ratio_paired_p50: f64,
+    /// Frame by frame, over the frames timed as geometry that warped a texture, the
+    /// all-geometry time over the same frame's as flown: the median. (`geometry_frame_ms_p50
+    /// / frame_ms_p50` divides the medians of different frames: a path's frames are of
+    /// different kinds, some showing many objects and some none.)
+    pub(super) geometry_over_frame_paired_p50: f64,
     /// Where the frame time goes, each stage's median on its own.
     pub(super) frame_stages_ms_p50: FrameStages,
     pub(super) requests_now: u64,

@@ -1,109 +1,134 @@
 //! `frames.csv`: each frame flown, its time and where the time went, beside what the
 //! manager did in it and, for the frames timed so, the same view drawn all as geometry
 //! — so a median's surprises (a frame's median over the sum of its stages' medians) can
-//! be traced to the frames that make them.
+//! be traced to the frames that make them; and the frames' paired ratio to geometry.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{Context, Result};
-use relief_client::flight::FlightLog;
+use anyhow::{Context, Result, ensure};
+use relief_client::flight::{FlightLog, FrameRecord};
 use relief_client::manager::RenderStages;
 
 /// The columns of `frames.csv`, in order.
 const HEADER: &str = "frame,path_frame,at_s,frame_ms,plan_ms,prewarp_ms,draw_ms,geometry_ms,shade_ms,\
                       unstaged_ms,texels_warped,geometry_frame_ms,stale,requests,arrived";
 
-/// The all-geometry frames' times: one for every `every`-th frame flown, in order.
-pub(super) struct Timed<'a> {
-    pub(super) every: u32,
-    pub(super) ms: &'a [f64],
+/// One frame flown and drawn: what the manager did, the frame's time and stages, and
+/// the same view's time all as geometry where it was timed so.
+struct Frame<'a> {
+    record: &'a FrameRecord,
+    frame_ms: f64,
+    stages: &'a RenderStages,
+    geometry_ms: Option<f64>,
 }
 
-impl Timed<'_> {
-    /// The all-geometry time of frame `k` flown, if it was timed.
-    fn of(&self, k: usize) -> Option<f64> {
-        let every = self.every.max(1) as usize;
-        k.is_multiple_of(every)
-            .then(|| self.ms.get(k / every).copied())
-            .flatten()
+/// Every frame of a flight in which each frame flown was drawn (the demo's).
+pub(super) struct FrameTimings<'a> {
+    frames: Vec<Frame<'a>>,
+}
+
+impl<'a> FrameTimings<'a> {
+    /// The frames of `log`, with `render` their stages in order, and `geometry_ms[i]`
+    /// the all-geometry time of frame `geometry_frames[i]` (indices of frames flown).
+    /// An error if `log` or `render` do not hold one entry for each frame flown.
+    pub(super) fn new(
+        log: &'a FlightLog,
+        render: &'a [RenderStages],
+        geometry_frames: &[usize],
+        geometry_ms: &[f64],
+    ) -> Result<FrameTimings<'a>> {
+        let flown = log.records.len();
+        ensure!(
+            log.frame_ms.len() == flown && render.len() == flown,
+            "a frame flown but not drawn: {flown} flown, {} timed, {} with stages",
+            log.frame_ms.len(),
+            render.len()
+        );
+        let mut geometry = vec![None; flown];
+        for (&k, &ms) in geometry_frames.iter().zip(geometry_ms) {
+            if let Some(slot) = geometry.get_mut(k) {
+                *slot = Some(ms);
+            }
+        }
+        let frames = (log.records.iter().zip(&log.frame_ms).zip(render).zip(geometry))
+            .map(|(((record, &frame_ms), stages), geometry_ms)| Frame {
+                record,
+                frame_ms,
+                stages,
+                geometry_ms,
+            })
+            .collect();
+        Ok(FrameTimings { frames })
     }
 
-    /// For each frame timed as geometry, its all-geometry time over its time as flown
-    /// (`frame_ms`, one a frame flown).
-    pub(super) fn ratios(&self, frame_ms: &[f64]) -> Vec<f64> {
-        (frame_ms.iter().enumerate())
-            .filter_map(|(k, &flown)| Some(self.of(k)? / flown))
+    /// For each frame timed as geometry that warped a texture, its all-geometry time
+    /// over its time as flown.
+    pub(super) fn paired_ratios(&self) -> Vec<f64> {
+        (self.frames.iter())
+            .filter(|f| f.stages.texels_warped > 0)
+            .filter_map(|f| Some(f.geometry_ms? / f.frame_ms))
             .filter(|ratio| ratio.is_finite())
             .collect()
     }
-}
 
-/// Writes `frames.csv` into `dir`: one row per frame flown, `render` the frames' stages
-/// in the same order (a frame flown but not drawn has empty times), `geometry` the
-/// all-geometry times of the frames timed so.
-pub(super) fn write_frames_csv(
-    dir: &Path,
-    log: &FlightLog,
-    render: &[RenderStages],
-    geometry: Timed,
-) -> Result<()> {
-    let mut csv = String::from(HEADER);
-    csv.push('\n');
-    let cell = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.3}"));
-    for (k, record) in log.records.iter().enumerate() {
-        // (Writing to a `String` cannot fail.)
-        let _ = write!(csv, "{k},{},{:.4},", record.path_frame, record.at_s);
-        match (log.frame_ms.get(k), render.get(k)) {
-            (Some(&frame), Some(s)) => {
-                let staged = record.plan_ms + s.prewarp_ms + s.draw_ms + s.geometry_ms + s.shade_ms;
-                let _ = write!(
-                    csv,
-                    "{frame:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{},",
-                    record.plan_ms,
-                    s.prewarp_ms,
-                    s.draw_ms,
-                    s.geometry_ms,
-                    s.shade_ms,
-                    frame - staged,
-                    s.texels_warped
-                );
-            }
-            _ => {
-                let _ = write!(csv, ",{:.3},,,,,,,", record.plan_ms);
-            }
+    /// Writes `frames.csv` into `dir`.
+    pub(super) fn write_csv(&self, dir: &Path) -> Result<()> {
+        let mut csv = String::from(HEADER);
+        csv.push('\n');
+        for (k, f) in self.frames.iter().enumerate() {
+            let (r, s) = (f.record, f.stages);
+            let staged = r.plan_ms + s.prewarp_ms + s.draw_ms + s.geometry_ms + s.shade_ms;
+            // (Writing to a `String` cannot fail.)
+            let _ = writeln!(
+                csv,
+                "{k},{},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{},{}",
+                r.path_frame,
+                r.at_s,
+                f.frame_ms,
+                r.plan_ms,
+                s.prewarp_ms,
+                s.draw_ms,
+                s.geometry_ms,
+                s.shade_ms,
+                f.frame_ms - staged,
+                s.texels_warped,
+                f.geometry_ms.map_or(String::new(), |ms| format!("{ms:.4}")),
+                u8::from(r.stale),
+                r.requests,
+                r.arrived
+            );
         }
-        let _ = writeln!(
-            csv,
-            "{},{},{},{}",
-            cell(geometry.of(k)),
-            u8::from(record.stale),
-            record.requests,
-            record.arrived
-        );
+        std::fs::write(dir.join("frames.csv"), csv).context("writing frames.csv")
     }
-    std::fs::write(dir.join("frames.csv"), csv).context("writing frames.csv")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// Every `every`-th frame has the next time, and no other frame one; the ratios pair
-    /// them with the frames as flown.
+    /// The all-geometry times go to the frames named; the paired ratios are those of
+    /// the frames timed so that warped a texture; a log with a frame not drawn is
+    /// refused.
     #[test]
-    fn the_timed_frames_are_every_kth() {
-        let timed = Timed {
-            every: 10,
-            ms: &[1.0, 2.0, 3.0],
+    fn frames_pair_with_their_geometry() {
+        let record = FrameRecord::default();
+        let log = FlightLog {
+            records: vec![record; 4],
+            frame_ms: vec![0.5, 0.5, 0.25, 0.5],
+            ..FlightLog::default()
         };
-        assert_eq!(
-            (timed.of(0), timed.of(10), timed.of(20)),
-            (Some(1.0), Some(2.0), Some(3.0))
-        );
-        assert_eq!((timed.of(5), timed.of(30)), (None, None));
-        // Paired with the frames as flown (the third flown in no time: left out).
-        let flown: Vec<f64> = (0..31).map(|k| if k == 20 { 0.0 } else { 0.5 }).collect();
-        assert_eq!(timed.ratios(&flown), [2.0, 4.0]);
+        let warped = |texels_warped| RenderStages {
+            texels_warped,
+            ..RenderStages::default()
+        };
+        let render = [warped(10), warped(0), warped(10), warped(10)];
+        // Frames 0, 1 and 2 timed as geometry; frame 1 warped nothing; a stray index
+        // past the flight is dropped.
+        let timings = FrameTimings::new(&log, &render, &[0, 1, 2, 9], &[1.0, 2.0, 3.0, 4.0]).unwrap();
+        assert_eq!(timings.paired_ratios(), [2.0, 12.0]);
+        let geometry: Vec<_> = timings.frames.iter().map(|f| f.geometry_ms).collect();
+        assert_eq!(geometry, [Some(1.0), Some(2.0), Some(3.0), None]);
+        assert!(FrameTimings::new(&log, &render[..3], &[], &[]).is_err());
     }
 }
