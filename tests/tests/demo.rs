@@ -216,7 +216,7 @@ fn the_demo_flies_and_summarises() {
     assert_eq!(stale as u64, summary["stale_frames"].as_u64().unwrap());
     // Every 10th frame (`--geometry-every`'s default) was timed as geometry too, and
     // the median of those times is the summary's.
-    let mut geometry: Vec<f64> = (rows.iter().enumerate())
+    let geometry: Vec<f64> = (rows.iter().enumerate())
         .map(|(k, row)| {
             let ms = row[at("geometry_frame_ms")];
             assert_eq!(ms.is_nan(), k % 10 != 0, "{row:?}");
@@ -224,28 +224,15 @@ fn the_demo_flies_and_summarises() {
         })
         .filter(|ms| !ms.is_nan())
         .collect();
-    geometry.sort_by(f64::total_cmp);
-    let p50 = summary["geometry_frame_ms_p50"].as_f64().unwrap();
-    let middle = geometry[(geometry.len() - 1) / 2]..=geometry[geometry.len() / 2];
-    assert!(
-        *middle.start() - 1e-3 <= p50 && p50 <= *middle.end() + 1e-3,
-        "{p50} {middle:?}"
-    );
+    is_median(geometry, &summary["geometry_frame_ms_p50"]);
     // The paired ratio: the median of each timed frame's all-geometry time over its own,
     // over the frames that warped a texture.
-    let mut paired: Vec<f64> = (rows.iter())
+    let paired: Vec<f64> = (rows.iter())
         .filter(|row| row[at("texels_warped")] > 0.0)
         .map(|row| row[at("geometry_frame_ms")] / row[at("frame_ms")])
         .filter(|ratio| ratio.is_finite())
         .collect();
-    paired.sort_by(f64::total_cmp);
-    let paired_p50 = summary["geometry_over_frame_paired_p50"].as_f64().unwrap();
-    let middle = paired[(paired.len() - 1) / 2]..=paired[paired.len() / 2];
-    // (Within a hundredth: the file's times are rounded to a tenth of a microsecond.)
-    assert!(
-        *middle.start() * 0.99 <= paired_p50 && paired_p50 <= *middle.end() * 1.01,
-        "{paired_p50} {middle:?}"
-    );
+    is_median(paired, &summary["geometry_over_frame_paired_p50"]);
     // Its texels are the summary's.
     let texels: f64 = rows.iter().map(|row| row[at("texels_warped")]).sum();
     let per_frame = summary["texels_warped_per_frame"].as_f64().unwrap();
@@ -253,13 +240,7 @@ fn the_demo_flies_and_summarises() {
         (texels - per_frame * frames as f64).abs() < 1.0,
         "{texels} {per_frame}"
     );
-    times.sort_by(f64::total_cmp);
-    let middle = times[(times.len() - 1) / 2]..=times[times.len() / 2];
-    let p50 = summary["frame_ms_p50"].as_f64().unwrap();
-    assert!(
-        *middle.start() - 0.001 <= p50 && p50 <= *middle.end() + 0.001,
-        "{p50} {middle:?}"
-    );
+    is_median(times, &summary["frame_ms_p50"]);
     // Every 15th frame drawn is written, named by its path frame.
     let written = std::fs::read_dir(&out)
         .unwrap()
@@ -329,5 +310,19 @@ fn the_demo_flies_and_summarises() {
     assert!(
         stderr.contains(first.file_name().unwrap().to_str().unwrap()),
         "{stderr}"
+    );
+}
+
+/// Asserts that `p50` (a summary's figure) is the median of `values` — either middle
+/// value, for an even count — within a hundredth: `frames.csv` rounds its times to a
+/// tenth of a microsecond.
+fn is_median(mut values: Vec<f64>, p50: &serde_json::Value) {
+    let p50 = p50.as_f64().unwrap_or_else(|| panic!("not a number: {p50}"));
+    assert!(!values.is_empty(), "no values for {p50}");
+    values.sort_by(f64::total_cmp);
+    let middle = values[(values.len() - 1) / 2]..=values[values.len() / 2];
+    assert!(
+        *middle.start() * 0.99 <= p50 && p50 <= *middle.end() * 1.01,
+        "{p50} {middle:?}"
     );
 }
