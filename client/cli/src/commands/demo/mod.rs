@@ -335,9 +335,9 @@ pub fn run(args: DemoArgs) -> Result<()> {
     drop(service);
     let geometry_ms = time_geometry(&scene, &geometry_cameras, (w, h));
     summary.geometry_frame_ms_p50 = median(geometry_ms.clone());
-    let timings = FrameTimings::new(&log, &render_stages, &geometry_frames, &geometry_ms)?;
-    summary.geometry_over_frame_paired_p50 = median(timings.paired_ratios());
-    timings.write_csv(&args.out)?;
+    let frame_timings = FrameTimings::new(&log, &render_stages, &geometry_frames, &geometry_ms)?;
+    summary.geometry_over_frame_paired_p50 = median(frame_timings.paired_ratios());
+    frame_timings.write_csv(&args.out)?;
     let json = serde_json::to_string_pretty(&summary)?;
     std::fs::write(args.out.join("summary.json"), &json).context("writing summary.json")?;
     if args.json {
