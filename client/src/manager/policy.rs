@@ -179,18 +179,18 @@ pub const LONE_BAND: f32 = 2.0;
 /// (−7.3 dB at 4°; 1.1 % and 2.5 % along one line). At 3 %, the fandisk's flight at a
 /// 100 ms round trip showed its sixth frame from a texture 4.3° round leaving 0.57 %
 /// unseen, the fin's narrow side a pixel-wide strip missing from its outline: 5 dB
-/// under the same frame's geometry, its worst frame 3.7–3.8 dB under geometry's worst (2
+/// under the same frame's geometry, its worst frame 3.7–3.8 dB under geometry's worst (4
 /// runs; 2.1–2.2 at rtt 0, 4 runs). At 0.5 % the texture is given a partner: 0.62–0.82
-/// dB (4 runs at rtt 100), 0.81–0.91 at rtt 0 (2). The bunny, the spot, the default
-/// scene, the orbits and the forest stayed within their runs' spread (the default
-/// scene: 22–27 partners drawn a run against 5–23, the knot's regenerations 23–24 an
-/// orbit against 22); the teapot's worst frame came 4.2 dB under geometry's in 1 run of
-/// 12 (a texture 13° round partnered by one 8.7° round, past the tolerance), 2.0–2.5 in
-/// the others, as in 11 runs of 11 at 3 %. A smooth convex surface turns
-/// into view slowly, `(1 − cos φ)/2` on a sphere seen from far (0.5 % at 8°), and less
-/// round its outline from near (0.1 % at 15° from 5 radii): the orbit's sphere gave 13
-/// textures an orbit either way. (A partner, from the far side of the eye, holds what
-/// turned into view: with one, the rim's band and the turn bound the texture.)
+/// dB (4 runs at rtt 100), 0.81–0.91 at rtt 0 (2). What that costs: more textures shown
+/// with partners or objects drawn as geometry meanwhile (the default scene at rtt 100:
+/// 22 partners and 32 stand-ins a run, against 5–8 and 6–15), and the teapot's worst
+/// frame 4.2 dB under geometry's in 1 run of 12 (a texture 13° round partnered by one
+/// 8.7° round, past the tolerance; 2.0–2.65 in 12 of 12 at 3 %): see `targets.md`. A
+/// smooth convex surface turns into view slowly, `(1 − cos φ)/2` on a sphere seen from
+/// far (0.5 % at about 8°, short of [`LONE_MAX_TURN`]), and less round its outline from
+/// near (0.1 % at 15° from 5 radii): the orbit's sphere gave 13 textures an orbit either
+/// way. (A partner, from the far side of the eye, holds what turned into view: with
+/// one, the rim's band and the turn bound the texture.)
 pub const LONE_UNSEEN: f32 = 0.005;
 
 /// With a partner filling the band past its rim, a texture counts as stale once that
