@@ -183,7 +183,7 @@ pub const LONE_BAND: f32 = 2.0;
 /// runs; 2.1–2.2 at rtt 0, 4 runs). At 0.5 % the texture is given a partner: 0.62–0.82
 /// dB (4 runs at rtt 100), 0.81–0.91 at rtt 0 (2). What that costs: more textures shown
 /// with partners or objects drawn as geometry meanwhile (the default scene at rtt 100:
-/// 22 partners and 32 stand-ins a run, against 5–8 and 6–15), and the teapot's worst
+/// 18–31 partners and 9–32 stand-ins a run, against 5–8 and 6–15), and the teapot's worst
 /// frame 4.2 dB under geometry's in 1 run of 12 (a texture 13° round partnered by one
 /// 8.7° round, past the tolerance; 2.0–2.65 in 12 of 12 at 3 %): see `targets.md`. A
 /// smooth convex surface turns into view slowly, `(1 − cos φ)/2` on a sphere seen from
