@@ -11,10 +11,6 @@ pub struct Counters {
     pub warps: u64,
     /// Partners warped (second textures drawn behind the shown one).
     pub partners: u64,
-    /// Texels pre-warped, over all warps and partners (the shown texture at the
-    /// pyramid level the screen needs, a partner coarser; of those, the ones that can
-    /// reach the screen): what a frame's impostors cost.
-    pub texels_warped: u64,
     pub requests_now: u64,
     pub requests_predicted: u64,
     pub withdrawn: u64,
@@ -65,8 +61,16 @@ pub struct Counters {
     /// the `needs`. (Objects no dearer as geometry than as impostors are drawn so
     /// whatever they hold, and are in neither.)
     pub stand_ins: u64,
-    /// Where each [`Manager::render`](super::Manager::render) spent its time.
+    /// Where each [`Manager::render`](super::Manager::render) spent its time, and the
+    /// texels it warped.
     pub render_stages: Vec<RenderStages>,
+}
+
+impl Counters {
+    /// Texels pre-warped over the run ([`RenderStages::texels_warped`], summed).
+    pub fn texels_warped(&self) -> u64 {
+        self.render_stages.iter().map(|s| s.texels_warped).sum()
+    }
 }
 
 /// Of predictions' lateness ([`Counters::prediction_lateness_ms`]), the fraction
@@ -135,7 +139,8 @@ pub struct RenderStages {
     pub geometry_ms: f64,
     /// Lighting the G-buffer into the frame.
     pub shade_ms: f64,
-    /// Texels the pre-warps visited: this frame's share of
-    /// [`Counters::texels_warped`].
+    /// Texels pre-warped, over all warps and partners (the shown texture at the
+    /// pyramid level the screen needs, a partner coarser; of those, the ones that can
+    /// reach the screen): what the frame's impostors cost.
     pub texels_warped: u64,
 }

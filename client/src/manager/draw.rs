@@ -208,7 +208,6 @@ impl Manager {
         let texels_warped = (prewarps.iter())
             .map(|ready| ready.as_ref().map_or(0, |p| p.texels_warped()) as u64)
             .sum::<u64>();
-        self.counters.texels_warped += texels_warped;
         let mut prewarps = warps.into_iter().zip(prewarps).peekable();
         let mut geometry: Vec<(u32, &SceneObject)> = Vec::new();
         for (k, key) in keys.into_iter().enumerate() {

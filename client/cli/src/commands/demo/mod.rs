@@ -304,7 +304,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         sprites: counters.sprites,
         warps: counters.warps,
         partners: counters.partners,
-        texels_warped_per_frame: counters.texels_warped as f64 / log.frames.max(1) as f64,
+        texels_warped_per_frame: counters.texels_warped() as f64 / log.frames.max(1) as f64,
         regenerations_per_orbit: log.regenerations_per_orbit(),
         psnr_db_mean: finite_mean(&judged.psnr),
         psnr_db_min: finite_min(&judged.psnr),
