@@ -227,8 +227,8 @@ pub const SHOWN_STALE: f32 = 2.0;
 pub const PARTNER_FROM: f32 = 15.0 * PI / 180.0;
 
 /// A partner is at most this far around the object from the eye, as a shown texture:
-/// farther, it fills the band past the shown texture's rim with texels seen a level
-/// coarser and stretched, and it keeps that texture counted as covering the eye (the
+/// farther, it fills the band past the shown texture's rim with texels seen
+/// stretched, and it keeps that texture counted as covering the eye (the
 /// partnered band) where a nearer one is due. At twice this, the sphere turned 16–22°
 /// from its texture with partners 73–80° off scored 3–5 dB under geometry, and its
 /// median over the demo's first 150 frames 1.0–1.7 dB under; at this turn, new textures
@@ -239,10 +239,6 @@ pub const PARTNER_MAX_TURN: f32 = MAX_TURN;
 /// bounding radius: more than two textures of one surface disagree on its depth (depth
 /// quanta, reconstruction), so the partner shows only where the shown one has nothing.
 pub const PARTNER_BEHIND: f32 = 0.05;
-
-/// Pyramid levels a partner is drawn coarser than the screen needs: it shows only
-/// slivers, and its pre-warp costs a quarter.
-pub const PARTNER_LEVELS_COARSER: usize = 1;
 
 // ---- What is asked for, and when ----------------------------------------------------
 
