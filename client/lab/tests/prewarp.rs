@@ -398,6 +398,25 @@ fn texture_mapping_covers_a_full_texture_to_its_edges() {
     eprintln!("{both} pixels covered by both, {differ} on the outline differ");
 }
 
+/// Shows `impostor` (object 0) from `camera` into `gbuffer`, depth-tested as if
+/// `factor` times farther (a texture drawn behind another, [`Prewarped::behind`], when
+/// over 1).
+fn draw_behind(
+    impostor: &Impostor,
+    camera: &relief_core::camera::Camera,
+    factor: f32,
+    gbuffer: &mut relief_render::gbuffer::GBuffer,
+) {
+    use relief_render::warp::{Prewarped, Variant};
+    let prewarped = Prewarped::new(Variant::Interleaved, impostor, camera).expect("pre-warp");
+    let prewarped = if factor > 1.0 {
+        prewarped.behind(factor).expect("behind")
+    } else {
+        prewarped
+    };
+    prewarped.draw(impostor, 0, camera, gbuffer);
+}
+
 /// A texture drawn behind another ([`Prewarped::behind`]) fills in what the first
 /// leaves empty: the sphere's textures baked 60° apart, seen from halfway between —
 /// where the first texture drew, the frame is as it alone left it (but for a few
@@ -406,7 +425,6 @@ fn texture_mapping_covers_a_full_texture_to_its_edges() {
 #[test]
 fn a_texture_drawn_behind_fills_what_the_first_leaves_empty() {
     use relief_render::gbuffer::GBuffer;
-    use relief_render::warp::{Prewarped, Variant};
 
     let scene = Scene::load("default").expect("default scene");
     let solo = Solo::new(&scene, "sphere", 3.0).expect("solo");
@@ -415,18 +433,9 @@ fn a_texture_drawn_behind_fills_what_the_first_leaves_empty() {
     let (first, second) = (bake(0.0), bake(60.0));
     let camera = solo.camera(solo.eye(30.0), 256).expect("orbit camera");
     let mut alone = GBuffer::new(256, 256);
-    let warp = |impostor: &Impostor, factor: f32, gbuffer: &mut GBuffer| {
-        let prewarped = Prewarped::new(Variant::Interleaved, impostor, &camera).expect("pre-warp");
-        let prewarped = if factor > 1.0 {
-            prewarped.behind(factor).expect("behind")
-        } else {
-            prewarped
-        };
-        prewarped.draw(impostor, 0, &camera, gbuffer);
-    };
-    warp(&first, 1.0, &mut alone);
+    draw_behind(&first, &camera, 1.0, &mut alone);
     let mut both = alone.clone();
-    warp(&second, 1.02, &mut both);
+    draw_behind(&second, &camera, 1.02, &mut both);
     let mut reference = GBuffer::new(256, 256);
     relief_render::raster::rasterize(&[(0, &solo.scene.objects[0])], &camera, 0.01, &mut reference);
     let (mut kept, mut changed, mut added) = (0, 0, 0);
@@ -882,7 +891,6 @@ fn a_partner_at_the_screens_level_adds_no_coarser_outline() {
     use relief_lab::image_error::object_psnr;
     use relief_render::gbuffer::GBuffer;
     use relief_render::pyramid::{MAX_TEXEL_PIXELS, MIN_LEVEL_EDGE, Pyramid};
-    use relief_render::warp::Prewarped;
 
     let scene = Scene::load("default").expect("default scene");
     let solo = Solo::new(&scene, "knot", 3.0).expect("solo");
@@ -895,23 +903,14 @@ fn a_partner_at_the_screens_level_adds_no_coarser_outline() {
     let (shown, partner) = (pyramid(0.0), pyramid(35.0));
     let camera = solo.camera(solo.eye(25.0), 256).expect("orbit camera");
     let reference = solo.reference(&camera, 3);
-    let draw = |impostor: &Impostor, factor: f32, gbuffer: &mut GBuffer| {
-        let prewarped = Prewarped::new(Variant::Interleaved, impostor, &camera).expect("pre-warp");
-        let prewarped = if factor > 1.0 {
-            prewarped.behind(factor).expect("behind")
-        } else {
-            prewarped
-        };
-        prewarped.draw(impostor, 0, &camera, gbuffer);
-    };
     // As the manager puts a partner behind: 5 % of the bounding radius, at 3 radii.
     let behind = 1.0 + 0.05 / 3.0;
     let shown_level = shown.level_for(&camera, MAX_TEXEL_PIXELS);
     let psnr = |partner_level: Option<usize>| {
         let mut gbuffer = GBuffer::new(256, 256);
-        draw(&shown.levels[shown_level], 1.0, &mut gbuffer);
+        draw_behind(&shown.levels[shown_level], &camera, 1.0, &mut gbuffer);
         if let Some(level) = partner_level {
-            draw(&partner.levels[level], behind, &mut gbuffer);
+            draw_behind(&partner.levels[level], &camera, behind, &mut gbuffer);
         }
         object_psnr(&gbuffer.shade(&solo.scene, &camera), &reference, 0).expect("knot shown")
     };
