@@ -408,11 +408,13 @@ impl Manager {
     /// [`MAX_TURN`] every growth is infinite). `None` while the eye is within
     /// [`PARTNER_FROM`] of `shown`'s and `shown` may be shown alone there ([`may_show`]).
     ///
-    /// Its level is the one whose texels are no larger than the screen's pixels, as
-    /// fine as a shown texture's may be: a level coarser (a quarter of the pre-warp)
-    /// drew its own coarser outline and speckles where the shown one had nothing — the
-    /// held-out teapot's worst frame, 24.5–24.7 dB against geometry's 29.6, where the
-    /// same textures with the partner at this level score 26.9–27.0.
+    /// Its level is the coarsest whose texels are no larger than a pixel
+    /// ([`MAX_TEXEL_PIXELS`]; a shown texture's may be finer, `policy::texel_pixels`): a
+    /// level coarser pre-warps a quarter of the texels but draws its own stepped,
+    /// speckled outline where the shown one has nothing. The held-out teapot's frame
+    /// of a texture 13° round partnered by one 8.7° round (every run at a tolerance of
+    /// 11.95 px; 1 in 9 at the default) scored 24.7–24.8 dB against geometry's 29.6 so,
+    /// and 26.9–27.0 with the partner at this level.
     pub(super) fn partner(
         &self,
         k: usize,

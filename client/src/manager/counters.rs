@@ -139,8 +139,8 @@ pub struct RenderStages {
     pub geometry_ms: f64,
     /// Lighting the G-buffer into the frame.
     pub shade_ms: f64,
-    /// Texels pre-warped, over all warps and partners (the shown texture at the
-    /// pyramid level the screen needs, a partner coarser; of those, the ones that can
-    /// reach the screen): what the frame's impostors cost.
+    /// Texels pre-warped, over all warps and partners (each at its pyramid level for
+    /// the screen; of those, the ones that can reach the screen): what the frame's
+    /// impostors cost.
     pub texels_warped: u64,
 }

@@ -185,7 +185,8 @@ pub const LONE_BAND: f32 = 2.0;
 /// with partners or objects drawn as geometry meanwhile (the default scene at rtt 100:
 /// 18–31 partners and 9–32 stand-ins a run, against 5–8 and 6–15), and the teapot's worst
 /// frame 4.2 dB under geometry's in 1 run of 12 (a texture 13° round partnered by one
-/// 8.7° round, past the tolerance; 2.0–2.65 in 12 of 12 at 3 %): see `targets.md`. A
+/// 8.7° round, past the tolerance; 2.0–2.65 in 12 of 12 at 3 %), the partner then a
+/// level coarser — at the screen's level 1.95 dB (`Manager::partner`): see `targets.md`. A
 /// smooth convex surface turns into view slowly, `(1 − cos φ)/2` on a sphere seen from
 /// far (0.5 % at about 8°, short of [`LONE_MAX_TURN`]), and less round its outline from
 /// near (0.1 % at 15° from 5 radii): the orbit's sphere gave 13 textures an orbit either
@@ -227,12 +228,12 @@ pub const SHOWN_STALE: f32 = 2.0;
 pub const PARTNER_FROM: f32 = 15.0 * PI / 180.0;
 
 /// A partner is at most this far around the object from the eye, as a shown texture:
-/// farther, it fills the band past the shown texture's rim with texels seen
-/// stretched, and it keeps that texture counted as covering the eye (the
-/// partnered band) where a nearer one is due. At twice this, the sphere turned 16–22°
-/// from its texture with partners 73–80° off scored 3–5 dB under geometry, and its
-/// median over the demo's first 150 frames 1.0–1.7 dB under; at this turn, new textures
-/// come sooner (the orbit-sphere scene asks 20 an orbit, not 17).
+/// farther, it fills the band past the shown texture's rim with texels seen stretched,
+/// and it keeps that texture counted as covering the eye (the partnered band) where a
+/// nearer one is due. At twice this, the sphere turned 16–22° from its texture with
+/// partners 73–80° off scored 3–5 dB under geometry, and its median over the demo's
+/// first 150 frames 1.0–1.7 dB under (partners then a level coarser); at this turn, new
+/// textures come sooner (the orbit-sphere scene asks 20 an orbit, not 17).
 pub const PARTNER_MAX_TURN: f32 = MAX_TURN;
 
 /// How far behind the shown texture a partner is drawn, as a fraction of the object's
