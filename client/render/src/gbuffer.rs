@@ -113,6 +113,29 @@ impl Stored {
     }
 }
 
+/// [`LANES`] surfaces of one object as the buffer stores them, a pixel's a lane
+/// ([`Stored`] eight times): what a texture mapping writes for eight pixels at once.
+#[derive(Debug, Clone, Copy)]
+pub struct StoredLanes {
+    pub object: u32,
+    /// Packed as [`Stored`]'s albedo.
+    pub albedo: u32x8,
+    /// Each component as [`Stored`]'s.
+    pub normal: [i16x8; 3],
+}
+
+impl StoredLanes {
+    /// Lane `l`'s surface.
+    #[inline(always)]
+    fn lane(&self, l: usize) -> Stored {
+        Stored {
+            object: self.object,
+            albedo: self.albedo.as_array()[l],
+            normal: self.normal.map(|c| c.as_array()[l]),
+        }
+    }
+}
+
 /// Rows of a [`GBuffer`], mutable: the whole buffer or a band of it, so writers can
 /// split the work by rows across threads. Pixel `i` is `(i % width, y0 + i / width)`.
 pub struct Rows<'a> {
@@ -275,6 +298,58 @@ impl Rows<'_> {
                 *plane = mask_i16
                     .select(i16x8::splat(value), i16x8::new(*plane))
                     .to_array();
+            }
+        }
+    }
+
+    /// [`Rows::keep_nearer_stored_as`] for the [`LANES`] pixels from `i` whose bits are
+    /// set in `lanes`, each with its own surface (lane `l` of `tested`, `depths` and
+    /// `stored`): one vector depth test, and the group written by vector selects.
+    #[inline(always)]
+    pub fn keep_nearer_lanes_as(
+        &mut self,
+        i: usize,
+        lanes: u32,
+        tested: f32x8,
+        depths: f32x8,
+        stored: &StoredLanes,
+    ) {
+        let group = i..i + LANES;
+        let Some(Ok(held)) = self
+            .depth
+            .get_mut(group.clone())
+            .map(<&mut [f32; LANES]>::try_from)
+        else {
+            // The buffer's last pixels: one at a time.
+            let (tested, depths) = (tested.to_array(), depths.to_array());
+            for l in 0..LANES {
+                if lanes & (1 << l) != 0 && i + l < self.depth.len() {
+                    self.keep_nearer_stored_as(i + l, tested[l], depths[l], &stored.lane(l));
+                }
+            }
+            return;
+        };
+        let old = f32x8::new(*held);
+        // (As `nearer`, and the stored depth positive; every comparison is false for NaN.)
+        let nearer = tested.simd_gt(f32x8::ZERO) & tested.simd_lt(old) & depths.simd_gt(f32x8::ZERO);
+        let bits = nearer.to_bitmask() & lanes;
+        if bits == 0 {
+            return;
+        }
+        let mask_u32 = lane_mask(bits);
+        *held = cast::<u32x8, f32x8>(mask_u32).select(depths, old).to_array();
+        let select_u32 = |plane: &mut [u32], value: u32x8| {
+            if let Ok(plane) = <&mut [u32; LANES]>::try_from(&mut plane[group.clone()]) {
+                *plane = mask_u32.select(value, u32x8::new(*plane)).to_array();
+            }
+        };
+        select_u32(self.object, u32x8::splat(stored.object));
+        select_u32(self.albedo, stored.albedo);
+        // (All ones stay all ones, saturated to 16 bits.)
+        let mask_i16 = i16x8::from_i32x8_saturate(cast::<u32x8, i32x8>(mask_u32));
+        for (plane, value) in self.normal.iter_mut().zip(stored.normal) {
+            if let Ok(plane) = <&mut [i16; LANES]>::try_from(&mut plane[group.clone()]) {
+                *plane = mask_i16.select(value, i16x8::new(*plane)).to_array();
             }
         }
     }

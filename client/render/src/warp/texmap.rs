@@ -4,19 +4,22 @@
 //! view depth `(h + d) / (D·f)` for the ray direction `D` with `D·forward = 1`. Where
 //! the pixel falls between covered and empty texels (a silhouette), the covered share
 //! of the bilinear weights is its coverage, and the surface is added as a
-//! [`Fragment`], blended by it over what lies behind.
+//! [`Fragment`], blended by it over what lies behind. Pixels whose footprint lies wholly
+//! on surface — most of them — are blended eight at once (`blend_full`), to the bit as
+//! one by one.
 
 use glam::Vec3;
 use rayon::prelude::*;
-use wide::{f32x8, i32x8};
+use wide::bytemuck::cast;
+use wide::{f32x8, i16x8, i32x8, u32x8};
 
 use relief_core::camera::Camera;
 use relief_core::relief::{ReliefTexture, SourceCamera};
 
 use super::params::WarpParams;
-use super::prewarp::{Attributes, PTexel, PrewarpImage};
+use super::prewarp::{Attributes, NORMAL_SHIFT, PTexel, PrewarpImage, field, lerp_attributes};
 use super::{MIN_TASK_PIXELS, round_small, rows_per_task};
-use crate::gbuffer::{Fragment, GBuffer, Stored};
+use crate::gbuffer::{Fragment, GBuffer, Stored, StoredLanes};
 use relief_core::shading::{LANE_INDEX, LANES};
 
 /// The screen rectangle `[x0, x1) × [y0, y1)` that the plane region `corners` can
@@ -78,6 +81,21 @@ pub fn map(
     camera: &Camera,
     gbuffer: &mut GBuffer,
 ) {
+    map_lanes::<true>(image, texture, params, depths, object, camera, gbuffer);
+}
+
+/// [`map`], blending the pixels whose footprints lie wholly on surface eight at once
+/// when `EIGHT_AT_ONCE` (else one by one, as the rest: the tests' reference). Returns
+/// how many pixels were blended eight at once.
+fn map_lanes<const EIGHT_AT_ONCE: bool>(
+    image: &PrewarpImage,
+    texture: &ReliefTexture,
+    params: &WarpParams,
+    depths: Depths,
+    object: u32,
+    camera: &Camera,
+    gbuffer: &mut GBuffer,
+) -> usize {
     let c = &texture.camera;
     let plane = |u: f32, v: f32| c.origin + c.a * u + c.b * v;
     let (u0, v0) = (image.u0 as f32, image.v0 as f32);
@@ -94,7 +112,7 @@ pub fn map(
     let (x0, y0) = (ix0.max(vx0), iy0.max(vy0));
     let (x1, y1) = (ix1.min(vx1).min(gbuffer.width), iy1.min(vy1).min(gbuffer.height));
     if x0 >= x1 || y0 >= y1 {
-        return;
+        return 0;
     }
     let (a_scale, b_scale) = (c.a / c.a.length_squared(), c.b / c.b.length_squared());
     // The ray direction D (`Camera::ray`) is linear in the pixel, so are
@@ -113,13 +131,14 @@ pub fn map(
     // Rows are independent (each pixel samples the image and depth-tests its own slot):
     // split across cores, no task below `MIN_TASK_PIXELS` (rayon runs work it does not
     // split on this thread). Silhouette pixels come back as fragments.
-    let fragments: Vec<Vec<Fragment>> = gbuffer
+    let bands: Vec<(Vec<Fragment>, usize)> = gbuffer
         .bands(y0, y1, 1)
         .into_par_iter()
         .with_min_len(rows_per_task((x1 - x0) as usize))
         .map(|mut pixels| {
             let y = pixels.y0();
             let row = dots(camera.ray(x0 as f32 + 0.5, y as f32 + 0.5));
+            let mut blended = 0;
             // Eight pixels at once up to the texel look-ups: most of the rectangle is
             // empty, and a group none of whose footprints holds a texel costs a few vector
             // operations.
@@ -154,24 +173,47 @@ pub fn map(
                 // Exact: the inside lanes are non-negative and below the image's size.
                 let (xs, ys) = (fu.trunc_int(), fv.trunc_int());
                 let ks = (ys * i32x8::splat(image.width as i32) + xs).to_array();
-                let (xs, ys) = (xs.to_array(), ys.to_array());
-                let (fu, fv, u, v) = (fu.to_array(), fv.to_array(), u.to_array(), v.to_array());
+                // Where in its footprint each pixel falls.
+                let (tx, ty) = (fu - f32x8::from_i32x8(xs), fv - f32x8::from_i32x8(ys));
+                // Inside lanes whose four footprint texels all hold surface are blended
+                // eight at once (`full`: the bulk of a surface); the silhouette's and the
+                // rim's one by one (`single`).
+                let (mut full, mut single) = (0u32, rim);
+                let mut quads = [[PTexel::EMPTY; 4]; LANES];
+                for l in set_lanes(inside) {
+                    let k = ks[l] as usize;
+                    if footprints[k] == 0 {
+                        continue;
+                    }
+                    let quad = footprint_of(image, k);
+                    if !EIGHT_AT_ONCE || quad.iter().any(PTexel::is_empty) {
+                        single |= 1 << l;
+                    } else {
+                        full |= 1 << l;
+                        quads[l] = quad;
+                    }
+                }
+                if full != 0 {
+                    let (depth, stored) = blend_full(&quads, tx, ty, object);
+                    let view_depth =
+                        (f32x8::splat(params.h) + depth) / towards_plane * f32x8::splat(depths.world);
+                    let tested = view_depth * f32x8::splat(depths.tested);
+                    pixels.keep_nearer_lanes_as(x, full, tested, view_depth, &stored);
+                    blended += full.count_ones() as usize;
+                }
+                if single == 0 {
+                    continue;
+                }
+                let (tx, ty, u, v) = (tx.to_array(), ty.to_array(), u.to_array(), v.to_array());
                 let towards_plane = towards_plane.to_array();
-                for l in 0..n {
+                for l in set_lanes(single) {
                     let found = if inside & (1 << l) != 0 {
-                        let k = ks[l] as usize;
-                        if footprints[k] == 0 {
-                            continue;
-                        }
-                        let (tx, ty) = (fu[l] - xs[l] as f32, fv[l] - ys[l] as f32);
-                        sample_inside(image, k, tx, ty)
-                    } else if rim & (1 << l) != 0 {
+                        sample_inside(image, ks[l] as usize, tx[l], ty[l])
+                    } else {
                         image
                             .at(u[l], v[l])
                             .filter(|t| !t.is_empty())
                             .map(|t| (t.depth, t.attributes, 1.0))
-                    } else {
-                        None
                     };
                     let Some((depth, attributes, coverage)) = found else {
                         continue;
@@ -187,10 +229,12 @@ pub fn map(
                     }
                 }
             }
-            pixels.into_fragments()
+            (pixels.into_fragments(), blended)
         })
         .collect();
-    gbuffer.add_fragments(fragments.into_iter().flatten());
+    let blended = bands.iter().map(|(_, n)| n).sum();
+    gbuffer.add_fragments(bands.into_iter().flat_map(|(fragments, _)| fragments));
+    blended
 }
 
 /// Per texel `k` of `image` (but the last row and column): whether any of the four
@@ -215,6 +259,59 @@ fn footprints(image: &PrewarpImage) -> Vec<u8> {
             }
         });
     out
+}
+
+/// The lanes set in `bits`, lowest first.
+#[inline(always)]
+fn set_lanes(mut bits: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        let l = bits.trailing_zeros() as usize;
+        bits &= bits.wrapping_sub(1);
+        (l < LANES).then_some(l)
+    })
+}
+
+/// The four texels of the bilinear footprint whose top-left is `k`: top-left, top-right,
+/// bottom-left, bottom-right.
+#[inline(always)]
+fn footprint_of(image: &PrewarpImage, k: usize) -> [PTexel; 4] {
+    let w = image.width as usize;
+    [
+        image.texels[k],
+        image.texels[k + 1],
+        image.texels[k + w],
+        image.texels[k + w + 1],
+    ]
+}
+
+/// [`sample_inside`] of eight footprints all of whose texels hold surface (`quads`, a
+/// lane's each; lanes not drawn may hold anything), at fractions `(tx, ty)`: the same
+/// arithmetic lane by lane, so the same depths and bytes. Returns the depths and the
+/// surfaces as the buffer stores them ([`Stored::with_encoded_normal`]'s encoding).
+#[inline(always)]
+fn blend_full(quads: &[[PTexel; 4]; LANES], tx: f32x8, ty: f32x8, object: u32) -> (f32x8, StoredLanes) {
+    let depth = |c: usize| f32x8::new(std::array::from_fn(|l| quads[l][c].depth));
+    let words = |c: usize| -> [u64; LANES] { std::array::from_fn(|l| quads[l][c].attributes.0) };
+    let lerp = |p: f32x8, q: f32x8, t: f32x8| p + (q - p) * t;
+    let blended_depth = lerp(lerp(depth(0), depth(1), tx), lerp(depth(2), depth(3), tx), ty);
+    let top = lerp_attributes(&words(0), &words(1), tx);
+    let bottom = lerp_attributes(&words(2), &words(3), tx);
+    let blended = lerp_attributes(&top, &bottom, ty);
+    // The packed bytes: albedo in the low three, the encoded normal in the next three.
+    let encoded = |shift: u32| {
+        let e = cast::<u32x8, i32x8>(field(&blended, shift, 8));
+        i16x8::from_i32x8_saturate((e * i32x8::splat(2) - i32x8::splat(255)) * i32x8::splat(128))
+    };
+    let stored = StoredLanes {
+        object,
+        albedo: field(&blended, 0, 24),
+        normal: [
+            encoded(NORMAL_SHIFT),
+            encoded(NORMAL_SHIFT + 8),
+            encoded(NORMAL_SHIFT + 16),
+        ],
+    };
+    (blended_depth, stored)
 }
 
 /// The pre-warped image in the bilinear footprint whose top-left texel is `k`, at
@@ -255,4 +352,92 @@ fn sample_inside(image: &PrewarpImage, k: usize, tx: f32, ty: f32) -> Option<(f3
     let top = a.attributes.lerp(b.attributes, sx);
     let bottom = c.attributes.lerp(d.attributes, sx);
     Some((depth, top.lerp(bottom, sy), 1.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::{Quat, Vec3};
+    use relief_core::camera::Camera;
+    use relief_core::relief::{DepthBits, SourceProjection};
+    use relief_core::scene::Scene;
+    use relief_trace::{bake, tracer::ObjectTracer};
+
+    use super::map_lanes;
+    use crate::gbuffer::GBuffer;
+    use crate::impostor::{Faces, Impostor};
+    use crate::warp::Prewarped;
+    use crate::warp::prewarp::Variant;
+
+    /// Pixels blended eight at once get the very depths, bytes and fragments that
+    /// blending them one by one gives, bit for bit: a self-occluding knot and a tree of
+    /// leaves (silhouettes everywhere), orthographic and perspective, seen from eyes
+    /// turned every way, nearer and farther, over a buffer another view of the object
+    /// already fills (so the depth test both passes and fails). Most surface pixels go
+    /// through the lanes (fails if they stop being used).
+    #[test]
+    fn eight_at_once_blend_as_one_by_one() {
+        let scene = Scene::load("default").expect("default scene");
+        let (mut cases, mut blended, mut covered) = (0, 0, 0);
+        for name in ["knot", "tree"] {
+            let object = scene.object(name).expect("object");
+            let tracer = ObjectTracer::new(object);
+            let centre = object.local_bounds.center();
+            let radius = object.local_bounds.extent().length() * 0.5;
+            let eye = centre + Vec3::new(0.0, 0.25, 1.0).normalize() * 3.0 * radius;
+            for (projection, depth_bits) in [
+                (SourceProjection::Orthographic, DepthBits::Sixteen),
+                (SourceProjection::Perspective, DepthBits::Eight),
+            ] {
+                let texture = bake(&tracer, eye, 96, depth_bits, projection).expect("baked");
+                let impostor = Impostor::new(texture).with_faces(Faces::Front);
+                for (yaw, pitch, distance) in
+                    [(-30.0f32, 5.0f32, 1.0f32), (4.0, -12.0, 0.7), (15.0, 20.0, 1.6)]
+                {
+                    let turn =
+                        Quat::from_rotation_y(yaw.to_radians()) * Quat::from_rotation_x(pitch.to_radians());
+                    let moved = centre + turn * (eye - centre) * distance;
+                    let camera = Camera::look_at(moved, centre, Vec3::Y, 50.0, 160, 120).expect("camera");
+                    // Another view's surface first, in both buffers alike.
+                    let mut under = GBuffer::new(camera.width, camera.height);
+                    let before = Camera::look_at(eye, centre, Vec3::Y, 50.0, 160, 120).expect("camera");
+                    if let Ok(first) = Prewarped::new(Variant::Interleaved, &impostor, &before) {
+                        first.draw(&impostor, 1, &camera, &mut under);
+                    }
+                    let Ok(prewarped) = Prewarped::new(Variant::Interleaved, &impostor, &camera) else {
+                        continue;
+                    };
+                    let draw = |eight: bool| {
+                        let mut gbuffer = under.clone();
+                        let p = &prewarped;
+                        let args = (&p.image, &impostor.texture, &p.params, p.depths, 0, &camera);
+                        let n = if eight {
+                            map_lanes::<true>(args.0, args.1, args.2, args.3, args.4, args.5, &mut gbuffer)
+                        } else {
+                            map_lanes::<false>(args.0, args.1, args.2, args.3, args.4, args.5, &mut gbuffer)
+                        };
+                        (gbuffer, n)
+                    };
+                    let ((lanes, n), (single, none)) = (draw(true), draw(false));
+                    assert_eq!(none, 0);
+                    let case = format!("{name} {projection:?} yaw {yaw} pitch {pitch} ×{distance}");
+                    for y in 0..camera.height {
+                        for x in 0..camera.width {
+                            let pixel = |g: &GBuffer| g.stored(x, y).map(|(d, s)| (d.to_bits(), s));
+                            assert_eq!(pixel(&lanes), pixel(&single), "{case}: pixel {x}, {y}");
+                            covered += usize::from(lanes.object_at(x, y) == 0);
+                        }
+                    }
+                    let fragments = |g: &GBuffer| g.fragments_of(0).copied().collect::<Vec<_>>();
+                    assert!(fragments(&lanes) == fragments(&single), "{case}: fragments");
+                    cases += 1;
+                    blended += n;
+                }
+            }
+        }
+        assert!(cases >= 10, "{cases} cases");
+        assert!(
+            2 * blended > covered,
+            "{blended} pixels blended eight at once of {covered} shown"
+        );
+    }
 }

@@ -35,11 +35,11 @@ impl PTexel {
 /// bytes are not read; a source texel keeps its depth's table entry and links there
 /// (see [`pack_texel`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Attributes(pub(super) u64);
+pub(crate) struct Attributes(pub(crate) u64);
 
 /// Where a packed texel's encoded normal starts ([`pack_texel`]): its three bytes follow
 /// the albedo's.
-pub(super) const NORMAL_SHIFT: u32 = 24;
+pub(crate) const NORMAL_SHIFT: u32 = 24;
 /// Where a packed texel's table entry starts ([`pack_texel`]).
 pub(super) const ENTRY_SHIFT: u32 = 48;
 /// The bits a table entry may take: entries reach

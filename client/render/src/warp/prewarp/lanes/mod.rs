@@ -32,6 +32,7 @@ mod vectors;
 
 pub(in crate::warp::prewarp) use columns::Columns;
 pub(in crate::warp::prewarp) use rows::{Emitted, RowSamples, row_block, sample_eight};
+pub(crate) use vectors::{field, lerp_attributes};
 
 /// Lanes per block.
 pub(in crate::warp::prewarp) const LANES: usize = 8;

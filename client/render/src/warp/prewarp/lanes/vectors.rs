@@ -58,7 +58,7 @@ pub(super) use relief_core::shading::lane_mask;
 /// 1]` (each weight rounded as there): two texels' bytes to a vector of sixteen
 /// 16-bit lanes, the same arithmetic, the same bytes.
 #[inline(always)]
-pub(super) fn lerp_attributes(a: &[u64; LANES], b: &[u64; LANES], t: f32x8) -> [u64; LANES] {
+pub(crate) fn lerp_attributes(a: &[u64; LANES], b: &[u64; LANES], t: f32x8) -> [u64; LANES] {
     // (`round_small(t·256).min(256)`, eight at once: the sum's low mantissa bits are
     // the rounded integer; NaN's bits give 256, as there.)
     let rounded = cast::<f32x8, u32x8>(t * f32x8::splat(256.0) + f32x8::splat(8_388_608.0));
@@ -100,7 +100,7 @@ pub(super) fn gather(values: &[f32], index: u32x8) -> f32x8 {
 
 /// Bits `shift..shift + width` of each of eight words, one per lane.
 #[inline(always)]
-pub(super) fn field(words: &[u64; LANES], shift: u32, width: u32) -> u32x8 {
+pub(crate) fn field(words: &[u64; LANES], shift: u32, width: u32) -> u32x8 {
     let [low, high] = cast::<[u64; LANES], [u64x4; 2]>(*words);
     let mask = u64x4::splat((1 << width) - 1);
     // `low`'s in the even 32-bit lanes, `high`'s in the odd; then in order.
