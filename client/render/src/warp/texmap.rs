@@ -18,7 +18,8 @@ use relief_core::relief::{ReliefTexture, SourceCamera};
 
 use super::params::WarpParams;
 use super::prewarp::{Attributes, NORMAL_SHIFT, PTexel, PrewarpImage, field, lerp_attributes};
-use super::{MIN_TASK_PIXELS, round_small, rows_per_task};
+use super::{round_small, rows_per_task};
+use crate::EMPTY_DEPTH;
 use crate::gbuffer::{Fragment, GBuffer, Stored, StoredLanes};
 use relief_core::shading::{LANE_INDEX, LANES};
 
@@ -119,7 +120,6 @@ fn map_lanes<const EIGHT_AT_ONCE: bool>(
     // D·f, D·a/|a|², D·b/|b|²: step them along the row.
     let dots = |d: Vec3| Vec3::new(d.dot(c.f), d.dot(a_scale), d.dot(b_scale));
     let x_step = dots(camera.ray_x_step());
-    let footprints = footprints(image);
     // Plane coordinates minus these are the bilinear footprint's corner: the texel
     // centres of `image` lie at `u0 + ½ + k`.
     let (corner_u, corner_v) = (f32x8::splat(u0 + 0.5), f32x8::splat(v0 + 0.5));
@@ -139,9 +139,8 @@ fn map_lanes<const EIGHT_AT_ONCE: bool>(
             let y = pixels.y0();
             let row = dots(camera.ray(x0 as f32 + 0.5, y as f32 + 0.5));
             let mut blended = 0;
-            // Eight pixels at once up to the texel look-ups: most of the rectangle is
-            // empty, and a group none of whose footprints holds a texel costs a few vector
-            // operations.
+            // Eight pixels at once: most of the rectangle is empty, and a group none of
+            // whose footprints holds a texel costs a few vector operations and gathers.
             for x in (x0 as usize..x1 as usize).step_by(LANES) {
                 let steps = f32x8::splat((x - x0 as usize) as f32) + LANE_INDEX;
                 let along = |start: f32, step: f32| f32x8::splat(start) + f32x8::splat(step) * steps;
@@ -172,29 +171,29 @@ fn map_lanes<const EIGHT_AT_ONCE: bool>(
                 }
                 // Exact: the inside lanes are non-negative and below the image's size.
                 let (xs, ys) = (fu.trunc_int(), fv.trunc_int());
-                let ks = (ys * i32x8::splat(image.width as i32) + xs).to_array();
+                let k = ys * i32x8::splat(image.width as i32) + xs;
+                let ks = k.to_array();
                 // Where in its footprint each pixel falls.
                 let (tx, ty) = (fu - f32x8::from_i32x8(xs), fv - f32x8::from_i32x8(ys));
                 // Inside lanes whose four footprint texels all hold surface are blended
                 // eight at once (`full`: the bulk of a surface); the silhouette's and the
-                // rim's one by one (`single`).
+                // rim's one by one (`single`); footprints wholly empty, not at all.
                 let (mut full, mut single) = (0u32, rim);
-                let mut quads = [[PTexel::EMPTY; 4]; LANES];
-                for l in set_lanes(inside) {
-                    let k = ks[l] as usize;
-                    if footprints[k] == 0 {
-                        continue;
-                    }
-                    let quad = footprint_of(image, k);
-                    if !EIGHT_AT_ONCE || quad.iter().any(PTexel::is_empty) {
-                        single |= 1 << l;
-                    } else {
-                        full |= 1 << l;
-                        quads[l] = quad;
-                    }
+                let mut corners = None;
+                if inside != 0 {
+                    let step = i32x8::splat(image.width as i32);
+                    let at = [k, k + i32x8::splat(1), k + step, k + step + i32x8::splat(1)];
+                    let depth = at.map(|at| gather_depths(&image.texels, at));
+                    let empty = depth.map(|d| d.simd_eq(f32x8::splat(EMPTY_DEPTH)).to_bitmask());
+                    let any_empty = empty[0] | empty[1] | empty[2] | empty[3];
+                    let all_empty = empty[0] & empty[1] & empty[2] & empty[3];
+                    full = if EIGHT_AT_ONCE { inside & !any_empty } else { 0 };
+                    single |= inside & !all_empty & !full;
+                    corners = Some((at, depth));
                 }
-                if full != 0 {
-                    let (depth, stored) = blend_full(&quads, tx, ty, object);
+                if let (true, Some((at, depth))) = (full != 0, corners) {
+                    let words = at.map(|at| gather_words(&image.texels, at));
+                    let (depth, stored) = blend_full(depth, &words, tx, ty, object);
                     let view_depth =
                         (f32x8::splat(params.h) + depth) / towards_plane * f32x8::splat(depths.world);
                     let tested = view_depth * f32x8::splat(depths.tested);
@@ -237,30 +236,6 @@ fn map_lanes<const EIGHT_AT_ONCE: bool>(
     blended
 }
 
-/// Per texel `k` of `image` (but the last row and column): whether any of the four
-/// texels of the bilinear footprint whose top-left is `k` holds a surface — the one
-/// look-up that turns away most of a texture mapping's pixels. Both passes in
-/// parallel for a large image: they read the whole pre-warped image (4 MB at 512²)
-/// before the mapping can start.
-fn footprints(image: &PrewarpImage) -> Vec<u8> {
-    // (`max`: chunks must not be empty; an image of no texels yields no rows.)
-    let w = (image.width as usize).max(1);
-    let filled: Vec<u8> = (image.texels.par_iter().with_min_len(MIN_TASK_PIXELS))
-        .map(|t| !t.is_empty() as u8)
-        .collect();
-    let mut out = vec![0; filled.len()];
-    out.par_chunks_exact_mut(w)
-        .zip(filled.par_chunks_exact(w))
-        .zip(filled.par_chunks_exact(w).skip(1))
-        .with_min_len(rows_per_task(w))
-        .for_each(|((out, top), bottom)| {
-            for x in 0..w.saturating_sub(1) {
-                out[x] = top[x] | top[x + 1] | bottom[x] | bottom[x + 1];
-            }
-        });
-    out
-}
-
 /// The lanes set in `bits`, lowest first.
 #[inline(always)]
 fn set_lanes(mut bits: u32) -> impl Iterator<Item = usize> {
@@ -271,31 +246,72 @@ fn set_lanes(mut bits: u32) -> impl Iterator<Item = usize> {
     })
 }
 
-/// The four texels of the bilinear footprint whose top-left is `k`: top-left, top-right,
-/// bottom-left, bottom-right.
+/// The depth of `texels[index[l]]` in lane `l`; an index outside `texels` (a lane not
+/// drawn) reads its first or last texel.
 #[inline(always)]
-fn footprint_of(image: &PrewarpImage, k: usize) -> [PTexel; 4] {
-    let w = image.width as usize;
-    [
-        image.texels[k],
-        image.texels[k + 1],
-        image.texels[k + w],
-        image.texels[k + w + 1],
-    ]
+fn gather_depths(texels: &[PTexel], index: i32x8) -> f32x8 {
+    let index = within(texels, index);
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        use std::arch::x86_64::{__m256i, _mm256_i32gather_ps};
+        // (In 8-byte steps: a texel is two.)
+        let steps: __m256i = cast(index + index);
+        // SAFETY: every index is within `texels` (`within`), and a `PTexel` (`repr(C)`,
+        // 16 bytes) holds its depth in its first 4: each lane reads one texel's depth.
+        cast(unsafe { _mm256_i32gather_ps::<8>(texels.as_ptr().cast::<f32>(), steps) })
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    f32x8::new(index.to_array().map(|i| texels[i as usize].depth))
 }
 
-/// [`sample_inside`] of eight footprints all of whose texels hold surface (`quads`, a
-/// lane's each; lanes not drawn may hold anything), at fractions `(tx, ty)`: the same
+/// The attribute word of `texels[index[l]]` in lane `l`, as [`gather_depths`] reads.
+#[inline(always)]
+fn gather_words(texels: &[PTexel], index: i32x8) -> [u64; LANES] {
+    let index = within(texels, index);
+    #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
+    {
+        use std::arch::x86_64::{__m128i, __m256i, _mm256_i32gather_epi64};
+        let [low, high] = cast::<i32x8, [__m128i; 2]>(index + index + i32x8::splat(1));
+        let words = texels.as_ptr().cast::<i64>();
+        // SAFETY: as `gather_depths`: the word at the texel's bytes 8..16 is its
+        // attributes (`PTexel`'s layout, asserted beside it); each lane reads one.
+        let [low, high]: [__m256i; 2] = unsafe {
+            [
+                _mm256_i32gather_epi64::<8>(words, low),
+                _mm256_i32gather_epi64::<8>(words, high),
+            ]
+        };
+        cast([low, high])
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
+    index.to_array().map(|i| texels[i as usize].attributes.0)
+}
+
+/// `index` clamped into `texels`' indices (which are not empty: a pre-warped image has
+/// a texel at least).
+#[inline(always)]
+fn within(texels: &[PTexel], index: i32x8) -> i32x8 {
+    let last = i32::try_from(texels.len().saturating_sub(1)).unwrap_or(i32::MAX);
+    index.max(i32x8::ZERO).min(i32x8::splat(last))
+}
+
+/// [`sample_inside`] of eight footprints all of whose texels hold surface, their
+/// corners' depths and attribute words given (top-left, top-right, bottom-left,
+/// bottom-right; lanes not drawn may hold anything), at fractions `(tx, ty)`: the same
 /// arithmetic lane by lane, so the same depths and bytes. Returns the depths and the
 /// surfaces as the buffer stores them ([`Stored::with_encoded_normal`]'s encoding).
 #[inline(always)]
-fn blend_full(quads: &[[PTexel; 4]; LANES], tx: f32x8, ty: f32x8, object: u32) -> (f32x8, StoredLanes) {
-    let depth = |c: usize| f32x8::new(std::array::from_fn(|l| quads[l][c].depth));
-    let words = |c: usize| -> [u64; LANES] { std::array::from_fn(|l| quads[l][c].attributes.0) };
+fn blend_full(
+    depth: [f32x8; 4],
+    words: &[[u64; LANES]; 4],
+    tx: f32x8,
+    ty: f32x8,
+    object: u32,
+) -> (f32x8, StoredLanes) {
     let lerp = |p: f32x8, q: f32x8, t: f32x8| p + (q - p) * t;
-    let blended_depth = lerp(lerp(depth(0), depth(1), tx), lerp(depth(2), depth(3), tx), ty);
-    let top = lerp_attributes(&words(0), &words(1), tx);
-    let bottom = lerp_attributes(&words(2), &words(3), tx);
+    let blended_depth = lerp(lerp(depth[0], depth[1], tx), lerp(depth[2], depth[3], tx), ty);
+    let top = lerp_attributes(&words[0], &words[1], tx);
+    let bottom = lerp_attributes(&words[2], &words[3], tx);
     let blended = lerp_attributes(&top, &bottom, ty);
     // The packed bytes: albedo in the low three, the encoded normal in the next three.
     let encoded = |shift: u32| {

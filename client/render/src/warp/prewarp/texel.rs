@@ -8,14 +8,24 @@ use wide::{i16x8, u8x16, u16x8, u64x2};
 use super::lanes::{DOWN_LINK, RIGHT_LINK};
 use crate::EMPTY_DEPTH;
 
-/// A pre-warped texel; [`EMPTY_DEPTH`] marks an empty one.
+/// A pre-warped texel; [`EMPTY_DEPTH`] marks an empty one. (`repr(C)`: the texture
+/// mapping gathers eight texels' depths, and their attribute words, by offset.)
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(C)]
 pub struct PTexel {
     /// Displacement along `f` of the surface seen here.
     pub depth: f32,
     /// Albedo and encoded normal, packed for blending.
     pub(crate) attributes: Attributes,
 }
+
+// The layout the texture mapping's gathers read: the depth first, the attribute word at
+// byte 8 of 16.
+const _: () = assert!(
+    std::mem::offset_of!(PTexel, depth) == 0
+        && std::mem::offset_of!(PTexel, attributes) == 8
+        && std::mem::size_of::<PTexel>() == 16
+);
 
 impl PTexel {
     pub const EMPTY: PTexel = PTexel {
