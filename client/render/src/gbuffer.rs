@@ -116,12 +116,12 @@ impl Stored {
 /// [`LANES`] surfaces of one object as the buffer stores them, a pixel's a lane
 /// ([`Stored`] eight times): what a texture mapping writes for eight pixels at once.
 #[derive(Debug, Clone, Copy)]
-pub struct StoredLanes {
-    pub object: u32,
+pub(crate) struct StoredLanes {
+    pub(crate) object: u32,
     /// Packed as [`Stored`]'s albedo.
-    pub albedo: u32x8,
+    pub(crate) albedo: u32x8,
     /// Each component as [`Stored`]'s.
-    pub normal: [i16x8; 3],
+    pub(crate) normal: [i16x8; 3],
 }
 
 impl StoredLanes {
@@ -308,7 +308,7 @@ impl Rows<'_> {
     /// set in `lanes`, each with its own surface (lane `l` of `tested`, `depths` and
     /// `stored`): one vector depth test, and the group written by vector selects.
     #[inline(always)]
-    pub fn keep_nearer_lanes_as(
+    pub(crate) fn keep_nearer_lanes_as(
         &mut self,
         i: usize,
         lanes: u32,

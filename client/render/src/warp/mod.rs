@@ -57,7 +57,7 @@ use crate::impostor::Impostor;
 use texmap::Depths;
 
 /// The fewest pixels or texels one task of a warp takes (a pre-warp's half, a texture
-/// mapping's rows, its footprint pass): smaller work is not split across cores, where
+/// mapping's rows): smaller work is not split across cores, where
 /// handing it to another thread costs more than it saves — a far impostor is a few
 /// hundred pixels (measured in `docs/targets.md`, "Many impostors").
 pub(crate) const MIN_TASK_PIXELS: usize = 4096;

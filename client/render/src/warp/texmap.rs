@@ -115,6 +115,9 @@ fn map_lanes<const EIGHT_AT_ONCE: bool>(
     if x0 >= x1 || y0 >= y1 {
         return 0;
     }
+    // (The gathers' indices are `i32`, doubled: a larger image, far past any texture's,
+    // goes one by one.)
+    let gathered = EIGHT_AT_ONCE && image.texels.len() <= MAX_GATHERED;
     let (a_scale, b_scale) = (c.a / c.a.length_squared(), c.b / c.b.length_squared());
     // The ray direction D (`Camera::ray`) is linear in the pixel, so are
     // D·f, D·a/|a|², D·b/|b|²: step them along the row.
@@ -178,27 +181,27 @@ fn map_lanes<const EIGHT_AT_ONCE: bool>(
                 // Inside lanes whose four footprint texels all hold surface are blended
                 // eight at once (`full`: the bulk of a surface); the silhouette's and the
                 // rim's one by one (`single`); footprints wholly empty, not at all.
-                let (mut full, mut single) = (0u32, rim);
-                let mut corners = None;
-                if inside != 0 {
+                let mut single = rim;
+                if inside != 0 && !gathered {
+                    single |= inside;
+                } else if inside != 0 {
                     let step = i32x8::splat(image.width as i32);
                     let at = [k, k + i32x8::splat(1), k + step, k + step + i32x8::splat(1)];
                     let depth = at.map(|at| gather_depths(&image.texels, at));
                     let empty = depth.map(|d| d.simd_eq(f32x8::splat(EMPTY_DEPTH)).to_bitmask());
                     let any_empty = empty[0] | empty[1] | empty[2] | empty[3];
                     let all_empty = empty[0] & empty[1] & empty[2] & empty[3];
-                    full = if EIGHT_AT_ONCE { inside & !any_empty } else { 0 };
+                    let full = inside & !any_empty;
                     single |= inside & !all_empty & !full;
-                    corners = Some((at, depth));
-                }
-                if let (true, Some((at, depth))) = (full != 0, corners) {
-                    let words = at.map(|at| gather_words(&image.texels, at));
-                    let (depth, stored) = blend_full(depth, &words, tx, ty, object);
-                    let view_depth =
-                        (f32x8::splat(params.h) + depth) / towards_plane * f32x8::splat(depths.world);
-                    let tested = view_depth * f32x8::splat(depths.tested);
-                    pixels.keep_nearer_lanes_as(x, full, tested, view_depth, &stored);
-                    blended += full.count_ones() as usize;
+                    if full != 0 {
+                        let words = at.map(|at| gather_words(&image.texels, at));
+                        let (depth, stored) = blend_full(depth, &words, tx, ty, object);
+                        let view_depth =
+                            (f32x8::splat(params.h) + depth) / towards_plane * f32x8::splat(depths.world);
+                        let tested = view_depth * f32x8::splat(depths.tested);
+                        pixels.keep_nearer_lanes_as(x, full, tested, view_depth, &stored);
+                        blended += full.count_ones() as usize;
+                    }
                 }
                 if single == 0 {
                     continue;
@@ -246,28 +249,38 @@ fn set_lanes(mut bits: u32) -> impl Iterator<Item = usize> {
     })
 }
 
+/// The most texels an image may have for [`gather_depths`] and [`gather_words`] to
+/// reach each: their indices, doubled (a texel is two 8-byte steps), stay `i32`.
+const MAX_GATHERED: usize = (i32::MAX / 2) as usize;
+
 /// The depth of `texels[index[l]]` in lane `l`; an index outside `texels` (a lane not
-/// drawn) reads its first or last texel.
+/// drawn) reads its first or last texel, and an empty `texels` gives empty depths.
 #[inline(always)]
 fn gather_depths(texels: &[PTexel], index: i32x8) -> f32x8 {
-    let index = within(texels, index);
+    let Some(index) = within(texels, index) else {
+        return f32x8::splat(EMPTY_DEPTH);
+    };
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     {
         use std::arch::x86_64::{__m256i, _mm256_i32gather_ps};
         // (In 8-byte steps: a texel is two.)
         let steps: __m256i = cast(index + index);
-        // SAFETY: every index is within `texels` (`within`), and a `PTexel` (`repr(C)`,
-        // 16 bytes) holds its depth in its first 4: each lane reads one texel's depth.
+        // SAFETY: every index lies within `texels` and below `MAX_GATHERED` (`within`),
+        // so its step does not overflow; a `PTexel` (`repr(C)`, 16 bytes) holds its
+        // depth in its first 4: each lane reads one texel's depth.
         cast(unsafe { _mm256_i32gather_ps::<8>(texels.as_ptr().cast::<f32>(), steps) })
     }
     #[cfg(not(all(target_arch = "x86_64", target_feature = "avx2")))]
     f32x8::new(index.to_array().map(|i| texels[i as usize].depth))
 }
 
-/// The attribute word of `texels[index[l]]` in lane `l`, as [`gather_depths`] reads.
+/// The attribute word of `texels[index[l]]` in lane `l`, as [`gather_depths`] reads
+/// (zero from an empty `texels`).
 #[inline(always)]
 fn gather_words(texels: &[PTexel], index: i32x8) -> [u64; LANES] {
-    let index = within(texels, index);
+    let Some(index) = within(texels, index) else {
+        return [0; LANES];
+    };
     #[cfg(all(target_arch = "x86_64", target_feature = "avx2"))]
     {
         use std::arch::x86_64::{__m128i, __m256i, _mm256_i32gather_epi64};
@@ -287,12 +300,12 @@ fn gather_words(texels: &[PTexel], index: i32x8) -> [u64; LANES] {
     index.to_array().map(|i| texels[i as usize].attributes.0)
 }
 
-/// `index` clamped into `texels`' indices (which are not empty: a pre-warped image has
-/// a texel at least).
+/// `index` clamped into `texels`' indices and below [`MAX_GATHERED`]; `None` when
+/// `texels` is empty.
 #[inline(always)]
-fn within(texels: &[PTexel], index: i32x8) -> i32x8 {
-    let last = i32::try_from(texels.len().saturating_sub(1)).unwrap_or(i32::MAX);
-    index.max(i32x8::ZERO).min(i32x8::splat(last))
+fn within(texels: &[PTexel], index: i32x8) -> Option<i32x8> {
+    let last = texels.len().checked_sub(1)?.min(MAX_GATHERED - 1) as i32;
+    Some(index.max(i32x8::ZERO).min(i32x8::splat(last)))
 }
 
 /// [`sample_inside`] of eight footprints all of whose texels hold surface, their
@@ -320,7 +333,8 @@ fn blend_full(
     };
     let stored = StoredLanes {
         object,
-        albedo: field(&blended, 0, 24),
+        // (The albedo is the bytes below the normal's.)
+        albedo: field(&blended, 0, NORMAL_SHIFT),
         normal: [
             encoded(NORMAL_SHIFT),
             encoded(NORMAL_SHIFT + 8),
@@ -378,22 +392,27 @@ mod tests {
     use relief_core::scene::Scene;
     use relief_trace::{bake, tracer::ObjectTracer};
 
-    use super::map_lanes;
+    use wide::i32x8;
+
+    use super::{gather_depths, gather_words, map_lanes};
+    use crate::EMPTY_DEPTH;
     use crate::gbuffer::GBuffer;
     use crate::impostor::{Faces, Impostor};
     use crate::warp::Prewarped;
-    use crate::warp::prewarp::Variant;
+    use crate::warp::prewarp::{Attributes, PTexel, Variant};
+    use relief_core::shading::LANES;
 
     /// Pixels blended eight at once get the very depths, bytes and fragments that
-    /// blending them one by one gives, bit for bit: a self-occluding knot and a tree of
-    /// leaves (silhouettes everywhere), orthographic and perspective, seen from eyes
-    /// turned every way, nearer and farther, over a buffer another view of the object
-    /// already fills (so the depth test both passes and fails). Most surface pixels go
-    /// through the lanes (fails if they stop being used).
+    /// blending them one by one gives, bit for bit (the reference takes every pixel one
+    /// by one, gathering nothing): a self-occluding knot and a tree of leaves
+    /// (silhouettes everywhere), orthographic and perspective, seen from eyes turned
+    /// every way, nearer and farther, tested behind the depths they store, over a buffer
+    /// another view of the object already fills. Most surface pixels go through the
+    /// lanes (fails if they stop being used).
     #[test]
     fn eight_at_once_blend_as_one_by_one() {
         let scene = Scene::load("default").expect("default scene");
-        let (mut cases, mut blended, mut covered) = (0, 0, 0);
+        let (mut cases, mut blended, mut shown, mut kept_under, mut fragments_seen) = (0, 0, 0, 0, 0);
         for name in ["knot", "tree"] {
             let object = scene.object(name).expect("object");
             let tracer = ObjectTracer::new(object);
@@ -419,41 +438,78 @@ mod tests {
                     if let Ok(first) = Prewarped::new(Variant::Interleaved, &impostor, &before) {
                         first.draw(&impostor, 1, &camera, &mut under);
                     }
-                    let Ok(prewarped) = Prewarped::new(Variant::Interleaved, &impostor, &camera) else {
+                    // (Tested behind: the depth tested differs from the depth stored.)
+                    let Ok(p) =
+                        Prewarped::new(Variant::Interleaved, &impostor, &camera).and_then(|p| p.behind(1.02))
+                    else {
                         continue;
                     };
-                    let draw = |eight: bool| {
+                    let draw = |map: fn(_, _, _, _, _, _, &mut GBuffer) -> usize| {
                         let mut gbuffer = under.clone();
-                        let p = &prewarped;
-                        let args = (&p.image, &impostor.texture, &p.params, p.depths, 0, &camera);
-                        let n = if eight {
-                            map_lanes::<true>(args.0, args.1, args.2, args.3, args.4, args.5, &mut gbuffer)
-                        } else {
-                            map_lanes::<false>(args.0, args.1, args.2, args.3, args.4, args.5, &mut gbuffer)
-                        };
+                        let n = map(
+                            &p.image,
+                            &impostor.texture,
+                            &p.params,
+                            p.depths,
+                            0,
+                            &camera,
+                            &mut gbuffer,
+                        );
                         (gbuffer, n)
                     };
-                    let ((lanes, n), (single, none)) = (draw(true), draw(false));
+                    let ((lanes, n), (single, none)) = (draw(map_lanes::<true>), draw(map_lanes::<false>));
                     assert_eq!(none, 0);
                     let case = format!("{name} {projection:?} yaw {yaw} pitch {pitch} ×{distance}");
                     for y in 0..camera.height {
                         for x in 0..camera.width {
                             let pixel = |g: &GBuffer| g.stored(x, y).map(|(d, s)| (d.to_bits(), s));
                             assert_eq!(pixel(&lanes), pixel(&single), "{case}: pixel {x}, {y}");
-                            covered += usize::from(lanes.object_at(x, y) == 0);
+                            shown += usize::from(lanes.object_at(x, y) == 0);
+                            kept_under += usize::from(lanes.object_at(x, y) == 1);
                         }
                     }
                     let fragments = |g: &GBuffer| g.fragments_of(0).copied().collect::<Vec<_>>();
                     assert!(fragments(&lanes) == fragments(&single), "{case}: fragments");
+                    fragments_seen += fragments(&lanes).len();
                     cases += 1;
                     blended += n;
                 }
             }
         }
         assert!(cases >= 10, "{cases} cases");
+        // Both surfaces show somewhere, and silhouettes leave fragments.
         assert!(
-            2 * blended > covered,
-            "{blended} pixels blended eight at once of {covered} shown"
+            shown > 0 && kept_under > 0 && fragments_seen > 0,
+            "{shown} {kept_under} {fragments_seen}"
         );
+        assert!(
+            2 * blended > shown,
+            "{blended} pixels sent to the lanes, {shown} shown"
+        );
+    }
+
+    /// The gathers read each lane's texel, clamp an index outside the texels to the
+    /// first or last, and read nothing from no texels.
+    #[test]
+    fn gathers_read_each_lanes_texel() {
+        let texels: Vec<PTexel> = (0..5u64)
+            .map(|i| PTexel {
+                depth: i as f32 + 0.5,
+                attributes: Attributes(0x0102_0304_0506_0708 * (i + 1)),
+            })
+            .collect();
+        let index = [-3, 0, 1, 4, 5, 100, i32::MIN, i32::MAX];
+        let clamped = index.map(|i| texels[i.clamp(0, 4) as usize]);
+        let got = (
+            gather_depths(&texels, i32x8::new(index)),
+            gather_words(&texels, i32x8::new(index)),
+        );
+        assert_eq!(got.0.to_array(), clamped.map(|t| t.depth));
+        assert_eq!(got.1, clamped.map(|t| t.attributes.0));
+        let none = (
+            gather_depths(&[], i32x8::new(index)),
+            gather_words(&[], i32x8::new(index)),
+        );
+        assert_eq!((none.0.to_array(), none.1), ([EMPTY_DEPTH; LANES], [0; LANES]));
     }
 }

@@ -45,6 +45,7 @@ impl PTexel {
 /// bytes are not read; a source texel keeps its depth's table entry and links there
 /// (see [`pack_texel`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[repr(transparent)]
 pub(crate) struct Attributes(pub(crate) u64);
 
 /// Where a packed texel's encoded normal starts ([`pack_texel`]): its three bytes follow
