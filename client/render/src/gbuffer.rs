@@ -242,7 +242,7 @@ impl Rows<'_> {
     /// test, and the group written by vector selects (a flat triangle's pixels — the
     /// ground covers half a frame — cost a few instructions each instead of a test and
     /// six stores, and a leaf's ragged edge no branch a lane). (Not through
-    /// [`Rows::keep_nearer_lanes_as`]: `relief bench raster --objects tree,ground` ran
+    /// `Rows::keep_nearer_lanes_as`: `relief bench raster --objects tree,ground` ran
     /// 2.55–2.63 ms so, against 2.03–2.09.)
     #[inline(always)]
     pub fn keep_nearer_stored_lanes(&mut self, i: usize, lanes: u32, depths: f32x8, stored: &Stored) {
