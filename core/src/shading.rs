@@ -88,6 +88,17 @@ pub const LANES: usize = 8;
 /// Each lane's index: `l` in lane `l` (the offsets of [`LANES`] consecutive pixels).
 pub const LANE_INDEX: f32x8 = f32x8::new([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]);
 
+/// The lanes whose bit is set in `bits` (bit `l`, lane `l`; `to_bitmask`'s), lowest
+/// first.
+#[inline(always)]
+pub fn set_lanes(mut bits: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        let l = bits.trailing_zeros() as usize;
+        bits &= bits.wrapping_sub(1);
+        (l < LANES).then_some(l)
+    })
+}
+
 /// All ones in the lanes whose bit is set in `bits` (bit `l`, lane `l`): a bit mask
 /// (`to_bitmask`'s) back as a lane mask.
 #[inline(always)]

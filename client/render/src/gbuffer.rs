@@ -125,6 +125,21 @@ pub(crate) struct StoredLanes {
 }
 
 impl StoredLanes {
+    /// [`Stored::with_encoded_normal`] of eight surfaces of `object`: `albedo` packed as
+    /// [`Stored`]'s, `normal` each component's 8-bit encoding, a lane a surface.
+    #[inline(always)]
+    pub(crate) fn with_encoded_normal(object: u32, albedo: u32x8, normal: [u32x8; 3]) -> StoredLanes {
+        let encode = |e: u32x8| {
+            let e = cast::<u32x8, i32x8>(e);
+            i16x8::from_i32x8_saturate((e * i32x8::splat(2) - i32x8::splat(255)) * i32x8::splat(128))
+        };
+        StoredLanes {
+            object,
+            albedo,
+            normal: normal.map(encode),
+        }
+    }
+
     /// Lane `l`'s surface.
     #[inline(always)]
     fn lane(&self, l: usize) -> Stored {

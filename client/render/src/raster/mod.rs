@@ -15,7 +15,7 @@ use wide::f32x8;
 
 use relief_core::camera::Camera;
 use relief_core::scene::SceneObject;
-use relief_core::shading::{LANES, to_rgb8};
+use relief_core::shading::{LANES, set_lanes, to_rgb8};
 
 use crate::gbuffer::{GBuffer, GPixel, Rows, Stored};
 
@@ -314,7 +314,7 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, w
             // Screen-space barycentric weights of corners a, b, c.
             let [ea, eb, ec] = [0, 1, 2].map(|k| edges[k].at(row[k], px));
             let inside = ea.simd_ge(f32x8::ZERO) & eb.simd_ge(f32x8::ZERO) & ec.simd_ge(f32x8::ZERO);
-            let mut inside = inside.to_bitmask() & ((1 << n) - 1);
+            let inside = inside.to_bitmask() & ((1 << n) - 1);
             if inside == 0 {
                 continue;
             }
@@ -330,9 +330,7 @@ fn draw(s: &ScreenTriangle, index: u32, object: &SceneObject, rows: &mut Rows, w
             }
             let depth = depth.to_array();
             let (pa, pb, pc, sum) = (pa.to_array(), pb.to_array(), pc.to_array(), sum.to_array());
-            while inside != 0 {
-                let l = inside.trailing_zeros() as usize;
-                inside &= inside - 1;
+            for l in set_lanes(inside) {
                 let i = row_start + x + l;
                 // (`depth` is finite and positive: clipping keeps depths at or beyond
                 // `near`; tested as "nearer" all the same, so a NaN would not pass.)

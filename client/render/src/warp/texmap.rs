@@ -11,7 +11,7 @@
 use glam::Vec3;
 use rayon::prelude::*;
 use wide::bytemuck::cast;
-use wide::{f32x8, i16x8, i32x8, u32x8};
+use wide::{f32x8, i32x8};
 
 use relief_core::camera::Camera;
 use relief_core::relief::{ReliefTexture, SourceCamera};
@@ -21,7 +21,7 @@ use super::prewarp::{Attributes, NORMAL_SHIFT, PTexel, PrewarpImage, field, lerp
 use super::{round_small, rows_per_task};
 use crate::EMPTY_DEPTH;
 use crate::gbuffer::{Fragment, GBuffer, Stored, StoredLanes};
-use relief_core::shading::{LANE_INDEX, LANES};
+use relief_core::shading::{LANE_INDEX, LANES, set_lanes};
 
 /// The screen rectangle `[x0, x1) × [y0, y1)` that the plane region `corners` can
 /// cover; the whole screen when part of it is behind the eye.
@@ -239,16 +239,6 @@ fn map_lanes<const EIGHT_AT_ONCE: bool>(
     blended
 }
 
-/// The lanes set in `bits`, lowest first.
-#[inline(always)]
-fn set_lanes(mut bits: u32) -> impl Iterator<Item = usize> {
-    std::iter::from_fn(move || {
-        let l = bits.trailing_zeros() as usize;
-        bits &= bits.wrapping_sub(1);
-        (l < LANES).then_some(l)
-    })
-}
-
 /// The most texels an image may have for [`gather_depths`] and [`gather_words`] to
 /// reach each: their indices, doubled (a texel is two 8-byte steps), stay `i32`.
 const MAX_GATHERED: usize = (i32::MAX / 2) as usize;
@@ -327,20 +317,12 @@ fn blend_full(
     let bottom = lerp_attributes(&words[2], &words[3], tx);
     let blended = lerp_attributes(&top, &bottom, ty);
     // The packed bytes: albedo in the low three, the encoded normal in the next three.
-    let encoded = |shift: u32| {
-        let e = cast::<u32x8, i32x8>(field(&blended, shift, 8));
-        i16x8::from_i32x8_saturate((e * i32x8::splat(2) - i32x8::splat(255)) * i32x8::splat(128))
-    };
-    let stored = StoredLanes {
+    let normal = |byte: u32| field(&blended, NORMAL_SHIFT + 8 * byte, 8);
+    let stored = StoredLanes::with_encoded_normal(
         object,
-        // (The albedo is the bytes below the normal's.)
-        albedo: field(&blended, 0, NORMAL_SHIFT),
-        normal: [
-            encoded(NORMAL_SHIFT),
-            encoded(NORMAL_SHIFT + 8),
-            encoded(NORMAL_SHIFT + 16),
-        ],
-    };
+        field(&blended, 0, NORMAL_SHIFT),
+        [normal(0), normal(1), normal(2)],
+    );
     (blended_depth, stored)
 }
 
@@ -390,7 +372,7 @@ mod tests {
     use relief_core::camera::Camera;
     use relief_core::relief::{DepthBits, SourceProjection};
     use relief_core::scene::Scene;
-    use relief_trace::{bake, tracer::ObjectTracer};
+    use relief_trace::bake;
 
     use wide::i32x8;
 
@@ -399,7 +381,7 @@ mod tests {
     use crate::gbuffer::GBuffer;
     use crate::impostor::{Faces, Impostor};
     use crate::warp::Prewarped;
-    use crate::warp::prewarp::{Attributes, PTexel, Variant};
+    use crate::warp::prewarp::{Attributes, PTexel, Variant, baked_from};
     use relief_core::shading::LANES;
 
     /// Pixels blended eight at once get the very depths, bytes and fragments that
@@ -414,11 +396,7 @@ mod tests {
         let scene = Scene::load("default").expect("default scene");
         let (mut cases, mut blended, mut shown, mut kept_under, mut fragments_seen) = (0, 0, 0, 0, 0);
         for name in ["knot", "tree"] {
-            let object = scene.object(name).expect("object");
-            let tracer = ObjectTracer::new(object);
-            let centre = object.local_bounds.center();
-            let radius = object.local_bounds.extent().length() * 0.5;
-            let eye = centre + Vec3::new(0.0, 0.25, 1.0).normalize() * 3.0 * radius;
+            let (tracer, centre, eye) = baked_from(&scene, name);
             for (projection, depth_bits) in [
                 (SourceProjection::Orthographic, DepthBits::Sixteen),
                 (SourceProjection::Perspective, DepthBits::Eight),

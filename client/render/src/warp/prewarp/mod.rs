@@ -62,6 +62,8 @@ use glam::Vec3;
 use self::cracks::fill_column_crack;
 pub use self::image::{PlaneWindow, PrewarpImage};
 use self::image::{WINDOW_MARGIN, extent, reaching};
+#[cfg(test)]
+pub(crate) use self::lanes::tests::baked_from;
 use self::lanes::{Columns, Emitted, LANES, RIGHT_LINK, RowSamples, VALID, first, row_block};
 pub(crate) use self::lanes::{field, lerp_attributes};
 use self::spans::{between, reach_ahead, reach_behind, signed_end, split_at, visited};
@@ -264,10 +266,7 @@ impl<const DOWN: bool> RowSink for IntoColumns<'_, '_, '_, DOWN> {
         } else {
             first(n as u32)
         };
-        let mut lanes = others;
-        while lanes != 0 {
-            let l = lanes.trailing_zeros() as usize;
-            lanes &= lanes - 1;
+        for l in relief_core::shading::set_lanes(others) {
             self.emit(emitted.first + l as i64, emitted.cell(l));
         }
     }

@@ -6,6 +6,7 @@ use wide::{f32x8, u32x8, u64x4};
 use super::vectors::{eight, lane_mask, lerp_attributes, load, load_u32, wide_mask};
 use super::{EXACT, Emitted, LANES, first};
 use crate::warp::prewarp::{Attributes, Cell, Column, Output, PTexel, signed_end};
+use relief_core::shading::set_lanes;
 
 /// Every pre-warped column's state in the column pass ([`Column`]), field by field so
 /// that eight columns from any one load as vectors, with a block's width to spare at
@@ -139,10 +140,7 @@ impl Columns {
                 // (Whole numbers below `EXACT`: they convert exactly, as vectors; one by
                 // one to `i64`, each saturating conversion cost a tenth of the column step.)
                 let rows = centre.fast_trunc_int().to_array();
-                let mut lanes = lanes;
-                while lanes != 0 {
-                    let l = lanes.trailing_zeros() as usize;
-                    lanes &= lanes - 1;
+                for l in set_lanes(lanes) {
                     let y = i64::from(rows[l]);
                     out.put_texel(
                         base + l,

@@ -54,7 +54,7 @@ pub(in crate::warp::prewarp) fn first(n: u32) -> u32 {
 }
 
 #[cfg(test)]
-pub(in crate::warp::prewarp) mod tests {
+pub(crate) mod tests {
     use std::cell::Cell;
 
     use glam::{Quat, Vec3};
@@ -80,7 +80,7 @@ pub(in crate::warp::prewarp) mod tests {
 
     /// An object of the default scene as these tests bake it: its tracer, its centre, and
     /// the textures' eye, three bounding radii off and a little above.
-    fn baked_from(scene: &Scene, name: &str) -> (ObjectTracer, Vec3, Vec3) {
+    pub(crate) fn baked_from(scene: &Scene, name: &str) -> (ObjectTracer, Vec3, Vec3) {
         let object = scene.object(name).expect("object");
         let centre = object.local_bounds.center();
         let radius = object.local_bounds.extent().length() * 0.5;
