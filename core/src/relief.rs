@@ -470,6 +470,13 @@ pub const TEXEL_SIDES: [(i32, i32); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
 /// The client predicts how far a turn brings it out past the rim, as it predicts the
 /// gap between two neighbours of very different depths
 /// (`relief_render::validity::critical`).
+///
+/// An entry whose neighbour on [`Hidden::side`] is covered, by a surface deeper than the
+/// texel's, is an outline instead: that deeper surface, seen past a step down, ends
+/// behind the texel, [`Hidden::inward`] texels in at [`Hidden::depth`] the last of it
+/// (the teapot's body behind its handle). The client's pre-warp fills the crack a turn
+/// opens there from the deeper surface only up to it (`relief_render::impostor`'s
+/// `Impostor::outlines`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Hidden {
     /// The rim texel, `j * width + i`.

@@ -1,8 +1,11 @@
 //! A relief texture prepared for display: the texture plus what every warp of it needs
 //! and that does not depend on the eye — computed once when the texture arrives.
 
+use std::collections::HashMap;
+
+use glam::Vec2;
 use relief_core::joins::{join_reach, slope_along};
-use relief_core::relief::{ReliefTexture, decode_normal_rgb8};
+use relief_core::relief::{ReliefTexture, TEXEL_SIDES, decode_normal_rgb8};
 
 use crate::warp::params::WarpLevels;
 use crate::warp::prewarp::pack_texel;
@@ -98,6 +101,13 @@ pub struct Impostor {
     pub surface: Option<SurfaceExtent>,
     /// Which sides of the surfaces can show.
     pub faces: Faces,
+    /// Where a deeper surface seen past a step down along a row ends, hidden behind the
+    /// step's near texel ([`Hidden`](relief_core::relief::Hidden) entries beside a
+    /// covered neighbour): keyed by [`Impostor::outline_key`], the outline's point in
+    /// texel coordinates and its displacement. The pre-warp fills a crack from that
+    /// surface no nearer the step than where the outline lands; past it the eye sees
+    /// beyond the surface.
+    pub outlines: HashMap<u32, (Vec2, f32)>,
 }
 
 impl Impostor {
@@ -192,6 +202,7 @@ impl Impostor {
                 pack_texel(albedo, normal, levels.entry(level), right, down)
             })
             .collect();
+        let outlines = row_outlines(&texture);
         Impostor {
             texture,
             right,
@@ -200,11 +211,61 @@ impl Impostor {
             occupied,
             surface,
             faces: Faces::Both,
+            outlines,
         }
+    }
+
+    /// The key of [`Impostor::outlines`] for the near texel `texel` of a step down to its
+    /// right (`rightwards`) or left neighbour.
+    pub fn outline_key(texel: usize, rightwards: bool) -> u32 {
+        (texel as u32) << 1 | u32::from(rightwards)
     }
 
     /// The same impostor, showing `faces`.
     pub fn with_faces(self, faces: Faces) -> Impostor {
         Impostor { faces, ..self }
     }
+}
+
+/// [`Impostor::outlines`] of `texture`: its hidden-surface entries beside a covered
+/// neighbour to the left or right.
+fn row_outlines(texture: &ReliefTexture) -> HashMap<u32, (Vec2, f32)> {
+    let c = &texture.camera;
+    let (w, h) = (c.width, c.height);
+    let empty = texture.depth_bits.empty();
+    let mut outlines = HashMap::new();
+    for entry in &texture.hidden {
+        let (di, dj) = TEXEL_SIDES[entry.side as usize];
+        let (i, j) = (entry.texel % w.max(1), entry.texel / w.max(1));
+        let beside = i.checked_add_signed(di).filter(|&i| i < w && j < h);
+        let covered = beside.is_some_and(|i2| texture.depth[texture.index(i2, j)] != empty);
+        let Some(behind) = entry.behind(w, h).filter(|_| dj == 0 && covered) else {
+            continue;
+        };
+        let at = Vec2::new(behind.0 as f32 + 0.5, behind.1 as f32 + 0.5);
+        let depth = c.depth_of_level(entry.depth, texture.depth_bits);
+        outlines.insert(Impostor::outline_key(entry.texel as usize, di > 0), (at, depth));
+    }
+    // A row whose own walk found no outline between two that did (its deeper surface's
+    // depth off, a ray that met a crease) takes its neighbours': left filled, the crack
+    // drew a strand of that surface across the opening.
+    let found: Vec<(u32, (Vec2, f32))> = outlines.iter().map(|(&k, &v)| (k, v)).collect();
+    for (key, (at, depth)) in found {
+        let (texel, rightwards) = (key >> 1, key & 1 == 1);
+        let (i, j) = (texel % w.max(1), texel / w.max(1));
+        for (dj, di) in [-1i32, 1]
+            .into_iter()
+            .flat_map(|dj| [0i32, -1, 1].map(|di| (dj, di)))
+        {
+            let (Some(i2), Some(j2)) = (i.checked_add_signed(di), j.checked_add_signed(dj)) else {
+                continue;
+            };
+            if i2 < w && j2 < h {
+                let moved = at + Vec2::new(di as f32, dj as f32);
+                let key = Impostor::outline_key((j2 * w + i2) as usize, rightwards);
+                outlines.entry(key).or_insert((moved, depth));
+            }
+        }
+    }
+    outlines
 }

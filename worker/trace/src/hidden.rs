@@ -30,12 +30,18 @@
 //! What the walk steps over is taken as the rim's own surface: a nearer surface seen
 //! beside it would be a step in depth the client measures apart.
 //!
+//! The same walk, from a step down to a deeper surface seen past a texel, finds where
+//! that surface ends behind it (`find_hidden_outlines`): what a turn shows there is
+//! the sky, not the surface the pre-warp would stretch across.
+//!
 //! Only closed solids' orthographic textures look: a sheet's faces (leaves, two-sided:
 //! [`EdgeCensus::is_sheets`](relief_core::mesh::EdgeCensus::is_sheets)) say nothing by
 //! their winding of which way they look, and a perspective texture is asked only for
 //! sheets.
 
-use relief_core::relief::{Hidden, ReliefTexture, SourceProjection, TEXEL_SIDES};
+use relief_core::relief::{DepthBits, Hidden, ReliefTexture, SourceCamera, SourceProjection, TEXEL_SIDES};
+
+use rayon::prelude::*;
 
 use crate::bvh::Ray;
 use crate::rim::{cast_rays, open_sides};
@@ -204,14 +210,318 @@ pub(crate) fn find_hidden(
             }
         }
     }
+    found.extend(find_hidden_outlines(texture, target, t_range, parallel));
     found.sort_unstable_by_key(Hidden::key);
     texture.hidden = found;
 }
 
+/// A covered neighbour lying more than this many texels' widths deeper than a texel,
+/// where the texel beyond it is nearer the neighbour again than half that, is another
+/// surface seen past it: a step down (`find_hidden_outlines`). (A surface seen at 76°
+/// from its normal drops 4 texels' widths a texel; one running away as steeply round a
+/// tube's outline goes on dropping, and is left: of the knot's 512² texture's 1,915
+/// such drops to the left or right on every other row, 217 are steps.)
+pub const STEP_TEXELS: f32 = 4.0;
+
+/// One step down walked in from its near texel (see [`find_hidden_outlines`]).
+#[derive(Clone, Copy)]
+struct OutlineWalk {
+    /// The near texel, and the side its deeper neighbour lies on.
+    texel: usize,
+    side: u8,
+    /// The deepest step over the near surface's covered texels.
+    covered: u8,
+    /// How far a step's depth level may lie from the last found for the deeper surface
+    /// to go on there: half the step's own.
+    within: u16,
+    /// Its near texel's own ray: the step 0 that met the deeper surface, and its level.
+    found: (u8, u16),
+}
+
+/// What a step of a walk met past its texel's own surface.
+#[derive(Clone, Copy)]
+enum Step {
+    /// The deeper surface, at this depth level.
+    Meets(u16),
+    /// Nothing, the ray out of the solid in front of the deeper surface's depth: its
+    /// outline lies nearer.
+    Open,
+    /// Something else: another surface far behind (what shows past the outline is
+    /// surface, not sky), or still inside the solid where the deeper surface would be
+    /// (it ends at a crease with the near one: a fin's foot on its base). The walk lists
+    /// nothing.
+    Lost,
+}
+
+impl OutlineWalk {
+    /// What a step met (`past`) past its texel's own level `own`, the walk's last step
+    /// that met the deeper surface `last`.
+    fn step(&self, last: (u8, u16), past: Past, own: u16, camera: &SourceCamera, bits: DepthBits) -> Step {
+        match past.facing.filter(|&q| q > own) {
+            Some(q) if q.abs_diff(last.1) <= self.within => Step::Meets(q),
+            Some(_) => Step::Lost,
+            None => {
+                let depth = camera.depth_of_level(last.1, bits) - camera.depth_near;
+                if past.left.is_some_and(|t| t < depth) && !past.unknown {
+                    Step::Open
+                } else {
+                    Step::Lost
+                }
+            }
+        }
+    }
+}
+
+/// Where a surface seen past a step down along a row ends, hidden behind the step's near
+/// texel: the body of a teapot seen through its handle, parallel rays meeting it all
+/// across the loop, where an eye near it looks past its outline, behind the handle,
+/// into the sky. The pre-warp fills the crack a turn opens between the handle and the
+/// body from the body, as if it went on; a [`Hidden`] entry of the near texel, on the
+/// step's side (beside a covered neighbour, where a rim's entries lie beside an empty
+/// one), tells it where the body ends (`relief_render`'s `Impostor::outlines`): `inward`
+/// texels in from the near texel, the deeper surface at `depth` is the last found
+/// before its outline.
+///
+/// From every near texel of a step to the left or right: where its own ray, cast on
+/// past its surface, meets the deeper surface (about as deep as the neighbour's), the
+/// walk looks in at every [`INWARD_STRIDE`]th texel up to [`inward_reach`] over the
+/// near surface's covered texels, then a texel at a time from the last that met it,
+/// and lists the last step that met it before one that met nothing out in the open
+/// (see the walk's loop). A surface that reaches further in, or meets another far
+/// behind it, lists nothing; nor do outlines in runs shorter than [`OUTLINE_RUN`].
+fn find_hidden_outlines(
+    texture: &ReliefTexture,
+    target: &ObjectTracer,
+    t_range: (f32, f32),
+    parallel: bool,
+) -> Vec<Hidden> {
+    let camera = texture.camera;
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let bits = texture.depth_bits;
+    let empty = bits.empty();
+    let reach = inward_reach(camera.width, camera.height);
+    // (An orthographic texture's depth levels are evenly spaced.)
+    let jump_levels = (STEP_TEXELS * camera.a.length() / camera.depth_quantum(bits)) as i64;
+    // The covered texel `inward` steps in from `texel`, away from `side`.
+    let inside = |texel: usize, side: u8, inward: u8| -> Option<usize> {
+        let (di, dj) = TEXEL_SIDES[side as usize];
+        let i = (texel % w) as i64 - i64::from(di) * i64::from(inward);
+        let j = (texel / w) as i64 - i64::from(dj) * i64::from(inward);
+        let k = usize::try_from(j).ok()? * w + usize::try_from(i).ok()?;
+        ((0..w as i64).contains(&i) && (0..h as i64).contains(&j) && texture.depth[k] != empty).then_some(k)
+    };
+    // Each step down: its near texel, the side, and the deeper neighbour's depth level.
+    // A step the deeper surface goes on from flatter than it came (the next texel along
+    // nearer than the step again): a neighbour on a surface that merely runs away from
+    // the rays as steeply, round a tube's outline, goes on as steeply and is left.
+    let level = |k: usize| i64::from(texture.depth[k]);
+    let row_steps = |j: usize| {
+        let mut steps = Vec::new();
+        for k in j * w..(j + 1) * w {
+            let q = texture.depth[k];
+            if q == empty {
+                continue;
+            }
+            // (Left and right: the pre-warp's row pass draws them, `Impostor::outlines`.)
+            for side in [0, 1] {
+                let Some(deeper) = inside(k, side ^ 1, 1) else {
+                    continue;
+                };
+                let drop = level(deeper) - i64::from(q);
+                if drop <= jump_levels || !every_other(k, w, side) {
+                    continue;
+                }
+                let flatter =
+                    inside(k, side ^ 1, 2).is_some_and(|beyond| level(beyond) - level(deeper) < drop / 2);
+                if flatter {
+                    steps.push((k, side, texture.depth[deeper]));
+                }
+            }
+        }
+        steps
+    };
+    // (Every other row: `every_other` for a step to the left or right.)
+    let rows = (0..h).step_by(2);
+    let steps: Vec<(usize, u8, u16)> = if parallel {
+        rows.collect::<Vec<_>>()
+            .into_par_iter()
+            .flat_map_iter(row_steps)
+            .collect()
+    } else {
+        rows.flat_map(row_steps).collect()
+    };
+    // Steps whose near texel's own ray meets a surface about as deep as the neighbour
+    // (within half the step): the deeper surface goes on behind it. Each is walked in
+    // over the near surface's covered texels.
+    let near: Vec<usize> = steps.iter().map(|&(k, _, _)| k).collect();
+    let hits = hidden_depths(texture, target, t_range, &near, parallel);
+    let walks: Vec<OutlineWalk> = (steps.into_iter().zip(hits))
+        .filter_map(|((texel, side, neighbour), hit)| {
+            let hit = hit?;
+            let within = neighbour.saturating_sub(texture.depth[texel]) / 2;
+            let covered = (1..=reach)
+                .take_while(|&k| inside(texel, side, k).is_some())
+                .last()?;
+            (hit.abs_diff(neighbour) <= within).then_some(OutlineWalk {
+                texel,
+                side,
+                covered,
+                within,
+                found: (0, hit),
+            })
+        })
+        .collect();
+    // What each step `inward` of each walk meets: all cast at once (the walks are few
+    // and short, a batch for the pool), then read in order.
+    let look = |asked: &[(usize, u8)]| -> Vec<(Past, u16)> {
+        let texels: Vec<usize> = (asked.iter())
+            .map(|&(w, k)| inside(walks[w].texel, walks[w].side, k).unwrap_or(walks[w].texel))
+            .collect();
+        let pasts = cast_past(texture, target, t_range, &texels, parallel);
+        pasts
+            .into_iter()
+            .zip(texels.iter().map(|&k| texture.depth[k]))
+            .collect()
+    };
+    // First the deepest step: where the deeper surface goes on that far (the knot's
+    // tubes passing under one another, most steps), the walk ends at one cast.
+    let deepest: Vec<(usize, u8)> = walks
+        .iter()
+        .enumerate()
+        .map(|(w, walk)| (w, walk.covered))
+        .collect();
+    let ends_open: Vec<bool> = (walks.iter().zip(look(&deepest)))
+        .map(|(walk, (past, own))| matches!(walk.step(walk.found, past, own, &camera, bits), Step::Open))
+        .collect();
+    // Then by strides, to the first step that does not meet the deeper surface: the
+    // walk's stretch to look at a texel at a time, from the stride before to it.
+    let strides: Vec<(usize, u8)> = (walks.iter().enumerate())
+        .filter(|&(w, _)| ends_open[w])
+        .flat_map(|(w, walk)| {
+            let stride = INWARD_STRIDE.min(walk.covered);
+            (1..)
+                .map(move |n| n * stride)
+                .take_while(move |&k| k <= walk.covered)
+                .map(move |k| (w, k))
+        })
+        .collect();
+    let mut found: Vec<Option<(u8, u16)>> = (walks.iter().zip(&ends_open))
+        .map(|(walk, &open)| open.then_some(walk.found))
+        .collect();
+    let mut stretch: Vec<Option<(u8, u8)>> = vec![None; walks.len()];
+    for (&(w, k), (past, own)) in strides.iter().zip(look(&strides)) {
+        let Some(last) = found[w].filter(|_| stretch[w].is_none()) else {
+            continue;
+        };
+        match walks[w].step(last, past, own, &camera, bits) {
+            Step::Meets(depth) => found[w] = Some((k, depth)),
+            Step::Open => stretch[w] = Some((last.0, k)),
+            Step::Lost => found[w] = None,
+        }
+    }
+    // Then a texel at a time over that stretch: the last step that meets it before one
+    // open.
+    let texels: Vec<(usize, u8)> = (stretch.iter().enumerate())
+        .filter_map(|(w, s)| Some((w, (*s)?)))
+        .flat_map(|(w, (from, to))| (from + 1..to).map(move |k| (w, k)))
+        .collect();
+    let mut open: Vec<bool> = stretch.iter().map(Option::is_some).collect();
+    let mut done = vec![false; walks.len()];
+    for (&(w, k), (past, own)) in texels.iter().zip(look(&texels)) {
+        let Some(last) = found[w].filter(|_| open[w] && !done[w]) else {
+            continue;
+        };
+        match walks[w].step(last, past, own, &camera, bits) {
+            Step::Meets(depth) => found[w] = Some((k, depth)),
+            Step::Open => done[w] = true,
+            Step::Lost => open[w] = false,
+        }
+    }
+    let mut outlines: Vec<Hidden> = (walks.iter().zip(found).zip(open))
+        .filter_map(|((walk, found), open)| {
+            let (inward, depth) = found.filter(|_| open)?;
+            Some(Hidden {
+                texel: walk.texel as u32,
+                side: walk.side,
+                inward,
+                depth,
+            })
+        })
+        .collect();
+    // (Listed as behind the near texel: deeper than its own level.)
+    outlines.retain(|h| h.depth > texture.depth[h.texel as usize]);
+    in_runs(outlines, w)
+}
+
+/// Outlines found on at least this many rows in a row along their step are listed;
+/// fewer are a sliver, whose few pixels are as likely a crease the walk misread. (The
+/// fandisk's, a few rows each, would have cut its edges; the teapot's, behind its
+/// handle, run 30 rows and more.)
+pub const OUTLINE_RUN: usize = 3;
+
+/// How far across its step an outline may lie from the one on the row before it and
+/// still continue its run ([`OUTLINE_RUN`]), texels.
+pub const OUTLINE_RUN_SHIFT: u32 = 6;
+
+/// Those of `outlines` (of a texture `width` wide) in runs of [`OUTLINE_RUN`] or more.
+fn in_runs(outlines: Vec<Hidden>, width: usize) -> Vec<Hidden> {
+    // Along the step's edge (the row) and across it.
+    let place = |h: &Hidden| {
+        let (i, j) = (h.texel as usize % width, h.texel as usize / width);
+        match TEXEL_SIDES[h.side as usize] {
+            (0, _) => (i, j),
+            _ => (j, i),
+        }
+    };
+    let mut by_place: std::collections::HashMap<(u8, usize), Vec<usize>> = Default::default();
+    for h in &outlines {
+        let (along, across) = place(h);
+        by_place.entry((h.side, along)).or_default().push(across);
+    }
+    // Where the outline on row `along` continues one across `across`.
+    let continues = |side: u8, along: usize, across: usize| {
+        let acrosses = by_place.get(&(side, along))?;
+        (acrosses.iter().copied())
+            .filter(|a| a.abs_diff(across) <= OUTLINE_RUN_SHIFT as usize)
+            .min_by_key(|a| a.abs_diff(across))
+    };
+    // How many rows the run through `h` goes on one way (up to the run needed).
+    let run_from = |h: &Hidden, forwards: bool| {
+        let (mut along, mut across) = place(h);
+        let mut n = 0;
+        while n < OUTLINE_RUN {
+            let next = if forwards {
+                along.checked_add(2)
+            } else {
+                along.checked_sub(2)
+            };
+            match next.and_then(|a| Some((a, continues(h.side, a, across)?))) {
+                Some((a, c)) => (along, across, n) = (a, c, n + 1),
+                None => break,
+            }
+        }
+        n
+    };
+    (outlines.iter())
+        .filter(|h| 1 + run_from(h, true) + run_from(h, false) >= OUTLINE_RUN)
+        .copied()
+        .collect()
+}
+
+/// What a texel's ray meets past its own surface ([`cast_past`]).
+#[derive(Debug, Clone, Copy, Default)]
+struct Past {
+    /// The depth level of the first face that faces the rays.
+    facing: Option<u16>,
+    /// Where the ray last left the solid, through a face turned away (depth, from the
+    /// texture's near depth), when it met none facing them after.
+    left: Option<f32>,
+    /// It passed [`MAX_CROSSINGS`] faces turned away and was given up.
+    unknown: bool,
+}
+
 /// For each of `texels` of `texture`, the depth level of the first face behind its
-/// own surface that faces the rays: its ray cast on from just past its depth (a surface
-/// within two quanta of it could not be told from it), past up to [`MAX_CROSSINGS`]
-/// faces turned away.
+/// own surface that faces the rays.
 fn hidden_depths(
     texture: &ReliefTexture,
     target: &ObjectTracer,
@@ -219,6 +529,21 @@ fn hidden_depths(
     texels: &[usize],
     parallel: bool,
 ) -> Vec<Option<u16>> {
+    (cast_past(texture, target, t_range, texels, parallel).into_iter())
+        .map(|past| past.facing)
+        .collect()
+}
+
+/// For each of `texels` of `texture`, what its ray meets cast on from just past its
+/// depth (a surface within two quanta of it could not be told from it), past up to
+/// [`MAX_CROSSINGS`] faces turned away.
+fn cast_past(
+    texture: &ReliefTexture,
+    target: &ObjectTracer,
+    t_range: (f32, f32),
+    texels: &[usize],
+    parallel: bool,
+) -> Vec<Past> {
     let camera = &texture.camera;
     let (w, bits) = (camera.width as usize, texture.depth_bits);
     let quantum = camera.depth_quantum(bits);
@@ -237,7 +562,7 @@ fn hidden_depths(
             (n, ray)
         })
         .collect();
-    let mut depths = vec![None; texels.len()];
+    let mut past = vec![Past::default(); texels.len()];
     for _ in 0..=MAX_CROSSINGS {
         if searching.is_empty() {
             break;
@@ -248,9 +573,13 @@ fn hidden_depths(
         for ((n, ray), hit) in searching.iter().zip(hits) {
             let Some(hit) = hit else { continue };
             if mesh.face_normal(hit.triangle as usize).dot(camera.f) < 0.0 {
-                depths[*n] = Some(camera.level_of_depth(camera.depth_near + hit.t, bits));
+                past[*n] = Past {
+                    facing: Some(camera.level_of_depth(camera.depth_near + hit.t, bits)),
+                    ..Past::default()
+                };
             } else {
                 // A face turned away: on past it, by a quantum.
+                past[*n].left = Some(hit.t);
                 let ray = Ray {
                     t_min: hit.t + quantum,
                     ..*ray
@@ -260,7 +589,10 @@ fn hidden_depths(
         }
         searching = onwards;
     }
-    depths
+    for (n, _) in searching {
+        past[n].unknown = true;
+    }
+    past
 }
 
 /// Whether rim texel `texel` (of a texture `width` wide) looks in from `side`: on even
@@ -399,6 +731,71 @@ mod tests {
         );
         // (Rows of the strip's 64, every other one.)
         assert!(expected.len() >= 30, "the strip is found: {}", expected.len());
+        assert_found(&texture, &expected);
+    }
+
+    /// A slab 2 × 2 wide stands before one reaching out past its right side, whose left
+    /// end lies 0.06 behind it: from every other texel of the near slab's right rim
+    /// over the far one, the last step in whose ray still meets the far slab — worked
+    /// out from the camera and the far slab's extent — with the depth its ray meets it
+    /// at (its front face, or the side the rays lean onto).
+    #[test]
+    fn a_step_lists_where_the_surface_past_it_ends_behind_it() {
+        let mut mesh = Mesh::cuboid(Vec3::new(2.0, 2.0, 0.5), Vec3::ZERO);
+        mesh.append(Mesh::cuboid(
+            Vec3::new(1.56, 1.0, 0.5),
+            Vec3::new(1.72, 0.0, -2.0),
+        ))
+        .expect("two boxes");
+        let texture = baked(mesh, SourceProjection::Orthographic);
+        let c = texture.camera;
+        let (w, empty) = (c.width as usize, texture.depth_bits.empty());
+        // Where the ray from plane point `p` meets the far slab, if it does: its front
+        // face (z = −1.75) or, as the rays lean towards +x, its left side (x = 0.94).
+        let at_z = |p: Vec3, z: f32| p + c.f * ((z - p.z) / c.f.z);
+        assert!(c.f.x > 0.0, "the rays lean towards +x: {}", c.f);
+        let far_hit = |p: Vec3| {
+            let (front, back) = (at_z(p, -1.75), at_z(p, -2.25));
+            let side = p + c.f * ((0.94 - p.x) / c.f.x);
+            let hit = if front.x >= 0.94 { front } else { side };
+            (back.x >= 0.94 && hit.y.abs() <= 0.5).then_some(hit)
+        };
+        let far = |p: Vec3| far_hit(p).is_some();
+        let mut expected = Vec::new();
+        for (k, &q) in texture.depth.iter().enumerate() {
+            let (i, j) = (k % w, k / w);
+            let centre = |i: usize| c.point(i as f32 + 0.5, j as f32 + 0.5, c.depth_near);
+            let deeper = texture.depth.get(k + 1).filter(|_| i + 1 < w);
+            let on_near = |p: Vec3| {
+                let q = at_z(p, 0.25);
+                q.x.abs() <= 1.0 && q.y.abs() <= 1.0
+            };
+            let step = deeper.is_some_and(|&d| d != empty && d > q) && !on_near(centre(i + 1));
+            if !(q != empty && on_near(centre(i)) && j % 2 == 0 && step && far(centre(i + 1))) {
+                continue;
+            }
+            let inward = (0..=i)
+                .take_while(|&n| far(centre(i - n)))
+                .last()
+                .expect("meets it");
+            let p = centre(i - inward);
+            let hit = far_hit(p).expect("meets it");
+            let depth = c.level_of_depth(c.depth_near + p.distance(hit), texture.depth_bits);
+            expected.push(Hidden {
+                texel: k as u32,
+                side: 1,
+                inward: inward as u8,
+                depth,
+            });
+        }
+        // (The far slab's rows, every other one, about 1 / 3.5 of 128 wide.)
+        assert!(expected.len() >= 15, "{}", expected.len());
+        assert!(
+            expected
+                .iter()
+                .all(|h| (3..INWARD_STRIDE * 2).contains(&h.inward)),
+            "{expected:?}"
+        );
         assert_found(&texture, &expected);
     }
 

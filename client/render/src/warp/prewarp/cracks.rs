@@ -52,6 +52,7 @@ pub(super) fn fill_column_crack<const DOWN: bool>(
         column.last_gap,
         (cell, cell.v),
         end,
+        None,
         |y, filler| out.put(column_index, y, filler),
     );
 }
@@ -76,6 +77,11 @@ impl Job<'_> {
     /// empty, −7.4 to −7.6 filled up to 2 pixels wide, −5.2 to −5.5 up to 16, −4.8 to
     /// −5.2 at any width; the knot −0.9 to −1.3, −0.3 to −0.7, −0.2 to −0.5, −0.1 to
     /// −0.3).
+    ///
+    /// Where the deeper surface is known to end behind the nearer (`outline`: where its
+    /// outline lands along the visit, [`Impostor::outlines`](crate::impostor::Impostor::outlines)),
+    /// it fills no pixel on the nearer's side of that: the eye sees past it there.
+    #[allow(clippy::too_many_arguments)]
     #[inline(never)]
     pub(super) fn crack<const FORWARDS: bool>(
         &self,
@@ -84,6 +90,7 @@ impl Job<'_> {
         last_gap: f32,
         (b, b_at): (&Cell, f32),
         end: i64,
+        outline: Option<f32>,
         mut put: impl FnMut(i64, &Cell),
     ) {
         let sign = if FORWARDS { 1.0 } else { -1.0 };
@@ -98,12 +105,21 @@ impl Job<'_> {
         let mut fillers = None;
         between::<FORWARDS>(from, b_at - 0.5 * sign, end, |x, _| {
             let [beside_a, beside_b] = fillers.get_or_insert_with(|| self.crack_fillers(a, b, axis * sign));
-            let beside = if (x as f32 + 0.5 - middle) * sign <= 0.0 {
+            let centre = x as f32 + 0.5;
+            let beside = if (centre - middle) * sign <= 0.0 {
                 beside_a
             } else {
                 beside_b
             };
-            put(x, beside)
+            // (Past the deeper surface's outline, on the nearer's side: nothing.)
+            let a_nearer = b.depth > a.depth;
+            let past_outline = outline.is_some_and(|at| {
+                let towards_deeper = if a_nearer { sign } else { -sign };
+                (centre - at) * towards_deeper < 0.0 && beside.depth == a.deeper(*b).depth
+            });
+            if !past_outline {
+                put(x, beside)
+            }
         });
     }
 
@@ -147,7 +163,7 @@ impl Job<'_> {
 mod tests {
     use glam::{Vec2, Vec3};
 
-    use super::super::{Variant, prewarp};
+    use super::super::{PTexel, Variant, prewarp};
     use crate::impostor::{Faces, Impostor};
     use crate::warp::params::WarpParams;
 
@@ -207,6 +223,93 @@ mod tests {
             (0, 0),
             "holes, square texels outside the square"
         );
+    }
+
+    /// Where the texture knows the surface behind a nearer edge ends behind it
+    /// ([`Impostor::outlines`], from its hidden-surface list), a crack opening at that
+    /// edge is filled from the surface behind no nearer the edge than where its outline
+    /// lands; between the two the image stays empty, for what lies beyond. The square
+    /// over the plane, its right edge's rows told that the plane ends a texel in behind
+    /// it, the eye moved until the plane parts from that edge by 6 pixels or more: in
+    /// each of those rows, the crack's pixels short of the outline's landing are empty
+    /// and those past it show the plane (fails filled throughout, as it is without the
+    /// list: checked too).
+    #[test]
+    fn a_crack_is_filled_no_nearer_than_the_outline_behind_it() {
+        use crate::fixtures::{EYE, PLANE, square_over_plane};
+        use relief_core::relief::Hidden;
+        let (plane, square) = (PLANE, ([0, 255, 0], 40));
+        let mut texture = square_over_plane(32, 10..22, square);
+        let rows = 12..20u32;
+        texture.hidden = rows
+            .clone()
+            .map(|j| Hidden {
+                texel: j * 32 + 21,
+                side: 1,
+                inward: 1,
+                depth: plane.1,
+            })
+            .collect();
+        texture.check_hidden().expect("well formed");
+        let told = Impostor::new(texture.clone());
+        let untold = Impostor {
+            outlines: Default::default(),
+            ..told.clone()
+        };
+        assert!(!told.outlines.is_empty(), "the list read");
+        let c = texture.camera;
+        // Where the square's right edge, the plane beside it and the plane's outline (at
+        // texel 20 of the row) land along row `j`.
+        let landings = |params: &WarpParams, j: u32| {
+            let at = |i: f32, level: u16| params.warp(i, j as f32 + 0.5, level as usize).x;
+            (at(21.5, square.1), at(22.5, plane.1), at(20.5, plane.1))
+        };
+        let params = (1..200)
+            .map(|step| EYE + (c.a.normalize() + c.b.normalize()) * 0.1 * step as f32)
+            .map(|eye| WarpParams::new(&told.texture, eye).expect("params"))
+            .find(|params| {
+                let (edge, plane_at, _) = landings(params, 16);
+                plane_at - edge > 6.0
+            })
+            .expect("an eye that opens a crack");
+        for (impostor, outlines_known) in [(&told, true), (&untold, false)] {
+            let image = prewarp(impostor, &params, Variant::Interleaved);
+            let (mut empty, mut filled, mut past_outline) = (0, 0, 0);
+            for j in rows.clone().skip(1).take(6) {
+                let (edge, plane_at, outline) = landings(&params, j);
+                assert!(
+                    edge + 1.0 < outline && outline + 1.0 < plane_at,
+                    "row {j}: {edge} {outline} {plane_at}"
+                );
+                // The row lands at the plane's height there.
+                let v = params.warp(22.5, j as f32 + 0.5, plane.1 as usize).y;
+                for x in (edge.ceil() as i32 + 1)..(plane_at.floor() as i32) {
+                    let centre = x as f32 + 0.5;
+                    if (centre - outline).abs() < 1.0 {
+                        continue;
+                    }
+                    let texel = image.at(centre, v).copied().unwrap_or(PTexel::EMPTY);
+                    match (centre < outline, texel.is_empty()) {
+                        (true, true) => empty += 1,
+                        (true, false) => filled += 1,
+                        (false, false) => past_outline += 1,
+                        (false, true) => panic!("row {j}: a hole past the outline at {centre}"),
+                    }
+                }
+            }
+            assert!(past_outline > 0, "pixels past the outline");
+            if outlines_known {
+                assert!(
+                    empty > 0 && filled == 0,
+                    "{empty} empty, {filled} filled short of the outline"
+                );
+            } else {
+                assert!(
+                    empty == 0 && filled > 0,
+                    "without the list: {empty} empty, {filled} filled"
+                );
+            }
+        }
     }
 
     /// Where a closed surface's last samples run out of the texture's sight towards the

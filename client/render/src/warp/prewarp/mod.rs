@@ -584,8 +584,9 @@ impl Job<'_> {
                     close(&previous, last_gap, sink);
                     // (`in_run`: the previous texel, of another surface or folded
                     // behind this one.)
+                    let outline = self.outline(j, &previous, &sample);
                     let (a, b) = ((&previous.cell, previous.u), (&sample.cell, sample.u));
-                    self.crack::<RIGHT>(self.axes.a, a, last_gap, b, end, |x, filler| {
+                    self.crack::<RIGHT>(self.axes.a, a, last_gap, b, end, outline, |x, filler| {
                         sink.emit(x, *filler)
                     });
                 }
@@ -599,6 +600,25 @@ impl Job<'_> {
         if in_run {
             close(&previous, last_gap, sink);
         }
+    }
+
+    /// Where the outline of the deeper of `a` and `b`, neighbours in source row `j`
+    /// parting at a crack, lands along the row, where the texture knows it ends behind
+    /// the nearer ([`Impostor::outlines`]).
+    #[inline]
+    fn outline(&self, j: usize, a: &RowSample, b: &RowSample) -> Option<f32> {
+        if self.impostor.outlines.is_empty() {
+            return None;
+        }
+        let (nearer, deeper) = if b.cell.depth > a.cell.depth {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        let texel = j * self.impostor.texture.camera.width as usize + nearer.source as usize;
+        let key = Impostor::outline_key(texel, deeper.source > nearer.source);
+        let &(at, depth) = self.impostor.outlines.get(&key)?;
+        Some(self.params.warp_at(at, depth).x)
     }
 
     /// Feeds `cell`, made by row number `seq` (in visiting order, downwards when
