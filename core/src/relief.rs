@@ -381,10 +381,11 @@ pub struct ReliefTexture {
     pub normal: Vec<[u8; 3]>,
     /// Depth levels; `depth_bits.empty()` marks an empty texel.
     pub depth: Vec<u16>,
-    /// What the texture's rim hides ([`Hidden`]), in [`Hidden::key`] order. Empty where
-    /// nothing was looked for: a texture's coarser levels, a perspective texture or one
-    /// of sheets, one whose larger edge is under 64 texels (see `relief_trace::hidden`),
-    /// one read from disk without it.
+    /// What the texture's rim hides, and the outlines its steps hide ([`Hidden`]), in
+    /// [`Hidden::key`] order. Empty where nothing was looked for: a texture's coarser
+    /// levels, a perspective texture or one of sheets, one read from disk without it
+    /// (and a rim's entries, for one whose larger edge is under 64 texels: see
+    /// `relief_trace::hidden`).
     pub hidden: Vec<Hidden>,
 }
 
@@ -403,7 +404,7 @@ pub enum HiddenError {
     NotALevel { index: usize, depth: u16 },
     #[error("hidden[{index}]: side {side} is not one of a texel's four")]
     NoSuchSide { index: usize, side: u8 },
-    #[error("hidden[{index}]: {inward} texels in from the rim is outside the texture")]
+    #[error("hidden[{index}]: {inward} texels in from its texel is outside the texture")]
     Outside { index: usize, inward: u8 },
 }
 
@@ -479,13 +480,15 @@ pub const TEXEL_SIDES: [(i32, i32); 4] = [(-1, 0), (1, 0), (0, -1), (0, 1)];
 /// `Impostor::outlines`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Hidden {
-    /// The rim texel, `j * width + i`.
+    /// The rim texel (or a step's near texel), `j * width + i`.
     pub texel: u32,
-    /// The rim's open side ([`TEXEL_SIDES`] index): outwards.
+    /// The rim's open side ([`TEXEL_SIDES`] index): outwards (or the side of the
+    /// step's deeper neighbour).
     pub side: u8,
-    /// How many texels in from the rim texel (away from `side`) the hidden surface lies.
+    /// How many texels in from the texel (away from `side`) the hidden surface lies
+    /// (or the last of the step's deeper surface before its outline).
     pub inward: u8,
-    /// The hidden surface's depth level (behind the rim texel's own).
+    /// That surface's depth level (behind the texel's own).
     pub depth: u16,
 }
 

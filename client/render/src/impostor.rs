@@ -106,7 +106,8 @@ pub struct Impostor {
     /// covered neighbour): keyed by [`Impostor::outline_key`], the outline's point in
     /// texel coordinates and its displacement. The pre-warp fills a crack from that
     /// surface no nearer the step than where the outline lands; past it the eye sees
-    /// beyond the surface.
+    /// beyond the surface. (Made from `texture`'s list: change it, and make the impostor
+    /// anew.)
     pub outlines: HashMap<u32, (Vec2, f32)>,
 }
 
@@ -228,12 +229,19 @@ impl Impostor {
 }
 
 /// [`Impostor::outlines`] of `texture`: its hidden-surface entries beside a covered
-/// neighbour to the left or right.
+/// neighbour to the left or right, each at half a texel past the last texel its walk
+/// found the deeper surface behind (its outline lies between that and the next, and
+/// halfway is the middle of the guesses, as in `Job::crack_fillers`).
+///
+/// The bake walks every other row: each outline is also the rows' beside it, its near
+/// texel there the same column or one aside (where no outline of their own is listed;
+/// the same column's first, and of two rows' the row above's). Left filled, a row
+/// between two outlines drew a strand of the deeper surface across the opening.
 fn row_outlines(texture: &ReliefTexture) -> HashMap<u32, (Vec2, f32)> {
     let c = &texture.camera;
     let (w, h) = (c.width, c.height);
     let empty = texture.depth_bits.empty();
-    let mut outlines = HashMap::new();
+    let mut listed = Vec::new();
     for entry in &texture.hidden {
         let (di, dj) = TEXEL_SIDES[entry.side as usize];
         let (i, j) = (entry.texel % w.max(1), entry.texel / w.max(1));
@@ -242,21 +250,19 @@ fn row_outlines(texture: &ReliefTexture) -> HashMap<u32, (Vec2, f32)> {
         let Some(behind) = entry.behind(w, h).filter(|_| dj == 0 && covered) else {
             continue;
         };
-        let at = Vec2::new(behind.0 as f32 + 0.5, behind.1 as f32 + 0.5);
+        let at = Vec2::new(behind.0 as f32 + 0.5 - 0.5 * di as f32, behind.1 as f32 + 0.5);
         let depth = c.depth_of_level(entry.depth, texture.depth_bits);
-        outlines.insert(Impostor::outline_key(entry.texel as usize, di > 0), (at, depth));
+        listed.push(((i, j), di > 0, (at, depth)));
     }
-    // A row whose own walk found no outline between two that did (its deeper surface's
-    // depth off, a ray that met a crease) takes its neighbours': left filled, the crack
-    // drew a strand of that surface across the opening.
-    let found: Vec<(u32, (Vec2, f32))> = outlines.iter().map(|(&k, &v)| (k, v)).collect();
-    for (key, (at, depth)) in found {
-        let (texel, rightwards) = (key >> 1, key & 1 == 1);
-        let (i, j) = (texel % w.max(1), texel / w.max(1));
-        for (dj, di) in [-1i32, 1]
-            .into_iter()
-            .flat_map(|dj| [0i32, -1, 1].map(|di| (dj, di)))
-        {
+    let mut outlines: HashMap<u32, (Vec2, f32)> = (listed.iter())
+        .map(|&((i, j), rightwards, outline)| {
+            (Impostor::outline_key((j * w + i) as usize, rightwards), outline)
+        })
+        .collect();
+    // (The same column's copies first; of two rows', in the list's order, by texel, the
+    // row above's.)
+    for di in [0i32, -1, 1] {
+        for (&((i, j), rightwards, (at, depth)), dj) in listed.iter().flat_map(|e| [(e, 1i32), (e, -1)]) {
             let (Some(i2), Some(j2)) = (i.checked_add_signed(di), j.checked_add_signed(dj)) else {
                 continue;
             };

@@ -63,7 +63,8 @@ pub const INWARD_STRIDE: u8 = 4;
 
 /// How far in from the rim a texture looks for what it hides: a sixteenth of its
 /// larger edge (16 texels of a 256² texture, 32 of a 512²; under [`INWARD_STRIDE`], so
-/// nothing, below 64²). A surface further in comes out only past a turn that moves it
+/// no rim's walk, below 64²), and how far in from a step for where the surface past it
+/// ends. A surface further in comes out only past a turn that moves it
 /// that far: 8–16 pixels at half a pixel to a texel, by when the gaps' tolerance has
 /// retired the texture.
 pub fn inward_reach(width: u32, height: u32) -> u8 {
@@ -223,6 +224,12 @@ pub(crate) fn find_hidden(
 /// such drops to the left or right on every other row, 217 are steps.)
 pub const STEP_TEXELS: f32 = 4.0;
 
+/// A step's drop over this: how much more the deeper surface may drop beyond the
+/// neighbour for the step to count (it must flatten past it), and how far from the last
+/// depth found the walk's steps may find it for it to be the same surface (half the
+/// step: more, and it is another one, or the near surface's own far side).
+const STEP_SHARE: i64 = 2;
+
 /// One step down walked in from its near texel (see [`find_hidden_outlines`]).
 #[derive(Clone, Copy)]
 struct OutlineWalk {
@@ -232,7 +239,7 @@ struct OutlineWalk {
     /// The deepest step over the near surface's covered texels.
     covered: u8,
     /// How far a step's depth level may lie from the last found for the deeper surface
-    /// to go on there: half the step's own.
+    /// to go on there: the step's drop over [`STEP_SHARE`].
     within: u16,
     /// Its near texel's own ray: the step 0 that met the deeper surface, and its level.
     found: (u8, u16),
@@ -296,7 +303,7 @@ fn find_hidden_outlines(
     parallel: bool,
 ) -> Vec<Hidden> {
     let camera = texture.camera;
-    let (w, h) = (camera.width as usize, camera.height as usize);
+    let (width, height) = (camera.width as usize, camera.height as usize);
     let bits = texture.depth_bits;
     let empty = bits.empty();
     let reach = inward_reach(camera.width, camera.height);
@@ -305,19 +312,21 @@ fn find_hidden_outlines(
     // The covered texel `inward` steps in from `texel`, away from `side`.
     let inside = |texel: usize, side: u8, inward: u8| -> Option<usize> {
         let (di, dj) = TEXEL_SIDES[side as usize];
-        let i = (texel % w) as i64 - i64::from(di) * i64::from(inward);
-        let j = (texel / w) as i64 - i64::from(dj) * i64::from(inward);
-        let k = usize::try_from(j).ok()? * w + usize::try_from(i).ok()?;
-        ((0..w as i64).contains(&i) && (0..h as i64).contains(&j) && texture.depth[k] != empty).then_some(k)
+        let i = (texel % width) as i64 - i64::from(di) * i64::from(inward);
+        let j = (texel / width) as i64 - i64::from(dj) * i64::from(inward);
+        let k = usize::try_from(j).ok()? * width + usize::try_from(i).ok()?;
+        let within = (0..width as i64).contains(&i) && (0..height as i64).contains(&j);
+        (within && texture.depth[k] != empty).then_some(k)
     };
     // Each step down: its near texel, the side, and the deeper neighbour's depth level.
-    // A step the deeper surface goes on from flatter than it came (the next texel along
-    // nearer than the step again): a neighbour on a surface that merely runs away from
-    // the rays as steeply, round a tube's outline, goes on as steeply and is left.
+    // A step the deeper surface goes on from flatter than it came (the texel beyond
+    // lies nearer the neighbour than half the step): a neighbour on a surface that
+    // merely runs away from the rays as steeply, round a tube's outline, goes on as
+    // steeply and is left.
     let level = |k: usize| i64::from(texture.depth[k]);
     let row_steps = |j: usize| {
         let mut steps = Vec::new();
-        for k in j * w..(j + 1) * w {
+        for k in j * width..(j + 1) * width {
             let q = texture.depth[k];
             if q == empty {
                 continue;
@@ -328,23 +337,19 @@ fn find_hidden_outlines(
                     continue;
                 };
                 let drop = level(deeper) - i64::from(q);
-                if drop <= jump_levels || !every_other(k, w, side) {
-                    continue;
-                }
-                let flatter =
-                    inside(k, side ^ 1, 2).is_some_and(|beyond| level(beyond) - level(deeper) < drop / 2);
-                if flatter {
+                let flatter = |beyond: usize| level(beyond) - level(deeper) < drop / STEP_SHARE;
+                if drop > jump_levels && inside(k, side ^ 1, 2).is_some_and(flatter) {
                     steps.push((k, side, texture.depth[deeper]));
                 }
             }
         }
         steps
     };
-    // (Every other row: `every_other` for a step to the left or right.)
-    let rows = (0..h).step_by(2);
+    // (Every other row, as a rim's walks go for a side to the left or right:
+    // `every_other`; the client copies each outline to the rows beside it.)
+    let rows = (0..height).step_by(2);
     let steps: Vec<(usize, u8, u16)> = if parallel {
-        rows.collect::<Vec<_>>()
-            .into_par_iter()
+        (rows.collect::<Vec<_>>().into_par_iter())
             .flat_map_iter(row_steps)
             .collect()
     } else {
@@ -358,9 +363,9 @@ fn find_hidden_outlines(
     let walks: Vec<OutlineWalk> = (steps.into_iter().zip(hits))
         .filter_map(|((texel, side, neighbour), hit)| {
             let hit = hit?;
-            let within = neighbour.saturating_sub(texture.depth[texel]) / 2;
+            let within = neighbour.saturating_sub(texture.depth[texel]) / STEP_SHARE as u16;
             let covered = (1..=reach)
-                .take_while(|&k| inside(texel, side, k).is_some())
+                .take_while(|&inward| inside(texel, side, inward).is_some())
                 .last()?;
             (hit.abs_diff(neighbour) <= within).then_some(OutlineWalk {
                 texel,
@@ -371,70 +376,73 @@ fn find_hidden_outlines(
             })
         })
         .collect();
-    // What each step `inward` of each walk meets: all cast at once (the walks are few
-    // and short, a batch for the pool), then read in order.
+    // What step `inward` of walk `n` meets, for each `(n, inward)` asked: all cast at
+    // once (the walks are few and short, a batch for the pool), then read in order.
     let look = |asked: &[(usize, u8)]| -> Vec<(Past, u16)> {
         let texels: Vec<usize> = (asked.iter())
-            .map(|&(w, k)| inside(walks[w].texel, walks[w].side, k).unwrap_or(walks[w].texel))
+            .map(|&(n, inward)| inside(walks[n].texel, walks[n].side, inward).unwrap_or(walks[n].texel))
             .collect();
         let pasts = cast_past(texture, target, t_range, &texels, parallel);
-        pasts
-            .into_iter()
+        (pasts.into_iter())
             .zip(texels.iter().map(|&k| texture.depth[k]))
             .collect()
     };
     // First the deepest step: where the deeper surface goes on that far (the knot's
     // tubes passing under one another, most steps), the walk ends at one cast.
-    let deepest: Vec<(usize, u8)> = walks
-        .iter()
-        .enumerate()
-        .map(|(w, walk)| (w, walk.covered))
+    let deepest: Vec<(usize, u8)> = (walks.iter().enumerate())
+        .map(|(n, walk)| (n, walk.covered))
         .collect();
     let ends_open: Vec<bool> = (walks.iter().zip(look(&deepest)))
         .map(|(walk, (past, own))| matches!(walk.step(walk.found, past, own, &camera, bits), Step::Open))
         .collect();
-    // Then by strides, to the first step that does not meet the deeper surface: the
-    // walk's stretch to look at a texel at a time, from the stride before to it.
+    // Then by strides short of it, to the first step that does not meet the deeper
+    // surface (else the deepest): the stretch to look at a texel at a time, from the
+    // last stride that met it.
     let strides: Vec<(usize, u8)> = (walks.iter().enumerate())
-        .filter(|&(w, _)| ends_open[w])
-        .flat_map(|(w, walk)| {
-            let stride = INWARD_STRIDE.min(walk.covered);
-            (1..)
-                .map(move |n| n * stride)
-                .take_while(move |&k| k <= walk.covered)
-                .map(move |k| (w, k))
+        .filter(|&(n, _)| ends_open[n])
+        .flat_map(|(n, walk)| {
+            (INWARD_STRIDE..walk.covered)
+                .step_by(INWARD_STRIDE.into())
+                .map(move |inward| (n, inward))
         })
         .collect();
     let mut found: Vec<Option<(u8, u16)>> = (walks.iter().zip(&ends_open))
         .map(|(walk, &open)| open.then_some(walk.found))
         .collect();
     let mut stretch: Vec<Option<(u8, u8)>> = vec![None; walks.len()];
-    for (&(w, k), (past, own)) in strides.iter().zip(look(&strides)) {
-        let Some(last) = found[w].filter(|_| stretch[w].is_none()) else {
+    for (&(n, inward), (past, own)) in strides.iter().zip(look(&strides)) {
+        let Some(last) = found[n].filter(|_| stretch[n].is_none()) else {
             continue;
         };
-        match walks[w].step(last, past, own, &camera, bits) {
-            Step::Meets(depth) => found[w] = Some((k, depth)),
-            Step::Open => stretch[w] = Some((last.0, k)),
-            Step::Lost => found[w] = None,
+        match walks[n].step(last, past, own, &camera, bits) {
+            Step::Meets(depth) => found[n] = Some((inward, depth)),
+            Step::Open => stretch[n] = Some((last.0, inward)),
+            Step::Lost => found[n] = None,
+        }
+    }
+    for ((walk, found), stretch) in walks.iter().zip(&found).zip(&mut stretch) {
+        if let (Some((last, _)), None) = (found, &stretch) {
+            *stretch = Some((*last, walk.covered));
         }
     }
     // Then a texel at a time over that stretch: the last step that meets it before one
     // open.
     let texels: Vec<(usize, u8)> = (stretch.iter().enumerate())
-        .filter_map(|(w, s)| Some((w, (*s)?)))
-        .flat_map(|(w, (from, to))| (from + 1..to).map(move |k| (w, k)))
+        .filter_map(|(n, s)| Some((n, (*s)?)))
+        .flat_map(|(n, (from, to))| (from + 1..to).map(move |inward| (n, inward)))
         .collect();
-    let mut open: Vec<bool> = stretch.iter().map(Option::is_some).collect();
+    let mut open: Vec<bool> = (stretch.iter().zip(&found))
+        .map(|(s, f)| s.is_some() && f.is_some())
+        .collect();
     let mut done = vec![false; walks.len()];
-    for (&(w, k), (past, own)) in texels.iter().zip(look(&texels)) {
-        let Some(last) = found[w].filter(|_| open[w] && !done[w]) else {
+    for (&(n, inward), (past, own)) in texels.iter().zip(look(&texels)) {
+        let Some(last) = found[n].filter(|_| open[n] && !done[n]) else {
             continue;
         };
-        match walks[w].step(last, past, own, &camera, bits) {
-            Step::Meets(depth) => found[w] = Some((k, depth)),
-            Step::Open => done[w] = true,
-            Step::Lost => open[w] = false,
+        match walks[n].step(last, past, own, &camera, bits) {
+            Step::Meets(depth) => found[n] = Some((inward, depth)),
+            Step::Open => done[n] = true,
+            Step::Lost => open[n] = false,
         }
     }
     let mut outlines: Vec<Hidden> = (walks.iter().zip(found).zip(open))
@@ -450,53 +458,52 @@ fn find_hidden_outlines(
         .collect();
     // (Listed as behind the near texel: deeper than its own level.)
     outlines.retain(|h| h.depth > texture.depth[h.texel as usize]);
-    in_runs(outlines, w)
+    in_runs(outlines, width)
 }
 
-/// Outlines found on at least this many rows in a row along their step are listed;
-/// fewer are a sliver, whose few pixels are as likely a crease the walk misread. (The
-/// fandisk's, a few rows each, would have cut its edges; the teapot's, behind its
-/// handle, run 30 rows and more.)
+/// Outlines found from at least this many near texels in a row of the rows walked
+/// (every other one) are listed; fewer are a sliver, whose few pixels are as likely a
+/// crease the walk misread. (The fandisk's, one or two each, switched its textures to
+/// perspective when the validity counted them; the teapot's, behind its handle, run 15
+/// and more.)
 pub const OUTLINE_RUN: usize = 3;
 
-/// How far across its step an outline may lie from the one on the row before it and
-/// still continue its run ([`OUTLINE_RUN`]), texels.
+/// How far apart (texels along the row) the near texels of two outlines on consecutive
+/// rows walked may lie for the second to continue the first's run ([`OUTLINE_RUN`]):
+/// the step slanting up to three texels a row (the teapot's handle, 2.5 where steepest).
 pub const OUTLINE_RUN_SHIFT: u32 = 6;
 
 /// Those of `outlines` (of a texture `width` wide) in runs of [`OUTLINE_RUN`] or more.
 fn in_runs(outlines: Vec<Hidden>, width: usize) -> Vec<Hidden> {
-    // Along the step's edge (the row) and across it.
-    let place = |h: &Hidden| {
-        let (i, j) = (h.texel as usize % width, h.texel as usize / width);
-        match TEXEL_SIDES[h.side as usize] {
-            (0, _) => (i, j),
-            _ => (j, i),
-        }
-    };
-    let mut by_place: std::collections::HashMap<(u8, usize), Vec<usize>> = Default::default();
+    // (Rows between two walked: `every_other`.)
+    const WALKED_ROWS_APART: usize = 2;
+    // Each outline's near texel: row and column.
+    let place = |h: &Hidden| (h.texel as usize / width, h.texel as usize % width);
+    let mut by_row: std::collections::HashMap<(u8, usize), Vec<usize>> = Default::default();
     for h in &outlines {
-        let (along, across) = place(h);
-        by_place.entry((h.side, along)).or_default().push(across);
+        let (row, column) = place(h);
+        by_row.entry((h.side, row)).or_default().push(column);
     }
-    // Where the outline on row `along` continues one across `across`.
-    let continues = |side: u8, along: usize, across: usize| {
-        let acrosses = by_place.get(&(side, along))?;
-        (acrosses.iter().copied())
-            .filter(|a| a.abs_diff(across) <= OUTLINE_RUN_SHIFT as usize)
-            .min_by_key(|a| a.abs_diff(across))
+    // The column of the outline on `row`, of steps to `side`, that continues one at
+    // `column`.
+    let continues = |side: u8, row: usize, column: usize| {
+        let columns = by_row.get(&(side, row))?;
+        (columns.iter().copied())
+            .filter(|c| c.abs_diff(column) <= OUTLINE_RUN_SHIFT as usize)
+            .min_by_key(|c| c.abs_diff(column))
     };
-    // How many rows the run through `h` goes on one way (up to the run needed).
-    let run_from = |h: &Hidden, forwards: bool| {
-        let (mut along, mut across) = place(h);
+    // How many rows walked the run through `h` goes on one way (up to the run needed).
+    let run_from = |h: &Hidden, down: bool| {
+        let (mut row, mut column) = place(h);
         let mut n = 0;
         while n < OUTLINE_RUN {
-            let next = if forwards {
-                along.checked_add(2)
+            let next = if down {
+                row.checked_add(WALKED_ROWS_APART)
             } else {
-                along.checked_sub(2)
+                row.checked_sub(WALKED_ROWS_APART)
             };
-            match next.and_then(|a| Some((a, continues(h.side, a, across)?))) {
-                Some((a, c)) => (along, across, n) = (a, c, n + 1),
+            match next.and_then(|r| Some((r, continues(h.side, r, column)?))) {
+                Some((r, c)) => (row, column, n) = (r, c, n + 1),
                 None => break,
             }
         }
@@ -734,42 +741,55 @@ mod tests {
         assert_found(&texture, &expected);
     }
 
-    /// A slab 2 × 2 wide stands before one reaching out past its right side, whose left
-    /// end lies 0.06 behind it: from every other texel of the near slab's right rim
-    /// over the far one, the last step in whose ray still meets the far slab — worked
-    /// out from the camera and the far slab's extent — with the depth its ray meets it
-    /// at (its front face, or the side the rays lean onto).
-    #[test]
-    fn a_step_lists_where_the_surface_past_it_ends_behind_it() {
-        let mut mesh = Mesh::cuboid(Vec3::new(2.0, 2.0, 0.5), Vec3::ZERO);
+    /// A slab reaching to x = 1 (2 high) stands before one reaching out past its right
+    /// side, whose left end lies behind it at `far_left`: the texture of the two, and
+    /// from every other texel of the near slab's right rim over the far one, the last
+    /// step in whose ray still meets the far slab — worked out from the camera and the
+    /// slabs' extents — with the depth its ray meets it at (its front face, or the side
+    /// the rays lean onto).
+    fn step_outlines(near_left: f32, far_left: f32, balanced: bool) -> (ReliefTexture, Vec<Hidden>) {
+        let near_width = 1.0 - near_left;
+        let mut mesh = Mesh::cuboid(
+            Vec3::new(near_width, 2.0, 0.5),
+            Vec3::new(1.0 - near_width / 2.0, 0.0, 0.0),
+        );
+        let far_width = 2.5 - far_left;
         mesh.append(Mesh::cuboid(
-            Vec3::new(1.56, 1.0, 0.5),
-            Vec3::new(1.72, 0.0, -2.0),
+            Vec3::new(far_width, 1.0, 0.5),
+            Vec3::new(2.5 - far_width / 2.0, 0.0, -2.0),
         ))
         .expect("two boxes");
+        if balanced {
+            // (A speck far to the left and behind: the bounds centred on the eye's
+            // line, the rays straight down z.)
+            mesh.append(Mesh::cuboid(Vec3::splat(0.01), Vec3::new(-2.49, 0.0, -2.2)))
+                .expect("and a speck");
+        }
         let texture = baked(mesh, SourceProjection::Orthographic);
         let c = texture.camera;
         let (w, empty) = (c.width as usize, texture.depth_bits.empty());
         // Where the ray from plane point `p` meets the far slab, if it does: its front
-        // face (z = −1.75) or, as the rays lean towards +x, its left side (x = 0.94).
+        // face (z = −1.75) or, where the rays lean towards +x, its left side.
         let at_z = |p: Vec3, z: f32| p + c.f * ((z - p.z) / c.f.z);
-        assert!(c.f.x > 0.0, "the rays lean towards +x: {}", c.f);
+        assert!(c.f.x >= 0.0, "the rays lean towards +x, or not at all: {}", c.f);
         let far_hit = |p: Vec3| {
             let (front, back) = (at_z(p, -1.75), at_z(p, -2.25));
-            let side = p + c.f * ((0.94 - p.x) / c.f.x);
-            let hit = if front.x >= 0.94 { front } else { side };
-            (back.x >= 0.94 && hit.y.abs() <= 0.5).then_some(hit)
+            let hit = match front.x >= far_left {
+                true => front,
+                false => p + c.f * ((far_left - p.x) / c.f.x),
+            };
+            (back.x >= far_left && hit.y.abs() <= 0.5).then_some(hit)
         };
         let far = |p: Vec3| far_hit(p).is_some();
+        let on_near = |p: Vec3| {
+            let q = at_z(p, 0.25);
+            (near_left..=1.0).contains(&q.x) && q.y.abs() <= 1.0
+        };
         let mut expected = Vec::new();
         for (k, &q) in texture.depth.iter().enumerate() {
             let (i, j) = (k % w, k / w);
             let centre = |i: usize| c.point(i as f32 + 0.5, j as f32 + 0.5, c.depth_near);
             let deeper = texture.depth.get(k + 1).filter(|_| i + 1 < w);
-            let on_near = |p: Vec3| {
-                let q = at_z(p, 0.25);
-                q.x.abs() <= 1.0 && q.y.abs() <= 1.0
-            };
             let step = deeper.is_some_and(|&d| d != empty && d > q) && !on_near(centre(i + 1));
             if !(q != empty && on_near(centre(i)) && j % 2 == 0 && step && far(centre(i + 1))) {
                 continue;
@@ -788,15 +808,44 @@ mod tests {
                 depth,
             });
         }
+        (texture, expected)
+    }
+
+    /// [`step_outlines`]: behind a slab 2 × 2, the far one's end 0.06 in from its edge
+    /// (found by the strides, then a texel at a time); behind a bar a few texels wide,
+    /// its end between the last stride and the bar's far edge (found past the strides).
+    #[test]
+    fn a_step_lists_where_the_surface_past_it_ends_behind_it() {
+        let (texture, expected) = step_outlines(-1.0, 0.94, false);
         // (The far slab's rows, every other one, about 1 / 3.5 of 128 wide.)
         assert!(expected.len() >= 15, "{}", expected.len());
         assert!(
-            expected
-                .iter()
-                .all(|h| (3..INWARD_STRIDE * 2).contains(&h.inward)),
+            (expected.iter()).all(|h| (3..INWARD_STRIDE * 2).contains(&h.inward)),
             "{expected:?}"
         );
         assert_found(&texture, &expected);
+        let (texture, expected) = step_outlines(0.75, 0.8, true);
+        let reach = |k: u32| {
+            let (w, empty) = (texture.camera.width, texture.depth_bits.empty());
+            (1..)
+                .take_while(|n| k % w >= *n && texture.depth[(k - n) as usize] != empty)
+                .count() as u8
+        };
+        assert!(expected.len() >= 15, "{}", expected.len());
+        assert!(
+            (expected.iter()).all(|h| h.inward > INWARD_STRIDE && reach(h.texel) % INWARD_STRIDE != 0),
+            "{:?}",
+            expected
+                .iter()
+                .map(|h| (h.inward, reach(h.texel)))
+                .collect::<Vec<_>>()
+        );
+        // (Its left rim hides the far slab too: those entries apart.)
+        let outlines = ReliefTexture {
+            hidden: (texture.hidden.iter()).filter(|h| h.side == 1).copied().collect(),
+            ..texture.clone()
+        };
+        assert_found(&outlines, &expected);
     }
 
     /// A convex object hides nothing behind its rim; a perspective texture, and one

@@ -80,7 +80,8 @@ impl Job<'_> {
     ///
     /// Where the deeper surface is known to end behind the nearer (`outline`: where its
     /// outline lands along the visit, [`Impostor::outlines`](crate::impostor::Impostor::outlines)),
-    /// it fills no pixel on the nearer's side of that: the eye sees past it there.
+    /// the deeper fills no pixel on the nearer's side of that: the eye sees past it
+    /// there. (The nearer, going on round, still fills its half.)
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
     pub(super) fn crack<const FORWARDS: bool>(
@@ -101,6 +102,9 @@ impl Job<'_> {
             a_at + half_gap(last_gap)
         };
         let middle = 0.5 * (a_at + b_at);
+        // Along the visit, the way from the nearer to the deeper, and the deeper's depth.
+        let towards_deeper = if b.depth > a.depth { sign } else { -sign };
+        let deeper_depth = a.depth.max(b.depth);
         // (Worked out once a pixel needs them: most cracks have none.)
         let mut fillers = None;
         between::<FORWARDS>(from, b_at - 0.5 * sign, end, |x, _| {
@@ -112,11 +116,8 @@ impl Job<'_> {
                 beside_b
             };
             // (Past the deeper surface's outline, on the nearer's side: nothing.)
-            let a_nearer = b.depth > a.depth;
-            let past_outline = outline.is_some_and(|at| {
-                let towards_deeper = if a_nearer { sign } else { -sign };
-                (centre - at) * towards_deeper < 0.0 && beside.depth == a.deeper(*b).depth
-            });
+            let past_outline = outline
+                .is_some_and(|at| (centre - at) * towards_deeper < 0.0 && beside.depth == deeper_depth);
             if !past_outline {
                 put(x, beside)
             }
