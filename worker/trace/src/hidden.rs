@@ -41,8 +41,6 @@
 
 use relief_core::relief::{DepthBits, Hidden, ReliefTexture, SourceCamera, SourceProjection, TEXEL_SIDES};
 
-use rayon::prelude::*;
-
 use crate::bvh::Ray;
 use crate::rim::{cast_rays, open_sides};
 use crate::tracer::ObjectTracer;
@@ -323,38 +321,29 @@ fn find_hidden_outlines(
     // lies nearer the neighbour than half the step): a neighbour on a surface that
     // merely runs away from the rays as steeply, round a tube's outline, goes on as
     // steeply and is left.
-    let level = |k: usize| i64::from(texture.depth[k]);
     let row_steps = |j: usize| {
+        let row = &texture.depth[j * width..(j + 1) * width];
         let mut steps = Vec::new();
-        for k in j * width..(j + 1) * width {
-            let q = texture.depth[k];
-            if q == empty {
-                continue;
+        // (Left and right: the pre-warp's row pass draws them, `Impostor::outlines`.)
+        let mut step = |i: usize, side: u8, deeper: usize, beyond: usize| {
+            let (q, d, b) = (row[i], row[deeper], row[beyond]);
+            let drop = i64::from(d) - i64::from(q);
+            let flatter = i64::from(b) - i64::from(d) < drop / STEP_SHARE;
+            if drop > jump_levels && flatter && d != empty && b != empty {
+                steps.push((j * width + i, side, d));
             }
-            // (Left and right: the pre-warp's row pass draws them, `Impostor::outlines`.)
-            for side in [0, 1] {
-                let Some(deeper) = inside(k, side ^ 1, 1) else {
-                    continue;
-                };
-                let drop = level(deeper) - i64::from(q);
-                let flatter = |beyond: usize| level(beyond) - level(deeper) < drop / STEP_SHARE;
-                if drop > jump_levels && inside(k, side ^ 1, 2).is_some_and(flatter) {
-                    steps.push((k, side, texture.depth[deeper]));
-                }
+        };
+        for i in (0..width).filter(|&i| row[i] != empty) {
+            if i >= 2 {
+                step(i, 0, i - 1, i - 2);
+            }
+            if i + 2 < width {
+                step(i, 1, i + 1, i + 2);
             }
         }
         steps
     };
-    // (Every other row, as a rim's walks go for a side to the left or right:
-    // `every_other`; the client copies each outline to the rows beside it.)
-    let rows = (0..height).step_by(2);
-    let steps: Vec<(usize, u8, u16)> = if parallel {
-        (rows.collect::<Vec<_>>().into_par_iter())
-            .flat_map_iter(row_steps)
-            .collect()
-    } else {
-        rows.flat_map(row_steps).collect()
-    };
+    let steps: Vec<(usize, u8, u16)> = (0..height).step_by(2).flat_map(row_steps).collect();
     // Steps whose near texel's own ray meets a surface about as deep as the neighbour
     // (within half the step): the deeper surface goes on behind it. Each is walked in
     // over the near surface's covered texels.
