@@ -577,6 +577,27 @@ impl ReliefTexture {
         j as usize * self.camera.width as usize + i as usize
     }
 
+    /// The texel `hidden` lies behind (its index), if it is inside the texture and
+    /// covered.
+    pub fn covered_behind(&self, hidden: &Hidden) -> Option<usize> {
+        let (i, j) = hidden.behind(self.camera.width, self.camera.height)?;
+        (!self.is_empty_texel(i, j)).then(|| self.index(i, j))
+    }
+
+    /// Whether `hidden` is an outline behind a step down (see [`Hidden`]): its texel's
+    /// neighbour on its side is covered, where a rim's lies empty or past the edge.
+    pub fn is_outline(&self, hidden: &Hidden) -> bool {
+        let (w, h) = (self.camera.width, self.camera.height);
+        let Some(&(di, dj)) = TEXEL_SIDES.get(hidden.side as usize) else {
+            return false;
+        };
+        let (i, j) = (hidden.texel % w.max(1), hidden.texel / w.max(1));
+        match (i.checked_add_signed(di), j.checked_add_signed(dj)) {
+            (Some(i2), Some(j2)) => i2 < w && j2 < h && !self.is_empty_texel(i2, j2),
+            _ => false,
+        }
+    }
+
     /// True when texel `(i, j)` holds no surface.
     #[inline]
     pub fn is_empty_texel(&self, i: u32, j: u32) -> bool {

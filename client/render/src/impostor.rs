@@ -240,14 +240,14 @@ impl Impostor {
 fn row_outlines(texture: &ReliefTexture) -> HashMap<u32, (Vec2, f32)> {
     let c = &texture.camera;
     let (w, h) = (c.width, c.height);
-    let empty = texture.depth_bits.empty();
     let mut listed = Vec::new();
     for entry in &texture.hidden {
         let (di, dj) = TEXEL_SIDES[entry.side as usize];
         let (i, j) = (entry.texel % w.max(1), entry.texel / w.max(1));
-        let beside = i.checked_add_signed(di).filter(|&i| i < w && j < h);
-        let covered = beside.is_some_and(|i2| texture.depth[texture.index(i2, j)] != empty);
-        let Some(behind) = entry.behind(w, h).filter(|_| dj == 0 && covered) else {
+        let Some(behind) = entry
+            .behind(w, h)
+            .filter(|_| dj == 0 && texture.is_outline(entry))
+        else {
             continue;
         };
         let at = Vec2::new(behind.0 as f32 + 0.5 - 0.5 * di as f32, behind.1 as f32 + 0.5);

@@ -160,12 +160,7 @@ pub(crate) fn find_hidden(
     let (w, h) = (camera.width, camera.height);
     let empty = texture.depth_bits.empty();
     let reach = inward_reach(w, h);
-    // The texel `hidden` lies behind, if it is inside the texture and covered.
-    let behind = |hidden: Hidden| -> Option<usize> {
-        let (i, j) = hidden.behind(w, h)?;
-        let k = (j * w + i) as usize;
-        (texture.depth[k] != empty).then_some(k)
-    };
+    let behind = |hidden: Hidden| texture.covered_behind(&hidden);
     let mut walks: Vec<Walk> = open_sides(&texture.depth, w as usize, h as usize, empty)
         .into_iter()
         .flat_map(|(texel, open)| {
@@ -308,13 +303,14 @@ fn find_hidden_outlines(
     // (An orthographic texture's depth levels are evenly spaced.)
     let jump_levels = (STEP_TEXELS * camera.a.length() / camera.depth_quantum(bits)) as i64;
     // The covered texel `inward` steps in from `texel`, away from `side`.
-    let inside = |texel: usize, side: u8, inward: u8| -> Option<usize> {
-        let (di, dj) = TEXEL_SIDES[side as usize];
-        let i = (texel % width) as i64 - i64::from(di) * i64::from(inward);
-        let j = (texel / width) as i64 - i64::from(dj) * i64::from(inward);
-        let k = usize::try_from(j).ok()? * width + usize::try_from(i).ok()?;
-        let within = (0..width as i64).contains(&i) && (0..height as i64).contains(&j);
-        (within && texture.depth[k] != empty).then_some(k)
+    let inside = |texel: usize, side: u8, inward: u8| {
+        let step = Hidden {
+            texel: texel as u32,
+            side,
+            inward,
+            depth: 0,
+        };
+        texture.covered_behind(&step)
     };
     // Each step down: its near texel, the side, and the deeper neighbour's depth level.
     // A step the deeper surface goes on from flatter than it came (the texel beyond

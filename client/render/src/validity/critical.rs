@@ -129,14 +129,12 @@ impl CriticalPoints {
                 continue;
             };
             let (i, j) = (surface.texel % w, surface.texel / w);
-            let (di, dj) = TEXEL_SIDES[surface.side as usize];
-            // (An entry beside a covered neighbour is an outline behind a step down,
-            // which the pre-warp draws: `Impostor::outlines`. Nothing comes out there that
-            // the texture lacks.)
-            let beside = (i.checked_add_signed(di), j.checked_add_signed(dj));
-            if matches!(beside, (Some(i2), Some(j2)) if i2 < w && j2 < h && depth(i2, j2).is_some()) {
+            // (An outline behind a step down the pre-warp draws, `Impostor::outlines`:
+            // nothing comes out there that the texture lacks.)
+            if texture.is_outline(surface) {
                 continue;
             }
+            let (di, dj) = TEXEL_SIDES[surface.side as usize];
             if let Some(d1) = depth(i, j) {
                 let d2 = c.depth_of_level(surface.depth, texture.depth_bits);
                 let outward = Vec2::new(di as f32, dj as f32);
