@@ -394,20 +394,20 @@ fn find_hidden_outlines(
         .filter(|(walk, end)| may_open(walk, end))
         .unzip();
     // Of those, the walks whose near texel's own ray meets a surface about as deep as the
-    // neighbour (within half the step): the deeper surface goes on behind it.
+    // neighbour (within half the step), the deeper surface going on behind it, and whose
+    // deepest step then ends open: the rest list nothing.
     let near: Vec<usize> = walks.iter().map(|walk| walk.texel).collect();
     let hits = hidden_depths(texture, target, t_range, &near, parallel);
-    let (walks, ends_open): (Vec<OutlineWalk>, Vec<bool>) = (walks.into_iter().zip(hits).zip(deepest))
+    let walks: Vec<OutlineWalk> = (walks.into_iter().zip(hits).zip(deepest))
         .filter_map(|((walk, hit), (past, own))| {
             let hit = hit.filter(|hit| hit.abs_diff(walk.neighbour) <= walk.within)?;
             let walk = OutlineWalk {
                 found: (0, hit),
                 ..walk
             };
-            let open = matches!(walk.step(walk.found, past, own, &camera, bits), Step::Open);
-            Some((walk, open))
+            matches!(walk.step(walk.found, past, own, &camera, bits), Step::Open).then_some(walk)
         })
-        .unzip();
+        .collect();
     // What step `inward` of walk `n` meets, for each `(n, inward)` asked: all cast at
     // once (the walks are few and short, a batch for the pool), then read in order.
     let look = |asked: &[(usize, u8)]| -> Vec<(Past, u16)> {
@@ -420,16 +420,13 @@ fn find_hidden_outlines(
     // surface (else the deepest): the stretch to look at a texel at a time, from the
     // last stride that met it.
     let strides: Vec<(usize, u8)> = (walks.iter().enumerate())
-        .filter(|&(n, _)| ends_open[n])
         .flat_map(|(n, walk)| {
             (INWARD_STRIDE..walk.covered)
                 .step_by(INWARD_STRIDE.into())
                 .map(move |inward| (n, inward))
         })
         .collect();
-    let mut found: Vec<Option<(u8, u16)>> = (walks.iter().zip(&ends_open))
-        .map(|(walk, &open)| open.then_some(walk.found))
-        .collect();
+    let mut found: Vec<Option<(u8, u16)>> = walks.iter().map(|walk| Some(walk.found)).collect();
     let mut stretch: Vec<Option<(u8, u8)>> = vec![None; walks.len()];
     for (&(n, inward), (past, own)) in strides.iter().zip(look(&strides)) {
         let Some(last) = found[n].filter(|_| stretch[n].is_none()) else {
